@@ -1,0 +1,12 @@
+//! brdfd: spectral BRDF from two handheld instruments.
+//!
+//! # Layout
+//! Science (pure, synchronous, no I/O):
+//! - [`spectral`]: the 31-band grid, 400–700 nm.
+//! - [`geometry`]: the 14 measurement geometries and their directions.
+//! - [`model`]: the spectral Cook–Torrance/GGX model.
+//! - [`processing`]: device readings → measured BRDF against the N9 reference.
+pub mod geometry;
+pub mod model;
+pub mod spectral;
+pub mod processing;
