@@ -6,7 +6,11 @@
 //! - [`geometry`]: the 14 measurement geometries and their directions.
 //! - [`model`]: the spectral Cook–Torrance/GGX model.
 //! - [`processing`]: device readings → measured BRDF against the N9 reference.
+//!
+//! Scans and fits (pure, synchronous; file I/O only at the edges):
+//! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
 pub mod geometry;
 pub mod model;
 pub mod spectral;
 pub mod processing;
+pub mod scan;

@@ -1,0 +1,897 @@
+//! The scan file, `brdfd.scan/1` (ARCHITECTURE.md contract 2): how one scan — a sample's 14
+//! readings and the Munsell N9 reference readings they are normalised by — leaves and enters
+//! brdfd outside the store.
+//!
+//! On disk the readings are JSON maps keyed by the devices' geometry names (SCIENCE.md §2), with
+//! the 31-band grid spelled out in `wavelengths_nm`. In memory they are fixed-size arrays in
+//! [`GEOMETRIES`] table order, so nothing downstream looks a name up again.
+//!
+//! Reading is two-staged (raw serde structs → checked [`Scan`]): the raw stage reports JSON shape
+//! errors with the path of the offending field, the checked stage reports every semantic problem
+//! (format version, geometry set, lengths, grid, non-finite or non-physical values) with the field
+//! named as `readings.ma_t12.15as-45[3] (430 nm)`. Writing goes through the same validation, so a
+//! NaN can never be written as `null`, and reproduces every `f64` bit for bit (shortest round-trip
+//! decimal out, correctly rounded parse in: serde_json's `float_roundtrip`).
+
+use std::fmt;
+use std::io::{self, Read};
+use std::path::{Path, PathBuf};
+
+use serde::de::{self, Deserializer, MapAccess, Visitor};
+use serde::ser::Serializer;
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::{self, Device, GEOMETRIES, Geometry, MA_T12_COUNT, SRA_COUNT};
+use crate::spectral::{BANDS, Spectrum, wavelengths_nm};
+
+/// The format tag this build reads and writes.
+pub const FORMAT: &str = "brdfd.scan/1";
+
+/// One scan: the sample's readings and the reference readings in force when it was taken.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scan {
+    /// The sample's name, e.g. "T.Freesia pink".
+    pub sample: String,
+    /// The white reference (Munsell N9) the readings are normalised by.
+    pub reference: Reference,
+    /// The sample's own readings.
+    pub readings: DeviceReadings,
+}
+
+/// A white reference tile and its readings on both devices at all 14 geometries.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reference {
+    /// The tile's name, e.g. "Munsell N9".
+    pub name: String,
+    /// Its readings; every value must be positive and finite (SCIENCE.md §3).
+    pub readings: DeviceReadings,
+}
+
+/// Readings of one surface on both instruments, in [`GEOMETRIES`] table order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DeviceReadings {
+    /// X-Rite MA-T12: reflectance factor as the device reports it (0–1 scale), 31 bands each,
+    /// for `GEOMETRIES[0..12]`.
+    pub ma_t12: [Spectrum; MA_T12_COUNT],
+    /// Canon RA-532H: one achromatic 1D-BRDF intensity each, for `GEOMETRIES[12..14]`.
+    pub sra: [f64; SRA_COUNT],
+}
+
+impl DeviceReadings {
+    /// The MA-T12 spectrum at a geometry of that device (`None` for an SRA geometry).
+    pub fn spectrum(&self, geo: &Geometry) -> Option<&Spectrum> {
+        match geo.device {
+            Device::MaT12 => self.ma_t12.get(geo.index),
+            Device::Sra => None,
+        }
+    }
+
+    /// The SRA intensity at a geometry of that device (`None` for an MA-T12 geometry).
+    pub fn intensity(&self, geo: &Geometry) -> Option<f64> {
+        match geo.device {
+            Device::MaT12 => None,
+            Device::Sra => self.sra.get(geo.index - MA_T12_COUNT).copied(),
+        }
+    }
+}
+
+/// Everything that can be wrong with a scan file or an in-memory [`Scan`].
+#[derive(Debug, thiserror::Error)]
+pub enum ScanError {
+    #[error("cannot read scan file {}: {source}", path.display())]
+    Read { path: PathBuf, source: io::Error },
+    #[error("cannot write scan file {}: {source}", path.display())]
+    Write { path: PathBuf, source: io::Error },
+    #[error("scan file is not valid JSON: {0}")]
+    Syntax(#[source] serde_json::Error),
+    /// The JSON is well formed but a field has the wrong shape or type (or a number is out of
+    /// the f64 range, which serde_json refuses at parse time).
+    #[error("{field}: {message}")]
+    Shape { field: String, message: String },
+    #[error("format: missing; a scan file must say \"format\": \"{FORMAT}\"")]
+    MissingFormat,
+    #[error(
+        "format: unknown version {found}; this brdfd reads \"{FORMAT}\" (convert the file or use a brdfd that reads it)"
+    )]
+    UnknownFormat { found: String },
+    #[error("{field}: must not be empty")]
+    EmptyName { field: &'static str },
+    #[error("wavelengths_nm: expected the 31 bands 400, 410, …, 700 nm, got {found}")]
+    WavelengthGrid { found: String },
+    #[error("{field}: missing geometry \"{geometry}\"")]
+    MissingGeometry {
+        field: String,
+        geometry: &'static str,
+    },
+    #[error("{field}: unknown geometry \"{name}\" (this device's geometries are {expected})")]
+    UnknownGeometry {
+        field: String,
+        name: String,
+        expected: String,
+    },
+    #[error("{field}: geometry \"{name}\" given twice")]
+    DuplicateGeometry { field: String, name: String },
+    #[error("{field}: expected {expected} values, got {got}")]
+    WrongLength {
+        field: String,
+        expected: usize,
+        got: usize,
+    },
+    #[error("{field}: {value} is not a finite number")]
+    NonFinite { field: String, value: f64 },
+    #[error("{field}: reference reading {value} must be positive; re-measure the reference tile")]
+    BadReference { field: String, value: f64 },
+    #[error("{field}: reading {value} is negative; a device reading cannot be")]
+    NegativeReading { field: String, value: f64 },
+}
+
+/// Whose readings a value belongs to; the reference must be strictly positive, the sample only
+/// non-negative (a black sample may read exactly 0).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Reference,
+    Sample,
+}
+
+impl Role {
+    const fn prefix(self) -> &'static str {
+        match self {
+            Role::Reference => "reference",
+            Role::Sample => "readings",
+        }
+    }
+}
+
+/// `readings.ma_t12.15as-45`
+fn geometry_field(role: Role, geo: &Geometry) -> String {
+    format!("{}.{}.{}", role.prefix(), geo.device.key(), geo.name)
+}
+
+/// `readings.ma_t12.15as-45[3] (430 nm)`
+fn band_field(role: Role, geo: &Geometry, band: usize) -> String {
+    format!(
+        "{}[{band}] ({} nm)",
+        geometry_field(role, geo),
+        wavelengths_nm()[band]
+    )
+}
+
+fn check_value(role: Role, field: impl FnOnce() -> String, value: f64) -> Result<(), ScanError> {
+    if !value.is_finite() {
+        return Err(ScanError::NonFinite {
+            field: field(),
+            value,
+        });
+    }
+    match role {
+        Role::Reference if value <= 0.0 => Err(ScanError::BadReference {
+            field: field(),
+            value,
+        }),
+        Role::Sample if value < 0.0 => Err(ScanError::NegativeReading {
+            field: field(),
+            value,
+        }),
+        _ => Ok(()),
+    }
+}
+
+impl DeviceReadings {
+    fn validate(&self, role: Role) -> Result<(), ScanError> {
+        for geo in &GEOMETRIES {
+            match geo.device {
+                Device::MaT12 => {
+                    for (band, &v) in self.ma_t12[geo.index].iter().enumerate() {
+                        check_value(role, || band_field(role, geo, band), v)?;
+                    }
+                }
+                Device::Sra => {
+                    let v = self.sra[geo.index - MA_T12_COUNT];
+                    check_value(role, || geometry_field(role, geo), v)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Scan {
+    /// Checks what the type system cannot: non-empty names, finite non-negative readings and a
+    /// strictly positive reference (SCIENCE.md §3). Reading and writing both call it.
+    pub fn validate(&self) -> Result<(), ScanError> {
+        if self.sample.trim().is_empty() {
+            return Err(ScanError::EmptyName { field: "sample" });
+        }
+        if self.reference.name.trim().is_empty() {
+            return Err(ScanError::EmptyName {
+                field: "reference.name",
+            });
+        }
+        self.reference.readings.validate(Role::Reference)?;
+        self.readings.validate(Role::Sample)
+    }
+
+    /// Parses and checks a `brdfd.scan/1` document.
+    pub fn from_json(bytes: &[u8]) -> Result<Scan, ScanError> {
+        // Stage 0: the format tag decides how to read the rest, so look at it first; a document
+        // of another version may legitimately have another shape.
+        #[derive(Deserialize)]
+        struct Probe {
+            format: Option<serde_json::Value>,
+        }
+        let probe: Probe = serde_json::from_slice(bytes).map_err(ScanError::Syntax)?;
+        match probe.format {
+            None => return Err(ScanError::MissingFormat),
+            Some(serde_json::Value::String(s)) if s == FORMAT => {}
+            Some(other) => {
+                return Err(ScanError::UnknownFormat {
+                    found: other.to_string(),
+                });
+            }
+        }
+
+        // Stage 1: shape, with the JSON path of whatever does not fit.
+        let mut de = serde_json::Deserializer::from_slice(bytes);
+        let raw: RawScan = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            let path = e.path().to_string();
+            let field = if path == "." {
+                "scan".to_string()
+            } else {
+                path
+            };
+            ScanError::Shape {
+                field,
+                message: e.into_inner().to_string(),
+            }
+        })?;
+
+        // Stage 2: semantics.
+        raw.check()
+    }
+
+    /// Reads a whole document from `reader` and parses it.
+    pub fn from_reader(mut reader: impl Read) -> Result<Scan, ScanError> {
+        let mut bytes = Vec::new();
+        reader
+            .read_to_end(&mut bytes)
+            .map_err(|source| ScanError::Read {
+                path: PathBuf::from("<reader>"),
+                source,
+            })?;
+        Scan::from_json(&bytes)
+    }
+
+    /// Reads and parses a scan file.
+    pub fn read_file(path: impl AsRef<Path>) -> Result<Scan, ScanError> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|source| ScanError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Scan::from_json(&bytes)
+    }
+
+    /// The document, pretty-printed with one line per geometry. Fails only if the scan does
+    /// not [`validate`](Scan::validate).
+    pub fn to_json_pretty(&self) -> Result<String, ScanError> {
+        self.validate()?;
+        let out = OutScan {
+            format: FORMAT,
+            sample: &self.sample,
+            wavelengths_nm: wavelengths_nm(),
+            reference: OutReference {
+                name: &self.reference.name,
+                ma_t12: OutMaT12(&self.reference.readings.ma_t12),
+                sra: OutSra(&self.reference.readings.sra),
+            },
+            readings: OutReadings {
+                ma_t12: OutMaT12(&self.readings.ma_t12),
+                sra: OutSra(&self.readings.sra),
+            },
+        };
+        let mut buf = Vec::new();
+        let mut ser = serde_json::Serializer::with_formatter(&mut buf, ScanFormatter::new());
+        out.serialize(&mut ser)
+            .expect("serialising into memory cannot fail");
+        buf.push(b'\n');
+        Ok(String::from_utf8(buf).expect("serde_json writes UTF-8"))
+    }
+
+    /// Writes the document to `path` (created or truncated).
+    pub fn write_file(&self, path: impl AsRef<Path>) -> Result<(), ScanError> {
+        let path = path.as_ref();
+        let text = self.to_json_pretty()?;
+        std::fs::write(path, text).map_err(|source| ScanError::Write {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Raw (as parsed) stage.
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScan {
+    #[allow(dead_code)] // checked by the probe
+    format: String,
+    sample: String,
+    wavelengths_nm: Vec<f64>,
+    reference: RawReference,
+    readings: RawReadings,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawReference {
+    name: String,
+    ma_t12: Entries<Vec<f64>>,
+    sra: Entries<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawReadings {
+    ma_t12: Entries<Vec<f64>>,
+    sra: Entries<f64>,
+}
+
+/// A JSON object read as its entries in document order, duplicates kept (a `BTreeMap` would
+/// silently keep the last of two readings for one geometry).
+struct Entries<V>(Vec<(String, V)>);
+
+impl<'de, V: Deserialize<'de>> Deserialize<'de> for Entries<V> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V_<V>(std::marker::PhantomData<V>);
+        impl<'de, V: Deserialize<'de>> Visitor<'de> for V_<V> {
+            type Value = Entries<V>;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("an object keyed by geometry name")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let mut out = Vec::new();
+                while let Some((k, v)) = map.next_entry::<String, V>()? {
+                    out.push((k, v));
+                }
+                Ok(Entries(out))
+            }
+        }
+        d.deserialize_map(V_(std::marker::PhantomData))
+    }
+}
+
+/// Puts one device's entries into table order, or names what is unknown, doubled or missing.
+fn arrange<V, T: Copy>(
+    entries: Entries<V>,
+    role: Role,
+    device: Device,
+    mut convert: impl FnMut(&Geometry, V) -> Result<T, ScanError>,
+    fill: T,
+) -> Result<Vec<T>, ScanError> {
+    let field = format!("{}.{}", role.prefix(), device.key());
+    let geos = geometry::of_device(device);
+    let first = geos[0].index;
+    let mut slots: Vec<Option<T>> = vec![None; geos.len()];
+    for (name, value) in entries.0 {
+        let Some(geo) = geos.iter().find(|g| g.name == name) else {
+            let expected = geos
+                .iter()
+                .map(|g| format!("\"{}\"", g.name))
+                .collect::<Vec<_>>()
+                .join(", ");
+            return Err(ScanError::UnknownGeometry {
+                field,
+                name,
+                expected,
+            });
+        };
+        let slot = &mut slots[geo.index - first];
+        if slot.is_some() {
+            return Err(ScanError::DuplicateGeometry { field, name });
+        }
+        *slot = Some(convert(geo, value)?);
+    }
+    if let Some(i) = slots.iter().position(Option::is_none) {
+        return Err(ScanError::MissingGeometry {
+            field,
+            geometry: geos[i].name,
+        });
+    }
+    Ok(slots.into_iter().map(|s| s.unwrap_or(fill)).collect())
+}
+
+fn arrange_readings(
+    ma_t12: Entries<Vec<f64>>,
+    sra: Entries<f64>,
+    role: Role,
+) -> Result<DeviceReadings, ScanError> {
+    let spectra = arrange(
+        ma_t12,
+        role,
+        Device::MaT12,
+        |geo, values: Vec<f64>| {
+            let spectrum: Spectrum =
+                values
+                    .as_slice()
+                    .try_into()
+                    .map_err(|_| ScanError::WrongLength {
+                        field: geometry_field(role, geo),
+                        expected: BANDS,
+                        got: values.len(),
+                    })?;
+            for (band, &v) in spectrum.iter().enumerate() {
+                check_value(role, || band_field(role, geo, band), v)?;
+            }
+            Ok(spectrum)
+        },
+        [0.0; BANDS],
+    )?;
+    let intensities = arrange(
+        sra,
+        role,
+        Device::Sra,
+        |geo, v: f64| {
+            check_value(role, || geometry_field(role, geo), v)?;
+            Ok(v)
+        },
+        0.0,
+    )?;
+    Ok(DeviceReadings {
+        ma_t12: spectra
+            .try_into()
+            .expect("arrange returns one slot per MA-T12 geometry"),
+        sra: intensities
+            .try_into()
+            .expect("arrange returns one slot per SRA geometry"),
+    })
+}
+
+impl RawScan {
+    fn check(self) -> Result<Scan, ScanError> {
+        if self.sample.trim().is_empty() {
+            return Err(ScanError::EmptyName { field: "sample" });
+        }
+        let grid = wavelengths_nm();
+        let grid_ok = self.wavelengths_nm.len() == BANDS
+            && self
+                .wavelengths_nm
+                .iter()
+                .zip(grid)
+                .all(|(&got, want)| got == f64::from(want));
+        if !grid_ok {
+            let found = if self.wavelengths_nm.len() == BANDS {
+                let (i, got) = self
+                    .wavelengths_nm
+                    .iter()
+                    .enumerate()
+                    .find(|&(i, &got)| got != f64::from(grid[i]))
+                    .expect("some band differs");
+                format!("{got} nm at position {i} (expected {} nm)", grid[i])
+            } else {
+                format!("{} values", self.wavelengths_nm.len())
+            };
+            return Err(ScanError::WavelengthGrid { found });
+        }
+        if self.reference.name.trim().is_empty() {
+            return Err(ScanError::EmptyName {
+                field: "reference.name",
+            });
+        }
+        let reference =
+            arrange_readings(self.reference.ma_t12, self.reference.sra, Role::Reference)?;
+        let readings = arrange_readings(self.readings.ma_t12, self.readings.sra, Role::Sample)?;
+        Ok(Scan {
+            sample: self.sample,
+            reference: Reference {
+                name: self.reference.name,
+                readings: reference,
+            },
+            readings,
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Output stage: borrowed views serialised in table order.
+
+#[derive(Serialize)]
+struct OutScan<'a> {
+    format: &'static str,
+    sample: &'a str,
+    wavelengths_nm: [u32; BANDS],
+    reference: OutReference<'a>,
+    readings: OutReadings<'a>,
+}
+
+#[derive(Serialize)]
+struct OutReference<'a> {
+    name: &'a str,
+    ma_t12: OutMaT12<'a>,
+    sra: OutSra<'a>,
+}
+
+#[derive(Serialize)]
+struct OutReadings<'a> {
+    ma_t12: OutMaT12<'a>,
+    sra: OutSra<'a>,
+}
+
+struct OutMaT12<'a>(&'a [Spectrum; MA_T12_COUNT]);
+struct OutSra<'a>(&'a [f64; SRA_COUNT]);
+
+impl Serialize for OutMaT12<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(geometry::ma_t12().iter().map(|g| g.name).zip(self.0.iter()))
+    }
+}
+
+impl Serialize for OutSra<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(geometry::sra().iter().map(|g| g.name).zip(self.0.iter()))
+    }
+}
+
+/// Pretty objects, but every array on one line: one geometry per line reads and diffs well.
+struct ScanFormatter {
+    pretty: serde_json::ser::PrettyFormatter<'static>,
+}
+
+impl ScanFormatter {
+    fn new() -> Self {
+        ScanFormatter {
+            pretty: serde_json::ser::PrettyFormatter::with_indent(b"  "),
+        }
+    }
+}
+
+impl serde_json::ser::Formatter for ScanFormatter {
+    fn begin_array<W: ?Sized + io::Write>(&mut self, w: &mut W) -> io::Result<()> {
+        w.write_all(b"[")
+    }
+    fn end_array<W: ?Sized + io::Write>(&mut self, w: &mut W) -> io::Result<()> {
+        w.write_all(b"]")
+    }
+    fn begin_array_value<W: ?Sized + io::Write>(
+        &mut self,
+        w: &mut W,
+        first: bool,
+    ) -> io::Result<()> {
+        if first { Ok(()) } else { w.write_all(b", ") }
+    }
+    fn end_array_value<W: ?Sized + io::Write>(&mut self, _w: &mut W) -> io::Result<()> {
+        Ok(())
+    }
+    fn begin_object<W: ?Sized + io::Write>(&mut self, w: &mut W) -> io::Result<()> {
+        self.pretty.begin_object(w)
+    }
+    fn end_object<W: ?Sized + io::Write>(&mut self, w: &mut W) -> io::Result<()> {
+        self.pretty.end_object(w)
+    }
+    fn begin_object_key<W: ?Sized + io::Write>(
+        &mut self,
+        w: &mut W,
+        first: bool,
+    ) -> io::Result<()> {
+        self.pretty.begin_object_key(w, first)
+    }
+    fn end_object_key<W: ?Sized + io::Write>(&mut self, w: &mut W) -> io::Result<()> {
+        self.pretty.end_object_key(w)
+    }
+    fn begin_object_value<W: ?Sized + io::Write>(&mut self, w: &mut W) -> io::Result<()> {
+        self.pretty.begin_object_value(w)
+    }
+    fn end_object_value<W: ?Sized + io::Write>(&mut self, w: &mut W) -> io::Result<()> {
+        self.pretty.end_object_value(w)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// A valid scan with distinct values everywhere, so a mix-up of geometries would show.
+    fn example() -> Scan {
+        let spectra = |base: f64| -> [Spectrum; MA_T12_COUNT] {
+            std::array::from_fn(|g| {
+                std::array::from_fn(|b| base + 0.01 * g as f64 + 0.001 * b as f64)
+            })
+        };
+        Scan {
+            sample: "T.Freesia pink".into(),
+            reference: Reference {
+                name: "Munsell N9".into(),
+                readings: DeviceReadings {
+                    ma_t12: spectra(0.7),
+                    sra: [0.245, 0.25],
+                },
+            },
+            readings: DeviceReadings {
+                ma_t12: spectra(0.3),
+                sra: [3.1, 7.9],
+            },
+        }
+    }
+
+    fn example_value() -> serde_json::Value {
+        serde_json::from_str(&example().to_json_pretty().unwrap()).unwrap()
+    }
+
+    /// Parses a modified copy of the example document and returns the error message.
+    fn error_after(edit: impl FnOnce(&mut serde_json::Value)) -> String {
+        let mut v = example_value();
+        edit(&mut v);
+        let text = serde_json::to_vec(&v).unwrap();
+        Scan::from_json(&text)
+            .expect_err("the edited document must be rejected")
+            .to_string()
+    }
+
+    #[test]
+    fn round_trips_exactly() {
+        let scan = example();
+        let text = scan.to_json_pretty().unwrap();
+        assert_eq!(Scan::from_json(text.as_bytes()).unwrap(), scan);
+        assert!(text.contains("\"format\": \"brdfd.scan/1\""));
+        // One line per geometry, arrays inline.
+        assert!(
+            text.lines()
+                .any(|l| l.trim_start().starts_with("\"15as-45\": [0.7, "))
+        );
+        assert!(text.contains("\"wavelengths_nm\": [400, 410, 420,"));
+    }
+
+    #[test]
+    fn round_trips_awkward_floats_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let mut scan = example();
+        for s in scan
+            .readings
+            .ma_t12
+            .iter_mut()
+            .chain(scan.reference.readings.ma_t12.iter_mut())
+        {
+            for v in s.iter_mut() {
+                // Full-precision mantissas over many decades, plus subnormal-ish extremes.
+                *v = rng.random::<f64>() * 10f64.powi(rng.random_range(-12..4)) + f64::MIN_POSITIVE;
+            }
+        }
+        scan.readings.sra = [0.1 + 0.2, 1e-300];
+        scan.readings.ma_t12[0][0] = 0.0;
+        let back = Scan::from_json(scan.to_json_pretty().unwrap().as_bytes()).unwrap();
+        for (a, b) in back
+            .readings
+            .ma_t12
+            .iter()
+            .flatten()
+            .zip(scan.readings.ma_t12.iter().flatten())
+        {
+            assert_eq!(a.to_bits(), b.to_bits());
+        }
+        assert_eq!(back, scan);
+    }
+
+    #[test]
+    fn file_round_trip() {
+        let dir = std::env::temp_dir().join(format!("brdfd-scan-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("x.scan.json");
+        example().write_file(&path).unwrap();
+        assert_eq!(Scan::read_file(&path).unwrap(), example());
+        assert_eq!(
+            Scan::from_reader(std::fs::File::open(&path).unwrap()).unwrap(),
+            example()
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+        let err = Scan::read_file(dir.join("nope.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("cannot read scan file") && err.contains("nope.json"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn geometries_are_put_in_table_order_whatever_the_file_order() {
+        let mut v = example_value();
+        let map = v["readings"]["ma_t12"].as_object_mut().unwrap();
+        let entries: Vec<_> = std::mem::take(map).into_iter().rev().collect();
+        map.extend(entries);
+        let scan = Scan::from_json(&serde_json::to_vec(&v).unwrap()).unwrap();
+        assert_eq!(scan, example());
+    }
+
+    #[test]
+    fn rejects_unknown_and_missing_format() {
+        let e = error_after(|v| v["format"] = "brdfd.scan/2".into());
+        assert_eq!(
+            e,
+            "format: unknown version \"brdfd.scan/2\"; this brdfd reads \"brdfd.scan/1\" \
+             (convert the file or use a brdfd that reads it)"
+        );
+        let e = error_after(|v| v["format"] = 1.into());
+        assert!(e.starts_with("format: unknown version 1;"), "{e}");
+        let e = error_after(|v| {
+            v.as_object_mut().unwrap().remove("format");
+        });
+        assert!(e.starts_with("format: missing"), "{e}");
+    }
+
+    #[test]
+    fn rejects_bad_json() {
+        let e = Scan::from_json(b"{\"format\": \"brdfd.scan/1\",")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("scan file is not valid JSON: "), "{e}");
+    }
+
+    #[test]
+    fn rejects_missing_geometry() {
+        let e = error_after(|v| {
+            v["readings"]["ma_t12"]
+                .as_object_mut()
+                .unwrap()
+                .remove("45as110");
+        });
+        assert_eq!(e, "readings.ma_t12: missing geometry \"45as110\"");
+        let e = error_after(|v| {
+            v["reference"]["sra"]
+                .as_object_mut()
+                .unwrap()
+                .remove("sra-20");
+        });
+        assert_eq!(e, "reference.sra: missing geometry \"sra-20\"");
+    }
+
+    #[test]
+    fn rejects_unknown_geometry() {
+        let e = error_after(|v| {
+            let m = v["readings"]["ma_t12"].as_object_mut().unwrap();
+            let x = m["15as-45"].clone();
+            m.insert("15as99".into(), x);
+        });
+        assert!(e.starts_with("readings.ma_t12: unknown geometry \"15as99\" (this device's geometries are \"15as-45\","), "{e}");
+        // A geometry of the other device is unknown here too.
+        let e = error_after(|v| {
+            v["readings"]["sra"]["45as15"] = 1.0.into();
+        });
+        assert!(
+            e.starts_with("readings.sra: unknown geometry \"45as15\""),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn rejects_duplicate_geometry() {
+        let mut text = example().to_json_pretty().unwrap();
+        text = text.replacen("\"sra-60\": 7.9", "\"sra-60\": 7.9, \"sra-60\": 8.0", 1);
+        let e = Scan::from_json(text.as_bytes()).unwrap_err().to_string();
+        assert_eq!(e, "readings.sra: geometry \"sra-60\" given twice");
+    }
+
+    #[test]
+    fn rejects_wrong_length() {
+        let e = error_after(|v| {
+            v["readings"]["ma_t12"]["15as-45"]
+                .as_array_mut()
+                .unwrap()
+                .pop();
+        });
+        assert_eq!(e, "readings.ma_t12.15as-45: expected 31 values, got 30");
+        let e = error_after(|v| {
+            v["reference"]["ma_t12"]["45as45"]
+                .as_array_mut()
+                .unwrap()
+                .push(0.5.into());
+        });
+        assert_eq!(e, "reference.ma_t12.45as45: expected 31 values, got 32");
+    }
+
+    #[test]
+    fn rejects_wrong_wavelength_grid() {
+        let e = error_after(|v| v["wavelengths_nm"][3] = 435.into());
+        assert_eq!(
+            e,
+            "wavelengths_nm: expected the 31 bands 400, 410, …, 700 nm, got 435 nm at position 3 (expected 430 nm)"
+        );
+        let e = error_after(|v| {
+            v["wavelengths_nm"].as_array_mut().unwrap().push(710.into());
+        });
+        assert!(e.ends_with("got 32 values"), "{e}");
+        // 400.0 is the same wavelength as 400.
+        let mut v = example_value();
+        v["wavelengths_nm"][0] = 400.0.into();
+        Scan::from_json(&serde_json::to_vec(&v).unwrap()).unwrap();
+    }
+
+    #[test]
+    fn rejects_out_of_range_numbers_naming_the_field() {
+        // JSON has no NaN or infinity; a literal past f64::MAX is the way one sneaks in.
+        let text = example()
+            .to_json_pretty()
+            .unwrap()
+            .replacen("[0.3, ", "[0.3, 1e999, ", 1);
+        let text = text.replacen("0.301, ", "", 1);
+        let e = Scan::from_json(text.as_bytes()).unwrap_err().to_string();
+        assert!(e.starts_with("readings.ma_t12.15as-45[1]: "), "{e}");
+        assert!(e.contains("number out of range"), "{e}");
+        // null where a number belongs.
+        let e = error_after(|v| v["readings"]["sra"]["sra-20"] = serde_json::Value::Null);
+        assert!(
+            e.starts_with("readings.sra.sra-20: invalid type: null"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn rejects_non_finite_values_in_memory_before_writing() {
+        let mut scan = example();
+        scan.readings.ma_t12[2][5] = f64::NAN;
+        let e = scan.to_json_pretty().unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "readings.ma_t12.15as-15[5] (450 nm): NaN is not a finite number"
+        );
+        let mut scan = example();
+        scan.reference.readings.sra[1] = f64::INFINITY;
+        let e = scan.validate().unwrap_err().to_string();
+        assert_eq!(e, "reference.sra.sra-60: inf is not a finite number");
+    }
+
+    #[test]
+    fn rejects_zero_or_negative_reference_but_accepts_a_zero_sample() {
+        let e = error_after(|v| v["reference"]["ma_t12"]["15as80"][30] = 0.into());
+        assert_eq!(
+            e,
+            "reference.ma_t12.15as80[30] (700 nm): reference reading 0 must be positive; re-measure the reference tile"
+        );
+        let e = error_after(|v| v["reference"]["sra"]["sra-60"] = (-0.2).into());
+        assert!(
+            e.starts_with("reference.sra.sra-60: reference reading -0.2 must be positive"),
+            "{e}"
+        );
+        let e = error_after(|v| v["readings"]["ma_t12"]["45as25"][0] = (-0.01).into());
+        assert_eq!(
+            e,
+            "readings.ma_t12.45as25[0] (400 nm): reading -0.01 is negative; a device reading cannot be"
+        );
+
+        let mut v = example_value();
+        v["readings"]["ma_t12"]["45as25"][0] = 0.into();
+        v["readings"]["sra"]["sra-20"] = 0.into();
+        let scan = Scan::from_json(&serde_json::to_vec(&v).unwrap()).unwrap();
+        assert_eq!(scan.readings.ma_t12[8][0], 0.0);
+        assert_eq!(scan.readings.sra[0], 0.0);
+    }
+
+    #[test]
+    fn rejects_empty_names_and_unknown_fields() {
+        let e = error_after(|v| v["sample"] = " ".into());
+        assert_eq!(e, "sample: must not be empty");
+        let e = error_after(|v| v["reference"]["name"] = "".into());
+        assert_eq!(e, "reference.name: must not be empty");
+        let e = error_after(|v| v["operator"] = "ann".into());
+        assert!(
+            e.starts_with("operator: unknown field `operator`, expected one of"),
+            "{e}"
+        );
+        let e = error_after(|v| {
+            v["readings"].as_object_mut().unwrap().remove("sra");
+        });
+        assert!(e.starts_with("readings: missing field `sra`"), "{e}");
+    }
+
+    #[test]
+    fn accessors_follow_the_table() {
+        let scan = example();
+        let g = geometry::by_name("45as110").unwrap();
+        assert_eq!(scan.readings.spectrum(g).unwrap()[0], 0.3 + 0.11);
+        assert_eq!(scan.readings.intensity(g), None);
+        let s = geometry::by_name("sra-60").unwrap();
+        assert_eq!(scan.readings.intensity(s), Some(7.9));
+        assert!(scan.readings.spectrum(s).is_none());
+    }
+}
