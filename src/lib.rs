@@ -13,6 +13,7 @@
 //!
 //! Scans and fits (pure, synchronous; file I/O only at the edges):
 //! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
+//! - [`synth`]: synthetic scans from a known ground truth (ColorChecker spectra, matt lobes).
 pub mod geometry;
 pub mod model;
 pub mod spectral;
@@ -22,3 +23,4 @@ pub mod colour;
 pub mod evaluation;
 pub mod stats;
 pub mod scan;
+pub mod synth;
