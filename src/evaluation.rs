@@ -56,6 +56,14 @@ pub struct Evaluation {
     pub specular: Summary,
 }
 
+impl Evaluation {
+    /// `(geometry name, ΔE00)` in [`GEOMETRIES`] order, for the `"delta_e00": {"<geometry>": x}`
+    /// objects of the CLI and the API.
+    pub fn per_geometry_named(&self) -> [(&'static str, f64); GEOMETRY_COUNT] {
+        std::array::from_fn(|g| (GEOMETRIES[g].name, self.per_geometry[g]))
+    }
+}
+
 /// CIELAB at each geometry of a BRDF (sr⁻¹), in [`GEOMETRIES`] order, for reports.
 pub fn lab_per_geometry(brdf: &[Spectrum; GEOMETRY_COUNT]) -> [Lab; GEOMETRY_COUNT] {
     brdf.map(|f| reflectance_to_lab(&brdf_to_reflectance(&f)))
@@ -183,6 +191,10 @@ mod tests {
         assert!((e.specular.median - (d20 + d60) / 2.0).abs() < 1e-12);
         assert_eq!(e.specular.max, d20);
         assert_eq!(e.all.max, d20);
+        let named = e.per_geometry_named();
+        assert_eq!(named[0], ("15as-45", 0.0));
+        assert_eq!(named[12], ("sra-20", d20));
+        assert_eq!(named[13], ("sra-60", d60));
         assert_eq!(GEOMETRY_COUNT - MA_T12_COUNT, 2);
     }
 

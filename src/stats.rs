@@ -25,7 +25,9 @@ pub struct MeanCi {
 /// Student-t quantile: the `t` with `P(T ≤ t) = p` for `df` degrees of freedom; a two-sided
 /// 95 % interval uses `p = 0.975`. `None` for df < 1 or `p` outside (0, 1).
 pub fn t_quantile(p: f64, df: f64) -> Option<f64> {
-    if !(df >= 1.0) || !(p > 0.0 && p < 1.0) {
+    // Written so that a NaN df or p also lands in the `None` branch.
+    let usable = df >= 1.0 && p > 0.0 && p < 1.0;
+    if !usable {
         return None;
     }
     let t = StudentsT::new(0.0, 1.0, df).ok()?;
@@ -157,6 +159,8 @@ mod tests {
         assert!((t_quantile(0.975, 1.0).unwrap() - exact).abs() < 1e-9);
         assert_eq!(t_quantile(0.975, 0.0), None);
         assert_eq!(t_quantile(1.0, 5.0), None);
+        assert_eq!(t_quantile(f64::NAN, 5.0), None);
+        assert_eq!(t_quantile(0.975, f64::NAN), None);
     }
 
     #[test]
