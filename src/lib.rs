@@ -14,6 +14,10 @@
 //! Scans and fits (pure, synchronous; file I/O only at the edges):
 //! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
 //! - [`synth`]: synthetic scans from a known ground truth (ColorChecker spectra, matt lobes).
+//! - [`fit`]: one scan → processing → optimiser → ΔE00 evaluation, and the fit report (JSON).
+//!
+//! Command line:
+//! - [`cli`]: the `brdfd` subcommands (`fit`, `synth`, `demo`, …); `src/main.rs` only runs it.
 pub mod geometry;
 pub mod model;
 pub mod spectral;
@@ -24,3 +28,5 @@ pub mod evaluation;
 pub mod stats;
 pub mod scan;
 pub mod synth;
+pub mod fit;
+pub mod cli;

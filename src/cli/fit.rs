@@ -1,0 +1,184 @@
+//! `brdfd fit`: fit one scan file and print the fit (ARCHITECTURE.md contract 3).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context;
+
+use crate::cost::CostFunction;
+use crate::fit::{FitReport, FitRequest, fit_scan};
+use crate::geometry::GEOMETRIES;
+use crate::model::FresnelCosine;
+use crate::optimise::{Method, Settings};
+use crate::processing::{ProcessingOptions, SpecularStrategy};
+use crate::scan::Scan;
+use crate::spectral::wavelengths_nm;
+
+#[derive(Debug, clap::Args)]
+pub struct FitArgs {
+    /// Scan file to fit: a `brdfd.scan/1` JSON document (sample and Munsell N9 reference
+    /// readings at all 14 geometries).
+    #[arg(long, value_name = "SCAN.json")]
+    pub input: PathBuf,
+
+    /// Cost function to minimise: `cf1` cosine-weighted RMSE (paper Eq. 6), `cf2` cube-root
+    /// cosine-weighted RMSE (Eq. 7, Forés et al. 2012), `m2` logarithmic error (Eq. 8, Löw et
+    /// al. 2012).
+    #[arg(long, value_name = "cf1|cf2|m2")]
+    pub cost: CostFunction,
+
+    /// Optimiser: `paper` is the paper's genetic algorithm over all 34 parameters; the default
+    /// method exploits the model's structure and is never worse than `paper`.
+    #[arg(long, value_name = "NAME", default_value_t = Method::default())]
+    pub method: Method,
+
+    /// Seed of the optimiser's random stream: same scan, settings and seed give the same fit,
+    /// bit for bit.
+    #[arg(long, value_name = "N", default_value_t = Settings::default().seed)]
+    pub seed: u64,
+
+    /// How the Canon SRA's single intensity becomes a flat spectrum: `ratio` (relative to the
+    /// N9 reference, on the MA-T12's scale) or `paper-eq9` (the paper's Eq. 9, R = q·π/300 nm).
+    #[arg(long, value_name = "ratio|paper-eq9", default_value_t = SpecularStrategy::Ratio)]
+    pub specular: SpecularStrategy,
+
+    /// Cosine in the Schlick Fresnel term: `incidence` (cos θi, as the paper writes Eq. 2) or
+    /// `light-half` (l·h, textbook Schlick).
+    #[arg(long, value_name = "incidence|light-half", default_value = "incidence", value_parser = parse_fresnel)]
+    pub fresnel: FresnelCosine,
+
+    /// Print one JSON object on stdout (sample, cost_function, method, seed, params, cost,
+    /// evaluations, generations, wall_ms, delta_e00 per geometry, delta_e00_mean, …) instead
+    /// of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Parses a Fresnel cosine name as the settings and reports spell it.
+pub fn parse_fresnel(s: &str) -> Result<FresnelCosine, String> {
+    match s {
+        "incidence" => Ok(FresnelCosine::Incidence),
+        "light-half" => Ok(FresnelCosine::LightHalf),
+        _ => Err(format!(
+            "unknown Fresnel cosine \"{s}\"; valid: incidence, light-half"
+        )),
+    }
+}
+
+impl FitArgs {
+    /// The fit request these options describe; every other setting keeps its default.
+    pub fn request(&self) -> FitRequest {
+        FitRequest {
+            processing: ProcessingOptions {
+                specular: self.specular,
+                ..Default::default()
+            },
+            settings: Settings {
+                method: self.method,
+                cost: self.cost,
+                seed: self.seed,
+                fresnel: self.fresnel,
+                ..Settings::default()
+            },
+        }
+    }
+}
+
+pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    let scan = Scan::read_file(&args.input)?;
+    let report = fit_scan(&scan, &args.request())
+        .with_context(|| format!("fitting {}", args.input.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!("{}", table(&report));
+    }
+    Ok(())
+}
+
+/// The human-readable form of a fit.
+pub fn table(r: &FitReport) -> String {
+    let o = &r.outcome;
+    let s = &r.request.settings;
+    let e = &r.evaluation;
+    let mut t = String::new();
+    let _ = writeln!(t, "sample           {}", r.sample);
+    let _ = writeln!(
+        t,
+        "fit              cost function {}, method {}, seed {}, specular {}, fresnel {}",
+        s.cost,
+        o.method,
+        o.seed,
+        r.request.processing.specular,
+        parse_name(s.fresnel)
+    );
+    let _ = writeln!(
+        t,
+        "cost             {:.6e}  ({} evaluations, {} generations, {:.1} ms)",
+        o.cost, o.evaluations, o.generations, o.wall_ms
+    );
+    let p = &o.params;
+    let _ = writeln!(
+        t,
+        "specular lobe    ks {:.5}  alpha {:.5}  ior {:.5}",
+        p.ks, p.alpha, p.ior
+    );
+    let _ = writeln!(t, "kd (sr⁻¹)");
+    for (chunk_nm, chunk_kd) in wavelengths_nm().chunks(8).zip(p.kd.chunks(8)) {
+        let cells: Vec<String> = chunk_nm
+            .iter()
+            .zip(chunk_kd)
+            .map(|(nm, k)| format!("{nm} {k:.5}"))
+            .collect();
+        let _ = writeln!(t, "  {}", cells.join("  "));
+    }
+    let _ = writeln!(t, "ΔE00 per geometry");
+    for (geo, de) in GEOMETRIES.iter().zip(e.per_geometry) {
+        let _ = writeln!(t, "  {:<8} {:>4}  {de:8.4}", geo.name, geo.device.key());
+    }
+    let _ = writeln!(
+        t,
+        "ΔE00 mean        {:.4}  (median {:.4}, max {:.4})",
+        e.all.mean, e.all.median, e.all.max
+    );
+    let _ = writeln!(
+        t,
+        "  diffuse  (12)  {:.4}  (median {:.4}, max {:.4})",
+        e.diffuse.mean, e.diffuse.median, e.diffuse.max
+    );
+    let _ = writeln!(
+        t,
+        "  specular (2)   {:.4}  (max {:.4})",
+        e.specular.mean, e.specular.max
+    );
+    t
+}
+
+fn parse_name(f: FresnelCosine) -> &'static str {
+    match f {
+        FresnelCosine::Incidence => "incidence",
+        FresnelCosine::LightHalf => "light-half",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fresnel_names_round_trip() {
+        for f in [FresnelCosine::Incidence, FresnelCosine::LightHalf] {
+            assert_eq!(parse_fresnel(parse_name(f)).unwrap(), f);
+            // Same spelling as the settings' serde form.
+            assert_eq!(
+                serde_json::to_string(&f).unwrap(),
+                format!("\"{}\"", parse_name(f))
+            );
+        }
+        assert!(
+            parse_fresnel("half")
+                .unwrap_err()
+                .contains("valid: incidence, light-half")
+        );
+    }
+}

@@ -1,0 +1,355 @@
+//! The fit pipeline for one scan: processing → optimiser → colour evaluation, and the fit
+//! report of ARCHITECTURE.md contract 3.
+//!
+//! [`fit_scan`] is what `brdfd fit` and the daemon's fit worker both call. The [`FitReport`] keeps
+//! everything a caller may want to store (the settings, the measured and estimated BRDF, the
+//! optimiser's whole [`FitOutcome`] with its best cost per generation, the evaluation); its JSON
+//! form is exactly the contract-3 object, built by [`FitReport::document`].
+
+use std::ops::ControlFlow;
+
+use serde::de::{self, Deserializer, MapAccess, Visitor};
+use serde::ser::Serializer;
+use serde::{Deserialize, Serialize};
+
+use crate::cost::CostFunction;
+use crate::evaluation::{Evaluation, evaluate};
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
+use crate::model::{self, FresnelCosine, SpecularGeometry};
+use crate::optimise::{self, FitError, FitOutcome, Progress, Settings};
+use crate::processing::{self, MeasuredBrdf, ProcessingError, ProcessingOptions, SpecularStrategy};
+use crate::scan::Scan;
+use crate::spectral::Spectrum;
+
+/// Everything that decides a fit besides the scan itself.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct FitRequest {
+    /// How readings become a measured BRDF.
+    pub processing: ProcessingOptions,
+    /// Optimiser settings: method, cost function, bounds, Fresnel cosine, seed, …
+    pub settings: Settings,
+}
+
+/// One finished fit of one scan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitReport {
+    /// The scan's sample name.
+    pub sample: String,
+    /// The request the fit ran with (recorded in full with every fit).
+    pub request: FitRequest,
+    /// The measured BRDF the fit was made to, sr⁻¹.
+    pub measured: MeasuredBrdf,
+    /// The fitted model at the 14 geometries, sr⁻¹.
+    pub estimated: [Spectrum; GEOMETRY_COUNT],
+    /// The optimiser's result: parameters, cost, effort, best cost per generation, method, seed.
+    pub outcome: FitOutcome,
+    /// ΔE00 between measured and estimated colour.
+    pub evaluation: Evaluation,
+}
+
+/// Why a scan could not be fitted.
+#[derive(Debug, thiserror::Error)]
+pub enum FitScanError {
+    /// The scan could not be processed (bad reference, bad calibration table).
+    #[error(transparent)]
+    Processing(#[from] ProcessingError),
+    /// The optimiser refused or was cancelled.
+    #[error("fitting \"{sample}\" with {cost}: {source}")]
+    Fit {
+        sample: String,
+        cost: CostFunction,
+        #[source]
+        source: FitError,
+    },
+}
+
+/// Fits one scan.
+pub fn fit_scan(scan: &Scan, request: &FitRequest) -> Result<FitReport, FitScanError> {
+    fit_scan_with_observer(scan, request, &mut |_| ControlFlow::Continue(()))
+}
+
+/// Fits one scan, reporting progress once per generation; `Break` cancels the fit.
+pub fn fit_scan_with_observer(
+    scan: &Scan,
+    request: &FitRequest,
+    observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<FitReport, FitScanError> {
+    let measured = processing::process(scan, &request.processing)?;
+    fit_measured(&scan.sample, measured, request, observer)
+}
+
+/// Fits an already processed measurement (the daemon stores processed scans).
+pub fn fit_measured(
+    sample: &str,
+    measured: MeasuredBrdf,
+    request: &FitRequest,
+    observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<FitReport, FitScanError> {
+    let outcome =
+        optimise::fit_with_observer(&measured, &request.settings, observer).map_err(|source| {
+            FitScanError::Fit {
+                sample: sample.to_string(),
+                cost: request.settings.cost,
+                source,
+            }
+        })?;
+    let estimated = model::evaluate(
+        &outcome.params,
+        request.settings.fresnel,
+        &SpecularGeometry::all(),
+    );
+    let evaluation = evaluate(&measured.values, &estimated);
+    Ok(FitReport {
+        sample: sample.to_string(),
+        request: request.clone(),
+        measured,
+        estimated,
+        outcome,
+        evaluation,
+    })
+}
+
+impl FitReport {
+    /// The contract-3 document.
+    pub fn document(&self) -> FitDocument {
+        let p = &self.outcome.params;
+        FitDocument {
+            sample: self.sample.clone(),
+            cost_function: self.request.settings.cost,
+            method: self.outcome.method.to_string(),
+            seed: self.outcome.seed,
+            params: ParamsDocument {
+                kd: p.kd.to_vec(),
+                ks: p.ks,
+                alpha: p.alpha,
+                ior: p.ior,
+            },
+            cost: self.outcome.cost,
+            evaluations: self.outcome.evaluations,
+            generations: self.outcome.generations,
+            wall_ms: self.outcome.wall_ms,
+            delta_e00: PerGeometry(self.evaluation.per_geometry),
+            delta_e00_mean: self.evaluation.all.mean,
+            delta_e00_diffuse_mean: self.evaluation.diffuse.mean,
+            delta_e00_specular_mean: self.evaluation.specular.mean,
+            specular_strategy: self.request.processing.specular,
+            fresnel: self.request.settings.fresnel,
+        }
+    }
+}
+
+impl Serialize for FitReport {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.document().serialize(s)
+    }
+}
+
+/// The JSON object `brdfd fit --json` prints (ARCHITECTURE.md contract 3). The first eleven
+/// keys are the contract; the last four are additions that make a fit self-describing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitDocument {
+    pub sample: String,
+    pub cost_function: CostFunction,
+    /// The optimiser method's name, e.g. "paper".
+    pub method: String,
+    pub seed: u64,
+    pub params: ParamsDocument,
+    /// Final value of the cost function.
+    pub cost: f64,
+    /// Cost evaluations the optimiser made.
+    pub evaluations: u64,
+    pub generations: u32,
+    /// Wall-clock time of the optimisation, ms.
+    pub wall_ms: f64,
+    /// ΔE00 per geometry, keyed by geometry name, in table order.
+    pub delta_e00: PerGeometry,
+    /// Mean ΔE00 over all 14 geometries.
+    pub delta_e00_mean: f64,
+    /// Mean over the 12 MA-T12 geometries.
+    pub delta_e00_diffuse_mean: f64,
+    /// Mean over the 2 SRA geometries.
+    pub delta_e00_specular_mean: f64,
+    /// How the SRA readings were processed.
+    pub specular_strategy: SpecularStrategy,
+    /// Which cosine the model's Fresnel term used.
+    pub fresnel: FresnelCosine,
+}
+
+/// The fitted parameters as the contract writes them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParamsDocument {
+    /// Diffuse term per band, 400–700 nm, sr⁻¹ (31 values).
+    pub kd: Vec<f64>,
+    pub ks: f64,
+    pub alpha: f64,
+    pub ior: f64,
+}
+
+/// One number per geometry, written as an object keyed by geometry name in table order;
+/// reading requires exactly the 14 names.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PerGeometry(pub [f64; GEOMETRY_COUNT]);
+
+impl Serialize for PerGeometry {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(GEOMETRIES.iter().map(|g| g.name).zip(self.0.iter()))
+    }
+}
+
+impl<'de> Deserialize<'de> for PerGeometry {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = PerGeometry;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("an object with one number per geometry name")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<PerGeometry, A::Error> {
+                let mut out = [None; GEOMETRY_COUNT];
+                while let Some((name, value)) = map.next_entry::<String, f64>()? {
+                    let geo = GEOMETRIES
+                        .iter()
+                        .find(|g| g.name == name)
+                        .ok_or_else(|| de::Error::custom(format!("unknown geometry \"{name}\"")))?;
+                    out[geo.index] = Some(value);
+                }
+                match out.iter().position(Option::is_none) {
+                    Some(i) => Err(de::Error::custom(format!(
+                        "missing geometry \"{}\"",
+                        GEOMETRIES[i].name
+                    ))),
+                    None => Ok(PerGeometry(out.map(|v| v.unwrap_or(f64::NAN)))),
+                }
+            }
+        }
+        d.deserialize_map(V)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{SynthOptions, paper_samples, synth_scan};
+
+    fn quick_request(cost: CostFunction) -> FitRequest {
+        FitRequest {
+            processing: ProcessingOptions::default(),
+            settings: Settings {
+                cost,
+                seed: 3,
+                ..Settings::default()
+            },
+        }
+    }
+
+    #[test]
+    fn report_serialises_to_exactly_the_contract_keys_plus_documented_extras() {
+        let truth = &paper_samples()[0];
+        let scan = synth_scan(truth, &SynthOptions::default()).unwrap();
+        let report = fit_scan(&scan, &quick_request(CostFunction::Cf2)).unwrap();
+        let v = serde_json::to_value(&report).unwrap();
+        let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
+        let mut want = vec![
+            "sample",
+            "cost_function",
+            "method",
+            "seed",
+            "params",
+            "cost",
+            "evaluations",
+            "generations",
+            "wall_ms",
+            "delta_e00",
+            "delta_e00_mean",
+            "delta_e00_diffuse_mean",
+            "delta_e00_specular_mean",
+            "specular_strategy",
+            "fresnel",
+        ];
+        let mut got = keys.clone();
+        got.sort();
+        want.sort();
+        assert_eq!(got, want);
+        assert_eq!(v["sample"], "T.Freesia pink");
+        assert_eq!(v["cost_function"], "cf2");
+        assert_eq!(v["seed"], 3);
+        assert_eq!(v["params"]["kd"].as_array().unwrap().len(), 31);
+        let de = v["delta_e00"].as_object().unwrap();
+        let names: Vec<&str> = de.keys().map(String::as_str).collect();
+        let mut table: Vec<&str> = GEOMETRIES.iter().map(|g| g.name).collect();
+        table.sort();
+        let mut names_sorted = names.clone();
+        names_sorted.sort();
+        assert_eq!(names_sorted, table);
+        // The mean is the mean of the 14 values printed.
+        let mean = de.values().map(|x| x.as_f64().unwrap()).sum::<f64>() / 14.0;
+        assert!((mean - v["delta_e00_mean"].as_f64().unwrap()).abs() < 1e-12);
+        // And the document reads back into its typed form.
+        let doc: FitDocument = serde_json::from_value(v).unwrap();
+        assert_eq!(doc, report.document());
+    }
+
+    #[test]
+    fn the_report_is_consistent_with_its_parts() {
+        let truth = &paper_samples()[3];
+        let scan = synth_scan(truth, &SynthOptions::default()).unwrap();
+        let request = quick_request(CostFunction::Cf1);
+        let report = fit_scan(&scan, &request).unwrap();
+        // Estimated = model at the fitted parameters; measured = processing of the scan.
+        let est = model::evaluate(
+            &report.outcome.params,
+            FresnelCosine::Incidence,
+            &SpecularGeometry::all(),
+        );
+        assert_eq!(report.estimated, est);
+        assert_eq!(
+            report.measured,
+            processing::process(&scan, &request.processing).unwrap()
+        );
+        let cost = crate::cost::cost(CostFunction::Cf1, &report.measured, &report.estimated);
+        assert!(
+            (cost - report.outcome.cost).abs() <= 1e-12 * cost.max(1e-300),
+            "{cost}"
+        );
+        assert!(!report.outcome.best_cost_per_generation.is_empty());
+    }
+
+    #[test]
+    fn processing_errors_pass_through_naming_the_field() {
+        let truth = &paper_samples()[0];
+        let mut scan = synth_scan(truth, &SynthOptions::default()).unwrap();
+        scan.reference.readings.sra[0] = 0.0;
+        let e = fit_scan(&scan, &FitRequest::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("reference.sra.sra-20: reference reading 0 must be positive"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn cancelling_gives_an_error() {
+        let truth = &paper_samples()[0];
+        let scan = synth_scan(truth, &SynthOptions::default()).unwrap();
+        let r = fit_scan_with_observer(&scan, &FitRequest::default(), &mut |_| {
+            ControlFlow::Break(())
+        });
+        assert!(matches!(r, Err(FitScanError::Fit { .. })));
+    }
+
+    #[test]
+    fn per_geometry_rejects_missing_and_unknown_names() {
+        let mut v = serde_json::to_value(PerGeometry([1.0; GEOMETRY_COUNT])).unwrap();
+        v.as_object_mut().unwrap().remove("sra-60");
+        let e = serde_json::from_value::<PerGeometry>(v.clone())
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "missing geometry \"sra-60\"");
+        v["15as99"] = 1.0.into();
+        let e = serde_json::from_value::<PerGeometry>(v)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "unknown geometry \"15as99\"");
+    }
+}

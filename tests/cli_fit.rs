@@ -1,0 +1,214 @@
+//! The `brdfd` binary end to end (ARCHITECTURE.md contracts 3 and 4): `fit --json` on an
+//! example scan prints one object with every contract key; a malformed scan or a bad option
+//! fails with exactly one line on stderr and a non-zero exit status.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn brdfd(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_brdfd"))
+        .args(args)
+        .output()
+        .expect("run brdfd")
+}
+
+fn example(name: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn stderr_one_line(out: &Output) -> String {
+    let err = String::from_utf8(out.stderr.clone()).unwrap();
+    assert_eq!(
+        err.lines().count(),
+        1,
+        "stderr must be one line, got: {err:?}"
+    );
+    assert!(err.starts_with("error: "), "{err}");
+    err
+}
+
+#[test]
+fn fit_json_has_every_contract_key() {
+    let scan = example("t-freesia-pink.scan.json");
+    let out = brdfd(&[
+        "fit", "--input", &scan, "--cost", "cf2", "--seed", "5", "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(
+        stdout.trim_end().lines().count(),
+        1,
+        "one JSON object on one line"
+    );
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    for key in [
+        "sample",
+        "cost_function",
+        "method",
+        "seed",
+        "params",
+        "cost",
+        "evaluations",
+        "generations",
+        "wall_ms",
+        "delta_e00",
+        "delta_e00_mean",
+    ] {
+        assert!(v.get(key).is_some(), "missing key {key} in {v}");
+    }
+    assert_eq!(v["sample"], "T.Freesia pink");
+    assert_eq!(v["cost_function"], "cf2");
+    assert_eq!(v["seed"], 5);
+    assert!(v["method"].as_str().is_some_and(|m| !m.is_empty()));
+    let params = &v["params"];
+    assert_eq!(params["kd"].as_array().unwrap().len(), 31);
+    for k in ["ks", "alpha", "ior"] {
+        assert!(params[k].as_f64().is_some_and(f64::is_finite), "params.{k}");
+    }
+    let de = v["delta_e00"].as_object().unwrap();
+    assert_eq!(de.len(), 14);
+    for name in ["15as-45", "45as110", "sra-20", "sra-60"] {
+        assert!(
+            de[name].as_f64().is_some_and(|x| x >= 0.0),
+            "delta_e00.{name}"
+        );
+    }
+    assert!(v["evaluations"].as_u64().unwrap() > 0);
+    assert!(v["delta_e00_mean"].as_f64().unwrap() >= 0.0);
+}
+
+#[test]
+fn fit_table_is_readable() {
+    let scan = example("t-pebble-grey.noisy.scan.json");
+    let out = brdfd(&[
+        "fit",
+        "--input",
+        &scan,
+        "--cost",
+        "m2",
+        "--specular",
+        "paper-eq9",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    for needle in [
+        "T.Pebble grey",
+        "cost function m2",
+        "specular paper-eq9",
+        "45as110",
+        "ΔE00 mean",
+    ] {
+        assert!(text.contains(needle), "missing {needle:?} in\n{text}");
+    }
+}
+
+#[test]
+fn malformed_scan_fails_with_one_line_naming_the_field() {
+    let text = std::fs::read_to_string(example("t-sky-blue.scan.json")).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["readings"]["ma_t12"]
+        .as_object_mut()
+        .unwrap()
+        .remove("45as110");
+    let dir = std::env::temp_dir().join(format!("brdfd-cli-fit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("broken.scan.json");
+    std::fs::write(&path, serde_json::to_vec(&v).unwrap()).unwrap();
+    let out = brdfd(&[
+        "fit",
+        "--input",
+        path.to_str().unwrap(),
+        "--cost",
+        "cf1",
+        "--json",
+    ]);
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(!out.status.success());
+    assert!(out.stdout.is_empty());
+    let err = stderr_one_line(&out);
+    assert!(
+        err.contains("readings.ma_t12: missing geometry \"45as110\""),
+        "{err}"
+    );
+}
+
+#[test]
+fn missing_file_fails_with_one_line() {
+    let out = brdfd(&["fit", "--input", "no-such-scan.json", "--cost", "cf1"]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr_one_line(&out);
+    assert!(
+        err.contains("cannot read scan file no-such-scan.json"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_cost_fails_with_one_line() {
+    let scan = example("t-freesia-pink.scan.json");
+    let out = brdfd(&["fit", "--input", &scan, "--cost", "cf9", "--json"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(out.stdout.is_empty());
+    let err = stderr_one_line(&out);
+    assert!(err.contains("unknown cost function \"cf9\""), "{err}");
+}
+
+#[test]
+fn help_lists_subcommands_and_explains_fit_options() {
+    let out = brdfd(&["--help"]);
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    for sub in ["fit", "synth", "demo"] {
+        assert!(text.contains(sub), "--help must list {sub}");
+    }
+    let out = brdfd(&["fit", "--help"]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    for opt in [
+        "--input",
+        "--cost",
+        "--method",
+        "--seed",
+        "--specular",
+        "--fresnel",
+        "--json",
+    ] {
+        assert!(text.contains(opt), "fit --help must explain {opt}");
+    }
+    assert!(text.contains("cube-root"), "{text}");
+}
+
+#[test]
+fn synth_writes_what_tests_data_holds() {
+    // The committed example files are exactly what `brdfd synth` writes.
+    let dir = std::env::temp_dir().join(format!("brdfd-cli-synth-{}", std::process::id()));
+    let out = brdfd(&["synth", "--out", dir.to_str().unwrap(), "--noise", "0.01"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for name in [
+        "t-prairie-green.noisy.scan.json",
+        "t-prairie-green.truth.json",
+    ] {
+        let made = std::fs::read_to_string(dir.join(name)).unwrap();
+        let committed = std::fs::read_to_string(example(name)).unwrap();
+        assert_eq!(
+            made, committed,
+            "{name} differs from tests/data: regenerate (tests/data/README.md)"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,154 @@
+//! Recovery of known parameters from the synthetic example scans in `tests/data/`.
+//!
+//! Every scan is fitted with every cost function (default method and seed). The mean ΔE00 over
+//! the 12 diffuse and the 2 specular geometries is printed per sample and cost function (run with
+//! `--nocapture` to see the table); the assertions are:
+//! - for every cost function, the fit's cost is no higher than the cost of the true parameters
+//!   (an optimiser that ends above the truth has stopped in a worse place than a known point);
+//! - `cf2`, noise-free: diffuse mean ΔE00 < 0.1 and ks, α, μ within 1 % of the truth;
+//! - `cf2`, 1 % noise: diffuse mean ΔE00 < 1.0.
+
+use std::path::PathBuf;
+
+use brdfd::cost::{CostFunction, cost};
+use brdfd::fit::{FitReport, FitRequest, fit_scan};
+use brdfd::model::FresnelCosine;
+use brdfd::optimise::Settings;
+use brdfd::scan::Scan;
+use brdfd::synth::{GroundTruth, paper_samples, slug};
+
+fn data_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests")
+        .join("data")
+}
+
+/// The example scans of one noise level with their truth, in `paper_samples()` order.
+fn examples(noisy: bool) -> Vec<(Scan, GroundTruth)> {
+    paper_samples()
+        .iter()
+        .map(|t| {
+            let s = slug(&t.sample);
+            let scan_name = if noisy {
+                format!("{s}.noisy.scan.json")
+            } else {
+                format!("{s}.scan.json")
+            };
+            let scan = Scan::read_file(data_dir().join(scan_name)).unwrap();
+            let text = std::fs::read_to_string(data_dir().join(format!("{s}.truth.json"))).unwrap();
+            let truth: GroundTruth = serde_json::from_str(&text).unwrap();
+            // The committed files must still be what the generator makes.
+            assert_eq!(
+                &truth, t,
+                "{s}.truth.json is stale: regenerate tests/data (README)"
+            );
+            (scan, truth)
+        })
+        .collect()
+}
+
+fn fit(scan: &Scan, cf: CostFunction) -> FitReport {
+    let request = FitRequest {
+        settings: Settings {
+            cost: cf,
+            ..Settings::default()
+        },
+        ..FitRequest::default()
+    };
+    fit_scan(scan, &request).unwrap()
+}
+
+fn rel(got: f64, want: f64) -> f64 {
+    (got - want).abs() / want.abs()
+}
+
+/// Fits every example of a noise level with one cost function, prints the table, checks the
+/// fit is never worse than the truth, and returns the reports.
+fn fit_and_report(noisy: bool, cf: CostFunction) -> Vec<(FitReport, GroundTruth)> {
+    let label = if noisy { "1 % noise" } else { "noise-free" };
+    let mut out = Vec::new();
+    println!("{cf}, {label}: sample, ΔE00 diffuse mean, specular mean, ks/α/μ relative error");
+    for (scan, truth) in examples(noisy) {
+        let r = fit(&scan, cf);
+        let p = &r.outcome.params;
+        let t = &truth.params;
+        println!(
+            "  {:<20} {:>8.4} {:>8.3}   ks {:>7.2} %  α {:>7.2} %  μ {:>7.2} %",
+            truth.sample,
+            r.evaluation.diffuse.mean,
+            r.evaluation.specular.mean,
+            100.0 * rel(p.ks, t.ks),
+            100.0 * rel(p.alpha, t.alpha),
+            100.0 * rel(p.ior, t.ior)
+        );
+        let at_truth = brdfd::model::evaluate(
+            t,
+            FresnelCosine::Incidence,
+            &brdfd::model::SpecularGeometry::all(),
+        );
+        let truth_cost = cost(cf, &r.measured, &at_truth);
+        assert!(
+            r.outcome.cost <= truth_cost * (1.0 + 1e-9),
+            "{cf} {label} {}: fit cost {} above the cost {} of the true parameters",
+            truth.sample,
+            r.outcome.cost,
+            truth_cost
+        );
+        out.push((r, truth));
+    }
+    let n = out.len() as f64;
+    println!(
+        "  mean over samples: diffuse {:.4}, specular {:.3}",
+        out.iter()
+            .map(|(r, _)| r.evaluation.diffuse.mean)
+            .sum::<f64>()
+            / n,
+        out.iter()
+            .map(|(r, _)| r.evaluation.specular.mean)
+            .sum::<f64>()
+            / n
+    );
+    out
+}
+
+#[test]
+fn cf2_recovers_the_noise_free_truth() {
+    for (r, truth) in fit_and_report(false, CostFunction::Cf2) {
+        let (p, t) = (&r.outcome.params, &truth.params);
+        let name = &truth.sample;
+        assert!(
+            r.evaluation.diffuse.mean < 0.1,
+            "{name}: diffuse ΔE00 {}",
+            r.evaluation.diffuse.mean
+        );
+        assert!(rel(p.ks, t.ks) < 0.01, "{name}: ks {} vs {}", p.ks, t.ks);
+        assert!(
+            rel(p.alpha, t.alpha) < 0.01,
+            "{name}: α {} vs {}",
+            p.alpha,
+            t.alpha
+        );
+        assert!(rel(p.ior, t.ior) < 0.01, "{name}: μ {} vs {}", p.ior, t.ior);
+    }
+}
+
+#[test]
+fn cf2_with_one_percent_noise_stays_below_one_delta_e() {
+    for (r, truth) in fit_and_report(true, CostFunction::Cf2) {
+        assert!(
+            r.evaluation.diffuse.mean < 1.0,
+            "{}: diffuse ΔE00 {}",
+            truth.sample,
+            r.evaluation.diffuse.mean
+        );
+    }
+}
+
+#[test]
+fn cf1_and_m2_fit_at_least_as_well_as_the_truth() {
+    for noisy in [false, true] {
+        for cf in [CostFunction::Cf1, CostFunction::M2] {
+            fit_and_report(noisy, cf);
+        }
+    }
+}
