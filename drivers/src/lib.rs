@@ -1,1 +1,17 @@
-//! placeholder
+//! brdfd's instrument drivers: the X-Rite MA-T12 over USB and the Canon RA-532H ("SRA") over a
+//! serial line. The wire framing is brdfd's own (the vendors' protocols are not public); it is
+//! specified in `PROTOCOL.md` beside this crate.
+//!
+//! # Layout
+//! - [`protocol`]: what is said, independent of bytes: requests, replies, readings, error codes,
+//!   the [`protocol::Codec`] trait and the commands as small pure types.
+//! - [`mat12::codec`], [`sra::codec`]: the bytes, one replaceable file per instrument.
+//! - [`session`]: the line-oriented session-file format (`brdfd-session 1`) that the recording
+//!   tap writes and the simulated instruments replay, with fault directives.
+
+pub mod mat12;
+pub mod protocol;
+pub mod session;
+pub mod sra;
+
+pub use protocol::{Instrument, Reading, ReadingValue};

@@ -1,0 +1,723 @@
+//! The MA-T12 wire codec: brdfd's own binary framing for the X-Rite MA-T12 over USB bulk
+//! (PROTOCOL.md, "MA-T12"). X-Rite's protocol is not public; this file is the only place that
+//! knows these bytes, so a vendor's real protocol replaces this one file.
+//!
+//! Frame (both directions), all integers little-endian:
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 2 | magic `4D 54` (`MT`) |
+//! | 2 | 1 | opcode (requests 0x01–0x07, replies = request \| 0x80, error 0xFF) |
+//! | 3 | 2 | payload length N (u16, at most [`MAX_PAYLOAD`]) |
+//! | 5 | N | payload |
+//! | 5+N | 2 | CRC-16/IBM-3740 of bytes 0..5+N (u16) |
+//!
+//! Readings are 31 IEEE-754 binary64 values: the reflectance factor travels exactly, so a
+//! recorded reading and the driver's reading compare bit for bit.
+
+use crate::protocol::{
+    BANDS, CRC16, Check, Codec, DeviceState, EncodeError, ErrorCode, FrameError, Identity,
+    Instrument, Reading, ReadingValue, Request, RequestKind, Response, Status,
+};
+
+/// The MA-T12's 12 geometries in SCIENCE.md §2 order; wire code = index + 1.
+pub const GEOMETRY_NAMES: [&str; 12] = [
+    "15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80", "45as-15", "45as15", "45as25",
+    "45as45", "45as75", "45as110",
+];
+
+/// Frame start.
+pub const MAGIC: [u8; 2] = *b"MT";
+/// Magic + opcode + length.
+pub const HEADER_LEN: usize = 5;
+/// CRC trailer.
+pub const CRC_LEN: usize = 2;
+/// Largest payload accepted; a larger declared length is treated as corruption.
+pub const MAX_PAYLOAD: usize = 1024;
+/// USB full-speed bulk packet size: the driver writes frames in chunks of at most this and
+/// reads with a buffer of this size.
+pub const PACKET_SIZE: usize = 64;
+
+pub const OP_IDENTIFY: u8 = 0x01;
+pub const OP_STATUS: u8 = 0x02;
+pub const OP_CALIBRATE: u8 = 0x03;
+pub const OP_MEASURE_ALL: u8 = 0x04;
+pub const OP_FETCH: u8 = 0x05;
+pub const OP_MEASURE_ONE: u8 = 0x06;
+pub const OP_ABORT: u8 = 0x07;
+/// A reply's opcode is its request's opcode with the high bit set.
+pub const REPLY_BIT: u8 = 0x80;
+pub const OP_ERROR: u8 = 0xFF;
+
+/// Payload of a reading: geometry code + 31 × f64.
+const READING_PAYLOAD: usize = 1 + 8 * BANDS;
+
+/// The MA-T12 codec.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Mat12Codec;
+
+/// Wire code (1–12) of a geometry name.
+pub fn geometry_code(name: &str) -> Option<u8> {
+    GEOMETRY_NAMES
+        .iter()
+        .position(|g| *g == name)
+        .map(|i| i as u8 + 1)
+}
+
+/// Geometry name of a wire code (1–12).
+pub fn geometry_name(code: u8) -> Option<&'static str> {
+    GEOMETRY_NAMES.get((code as usize).checked_sub(1)?).copied()
+}
+
+const fn opcode_of(kind: RequestKind) -> u8 {
+    match kind {
+        RequestKind::Identify => OP_IDENTIFY,
+        RequestKind::Status => OP_STATUS,
+        RequestKind::Calibrate => OP_CALIBRATE,
+        RequestKind::MeasureAll => OP_MEASURE_ALL,
+        RequestKind::Fetch => OP_FETCH,
+        RequestKind::MeasureOne => OP_MEASURE_ONE,
+        RequestKind::Abort => OP_ABORT,
+    }
+}
+
+fn kind_of(opcode: u8) -> Option<RequestKind> {
+    Some(match opcode {
+        OP_IDENTIFY => RequestKind::Identify,
+        OP_STATUS => RequestKind::Status,
+        OP_CALIBRATE => RequestKind::Calibrate,
+        OP_MEASURE_ALL => RequestKind::MeasureAll,
+        OP_FETCH => RequestKind::Fetch,
+        OP_MEASURE_ONE => RequestKind::MeasureOne,
+        OP_ABORT => RequestKind::Abort,
+        _ => return None,
+    })
+}
+
+const fn error_byte(code: ErrorCode) -> u8 {
+    match code {
+        ErrorCode::BadChecksum => 0x01,
+        ErrorCode::UnknownRequest => 0x02,
+        ErrorCode::NotCalibrated => 0x03,
+        ErrorCode::Busy => 0x04,
+        ErrorCode::NoMeasurement => 0x05,
+        ErrorCode::BadGeometry => 0x06,
+        ErrorCode::MeasurementFailed => 0x07,
+        ErrorCode::Aborted => 0x08,
+    }
+}
+
+fn error_code(byte: u8) -> Option<ErrorCode> {
+    ErrorCode::ALL.into_iter().find(|c| error_byte(*c) == byte)
+}
+
+const fn state_byte(state: DeviceState) -> u8 {
+    match state {
+        DeviceState::Ready => 0,
+        DeviceState::Busy => 1,
+        DeviceState::NeedsCalibration => 2,
+    }
+}
+
+/// Build a whole frame around `payload`.
+pub fn frame(opcode: u8, payload: &[u8]) -> Vec<u8> {
+    debug_assert!(payload.len() <= MAX_PAYLOAD);
+    let mut out = Vec::with_capacity(HEADER_LEN + payload.len() + CRC_LEN);
+    out.extend_from_slice(&MAGIC);
+    out.push(opcode);
+    out.extend_from_slice(&(payload.len() as u16).to_le_bytes());
+    out.extend_from_slice(payload);
+    let crc = CRC16.checksum(&out);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out
+}
+
+/// First framing step (the same for both directions): is a whole, checksummed frame at the
+/// front of `buf`? Leading bytes that cannot start a frame are rejected as garbage; a trailing
+/// lone `M` is kept because the `T` may be in the next packet.
+pub fn check(buf: &[u8]) -> Check {
+    if buf.is_empty() {
+        return Check::Incomplete;
+    }
+    let start = (0..buf.len())
+        .find(|&i| buf[i] == MAGIC[0] && buf.get(i + 1).is_none_or(|b| *b == MAGIC[1]))
+        .unwrap_or(buf.len());
+    if start > 0 {
+        return Check::Reject(start, FrameError::Garbage { skipped: start });
+    }
+    if buf.len() < HEADER_LEN {
+        return Check::Incomplete;
+    }
+    let declared = u16::from_le_bytes([buf[3], buf[4]]) as usize;
+    if declared > MAX_PAYLOAD {
+        // Drop the magic only: a real frame may start inside what we took for this header.
+        return Check::Reject(
+            2,
+            FrameError::BadLength {
+                declared,
+                max: MAX_PAYLOAD,
+            },
+        );
+    }
+    let total = HEADER_LEN + declared + CRC_LEN;
+    if buf.len() < total {
+        return Check::Incomplete;
+    }
+    let body = &buf[..HEADER_LEN + declared];
+    let computed = CRC16.checksum(body);
+    let received = u16::from_le_bytes([buf[total - 2], buf[total - 1]]);
+    if computed != received {
+        return Check::Reject(total, FrameError::BadChecksum { computed, received });
+    }
+    Check::Frame(total)
+}
+
+/// Split a checked frame into (opcode, payload).
+fn split(frame: &[u8]) -> Result<(u8, &[u8]), FrameError> {
+    if frame.len() < HEADER_LEN + CRC_LEN || frame[..2] != MAGIC {
+        return Err(FrameError::malformed("not a whole MA-T12 frame"));
+    }
+    let declared = u16::from_le_bytes([frame[3], frame[4]]) as usize;
+    if frame.len() != HEADER_LEN + declared + CRC_LEN {
+        return Err(FrameError::malformed(
+            "frame length disagrees with its length field",
+        ));
+    }
+    Ok((frame[2], &frame[HEADER_LEN..HEADER_LEN + declared]))
+}
+
+fn expect_len(what: &str, payload: &[u8], len: usize) -> Result<(), FrameError> {
+    if payload.len() == len {
+        Ok(())
+    } else {
+        Err(FrameError::malformed(format!(
+            "{what} payload must be {len} byte(s), got {}",
+            payload.len()
+        )))
+    }
+}
+
+fn geometry_from(code: u8) -> Result<&'static str, FrameError> {
+    geometry_name(code).ok_or(FrameError::UnknownGeometry {
+        code: format!("0x{code:02X}"),
+    })
+}
+
+fn parse_reading(payload: &[u8]) -> Result<Reading, FrameError> {
+    expect_len("READING", payload, READING_PAYLOAD)?;
+    let geometry = geometry_from(payload[0])?;
+    let mut values = [0.0; BANDS];
+    for (band, (v, bytes)) in values
+        .iter_mut()
+        .zip(payload[1..].chunks_exact(8))
+        .enumerate()
+    {
+        let x = f64::from_le_bytes(bytes.try_into().expect("chunks_exact(8)"));
+        if !x.is_finite() {
+            return Err(FrameError::NonFinite { geometry, band });
+        }
+        *v = x;
+    }
+    Ok(Reading {
+        geometry,
+        value: ReadingValue::Reflectance(values),
+    })
+}
+
+fn parse_string(payload: &[u8], at: &mut usize, field: &str) -> Result<String, FrameError> {
+    let len = *payload
+        .get(*at)
+        .ok_or_else(|| FrameError::malformed(format!("IDENTITY ends before {field}")))?
+        as usize;
+    let bytes = payload
+        .get(*at + 1..*at + 1 + len)
+        .ok_or_else(|| FrameError::malformed(format!("IDENTITY {field} runs past the payload")))?;
+    *at += 1 + len;
+    let s = std::str::from_utf8(bytes)
+        .map_err(|_| FrameError::malformed(format!("IDENTITY {field} is not UTF-8")))?;
+    if s.chars().any(char::is_control) {
+        return Err(FrameError::malformed(format!(
+            "IDENTITY {field} has control characters"
+        )));
+    }
+    Ok(s.to_owned())
+}
+
+fn encode_string(out: &mut Vec<u8>, field: &'static str, s: &str) -> Result<(), EncodeError> {
+    if s.len() > u8::MAX as usize || s.chars().any(char::is_control) {
+        return Err(EncodeError::BadField {
+            instrument: Instrument::MaT12,
+            field,
+            value: s.to_owned(),
+            why: "at most 255 bytes of UTF-8 without control characters",
+        });
+    }
+    out.push(s.len() as u8);
+    out.extend_from_slice(s.as_bytes());
+    Ok(())
+}
+
+fn code_for(geometry: &str) -> Result<u8, EncodeError> {
+    geometry_code(geometry)
+        .ok_or_else(|| EncodeError::unknown_geometry(Instrument::MaT12, geometry))
+}
+
+fn reading_payload(r: &Reading) -> Result<Vec<u8>, EncodeError> {
+    let code = code_for(r.geometry)?;
+    let ReadingValue::Reflectance(values) = &r.value else {
+        return Err(EncodeError::WrongValueKind {
+            instrument: Instrument::MaT12,
+            expected: "31-band reflectance",
+            found: "an intensity",
+        });
+    };
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(EncodeError::NonFinite {
+            instrument: Instrument::MaT12,
+            geometry: r.geometry,
+        });
+    }
+    let mut p = Vec::with_capacity(READING_PAYLOAD);
+    p.push(code);
+    for v in values {
+        p.extend_from_slice(&v.to_le_bytes());
+    }
+    Ok(p)
+}
+
+impl Codec for Mat12Codec {
+    const INSTRUMENT: Instrument = Instrument::MaT12;
+
+    fn check_request(buf: &[u8]) -> Check {
+        check(buf)
+    }
+
+    fn check_response(buf: &[u8]) -> Check {
+        check(buf)
+    }
+
+    fn parse_request(frame: &[u8]) -> Result<Request, FrameError> {
+        let (op, payload) = split(frame)?;
+        let geometry = |name: &str| -> Result<&'static str, FrameError> {
+            expect_len(name, payload, 1)?;
+            geometry_from(payload[0])
+        };
+        let no_payload = |name: &str, req: Request| -> Result<Request, FrameError> {
+            expect_len(name, payload, 0).map(|_| req)
+        };
+        match op {
+            OP_IDENTIFY => no_payload("IDENTIFY", Request::Identify),
+            OP_STATUS => no_payload("STATUS", Request::Status),
+            OP_CALIBRATE => no_payload("CALIBRATE", Request::Calibrate),
+            OP_MEASURE_ALL => no_payload("MEASURE-ALL", Request::MeasureAll),
+            OP_FETCH => Ok(Request::Fetch {
+                geometry: geometry("FETCH")?,
+            }),
+            OP_MEASURE_ONE => Ok(Request::MeasureOne {
+                geometry: geometry("MEASURE-ONE")?,
+            }),
+            OP_ABORT => no_payload("ABORT", Request::Abort),
+            other => Err(FrameError::UnknownOpcode {
+                what: format!("0x{other:02X}"),
+            }),
+        }
+    }
+
+    fn parse_response(frame: &[u8]) -> Result<Response, FrameError> {
+        let (op, payload) = split(frame)?;
+        const IDENTITY: u8 = OP_IDENTIFY | REPLY_BIT;
+        const STATUS: u8 = OP_STATUS | REPLY_BIT;
+        const CALIBRATED: u8 = OP_CALIBRATE | REPLY_BIT;
+        const MEASURED: u8 = OP_MEASURE_ALL | REPLY_BIT;
+        const FETCHED: u8 = OP_FETCH | REPLY_BIT;
+        const MEASURED_ONE: u8 = OP_MEASURE_ONE | REPLY_BIT;
+        const ABORTED: u8 = OP_ABORT | REPLY_BIT;
+        match op {
+            IDENTITY => {
+                let mut at = 0;
+                let model = parse_string(payload, &mut at, "model")?;
+                let serial = parse_string(payload, &mut at, "serial")?;
+                let firmware = parse_string(payload, &mut at, "firmware")?;
+                if at != payload.len() {
+                    return Err(FrameError::malformed("IDENTITY has bytes after firmware"));
+                }
+                Ok(Response::Identity(Identity {
+                    model,
+                    serial,
+                    firmware,
+                }))
+            }
+            STATUS => {
+                expect_len("STATUS", payload, 2)?;
+                let state = match payload[0] {
+                    0 => DeviceState::Ready,
+                    1 => DeviceState::Busy,
+                    2 => DeviceState::NeedsCalibration,
+                    s => return Err(FrameError::malformed(format!("STATUS state {s} unknown"))),
+                };
+                if payload[1] > 100 {
+                    return Err(FrameError::malformed(format!(
+                        "STATUS battery {}% is over 100%",
+                        payload[1]
+                    )));
+                }
+                Ok(Response::Status(Status {
+                    state,
+                    battery_percent: payload[1],
+                }))
+            }
+            CALIBRATED => expect_len("CALIBRATED", payload, 0).map(|_| Response::Calibrated),
+            MEASURED => {
+                expect_len("MEASURED", payload, 1)?;
+                Ok(Response::Measured { count: payload[0] })
+            }
+            FETCHED => parse_reading(payload).map(Response::Fetched),
+            MEASURED_ONE => parse_reading(payload).map(Response::MeasuredOne),
+            ABORTED => expect_len("ABORTED", payload, 0).map(|_| Response::Aborted),
+            OP_ERROR => {
+                expect_len("ERROR", payload, 3)?;
+                let request = kind_of(payload[0]).ok_or_else(|| {
+                    FrameError::malformed(format!("ERROR names request 0x{:02X}", payload[0]))
+                })?;
+                let code = error_code(payload[1]).ok_or_else(|| {
+                    FrameError::malformed(format!("ERROR code 0x{:02X} unknown", payload[1]))
+                })?;
+                let geometry = match payload[2] {
+                    0 => None,
+                    c => Some(geometry_from(c)?),
+                };
+                Ok(Response::Error {
+                    request,
+                    code,
+                    geometry,
+                })
+            }
+            other => Err(FrameError::UnknownOpcode {
+                what: format!("0x{other:02X}"),
+            }),
+        }
+    }
+
+    fn encode_request(request: &Request) -> Result<Vec<u8>, EncodeError> {
+        let op = opcode_of(request.kind());
+        Ok(match request.geometry() {
+            Some(g) => frame(op, &[code_for(g)?]),
+            None => frame(op, &[]),
+        })
+    }
+
+    fn encode_response(response: &Response) -> Result<Vec<u8>, EncodeError> {
+        let reply = |kind: RequestKind| opcode_of(kind) | REPLY_BIT;
+        Ok(match response {
+            Response::Identity(id) => {
+                let mut p = Vec::new();
+                encode_string(&mut p, "model", &id.model)?;
+                encode_string(&mut p, "serial", &id.serial)?;
+                encode_string(&mut p, "firmware", &id.firmware)?;
+                frame(reply(RequestKind::Identify), &p)
+            }
+            Response::Status(s) => {
+                if s.battery_percent > 100 {
+                    return Err(EncodeError::BadField {
+                        instrument: Instrument::MaT12,
+                        field: "battery_percent",
+                        value: s.battery_percent.to_string(),
+                        why: "a percentage is at most 100",
+                    });
+                }
+                frame(
+                    reply(RequestKind::Status),
+                    &[state_byte(s.state), s.battery_percent],
+                )
+            }
+            Response::Calibrated => frame(reply(RequestKind::Calibrate), &[]),
+            Response::Measured { count } => frame(reply(RequestKind::MeasureAll), &[*count]),
+            Response::Fetched(r) => frame(reply(RequestKind::Fetch), &reading_payload(r)?),
+            Response::MeasuredOne(r) => frame(reply(RequestKind::MeasureOne), &reading_payload(r)?),
+            Response::Aborted => frame(reply(RequestKind::Abort), &[]),
+            Response::Error {
+                request,
+                code,
+                geometry,
+            } => {
+                let g = match geometry {
+                    Some(g) => code_for(g)?,
+                    None => 0,
+                };
+                frame(OP_ERROR, &[opcode_of(*request), error_byte(*code), g])
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bytes::BytesMut;
+    use proptest::prelude::*;
+
+    use crate::protocol::golden;
+
+    /// The ramp used by PROTOCOL.md's golden READING: 0.25 + i/64, exact in binary64.
+    fn golden_ramp() -> [f64; BANDS] {
+        std::array::from_fn(|i| 0.25 + i as f64 / 64.0)
+    }
+
+    fn identity() -> Identity {
+        Identity {
+            model: "MA-T12".into(),
+            serial: "SN-000123".into(),
+            firmware: "FW 2.1.04".into(),
+        }
+    }
+
+    // Golden frames come verbatim from PROTOCOL.md (its CRCs were computed with an independent
+    // bit-by-bit CRC-16/CCITT-FALSE, not with this code).
+    #[test]
+    fn golden_requests_encode_and_parse() {
+        for (req, label) in [
+            (Request::Identify, "mat12 IDENTIFY"),
+            (Request::Status, "mat12 STATUS"),
+            (Request::Calibrate, "mat12 CALIBRATE"),
+            (Request::MeasureAll, "mat12 MEASURE-ALL"),
+            (
+                Request::Fetch {
+                    geometry: "15as-45",
+                },
+                "mat12 FETCH 15as-45",
+            ),
+            (
+                Request::MeasureOne {
+                    geometry: "45as110",
+                },
+                "mat12 MEASURE-ONE 45as110",
+            ),
+            (Request::Abort, "mat12 ABORT"),
+        ] {
+            let bytes = golden(label);
+            assert_eq!(Mat12Codec::encode_request(&req).unwrap(), bytes, "{label}");
+            let mut buf = BytesMut::from(&bytes[..]);
+            assert_eq!(
+                Mat12Codec::decode_request(&mut buf),
+                Ok(Some(req)),
+                "{label}"
+            );
+            assert!(buf.is_empty());
+        }
+    }
+
+    #[test]
+    fn golden_replies_encode_and_parse() {
+        let reading = Reading {
+            geometry: "15as-45",
+            value: ReadingValue::Reflectance(golden_ramp()),
+        };
+        let cases = [
+            (Response::Identity(identity()), "mat12 IDENTITY"),
+            (
+                Response::Status(Status {
+                    state: DeviceState::Ready,
+                    battery_percent: 87,
+                }),
+                "mat12 STATUS ready 87%",
+            ),
+            (Response::Calibrated, "mat12 CALIBRATED"),
+            (Response::Measured { count: 12 }, "mat12 MEASURED 12"),
+            (Response::Fetched(reading), "mat12 READING 15as-45"),
+            (Response::Aborted, "mat12 ABORTED"),
+            (
+                Response::Error {
+                    request: RequestKind::MeasureAll,
+                    code: ErrorCode::NotCalibrated,
+                    geometry: None,
+                },
+                "mat12 ERROR MEASURE-ALL NOT-CALIBRATED",
+            ),
+        ];
+        for (resp, label) in cases {
+            let bytes = golden(label);
+            assert_eq!(
+                Mat12Codec::encode_response(&resp).unwrap(),
+                bytes,
+                "{label}"
+            );
+            assert_eq!(Mat12Codec::parse_response(&bytes), Ok(resp), "{label}");
+        }
+    }
+
+    #[test]
+    fn golden_reading_is_exact_and_four_packets_long() {
+        let bytes = golden("mat12 READING 15as-45");
+        assert_eq!(bytes.len(), 4 * PACKET_SIZE);
+        let Ok(Response::Fetched(back)) = Mat12Codec::parse_response(&bytes) else {
+            panic!("golden reading did not parse")
+        };
+        let ReadingValue::Reflectance(v) = back.value else {
+            panic!("not a spectrum")
+        };
+        for (i, x) in v.iter().enumerate() {
+            assert_eq!(x.to_bits(), (0.25 + i as f64 / 64.0).to_bits(), "band {i}");
+        }
+    }
+
+    #[test]
+    fn partial_frames_wait_and_garbage_is_skipped() {
+        let bytes = golden("mat12 STATUS ready 87%");
+        for cut in 0..bytes.len() {
+            assert_eq!(check(&bytes[..cut]), Check::Incomplete, "cut at {cut}");
+        }
+        let mut buf = BytesMut::from(&b"\x00\xffxyM"[..]);
+        buf.extend_from_slice(&bytes);
+        // `M` followed by `M` cannot start a frame, so the garbage is `00 FF x y M`.
+        assert_eq!(
+            Mat12Codec::decode_response(&mut buf),
+            Err(FrameError::Garbage { skipped: 5 })
+        );
+        assert!(matches!(
+            Mat12Codec::decode_response(&mut buf),
+            Ok(Some(Response::Status(_)))
+        ));
+    }
+
+    #[test]
+    fn bad_checksum_is_rejected_whole() {
+        let mut bytes = golden("mat12 MEASURED 12");
+        bytes[5] ^= 0x01;
+        let mut buf = BytesMut::from(&bytes[..]);
+        buf.extend_from_slice(&golden("mat12 MEASURED 12"));
+        assert!(matches!(
+            Mat12Codec::decode_response(&mut buf),
+            Err(FrameError::BadChecksum { .. })
+        ));
+        // The good copy behind it decodes.
+        assert_eq!(
+            Mat12Codec::decode_response(&mut buf),
+            Ok(Some(Response::Measured { count: 12 }))
+        );
+    }
+
+    #[test]
+    fn every_single_bit_flip_of_the_golden_reading_is_caught() {
+        let good = golden("mat12 READING 15as-45");
+        for byte in 0..good.len() {
+            for bit in 0..8 {
+                let mut bad = good.clone();
+                bad[byte] ^= 1 << bit;
+                let mut buf = BytesMut::from(&bad[..]);
+                while !buf.is_empty() {
+                    match Mat12Codec::decode_response(&mut buf) {
+                        Ok(None) => break,
+                        Ok(Some(r)) => panic!("flip {byte}:{bit} decoded to {r}"),
+                        Err(_) => {}
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn non_finite_reading_is_refused() {
+        let mut values = golden_ramp();
+        values[7] = f64::NAN;
+        let r = Reading {
+            geometry: "45as45",
+            value: ReadingValue::Reflectance(values),
+        };
+        assert!(Mat12Codec::encode_response(&Response::Fetched(r)).is_err());
+        let mut payload = vec![10u8];
+        for v in values {
+            payload.extend_from_slice(&v.to_le_bytes());
+        }
+        let bytes = frame(OP_FETCH | REPLY_BIT, &payload);
+        assert_eq!(
+            Mat12Codec::parse_response(&bytes),
+            Err(FrameError::NonFinite {
+                geometry: "45as45",
+                band: 7
+            })
+        );
+    }
+
+    #[test]
+    fn geometry_codes_cover_the_twelve_names() {
+        for (i, name) in GEOMETRY_NAMES.iter().enumerate() {
+            assert_eq!(geometry_code(name), Some(i as u8 + 1));
+            assert_eq!(geometry_name(i as u8 + 1), Some(*name));
+        }
+        assert_eq!(geometry_name(0), None);
+        assert_eq!(geometry_name(13), None);
+        assert_eq!(geometry_code("sra-20"), None);
+    }
+
+    fn drain(buf: &mut BytesMut) -> Vec<Response> {
+        let mut out = Vec::new();
+        while !buf.is_empty() {
+            match Mat12Codec::decode_response(buf) {
+                Ok(None) => break,
+                Ok(Some(r)) => out.push(r),
+                Err(_) => {}
+            }
+        }
+        out
+    }
+
+    proptest! {
+        #[test]
+        fn arbitrary_bytes_never_panic_nor_yield_a_reading(
+            bytes in proptest::collection::vec(any::<u8>(), 0..2048)
+        ) {
+            let mut buf = BytesMut::from(&bytes[..]);
+            for r in drain(&mut buf) {
+                prop_assert!(!matches!(r, Response::Fetched(_) | Response::MeasuredOne(_)));
+            }
+            let mut buf = BytesMut::from(&bytes[..]);
+            while !buf.is_empty() {
+                if let Ok(None) = Mat12Codec::decode_request(&mut buf) {
+                    break;
+                }
+            }
+        }
+
+        #[test]
+        fn arbitrary_bytes_after_magic_never_yield_a_reading(
+            op in prop_oneof![Just(0x85u8), Just(0x86u8), any::<u8>()],
+            rest in proptest::collection::vec(any::<u8>(), 0..600)
+        ) {
+            // Aim the fuzz at the parser: a plausible header, then noise.
+            let mut bytes = vec![b'M', b'T', op, READING_PAYLOAD as u8, 0];
+            bytes.extend_from_slice(&rest);
+            let mut buf = BytesMut::from(&bytes[..]);
+            for r in drain(&mut buf) {
+                prop_assert!(!matches!(r, Response::Fetched(_) | Response::MeasuredOne(_)));
+            }
+        }
+
+        #[test]
+        fn readings_round_trip_bit_for_bit_in_any_chunking(
+            code in 1u8..=12,
+            bits in proptest::array::uniform31(any::<u64>()),
+            chunk in 1usize..=64,
+        ) {
+            let values = bits.map(|b| {
+                let x = f64::from_bits(b);
+                if x.is_finite() { x } else { 0.5 }
+            });
+            let r = Reading {
+                geometry: geometry_name(code).unwrap(),
+                value: ReadingValue::Reflectance(values),
+            };
+            let bytes = Mat12Codec::encode_response(&Response::Fetched(r)).unwrap();
+            let mut buf = BytesMut::new();
+            let mut got = Vec::new();
+            for piece in bytes.chunks(chunk) {
+                buf.extend_from_slice(piece);
+                while let Some(resp) = Mat12Codec::decode_response(&mut buf).unwrap() {
+                    got.push(resp);
+                }
+            }
+            prop_assert_eq!(got.len(), 1);
+            let Response::Fetched(back) = &got[0] else { panic!("not a reading") };
+            prop_assert!(back.bit_eq(&r));
+        }
+    }
+}

@@ -1,0 +1,718 @@
+//! The SRA wire codec: brdfd's own ASCII line framing for the Canon RA-532H over a serial line
+//! (PROTOCOL.md, "SRA"). Canon's protocol is not public; this file is the only place that knows
+//! these bytes, so a vendor's real protocol replaces this one file.
+//!
+//! A line is `<start><body>*<CRC>\r\n`: start `$` for requests and `!` for replies; body fields
+//! separated by `,`; CRC = CRC-16/IBM-3740 of `<start><body>` as four upper-case hex digits.
+//! `$`, `!` and `*` never occur inside a body, so after garbage the decoder resynchronises on the
+//! last start character before a line end.
+//!
+//! Intensities are written in the shortest decimal that reads back to the same IEEE-754 binary64
+//! value (Rust's `{}` formatting, `{:e}` outside 1e-5..1e9), so a recorded reading and the
+//! driver's reading compare bit for bit.
+
+use crate::protocol::{
+    CRC16, Check, Codec, DeviceState, EncodeError, ErrorCode, FrameError, Identity, Instrument,
+    Reading, ReadingValue, Request, RequestKind, Response, Status,
+};
+
+/// The SRA's 2 geometries in SCIENCE.md §2 order.
+pub const GEOMETRY_NAMES: [&str; 2] = ["sra-20", "sra-60"];
+/// Wire codes of [`GEOMETRY_NAMES`]: the incidence = viewing angle in degrees.
+pub const GEOMETRY_CODES: [&str; 2] = ["20", "60"];
+
+/// Start of a request line.
+pub const REQUEST_START: u8 = b'$';
+/// Start of a reply line.
+pub const REPLY_START: u8 = b'!';
+/// Longest line, terminator included. A longer run without `\r\n` is dropped as garbage.
+pub const MAX_LINE: usize = 128;
+/// Serial settings brdfd opens the port with: 9600 baud, 8 data bits, no parity, 1 stop bit.
+pub const BAUD_RATE: u32 = 9600;
+
+/// The SRA codec.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SraCodec;
+
+/// Wire code (`20`, `60`) of a geometry name.
+pub fn geometry_code(name: &str) -> Option<&'static str> {
+    GEOMETRY_NAMES
+        .iter()
+        .position(|g| *g == name)
+        .map(|i| GEOMETRY_CODES[i])
+}
+
+/// Geometry name of a wire code.
+pub fn geometry_name(code: &str) -> Option<&'static str> {
+    GEOMETRY_CODES
+        .iter()
+        .position(|c| *c == code)
+        .map(|i| GEOMETRY_NAMES[i])
+}
+
+const fn mnemonic(kind: RequestKind) -> &'static str {
+    match kind {
+        RequestKind::Identify => "ID",
+        RequestKind::Status => "ST",
+        RequestKind::Calibrate => "CAL",
+        RequestKind::MeasureAll => "MA",
+        RequestKind::Fetch => "RD",
+        RequestKind::MeasureOne => "M1",
+        RequestKind::Abort => "AB",
+    }
+}
+
+fn kind_of(mnemonic: &str) -> Option<RequestKind> {
+    Some(match mnemonic {
+        "ID" => RequestKind::Identify,
+        "ST" => RequestKind::Status,
+        "CAL" => RequestKind::Calibrate,
+        "MA" => RequestKind::MeasureAll,
+        "RD" => RequestKind::Fetch,
+        "M1" => RequestKind::MeasureOne,
+        "AB" => RequestKind::Abort,
+        _ => return None,
+    })
+}
+
+const fn error_mnemonic(code: ErrorCode) -> &'static str {
+    match code {
+        ErrorCode::BadChecksum => "CRC",
+        ErrorCode::UnknownRequest => "UNKNOWN",
+        ErrorCode::NotCalibrated => "NOCAL",
+        ErrorCode::Busy => "BUSY",
+        ErrorCode::NoMeasurement => "NODATA",
+        ErrorCode::BadGeometry => "BADGEOM",
+        ErrorCode::MeasurementFailed => "FAULT",
+        ErrorCode::Aborted => "ABORTED",
+    }
+}
+
+fn error_code(s: &str) -> Option<ErrorCode> {
+    ErrorCode::ALL.into_iter().find(|c| error_mnemonic(*c) == s)
+}
+
+const fn state_word(state: DeviceState) -> &'static str {
+    match state {
+        DeviceState::Ready => "READY",
+        DeviceState::Busy => "BUSY",
+        DeviceState::NeedsCalibration => "NOCAL",
+    }
+}
+
+/// Characters allowed in a body: printable ASCII except the framing characters.
+fn body_char(b: u8) -> bool {
+    (0x20..=0x7E).contains(&b) && !matches!(b, b'$' | b'!' | b'*')
+}
+
+/// Build a whole line from a start character and body.
+pub fn line(start: u8, body: &str) -> Vec<u8> {
+    let mut out = Vec::with_capacity(body.len() + 8);
+    out.push(start);
+    out.extend_from_slice(body.as_bytes());
+    let crc = CRC16.checksum(&out);
+    out.extend_from_slice(format!("*{crc:04X}\r\n").as_bytes());
+    out
+}
+
+/// First framing step: is a whole checksummed line starting with `start` at the front of `buf`?
+pub fn check(buf: &[u8], start: u8) -> Check {
+    if buf.is_empty() {
+        return Check::Incomplete;
+    }
+    let Some(first) = buf.iter().position(|b| *b == start) else {
+        return Check::Reject(buf.len(), FrameError::Garbage { skipped: buf.len() });
+    };
+    if first > 0 {
+        return Check::Reject(first, FrameError::Garbage { skipped: first });
+    }
+    let Some(nl) = buf.iter().position(|b| *b == b'\n') else {
+        if buf.len() >= MAX_LINE {
+            // No terminator where one must be: drop up to a later start, or everything.
+            let cut = buf[1..]
+                .iter()
+                .position(|b| *b == start)
+                .map_or(buf.len(), |i| i + 1);
+            return Check::Reject(
+                cut,
+                FrameError::LineTooLong {
+                    len: cut,
+                    max: MAX_LINE,
+                },
+            );
+        }
+        return Check::Incomplete;
+    };
+    // A line begins at the last start character before its terminator.
+    let last = buf[..nl].iter().rposition(|b| *b == start).unwrap_or(0);
+    if last > 0 {
+        return Check::Reject(last, FrameError::Garbage { skipped: last });
+    }
+    let len = nl + 1;
+    if len > MAX_LINE {
+        return Check::Reject(len, FrameError::LineTooLong { len, max: MAX_LINE });
+    }
+    // <start><body>*XXXX\r\n: at least 1 + 0 + 5 + 2 bytes.
+    if len < 8 || buf[nl - 1] != b'\r' || buf[nl - 6] != b'*' {
+        return Check::Reject(
+            len,
+            FrameError::malformed("line does not end in *XXXX\\r\\n"),
+        );
+    }
+    let digits = &buf[nl - 5..nl - 1];
+    if !digits
+        .iter()
+        .all(|b| b.is_ascii_digit() || (b'A'..=b'F').contains(b))
+    {
+        return Check::Reject(
+            len,
+            FrameError::malformed("checksum is not 4 upper-case hex digits"),
+        );
+    }
+    let received =
+        u16::from_str_radix(std::str::from_utf8(digits).expect("ascii"), 16).expect("checked hex");
+    let computed = CRC16.checksum(&buf[..nl - 6]);
+    if computed != received {
+        return Check::Reject(len, FrameError::BadChecksum { computed, received });
+    }
+    Check::Frame(len)
+}
+
+/// The fields of a checked line.
+fn fields(frame: &[u8]) -> Result<Vec<&str>, FrameError> {
+    if frame.len() < 8 || !frame.ends_with(b"\r\n") || frame[frame.len() - 7] != b'*' {
+        return Err(FrameError::malformed("not a whole SRA line"));
+    }
+    let body = &frame[1..frame.len() - 7];
+    if let Some(b) = body.iter().find(|b| !body_char(**b)) {
+        return Err(FrameError::malformed(format!(
+            "byte 0x{b:02X} is not allowed in a line"
+        )));
+    }
+    Ok(std::str::from_utf8(body)
+        .expect("printable ascii")
+        .split(',')
+        .collect())
+}
+
+fn arity(f: &[&str], n: usize) -> Result<(), FrameError> {
+    if f.len() == n {
+        Ok(())
+    } else {
+        Err(FrameError::malformed(format!(
+            "{} takes {} field(s), got {}",
+            f[0],
+            n - 1,
+            f.len() - 1
+        )))
+    }
+}
+
+fn geometry_from(code: &str) -> Result<&'static str, FrameError> {
+    geometry_name(code).ok_or_else(|| FrameError::UnknownGeometry {
+        code: code.to_owned(),
+    })
+}
+
+/// A small unsigned decimal with at most three digits (counts and percentages).
+fn small_number(field: &str, s: &str) -> Result<u8, FrameError> {
+    if s.is_empty() || s.len() > 3 || !s.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(FrameError::malformed(format!(
+            "{field} {s:?} is not a number 0-255"
+        )));
+    }
+    s.parse()
+        .map_err(|_| FrameError::malformed(format!("{field} {s:?} is not a number 0-255")))
+}
+
+/// `-?digits(.digits)?(e-?digits)?`: the only decimal forms the codec writes; this keeps `inf`,
+/// `NaN`, `+1` and hex floats off the wire.
+fn decimal_grammar(s: &str) -> bool {
+    let s = s.strip_prefix('-').unwrap_or(s);
+    let (mantissa, exp) = match s.split_once(['e', 'E']) {
+        Some((m, e)) => (m, Some(e.strip_prefix('-').unwrap_or(e))),
+        None => (s, None),
+    };
+    let digits = |t: &str| !t.is_empty() && t.bytes().all(|b| b.is_ascii_digit());
+    let mantissa_ok = match mantissa.split_once('.') {
+        Some((i, f)) => digits(i) && digits(f),
+        None => digits(mantissa),
+    };
+    mantissa_ok && exp.is_none_or(digits)
+}
+
+fn parse_value(geometry: &'static str, s: &str) -> Result<f64, FrameError> {
+    if !decimal_grammar(s) {
+        return Err(FrameError::malformed(format!(
+            "intensity {s:?} for {geometry} is not a decimal"
+        )));
+    }
+    let v: f64 = s
+        .parse()
+        .map_err(|_| FrameError::malformed(format!("intensity {s:?} for {geometry}")))?;
+    if !v.is_finite() {
+        return Err(FrameError::NonFinite { geometry, band: 0 });
+    }
+    Ok(v)
+}
+
+/// Shortest decimal that reads back to exactly `v`.
+pub fn format_value(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 || (1e-5..1e9).contains(&a) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+fn parse_reading(f: &[&str]) -> Result<Reading, FrameError> {
+    arity(f, 3)?;
+    let geometry = geometry_from(f[1])?;
+    let v = parse_value(geometry, f[2])?;
+    Ok(Reading {
+        geometry,
+        value: ReadingValue::Intensity(v),
+    })
+}
+
+fn code_for(geometry: &str) -> Result<&'static str, EncodeError> {
+    geometry_code(geometry).ok_or_else(|| EncodeError::unknown_geometry(Instrument::Sra, geometry))
+}
+
+fn reading_body(tag: &str, r: &Reading) -> Result<String, EncodeError> {
+    let code = code_for(r.geometry)?;
+    let ReadingValue::Intensity(v) = r.value else {
+        return Err(EncodeError::WrongValueKind {
+            instrument: Instrument::Sra,
+            expected: "one intensity",
+            found: "a 31-band reflectance",
+        });
+    };
+    if !v.is_finite() {
+        return Err(EncodeError::NonFinite {
+            instrument: Instrument::Sra,
+            geometry: r.geometry,
+        });
+    }
+    Ok(format!("{tag},{code},{}", format_value(v)))
+}
+
+fn text_field(field: &'static str, s: &str) -> Result<(), EncodeError> {
+    if s.bytes().all(|b| body_char(b) && b != b',') {
+        Ok(())
+    } else {
+        Err(EncodeError::BadField {
+            instrument: Instrument::Sra,
+            field,
+            value: s.to_owned(),
+            why: "printable ASCII without , * $ or !",
+        })
+    }
+}
+
+impl Codec for SraCodec {
+    const INSTRUMENT: Instrument = Instrument::Sra;
+
+    fn check_request(buf: &[u8]) -> Check {
+        check(buf, REQUEST_START)
+    }
+
+    fn check_response(buf: &[u8]) -> Check {
+        check(buf, REPLY_START)
+    }
+
+    fn parse_request(frame: &[u8]) -> Result<Request, FrameError> {
+        if frame.first() != Some(&REQUEST_START) {
+            return Err(FrameError::malformed("a request starts with $"));
+        }
+        let f = fields(frame)?;
+        let kind = kind_of(f[0]).ok_or_else(|| FrameError::UnknownOpcode { what: f[0].into() })?;
+        Ok(match kind {
+            RequestKind::Fetch => {
+                arity(&f, 2)?;
+                Request::Fetch {
+                    geometry: geometry_from(f[1])?,
+                }
+            }
+            RequestKind::MeasureOne => {
+                arity(&f, 2)?;
+                Request::MeasureOne {
+                    geometry: geometry_from(f[1])?,
+                }
+            }
+            simple => {
+                arity(&f, 1)?;
+                match simple {
+                    RequestKind::Identify => Request::Identify,
+                    RequestKind::Status => Request::Status,
+                    RequestKind::Calibrate => Request::Calibrate,
+                    RequestKind::MeasureAll => Request::MeasureAll,
+                    _ => Request::Abort,
+                }
+            }
+        })
+    }
+
+    fn parse_response(frame: &[u8]) -> Result<Response, FrameError> {
+        if frame.first() != Some(&REPLY_START) {
+            return Err(FrameError::malformed("a reply starts with !"));
+        }
+        let f = fields(frame)?;
+        match f[0] {
+            "ID" => {
+                arity(&f, 4)?;
+                Ok(Response::Identity(Identity {
+                    model: f[1].into(),
+                    serial: f[2].into(),
+                    firmware: f[3].into(),
+                }))
+            }
+            "ST" => {
+                arity(&f, 3)?;
+                let state = match f[1] {
+                    "READY" => DeviceState::Ready,
+                    "BUSY" => DeviceState::Busy,
+                    "NOCAL" => DeviceState::NeedsCalibration,
+                    s => return Err(FrameError::malformed(format!("STATUS state {s:?} unknown"))),
+                };
+                let battery_percent = small_number("battery", f[2])?;
+                if battery_percent > 100 {
+                    return Err(FrameError::malformed(format!(
+                        "STATUS battery {battery_percent}% is over 100%"
+                    )));
+                }
+                Ok(Response::Status(Status {
+                    state,
+                    battery_percent,
+                }))
+            }
+            "CAL" => arity(&f, 1).map(|_| Response::Calibrated),
+            "MA" => {
+                arity(&f, 2)?;
+                Ok(Response::Measured {
+                    count: small_number("count", f[1])?,
+                })
+            }
+            "RD" => parse_reading(&f).map(Response::Fetched),
+            "M1" => parse_reading(&f).map(Response::MeasuredOne),
+            "AB" => arity(&f, 1).map(|_| Response::Aborted),
+            "ER" => {
+                if !(3..=4).contains(&f.len()) {
+                    return Err(FrameError::malformed("ER takes 2 or 3 fields"));
+                }
+                let request = kind_of(f[1]).ok_or_else(|| {
+                    FrameError::malformed(format!("ER names unknown request {:?}", f[1]))
+                })?;
+                let code = error_code(f[2])
+                    .ok_or_else(|| FrameError::malformed(format!("ER code {:?} unknown", f[2])))?;
+                let geometry = match f.get(3) {
+                    Some(c) => Some(geometry_from(c)?),
+                    None => None,
+                };
+                Ok(Response::Error {
+                    request,
+                    code,
+                    geometry,
+                })
+            }
+            other => Err(FrameError::UnknownOpcode { what: other.into() }),
+        }
+    }
+
+    fn encode_request(request: &Request) -> Result<Vec<u8>, EncodeError> {
+        let m = mnemonic(request.kind());
+        let body = match request.geometry() {
+            Some(g) => format!("{m},{}", code_for(g)?),
+            None => m.to_owned(),
+        };
+        Ok(line(REQUEST_START, &body))
+    }
+
+    fn encode_response(response: &Response) -> Result<Vec<u8>, EncodeError> {
+        let body = match response {
+            Response::Identity(id) => {
+                text_field("model", &id.model)?;
+                text_field("serial", &id.serial)?;
+                text_field("firmware", &id.firmware)?;
+                format!("ID,{},{},{}", id.model, id.serial, id.firmware)
+            }
+            Response::Status(s) => {
+                if s.battery_percent > 100 {
+                    return Err(EncodeError::BadField {
+                        instrument: Instrument::Sra,
+                        field: "battery_percent",
+                        value: s.battery_percent.to_string(),
+                        why: "a percentage is at most 100",
+                    });
+                }
+                format!("ST,{},{}", state_word(s.state), s.battery_percent)
+            }
+            Response::Calibrated => "CAL".to_owned(),
+            Response::Measured { count } => format!("MA,{count}"),
+            Response::Fetched(r) => reading_body("RD", r)?,
+            Response::MeasuredOne(r) => reading_body("M1", r)?,
+            Response::Aborted => "AB".to_owned(),
+            Response::Error {
+                request,
+                code,
+                geometry,
+            } => match geometry {
+                Some(g) => format!(
+                    "ER,{},{},{}",
+                    mnemonic(*request),
+                    error_mnemonic(*code),
+                    code_for(g)?
+                ),
+                None => format!("ER,{},{}", mnemonic(*request), error_mnemonic(*code)),
+            },
+        };
+        let bytes = line(REPLY_START, &body);
+        if bytes.len() > MAX_LINE {
+            return Err(EncodeError::BadField {
+                instrument: Instrument::Sra,
+                field: "line",
+                value: body,
+                why: "a line is at most 128 bytes",
+            });
+        }
+        Ok(bytes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::golden;
+    use bytes::BytesMut;
+    use proptest::prelude::*;
+
+    fn intensity(geometry: &'static str, v: f64) -> Reading {
+        Reading {
+            geometry,
+            value: ReadingValue::Intensity(v),
+        }
+    }
+
+    // Golden lines come verbatim from PROTOCOL.md (CRCs computed independently of this code).
+    #[test]
+    fn golden_requests_encode_and_parse() {
+        for (req, label) in [
+            (Request::Identify, "sra IDENTIFY"),
+            (Request::Status, "sra STATUS"),
+            (Request::Calibrate, "sra CALIBRATE"),
+            (Request::MeasureAll, "sra MEASURE-ALL"),
+            (Request::Fetch { geometry: "sra-20" }, "sra FETCH sra-20"),
+            (
+                Request::MeasureOne { geometry: "sra-60" },
+                "sra MEASURE-ONE sra-60",
+            ),
+            (Request::Abort, "sra ABORT"),
+        ] {
+            let bytes = golden(label);
+            assert_eq!(SraCodec::encode_request(&req).unwrap(), bytes, "{label}");
+            let mut buf = BytesMut::from(&bytes[..]);
+            assert_eq!(SraCodec::decode_request(&mut buf), Ok(Some(req)), "{label}");
+            assert!(buf.is_empty());
+        }
+    }
+
+    #[test]
+    fn golden_replies_encode_and_parse() {
+        let cases = [
+            (
+                Response::Identity(Identity {
+                    model: "RA-532H".into(),
+                    serial: "SN-004711".into(),
+                    firmware: "FW 1.07".into(),
+                }),
+                "sra IDENTITY",
+            ),
+            (
+                Response::Status(Status {
+                    state: DeviceState::Ready,
+                    battery_percent: 64,
+                }),
+                "sra STATUS ready 64%",
+            ),
+            (Response::Calibrated, "sra CALIBRATED"),
+            (Response::Measured { count: 2 }, "sra MEASURED 2"),
+            (
+                Response::Fetched(intensity("sra-20", 3.1)),
+                "sra READING sra-20",
+            ),
+            (
+                Response::Fetched(intensity("sra-60", 7.9)),
+                "sra READING sra-60",
+            ),
+            (
+                Response::MeasuredOne(intensity("sra-60", 0.245)),
+                "sra READING (measure-one) sra-60",
+            ),
+            (Response::Aborted, "sra ABORTED"),
+            (
+                Response::Error {
+                    request: RequestKind::Fetch,
+                    code: ErrorCode::NoMeasurement,
+                    geometry: Some("sra-20"),
+                },
+                "sra ERROR FETCH NO-MEASUREMENT sra-20",
+            ),
+        ];
+        for (resp, label) in cases {
+            let bytes = golden(label);
+            assert_eq!(SraCodec::encode_response(&resp).unwrap(), bytes, "{label}");
+            let mut buf = BytesMut::from(&bytes[..]);
+            assert_eq!(
+                SraCodec::decode_response(&mut buf),
+                Ok(Some(resp)),
+                "{label}"
+            );
+        }
+    }
+
+    #[test]
+    fn resynchronises_after_garbage_containing_start_characters() {
+        let good = golden("sra READING sra-20");
+        let mut buf = BytesMut::from(&b"\x00\xff!!RD,2"[..]);
+        buf.extend_from_slice(&good);
+        let mut got = Vec::new();
+        let mut errors = 0;
+        loop {
+            match SraCodec::decode_response(&mut buf) {
+                Ok(Some(r)) => got.push(r),
+                Ok(None) => break,
+                Err(_) => errors += 1,
+            }
+        }
+        assert_eq!(got, vec![Response::Fetched(intensity("sra-20", 3.1))]);
+        assert!(errors >= 1);
+        assert!(buf.is_empty());
+    }
+
+    #[test]
+    fn partial_lines_wait() {
+        let good = golden("sra READING sra-60");
+        for cut in 0..good.len() {
+            assert_eq!(
+                check(&good[..cut], REPLY_START),
+                Check::Incomplete,
+                "cut {cut}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_line_without_terminator_is_dropped_at_the_limit() {
+        let mut buf = BytesMut::from(&[b'!'; 1][..]);
+        buf.extend_from_slice(&[b'7'; MAX_LINE]);
+        assert!(matches!(
+            SraCodec::decode_response(&mut buf),
+            Err(FrameError::LineTooLong { .. })
+        ));
+        assert!(buf.is_empty());
+    }
+
+    #[test]
+    fn lower_case_checksum_and_non_decimal_values_are_refused() {
+        let mut good = golden("sra READING sra-20");
+        let n = good.len();
+        assert_eq!(good[n - 6], b'F', "golden CRC is F721");
+        good[n - 6] = b'f';
+        assert!(matches!(check(&good, REPLY_START), Check::Reject(..)));
+        for v in ["inf", "NaN", "+1", "0x10", "1e400", "1.", ".5", ""] {
+            let bytes = line(REPLY_START, &format!("RD,20,{v}"));
+            let mut buf = BytesMut::from(&bytes[..]);
+            assert!(
+                SraCodec::decode_response(&mut buf).is_err(),
+                "{v:?} accepted"
+            );
+        }
+    }
+
+    #[test]
+    fn every_single_bit_flip_of_a_golden_reading_is_caught() {
+        let good = golden("sra READING (measure-one) sra-60");
+        for byte in 0..good.len() {
+            for bit in 0..8 {
+                let mut bad = good.clone();
+                bad[byte] ^= 1 << bit;
+                let mut buf = BytesMut::from(&bad[..]);
+                while !buf.is_empty() {
+                    match SraCodec::decode_response(&mut buf) {
+                        Ok(None) => break,
+                        Ok(Some(r)) => panic!("flip {byte}:{bit} decoded to {r}"),
+                        Err(_) => {}
+                    }
+                }
+            }
+        }
+    }
+
+    fn drain(buf: &mut BytesMut) -> Vec<Response> {
+        let mut out = Vec::new();
+        while !buf.is_empty() {
+            match SraCodec::decode_response(buf) {
+                Ok(None) => break,
+                Ok(Some(r)) => out.push(r),
+                Err(_) => {}
+            }
+        }
+        out
+    }
+
+    proptest! {
+        #[test]
+        fn arbitrary_bytes_never_panic_nor_yield_a_reading(
+            bytes in proptest::collection::vec(any::<u8>(), 0..2048)
+        ) {
+            let mut buf = BytesMut::from(&bytes[..]);
+            for r in drain(&mut buf) {
+                prop_assert!(!matches!(r, Response::Fetched(_) | Response::MeasuredOne(_)));
+            }
+            let mut buf = BytesMut::from(&bytes[..]);
+            while !buf.is_empty() {
+                if let Ok(None) = SraCodec::decode_request(&mut buf) {
+                    break;
+                }
+            }
+        }
+
+        #[test]
+        fn plausible_lines_with_wrong_checksums_never_yield_a_reading(
+            code in prop_oneof![Just("20"), Just("60")],
+            value in "[-0-9.e]{1,20}",
+            crc in any::<u16>(),
+        ) {
+            let body = format!("!RD,{code},{value}");
+            prop_assume!(crc != CRC16.checksum(body.as_bytes()));
+            let bytes = format!("{body}*{crc:04X}\r\n").into_bytes();
+            let mut buf = BytesMut::from(&bytes[..]);
+            prop_assert!(drain(&mut buf).is_empty());
+        }
+
+        #[test]
+        fn intensities_round_trip_bit_for_bit_in_any_chunking(
+            bits in any::<u64>(),
+            g in 0usize..2,
+            chunk in 1usize..=16,
+        ) {
+            let v = f64::from_bits(bits);
+            prop_assume!(v.is_finite());
+            let r = intensity(GEOMETRY_NAMES[g], v);
+            let bytes = SraCodec::encode_response(&Response::Fetched(r)).unwrap();
+            prop_assert!(bytes.len() <= MAX_LINE);
+            let mut buf = BytesMut::new();
+            let mut got = Vec::new();
+            for piece in bytes.chunks(chunk) {
+                buf.extend_from_slice(piece);
+                while let Some(resp) = SraCodec::decode_response(&mut buf).unwrap() {
+                    got.push(resp);
+                }
+            }
+            prop_assert_eq!(got.len(), 1);
+            let Response::Fetched(back) = &got[0] else { panic!("not a reading") };
+            prop_assert!(back.bit_eq(&r));
+        }
+    }
+}

@@ -1,0 +1,3 @@
+//! Canon RA-532H "SRA" (serial): the wire codec and the real serial transport.
+
+pub mod codec;
