@@ -18,6 +18,9 @@
 //!
 //! Command line:
 //! - [`cli`]: the `brdfd` subcommands (`fit`, `synth`, `demo`, …); `src/main.rs` only runs it.
+//!
+//! Service (async at the edges):
+//! - [`store`]: the SQLite store (sqlx, embedded migrations): scans, readings, references, fits.
 pub mod geometry;
 pub mod model;
 pub mod spectral;
@@ -30,3 +33,4 @@ pub mod scan;
 pub mod synth;
 pub mod fit;
 pub mod cli;
+pub mod store;

@@ -1,0 +1,429 @@
+//! Store verbs for fit runs and their colour evaluations.
+//!
+//! A fit run goes queued → running → done | failed | cancelled, each move one conditional
+//! UPDATE. `finish_fit` writes the result, the 14 ΔE00 values and their summary in one
+//! transaction, so a fit is never `done` without its evaluation.
+
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
+
+use super::backend::Db;
+use super::codec;
+use super::ids::{FitRunId, ProcessedId, ScanId};
+use super::records::{
+    DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, NewFit,
+};
+use super::{Store, StoreError, now_ms};
+
+#[derive(sqlx::FromRow)]
+struct FitRow {
+    id: i64,
+    scan_id: i64,
+    processed_id: i64,
+    specular: String,
+    method: String,
+    cost_function: String,
+    settings_json: String,
+    seed: String,
+    status: String,
+    error: Option<String>,
+    cost: Option<f64>,
+    params_json: Option<String>,
+    best_cost_per_generation_json: Option<String>,
+    evaluations: Option<i64>,
+    generations: Option<i64>,
+    wall_ms: Option<f64>,
+    queued_at_ms: i64,
+    started_at_ms: Option<i64>,
+    finished_at_ms: Option<i64>,
+}
+
+const FIT_RUN: &str = "\
+    SELECT f.id, f.scan_id, f.processed_id, p.specular, f.method, f.cost_function,
+           f.settings_json, f.seed, f.status, f.error, f.cost, f.params_json,
+           f.best_cost_per_generation_json, f.evaluations, f.generations, f.wall_ms,
+           f.queued_at_ms, f.started_at_ms, f.finished_at_ms
+    FROM fit_runs f JOIN processed p ON p.id = f.processed_id";
+
+impl FitRow {
+    fn into_run(self) -> Result<FitRun, StoreError> {
+        let id = self.id;
+        let corrupt = |detail: String| StoreError::Corrupt {
+            table: "fit_runs",
+            id,
+            detail,
+        };
+        let json = |field: &str, text: &str| {
+            serde_json::from_str::<serde_json::Value>(text)
+                .map_err(|e| corrupt(format!("{field}: {e}")))
+        };
+        let status: FitStatus = self.status.parse().map_err(corrupt)?;
+        let result = match (
+            self.cost,
+            &self.params_json,
+            &self.best_cost_per_generation_json,
+            self.evaluations,
+            self.generations,
+            self.wall_ms,
+        ) {
+            (
+                Some(cost),
+                Some(params),
+                Some(best),
+                Some(evaluations),
+                Some(generations),
+                Some(wall_ms),
+            ) => Some(FitResult {
+                cost,
+                params: json("params_json", params)?,
+                best_cost_per_generation: serde_json::from_str(best)
+                    .map_err(|e| corrupt(format!("best_cost_per_generation_json: {e}")))?,
+                evaluations: evaluations as u64,
+                generations: generations as u32,
+                wall_ms,
+            }),
+            _ => None,
+        };
+        Ok(FitRun {
+            id: FitRunId(id),
+            scan: ScanId(self.scan_id),
+            processed: ProcessedId(self.processed_id),
+            specular: self
+                .specular
+                .parse()
+                .map_err(|e: crate::processing::UnknownSpecularStrategy| corrupt(e.to_string()))?,
+            method: self.method,
+            cost_function: self
+                .cost_function
+                .parse()
+                .map_err(|e: crate::cost::ParseCostFunctionError| corrupt(e.to_string()))?,
+            settings: json("settings_json", &self.settings_json)?,
+            seed: self
+                .seed
+                .parse()
+                .map_err(|e| corrupt(format!("seed \"{}\": {e}", self.seed)))?,
+            status,
+            error: self.error,
+            result,
+            queued_at_ms: self.queued_at_ms,
+            started_at_ms: self.started_at_ms,
+            finished_at_ms: self.finished_at_ms,
+        })
+    }
+}
+
+/// The status of fit run `id`, or `NotFound`.
+async fn fit_status<'e, E>(ex: E, id: FitRunId) -> Result<FitStatus, StoreError>
+where
+    E: sqlx::Executor<'e, Database = Db>,
+{
+    let status: Option<String> = sqlx::query_scalar("SELECT status FROM fit_runs WHERE id = $1")
+        .bind(id.0)
+        .fetch_optional(ex)
+        .await?;
+    let status = status.ok_or(StoreError::NotFound {
+        what: FitRunId::WHAT,
+        id: id.0,
+    })?;
+    status.parse().map_err(|detail| StoreError::Corrupt {
+        table: "fit_runs",
+        id: id.0,
+        detail,
+    })
+}
+
+fn to_json(field: &'static str, value: &impl serde::Serialize) -> Result<String, StoreError> {
+    serde_json::to_string(value).map_err(|source| StoreError::Json { field, source })
+}
+
+impl Store {
+    /// Queues a fit of processed scan `processed`; status `queued`. Returns its id.
+    pub async fn queue_fit(
+        &self,
+        processed: ProcessedId,
+        fit: &NewFit,
+    ) -> Result<FitRunId, StoreError> {
+        if fit.method.trim().is_empty() {
+            return Err(StoreError::Empty {
+                field: "fit method",
+            });
+        }
+        let id: Option<i64> = sqlx::query_scalar(
+            "INSERT INTO fit_runs (scan_id, processed_id, method, cost_function, settings_json,
+                                   seed, status, queued_at_ms)
+             SELECT p.scan_id, p.id, $2, $3, $4, $5, 'queued', $6
+             FROM processed p WHERE p.id = $1
+             RETURNING id",
+        )
+        .bind(processed.0)
+        .bind(&fit.method)
+        .bind(fit.cost_function.name())
+        .bind(to_json("fit settings", &fit.settings)?)
+        .bind(fit.seed.to_string())
+        .bind(now_ms())
+        .fetch_optional(&self.writer)
+        .await?;
+        id.map(FitRunId).ok_or(StoreError::NotFound {
+            what: ProcessedId::WHAT,
+            id: processed.0,
+        })
+    }
+
+    /// queued → running: the worker picked it up.
+    pub async fn start_fit(&self, fit: FitRunId) -> Result<(), StoreError> {
+        let done = sqlx::query(
+            "UPDATE fit_runs SET status = 'running', started_at_ms = $2
+             WHERE id = $1 AND status = 'queued'",
+        )
+        .bind(fit.0)
+        .bind(now_ms())
+        .execute(&self.writer)
+        .await?;
+        self.explain_fit(fit, done.rows_affected(), "queued", "start it")
+            .await
+    }
+
+    /// running → done, with the optimiser's result and the ΔE00 at each geometry (table
+    /// order); the store adds the mean/median/max summaries. One transaction.
+    pub async fn finish_fit(
+        &self,
+        fit: FitRunId,
+        outcome: &FitResult,
+        delta_e00: &[f64; GEOMETRY_COUNT],
+    ) -> Result<(), StoreError> {
+        let owner = || format!("fit run {fit}");
+        codec::check_finite(&owner, &[outcome.cost], |_| "the cost".into())?;
+        codec::check_finite(&owner, &[outcome.wall_ms], |_| "the wall time".into())?;
+        codec::check_finite(&owner, &outcome.best_cost_per_generation, |i| {
+            format!("the best cost of generation {i}")
+        })?;
+        codec::check_finite(&owner, delta_e00, |i| {
+            format!("ΔE00 at {}", GEOMETRIES[i].name)
+        })?;
+        let evaluation = EvaluationRecord {
+            per_geometry: *delta_e00,
+            all: DeltaESummary::of(delta_e00),
+            diffuse: DeltaESummary::of(&delta_e00[..MA_T12_COUNT]),
+            specular: DeltaESummary::of(&delta_e00[MA_T12_COUNT..]),
+        };
+        let params = to_json("fit parameters", &outcome.params)?;
+        let best = to_json(
+            "best cost per generation",
+            &outcome.best_cost_per_generation,
+        )?;
+
+        let mut tx = self.writer.begin().await?;
+        let done = sqlx::query(
+            "UPDATE fit_runs SET status = 'done', cost = $2, params_json = $3,
+                 best_cost_per_generation_json = $4, evaluations = $5, generations = $6,
+                 wall_ms = $7, finished_at_ms = $8
+             WHERE id = $1 AND status = 'running'",
+        )
+        .bind(fit.0)
+        .bind(outcome.cost)
+        .bind(params)
+        .bind(best)
+        // u64 → i64: 2⁶³ cost evaluations is beyond any fit.
+        .bind(outcome.evaluations as i64)
+        .bind(i64::from(outcome.generations))
+        .bind(outcome.wall_ms)
+        .bind(now_ms())
+        .execute(&mut *tx)
+        .await?;
+        if done.rows_affected() != 1 {
+            return Err(StoreError::FitState {
+                fit,
+                status: fit_status(&mut *tx, fit).await?,
+                expected: "running",
+                action: "finish it",
+            });
+        }
+        for (g, de) in GEOMETRIES.iter().zip(delta_e00) {
+            sqlx::query(
+                "INSERT INTO evaluations (fit_run_id, geometry, delta_e00) VALUES ($1, $2, $3)",
+            )
+            .bind(fit.0)
+            .bind(g.name)
+            .bind(*de)
+            .execute(&mut *tx)
+            .await?;
+        }
+        let (a, d, s) = (evaluation.all, evaluation.diffuse, evaluation.specular);
+        sqlx::query(
+            "INSERT INTO evaluation_summaries (fit_run_id, mean, median, max, diffuse_mean,
+                 diffuse_median, diffuse_max, specular_mean, specular_median, specular_max)
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)",
+        )
+        .bind(fit.0)
+        .bind(a.mean)
+        .bind(a.median)
+        .bind(a.max)
+        .bind(d.mean)
+        .bind(d.median)
+        .bind(d.max)
+        .bind(s.mean)
+        .bind(s.median)
+        .bind(s.max)
+        .execute(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    /// queued | running → failed, with the error.
+    pub async fn fail_fit(&self, fit: FitRunId, reason: &str) -> Result<(), StoreError> {
+        if reason.trim().is_empty() {
+            return Err(StoreError::Empty {
+                field: "failure reason",
+            });
+        }
+        let done = sqlx::query(
+            "UPDATE fit_runs SET status = 'failed', error = $2, finished_at_ms = $3
+             WHERE id = $1 AND status IN ('queued', 'running')",
+        )
+        .bind(fit.0)
+        .bind(reason)
+        .bind(now_ms())
+        .execute(&self.writer)
+        .await?;
+        self.explain_fit(fit, done.rows_affected(), "queued or running", "fail it")
+            .await
+    }
+
+    /// queued | running → cancelled.
+    pub async fn cancel_fit(&self, fit: FitRunId) -> Result<(), StoreError> {
+        let done = sqlx::query(
+            "UPDATE fit_runs SET status = 'cancelled', finished_at_ms = $2
+             WHERE id = $1 AND status IN ('queued', 'running')",
+        )
+        .bind(fit.0)
+        .bind(now_ms())
+        .execute(&self.writer)
+        .await?;
+        self.explain_fit(fit, done.rows_affected(), "queued or running", "cancel it")
+            .await
+    }
+
+    /// At start-up: fits a crash left `running` go back to `queued` (a fit is deterministic
+    /// by its seed, so running it again loses nothing). Returns their ids, oldest first.
+    pub async fn requeue_interrupted_fits(&self) -> Result<Vec<FitRunId>, StoreError> {
+        let mut ids: Vec<i64> = sqlx::query_scalar(
+            "UPDATE fit_runs SET status = 'queued', started_at_ms = NULL
+             WHERE status = 'running' RETURNING id",
+        )
+        .fetch_all(&self.writer)
+        .await?;
+        ids.sort_unstable();
+        Ok(ids.into_iter().map(FitRunId).collect())
+    }
+
+    /// Fits waiting for the worker, oldest first.
+    pub async fn queued_fits(&self) -> Result<Vec<FitRun>, StoreError> {
+        let rows: Vec<FitRow> = sqlx::query_as(&format!(
+            "{FIT_RUN} WHERE f.status = 'queued' ORDER BY f.id"
+        ))
+        .fetch_all(&self.reader)
+        .await?;
+        rows.into_iter().map(FitRow::into_run).collect()
+    }
+
+    /// Every fit run of a scan, oldest first.
+    pub async fn fits_for_scan(&self, scan: ScanId) -> Result<Vec<FitRun>, StoreError> {
+        let rows: Vec<FitRow> =
+            sqlx::query_as(&format!("{FIT_RUN} WHERE f.scan_id = $1 ORDER BY f.id"))
+                .bind(scan.0)
+                .fetch_all(&self.reader)
+                .await?;
+        rows.into_iter().map(FitRow::into_run).collect()
+    }
+
+    /// A fit run and, when done, its evaluation.
+    pub async fn fit_detail(&self, fit: FitRunId) -> Result<FitDetail, StoreError> {
+        let row: Option<FitRow> = sqlx::query_as(&format!("{FIT_RUN} WHERE f.id = $1"))
+            .bind(fit.0)
+            .fetch_optional(&self.reader)
+            .await?;
+        let run = row
+            .ok_or(StoreError::NotFound {
+                what: FitRunId::WHAT,
+                id: fit.0,
+            })?
+            .into_run()?;
+        let rows: Vec<(String, f64)> =
+            sqlx::query_as("SELECT geometry, delta_e00 FROM evaluations WHERE fit_run_id = $1")
+                .bind(fit.0)
+                .fetch_all(&self.reader)
+                .await?;
+        let evaluation = if rows.is_empty() {
+            None
+        } else {
+            let mut per_geometry = [f64::NAN; GEOMETRY_COUNT];
+            for (name, de) in &rows {
+                let g = codec::geometry(name).map_err(|_| StoreError::Corrupt {
+                    table: "evaluations",
+                    id: fit.0,
+                    detail: format!("unknown geometry \"{name}\""),
+                })?;
+                per_geometry[g.index] = *de;
+            }
+            if let Some(g) = per_geometry.iter().position(|v| v.is_nan()) {
+                return Err(StoreError::Corrupt {
+                    table: "evaluations",
+                    id: fit.0,
+                    detail: format!("no ΔE00 at {}", GEOMETRIES[g].name),
+                });
+            }
+            // Read back what finish_fit stored, rather than recomputing it.
+            let s: (f64, f64, f64, f64, f64, f64, f64, f64, f64) = sqlx::query_as(
+                "SELECT mean, median, max, diffuse_mean, diffuse_median, diffuse_max,
+                        specular_mean, specular_median, specular_max
+                 FROM evaluation_summaries WHERE fit_run_id = $1",
+            )
+            .bind(fit.0)
+            .fetch_optional(&self.reader)
+            .await?
+            .ok_or_else(|| StoreError::Corrupt {
+                table: "evaluation_summaries",
+                id: fit.0,
+                detail: "missing summary".into(),
+            })?;
+            Some(EvaluationRecord {
+                per_geometry,
+                all: DeltaESummary {
+                    mean: s.0,
+                    median: s.1,
+                    max: s.2,
+                },
+                diffuse: DeltaESummary {
+                    mean: s.3,
+                    median: s.4,
+                    max: s.5,
+                },
+                specular: DeltaESummary {
+                    mean: s.6,
+                    median: s.7,
+                    max: s.8,
+                },
+            })
+        };
+        Ok(FitDetail { run, evaluation })
+    }
+
+    /// Like `explain_scan`, for fit runs.
+    async fn explain_fit(
+        &self,
+        fit: FitRunId,
+        rows: u64,
+        expected: &'static str,
+        action: &'static str,
+    ) -> Result<(), StoreError> {
+        if rows == 1 {
+            return Ok(());
+        }
+        Err(StoreError::FitState {
+            fit,
+            status: fit_status(&self.writer, fit).await?,
+            expected,
+            action,
+        })
+    }
+}

@@ -1,0 +1,387 @@
+//! What the store takes in and hands back: life-cycle states, reading values, and the records of
+//! instruments, references, scans, processed scans, fit runs and evaluations.
+//!
+//! Timestamps are `i64` milliseconds since the Unix epoch, UTC (fields named `*_ms`), as stored.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Serialize, Serializer};
+
+use crate::cost::CostFunction;
+use crate::geometry::{Device, GEOMETRY_COUNT, Geometry};
+use crate::processing::{MeasuredBrdf, SpecularStrategy};
+use crate::spectral::Spectrum;
+
+use super::ids::{FitRunId, InstrumentId, ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
+
+macro_rules! text_enum {
+    ($(#[$doc:meta])* $name:ident { $($(#[$vdoc:meta])* $variant:ident = $text:literal),+ $(,)? }) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
+        #[serde(rename_all = "snake_case")]
+        pub enum $name {
+            $($(#[$vdoc])* $variant),+
+        }
+
+        impl $name {
+            /// The text stored in the database and shown to users.
+            pub const fn as_str(self) -> &'static str {
+                match self {
+                    $($name::$variant => $text),+
+                }
+            }
+        }
+
+        impl fmt::Display for $name {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+
+        impl FromStr for $name {
+            type Err = String;
+
+            fn from_str(s: &str) -> Result<Self, Self::Err> {
+                match s {
+                    $($text => Ok($name::$variant),)+
+                    _ => Err(format!(concat!("unknown ", stringify!($name), " \"{}\""), s)),
+                }
+            }
+        }
+    };
+}
+
+text_enum!(
+    /// Where a scan is in its life: requested → measuring → complete | failed | aborted.
+    ScanState {
+        /// Asked for; no device has started.
+        Requested = "requested",
+        /// Devices are measuring; readings arrive.
+        Measuring = "measuring",
+        /// All 14 readings are in.
+        Complete = "complete",
+        /// Stopped by an error (the reason says which); keeps its readings.
+        Failed = "failed",
+        /// Stopped by the operator; keeps its readings.
+        Aborted = "aborted",
+    }
+);
+
+text_enum!(
+    /// Where a reference set is: measuring → complete | failed.
+    ReferenceStatus {
+        /// Readings of the tile arrive.
+        Measuring = "measuring",
+        /// All 14 readings are in; usable for scans.
+        Complete = "complete",
+        /// Abandoned (the reason says why).
+        Failed = "failed",
+    }
+);
+
+text_enum!(
+    /// Where a fit run is: queued → running → done | failed | cancelled.
+    FitStatus {
+        /// Waiting for the fit worker.
+        Queued = "queued",
+        /// The optimiser is running.
+        Running = "running",
+        /// Finished; result and evaluation stored.
+        Done = "done",
+        /// The optimiser or the evaluation failed (the error says why).
+        Failed = "failed",
+        /// Cancelled before it finished.
+        Cancelled = "cancelled",
+    }
+);
+
+/// The value(s) of one reading, as the device reports them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum ReadingValues {
+    /// MA-T12: reflectance factor (0–1 scale) at the 31 bands, 400–700 nm.
+    Spectrum(Spectrum),
+    /// SRA: one achromatic 1D-BRDF intensity, in the device's unit.
+    Intensity(f64),
+}
+
+impl ReadingValues {
+    /// The numbers, in band order (one for an intensity).
+    pub fn as_slice(&self) -> &[f64] {
+        match self {
+            ReadingValues::Spectrum(s) => s,
+            ReadingValues::Intensity(v) => std::slice::from_ref(v),
+        }
+    }
+
+    /// The kind of value each device reports, for messages.
+    pub(crate) const fn kind_name(&self) -> &'static str {
+        match self {
+            ReadingValues::Spectrum(_) => "a 31-band spectrum",
+            ReadingValues::Intensity(_) => "a single intensity",
+        }
+    }
+
+    /// The kind of value `device` reports, for messages.
+    pub(crate) const fn expected_kind(device: Device) -> &'static str {
+        match device {
+            Device::MaT12 => "a 31-band spectrum",
+            Device::Sra => "a single intensity",
+        }
+    }
+}
+
+/// One reading to store, for [`super::Store::add_readings_tx`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewReading<'a> {
+    pub device: Device,
+    pub geometry: &'static Geometry,
+    pub values: ReadingValues,
+    /// The device's reply frame, byte for byte.
+    pub raw_frame: &'a [u8],
+}
+
+fn geometry_name<S: Serializer>(g: &&'static Geometry, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(g.name)
+}
+
+fn hex<S: Serializer>(bytes: &[u8], s: S) -> Result<S::Ok, S::Error> {
+    use std::fmt::Write;
+    let mut out = String::with_capacity(bytes.len() * 2);
+    for b in bytes {
+        let _ = write!(out, "{b:02x}");
+    }
+    s.serialize_str(&out)
+}
+
+/// A stored reading of a scan or of a reference set. Serialises with the geometry by name and
+/// the raw frame as lowercase hex.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Reading {
+    pub id: ReadingId,
+    pub device: Device,
+    #[serde(serialize_with = "geometry_name")]
+    pub geometry: &'static Geometry,
+    pub values: ReadingValues,
+    #[serde(serialize_with = "hex")]
+    pub raw_frame: Vec<u8>,
+    /// When the store received it.
+    pub at_ms: i64,
+}
+
+/// A known instrument.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Instrument {
+    pub id: InstrumentId,
+    pub device: Device,
+    pub serial: String,
+    /// The device's identification string (model, firmware), as last reported.
+    pub identity: String,
+    pub first_seen_ms: i64,
+    pub last_seen_ms: i64,
+}
+
+/// A reference set without its readings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReferenceSummary {
+    pub id: ReferenceId,
+    /// The tile, e.g. "Munsell N9".
+    pub name: String,
+    pub status: ReferenceStatus,
+    /// Why it failed.
+    pub reason: Option<String>,
+    /// The tile's calibrated reflectance factor; `None` = 1 in every band (the paper's choice).
+    pub rho_ref: Option<Spectrum>,
+    /// When it was begun.
+    pub taken_at_ms: i64,
+    pub completed_at_ms: Option<i64>,
+    pub reading_count: usize,
+}
+
+/// A reference set with its readings in geometry-table order.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReferenceDetail {
+    pub reference: ReferenceSummary,
+    pub readings: Vec<Reading>,
+}
+
+/// A scan without its readings.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct ScanSummary {
+    pub id: ScanId,
+    pub sample_id: SampleId,
+    pub sample: String,
+    /// The reference set the scan is normalised by.
+    pub reference_id: ReferenceId,
+    pub state: ScanState,
+    /// Why it failed or was aborted.
+    pub reason: Option<String>,
+    pub requested_at_ms: i64,
+    pub started_at_ms: Option<i64>,
+    pub finished_at_ms: Option<i64>,
+    pub reading_count: usize,
+}
+
+/// A scan, its readings (geometry-table order) and its reference set.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ScanDetail {
+    pub scan: ScanSummary,
+    pub readings: Vec<Reading>,
+    pub reference: ReferenceDetail,
+}
+
+/// Which scans [`super::Store::list_scans`] returns, newest first.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ScanFilter {
+    pub state: Option<ScanState>,
+    pub sample: Option<String>,
+    /// At most this many.
+    pub limit: u32,
+}
+
+impl Default for ScanFilter {
+    fn default() -> Self {
+        ScanFilter {
+            state: None,
+            sample: None,
+            limit: 100,
+        }
+    }
+}
+
+/// A complete scan processed into measured BRDF.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Processed {
+    pub id: ProcessedId,
+    pub scan: ScanId,
+    pub specular: SpecularStrategy,
+    /// sr⁻¹, 14 geometries × 31 bands.
+    pub brdf: MeasuredBrdf,
+    pub created_at_ms: i64,
+}
+
+/// A fit to queue: what the worker will run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewFit {
+    /// The optimiser method's name (e.g. "paper").
+    pub method: String,
+    pub cost_function: CostFunction,
+    /// Every optimiser setting, as serde serialises them, so the fit can be re-run exactly.
+    pub settings: serde_json::Value,
+    pub seed: u64,
+}
+
+/// What a finished fit produced.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FitResult {
+    /// Final cost under the run's cost function.
+    pub cost: f64,
+    /// The fitted parameters as serde serialises them (`kd` [31], `ks`, `alpha`, `ior`).
+    pub params: serde_json::Value,
+    pub best_cost_per_generation: Vec<f64>,
+    /// Number of cost-function evaluations.
+    pub evaluations: u64,
+    pub generations: u32,
+    /// Wall time of the fit, ms.
+    pub wall_ms: f64,
+}
+
+/// A fit run with its result when done.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FitRun {
+    pub id: FitRunId,
+    pub scan: ScanId,
+    pub processed: ProcessedId,
+    /// The specular strategy of the processed scan it fits.
+    pub specular: SpecularStrategy,
+    pub method: String,
+    pub cost_function: CostFunction,
+    pub settings: serde_json::Value,
+    pub seed: u64,
+    pub status: FitStatus,
+    /// Why it failed.
+    pub error: Option<String>,
+    /// Set when done.
+    pub result: Option<FitResult>,
+    pub queued_at_ms: i64,
+    pub started_at_ms: Option<i64>,
+    pub finished_at_ms: Option<i64>,
+}
+
+/// Mean, median and maximum of some ΔE00 values.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DeltaESummary {
+    pub mean: f64,
+    pub median: f64,
+    pub max: f64,
+}
+
+impl DeltaESummary {
+    /// Summary of `values` (not empty, all finite).
+    pub(crate) fn of(values: &[f64]) -> DeltaESummary {
+        let mut sorted = values.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let n = sorted.len();
+        let median = if n % 2 == 1 {
+            sorted[n / 2]
+        } else {
+            (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0
+        };
+        DeltaESummary {
+            mean: sorted.iter().sum::<f64>() / n as f64,
+            median,
+            max: sorted[n - 1],
+        }
+    }
+}
+
+/// The colour evaluation of a fit (SCIENCE.md §7).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct EvaluationRecord {
+    /// ΔE00 at each geometry, in geometry-table order.
+    pub per_geometry: [f64; GEOMETRY_COUNT],
+    /// Over all 14 geometries.
+    pub all: DeltaESummary,
+    /// Over the 12 MA-T12 geometries.
+    pub diffuse: DeltaESummary,
+    /// Over the 2 SRA geometries.
+    pub specular: DeltaESummary,
+}
+
+/// A fit run and, when done, its evaluation.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FitDetail {
+    pub run: FitRun,
+    pub evaluation: Option<EvaluationRecord>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn states_round_trip_through_their_text() {
+        for s in [
+            ScanState::Requested,
+            ScanState::Measuring,
+            ScanState::Complete,
+            ScanState::Failed,
+            ScanState::Aborted,
+        ] {
+            assert_eq!(s.as_str().parse::<ScanState>().unwrap(), s);
+        }
+        for s in [FitStatus::Queued, FitStatus::Cancelled] {
+            assert_eq!(s.to_string().parse::<FitStatus>().unwrap(), s);
+        }
+        assert!("done".parse::<ScanState>().is_err());
+    }
+
+    #[test]
+    fn summary_of_odd_and_even_counts() {
+        let s = DeltaESummary::of(&[3.0, 1.0, 2.0]);
+        assert_eq!((s.mean, s.median, s.max), (2.0, 2.0, 3.0));
+        let s = DeltaESummary::of(&[4.0, 1.0]);
+        assert_eq!((s.mean, s.median, s.max), (2.5, 2.5, 4.0));
+    }
+}

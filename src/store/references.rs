@@ -1,0 +1,339 @@
+//! Store verbs for instruments and reference sets (readings of the white reference tile that
+//! scans are normalised by).
+
+use crate::geometry::{Device, GEOMETRY_COUNT, Geometry};
+use crate::spectral::{Spectrum, wavelengths_nm};
+
+use super::backend::{self, Db};
+use super::codec::{self, ReadingRow};
+use super::ids::{InstrumentId, ReadingId, ReferenceId};
+use super::records::{
+    Instrument, ReadingValues, ReferenceDetail, ReferenceStatus, ReferenceSummary,
+};
+use super::{Store, StoreError, now_ms};
+
+#[derive(sqlx::FromRow)]
+struct InstrumentRow {
+    id: i64,
+    device: String,
+    serial: String,
+    identity: String,
+    first_seen_ms: i64,
+    last_seen_ms: i64,
+}
+
+#[derive(sqlx::FromRow)]
+struct ReferenceRow {
+    id: i64,
+    name: String,
+    status: String,
+    reason: Option<String>,
+    rho_ref: Option<Vec<u8>>,
+    taken_at_ms: i64,
+    completed_at_ms: Option<i64>,
+    reading_count: i64,
+}
+
+const REFERENCE_SUMMARY: &str = "\
+    SELECT r.id, r.name, r.status, r.reason, r.rho_ref, r.taken_at_ms, r.completed_at_ms,
+           (SELECT COUNT(*) FROM reference_readings rr WHERE rr.reference_id = r.id)
+               AS reading_count
+    FROM reference_sets r";
+
+impl ReferenceRow {
+    fn into_summary(self) -> Result<ReferenceSummary, StoreError> {
+        let corrupt = |detail: String| StoreError::Corrupt {
+            table: "reference_sets",
+            id: self.id,
+            detail,
+        };
+        let status = self.status.parse().map_err(corrupt)?;
+        let rho_ref = match &self.rho_ref {
+            None => None,
+            Some(b) => Some(
+                codec::decode_spectrum(b)
+                    .ok_or_else(|| corrupt(format!("rho_ref has {} bytes", b.len())))?,
+            ),
+        };
+        Ok(ReferenceSummary {
+            id: ReferenceId(self.id),
+            name: self.name,
+            status,
+            reason: self.reason,
+            rho_ref,
+            taken_at_ms: self.taken_at_ms,
+            completed_at_ms: self.completed_at_ms,
+            reading_count: self.reading_count as usize,
+        })
+    }
+}
+
+/// The status of reference set `id`, or `NotFound`.
+pub(crate) async fn reference_status<'e, E>(
+    ex: E,
+    id: ReferenceId,
+) -> Result<ReferenceStatus, StoreError>
+where
+    E: sqlx::Executor<'e, Database = Db>,
+{
+    let status: Option<String> =
+        sqlx::query_scalar("SELECT status FROM reference_sets WHERE id = $1")
+            .bind(id.0)
+            .fetch_optional(ex)
+            .await?;
+    let status = status.ok_or(StoreError::NotFound {
+        what: ReferenceId::WHAT,
+        id: id.0,
+    })?;
+    status.parse().map_err(|detail| StoreError::Corrupt {
+        table: "reference_sets",
+        id: id.0,
+        detail,
+    })
+}
+
+impl Store {
+    /// Records an instrument by its serial number, or refreshes its identity string and
+    /// last-seen time if it is known. Returns its id either way.
+    pub async fn add_instrument(
+        &self,
+        device: Device,
+        serial: &str,
+        identity: &str,
+    ) -> Result<InstrumentId, StoreError> {
+        if serial.trim().is_empty() {
+            return Err(StoreError::Empty {
+                field: "instrument serial number",
+            });
+        }
+        let id: i64 = sqlx::query_scalar(backend::UPSERT_INSTRUMENT)
+            .bind(device.key())
+            .bind(serial)
+            .bind(identity)
+            .bind(now_ms())
+            .fetch_one(&self.writer)
+            .await?;
+        Ok(InstrumentId(id))
+    }
+
+    /// Every known instrument, by id.
+    pub async fn instruments(&self) -> Result<Vec<Instrument>, StoreError> {
+        let rows: Vec<InstrumentRow> = sqlx::query_as(
+            "SELECT id, device, serial, identity, first_seen_ms, last_seen_ms
+             FROM instruments ORDER BY id",
+        )
+        .fetch_all(&self.reader)
+        .await?;
+        rows.into_iter()
+            .map(|r| {
+                let device =
+                    codec::device_from_key(&r.device).ok_or_else(|| StoreError::Corrupt {
+                        table: "instruments",
+                        id: r.id,
+                        detail: format!("unknown device \"{}\"", r.device),
+                    })?;
+                Ok(Instrument {
+                    id: InstrumentId(r.id),
+                    device,
+                    serial: r.serial,
+                    identity: r.identity,
+                    first_seen_ms: r.first_seen_ms,
+                    last_seen_ms: r.last_seen_ms,
+                })
+            })
+            .collect()
+    }
+
+    /// Starts a reference set for the tile `name` (e.g. "Munsell N9"), status `measuring`.
+    /// `rho_ref` is the tile's calibrated reflectance factor, if known; every value must be
+    /// positive and finite.
+    pub async fn begin_reference(
+        &self,
+        name: &str,
+        rho_ref: Option<&Spectrum>,
+    ) -> Result<ReferenceId, StoreError> {
+        if name.trim().is_empty() {
+            return Err(StoreError::Empty {
+                field: "reference name",
+            });
+        }
+        if let Some(rho) = rho_ref {
+            let owner = || format!("calibrated reflectance of reference \"{name}\"");
+            let band = |i: usize| format!("the value at {} nm", wavelengths_nm()[i]);
+            codec::check_finite(&owner, rho, band)?;
+            if let Some(i) = rho.iter().position(|&v| v <= 0.0) {
+                return Err(StoreError::NonPositiveReference {
+                    owner: owner(),
+                    what: band(i),
+                    value: rho[i],
+                });
+            }
+        }
+        let id: i64 = sqlx::query_scalar(
+            "INSERT INTO reference_sets (name, status, rho_ref, taken_at_ms)
+             VALUES ($1, 'measuring', $2, $3) RETURNING id",
+        )
+        .bind(name)
+        .bind(rho_ref.map(|r| codec::encode_f64s(r)))
+        .bind(now_ms())
+        .fetch_one(&self.writer)
+        .await?;
+        Ok(ReferenceId(id))
+    }
+
+    /// Stores one reading of the reference tile. The set must be `measuring`; each geometry
+    /// once; every value positive and finite (the sample is divided by it).
+    pub async fn add_reference_reading(
+        &self,
+        reference: ReferenceId,
+        device: Device,
+        geometry: &Geometry,
+        values: &ReadingValues,
+        raw_frame: &[u8],
+    ) -> Result<ReadingId, StoreError> {
+        let owner = || format!("reference {reference}");
+        let geometry = codec::check_reading(&owner, device, geometry, values, true)?;
+        // The state test and the insert are one statement, so no verb can slip in between.
+        let inserted: Result<Option<i64>, sqlx::Error> = sqlx::query_scalar(
+            "INSERT INTO reference_readings
+                 (reference_id, device, geometry, values_f64le, raw_frame, taken_at_ms)
+             SELECT $1, $2, $3, $4, $5, $6
+             WHERE EXISTS (SELECT 1 FROM reference_sets WHERE id = $1 AND status = 'measuring')
+             RETURNING id",
+        )
+        .bind(reference.0)
+        .bind(device.key())
+        .bind(geometry.name)
+        .bind(codec::encode_f64s(values.as_slice()))
+        .bind(raw_frame)
+        .bind(now_ms())
+        .fetch_optional(&self.writer)
+        .await;
+        match inserted {
+            Ok(Some(id)) => Ok(ReadingId(id)),
+            Ok(None) => Err(StoreError::ReferenceState {
+                reference,
+                status: reference_status(&self.writer, reference).await?,
+                expected: "measuring",
+                action: "add a reading to it",
+            }),
+            Err(e) if backend::is_unique_violation(&e) => Err(StoreError::DuplicateReading {
+                owner: owner(),
+                geometry: geometry.name,
+            }),
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// Marks a reference set `complete`. It must be `measuring` and hold all 14 readings.
+    pub async fn complete_reference(&self, reference: ReferenceId) -> Result<(), StoreError> {
+        let done = sqlx::query(
+            "UPDATE reference_sets SET status = 'complete', completed_at_ms = $2
+             WHERE id = $1 AND status = 'measuring'
+               AND (SELECT COUNT(*) FROM reference_readings WHERE reference_id = $1) = $3",
+        )
+        .bind(reference.0)
+        .bind(now_ms())
+        .bind(GEOMETRY_COUNT as i64)
+        .execute(&self.writer)
+        .await?;
+        if done.rows_affected() == 1 {
+            return Ok(());
+        }
+        let status = reference_status(&self.writer, reference).await?;
+        if status != ReferenceStatus::Measuring {
+            return Err(StoreError::ReferenceState {
+                reference,
+                status,
+                expected: "measuring",
+                action: "complete it",
+            });
+        }
+        let present: Vec<String> =
+            sqlx::query_scalar("SELECT geometry FROM reference_readings WHERE reference_id = $1")
+                .bind(reference.0)
+                .fetch_all(&self.writer)
+                .await?;
+        Err(StoreError::ReferenceIncomplete {
+            reference,
+            have: present.len(),
+            missing: codec::missing_geometries(&present),
+        })
+    }
+
+    /// Marks a `measuring` reference set `failed`, keeping its readings.
+    pub async fn fail_reference(
+        &self,
+        reference: ReferenceId,
+        reason: &str,
+    ) -> Result<(), StoreError> {
+        if reason.trim().is_empty() {
+            return Err(StoreError::Empty {
+                field: "failure reason",
+            });
+        }
+        let done = sqlx::query(
+            "UPDATE reference_sets SET status = 'failed', reason = $2
+             WHERE id = $1 AND status = 'measuring'",
+        )
+        .bind(reference.0)
+        .bind(reason)
+        .execute(&self.writer)
+        .await?;
+        if done.rows_affected() == 1 {
+            return Ok(());
+        }
+        Err(StoreError::ReferenceState {
+            reference,
+            status: reference_status(&self.writer, reference).await?,
+            expected: "measuring",
+            action: "fail it",
+        })
+    }
+
+    /// The most recently completed reference set, the one new scans use; `None` before the
+    /// first. Whether it is too old is the caller's call (`[scan] reference_max_age_hours`).
+    pub async fn latest_reference(&self) -> Result<Option<ReferenceSummary>, StoreError> {
+        let row: Option<ReferenceRow> = sqlx::query_as(&format!(
+            "{REFERENCE_SUMMARY} WHERE r.status = 'complete'
+             ORDER BY r.completed_at_ms DESC, r.id DESC LIMIT 1"
+        ))
+        .fetch_optional(&self.reader)
+        .await?;
+        row.map(ReferenceRow::into_summary).transpose()
+    }
+
+    /// A reference set with its readings in geometry-table order.
+    pub async fn reference_detail(
+        &self,
+        reference: ReferenceId,
+    ) -> Result<ReferenceDetail, StoreError> {
+        let row: Option<ReferenceRow> =
+            sqlx::query_as(&format!("{REFERENCE_SUMMARY} WHERE r.id = $1"))
+                .bind(reference.0)
+                .fetch_optional(&self.reader)
+                .await?;
+        let reference_summary = row
+            .ok_or(StoreError::NotFound {
+                what: ReferenceId::WHAT,
+                id: reference.0,
+            })?
+            .into_summary()?;
+        let rows: Vec<ReadingRow> = sqlx::query_as(
+            "SELECT id, device, geometry, values_f64le, raw_frame, taken_at_ms AS at_ms
+             FROM reference_readings WHERE reference_id = $1",
+        )
+        .bind(reference.0)
+        .fetch_all(&self.reader)
+        .await?;
+        let mut readings = rows
+            .into_iter()
+            .map(|r| r.into_reading("reference_readings"))
+            .collect::<Result<Vec<_>, _>>()?;
+        codec::sort_readings(&mut readings);
+        Ok(ReferenceDetail {
+            reference: reference_summary,
+            readings,
+        })
+    }
+}

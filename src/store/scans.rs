@@ -1,0 +1,519 @@
+//! Store verbs for scans, their readings, and processed scans.
+//!
+//! A scan goes requested → measuring → complete | failed | aborted. Each verb moves it with one
+//! conditional UPDATE (`… WHERE state = 'measuring'`), so the rule holds even if two tasks race,
+//! and only reads the row again to explain a refusal.
+
+use crate::geometry::{Device, GEOMETRY_COUNT, Geometry};
+use crate::processing::{MeasuredBrdf, SpecularStrategy};
+use crate::spectral::wavelengths_nm;
+
+use super::backend::{self, Db};
+use super::codec::{self, ReadingRow};
+use super::ids::{ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
+use super::records::{
+    NewReading, Processed, ReadingValues, ReferenceStatus, ScanDetail, ScanFilter, ScanState,
+    ScanSummary,
+};
+use super::references::reference_status;
+use super::{Store, StoreError, now_ms};
+
+/// The reason [`Store::mark_interrupted_scans_failed`] records.
+pub const INTERRUPTED_REASON: &str = "daemon stopped during the scan";
+
+#[derive(sqlx::FromRow)]
+struct ScanRow {
+    id: i64,
+    sample_id: i64,
+    sample: String,
+    reference_id: i64,
+    state: String,
+    reason: Option<String>,
+    requested_at_ms: i64,
+    started_at_ms: Option<i64>,
+    finished_at_ms: Option<i64>,
+    reading_count: i64,
+}
+
+const SCAN_SUMMARY: &str = "\
+    SELECT s.id, s.sample_id, sa.name AS sample, s.reference_id, s.state, s.reason,
+           s.requested_at_ms, s.started_at_ms, s.finished_at_ms,
+           (SELECT COUNT(*) FROM readings r WHERE r.scan_id = s.id) AS reading_count
+    FROM scans s JOIN samples sa ON sa.id = s.sample_id";
+
+impl ScanRow {
+    fn into_summary(self) -> Result<ScanSummary, StoreError> {
+        let state = self.state.parse().map_err(|detail| StoreError::Corrupt {
+            table: "scans",
+            id: self.id,
+            detail,
+        })?;
+        Ok(ScanSummary {
+            id: ScanId(self.id),
+            sample_id: SampleId(self.sample_id),
+            sample: self.sample,
+            reference_id: ReferenceId(self.reference_id),
+            state,
+            reason: self.reason,
+            requested_at_ms: self.requested_at_ms,
+            started_at_ms: self.started_at_ms,
+            finished_at_ms: self.finished_at_ms,
+            reading_count: self.reading_count as usize,
+        })
+    }
+}
+
+#[derive(sqlx::FromRow)]
+struct ProcessedRow {
+    id: i64,
+    scan_id: i64,
+    specular: String,
+    brdf_f64le: Vec<u8>,
+    created_at_ms: i64,
+}
+
+impl ProcessedRow {
+    fn into_processed(self) -> Result<Processed, StoreError> {
+        let corrupt = |detail: String| StoreError::Corrupt {
+            table: "processed",
+            id: self.id,
+            detail,
+        };
+        let specular = self
+            .specular
+            .parse()
+            .map_err(|e: crate::processing::UnknownSpecularStrategy| corrupt(e.to_string()))?;
+        let brdf = codec::decode_brdf(&self.brdf_f64le)
+            .ok_or_else(|| corrupt(format!("brdf has {} bytes", self.brdf_f64le.len())))?;
+        Ok(Processed {
+            id: ProcessedId(self.id),
+            scan: ScanId(self.scan_id),
+            specular,
+            brdf,
+            created_at_ms: self.created_at_ms,
+        })
+    }
+}
+
+/// The state of scan `id`, or `NotFound`.
+async fn scan_state<'e, E>(ex: E, id: ScanId) -> Result<ScanState, StoreError>
+where
+    E: sqlx::Executor<'e, Database = Db>,
+{
+    let state: Option<String> = sqlx::query_scalar("SELECT state FROM scans WHERE id = $1")
+        .bind(id.0)
+        .fetch_optional(ex)
+        .await?;
+    let state = state.ok_or(StoreError::NotFound {
+        what: ScanId::WHAT,
+        id: id.0,
+    })?;
+    state.parse().map_err(|detail| StoreError::Corrupt {
+        table: "scans",
+        id: id.0,
+        detail,
+    })
+}
+
+impl Store {
+    /// Asks for a scan of the sample `sample_name` (created on first use), to be normalised by
+    /// reference set `reference`, which must be complete. The scan starts `requested`.
+    pub async fn request_scan(
+        &self,
+        sample_name: &str,
+        reference: ReferenceId,
+    ) -> Result<ScanId, StoreError> {
+        if sample_name.trim().is_empty() {
+            return Err(StoreError::Empty {
+                field: "sample name",
+            });
+        }
+        let mut tx = self.writer.begin().await?;
+        let status = reference_status(&mut *tx, reference).await?;
+        if status != ReferenceStatus::Complete {
+            return Err(StoreError::ReferenceState {
+                reference,
+                status,
+                expected: "complete",
+                action: "scan against it",
+            });
+        }
+        let now = now_ms();
+        let sample: i64 = sqlx::query_scalar(backend::UPSERT_SAMPLE)
+            .bind(sample_name)
+            .bind(now)
+            .fetch_one(&mut *tx)
+            .await?;
+        let id: i64 = sqlx::query_scalar(
+            "INSERT INTO scans (sample_id, reference_id, state, requested_at_ms)
+             VALUES ($1, $2, 'requested', $3) RETURNING id",
+        )
+        .bind(sample)
+        .bind(reference.0)
+        .bind(now)
+        .fetch_one(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(ScanId(id))
+    }
+
+    /// requested → measuring: the devices are starting.
+    pub async fn start_measuring(&self, scan: ScanId) -> Result<(), StoreError> {
+        let done = sqlx::query(
+            "UPDATE scans SET state = 'measuring', started_at_ms = $2
+             WHERE id = $1 AND state = 'requested'",
+        )
+        .bind(scan.0)
+        .bind(now_ms())
+        .execute(&self.writer)
+        .await?;
+        self.explain_scan(
+            scan,
+            done.rows_affected(),
+            "requested",
+            "start measuring it",
+        )
+        .await
+    }
+
+    /// Stores one reading of a `measuring` scan the moment it arrives (one commit). Each
+    /// geometry once; `device` must be the geometry's; values finite.
+    pub async fn add_reading(
+        &self,
+        scan: ScanId,
+        device: Device,
+        geometry: &Geometry,
+        values: &ReadingValues,
+        raw_frame: &[u8],
+    ) -> Result<ReadingId, StoreError> {
+        let owner = || format!("scan {scan}");
+        let geometry = codec::check_reading(&owner, device, geometry, values, false)?;
+        // The state test and the insert are one statement, so a scan failed or aborted by
+        // another task cannot gain a reading afterwards.
+        let inserted: Result<Option<i64>, sqlx::Error> = sqlx::query_scalar(
+            "INSERT INTO readings
+                 (scan_id, device, geometry, values_f64le, raw_frame, received_at_ms)
+             SELECT $1, $2, $3, $4, $5, $6
+             WHERE EXISTS (SELECT 1 FROM scans WHERE id = $1 AND state = 'measuring')
+             RETURNING id",
+        )
+        .bind(scan.0)
+        .bind(device.key())
+        .bind(geometry.name)
+        .bind(codec::encode_f64s(values.as_slice()))
+        .bind(raw_frame)
+        .bind(now_ms())
+        .fetch_optional(&self.writer)
+        .await;
+        match inserted {
+            Ok(Some(id)) => Ok(ReadingId(id)),
+            Ok(None) => Err(StoreError::ScanState {
+                scan,
+                state: scan_state(&self.writer, scan).await?,
+                expected: "measuring",
+                action: "add a reading to it",
+            }),
+            Err(e) if backend::is_unique_violation(&e) => Err(StoreError::DuplicateReading {
+                owner: owner(),
+                geometry: geometry.name,
+            }),
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// Stores several readings of a `measuring` scan in one transaction: all or none (imports,
+    /// and the benchmark of a whole scan). Same checks as [`Store::add_reading`].
+    pub async fn add_readings_tx(
+        &self,
+        scan: ScanId,
+        readings: &[NewReading<'_>],
+    ) -> Result<Vec<ReadingId>, StoreError> {
+        let owner = || format!("scan {scan}");
+        let mut checked = Vec::with_capacity(readings.len());
+        for r in readings {
+            checked.push(codec::check_reading(
+                &owner, r.device, r.geometry, &r.values, false,
+            )?);
+        }
+        let mut tx = self.writer.begin().await?;
+        let state = scan_state(&mut *tx, scan).await?;
+        if state != ScanState::Measuring {
+            return Err(StoreError::ScanState {
+                scan,
+                state,
+                expected: "measuring",
+                action: "add readings to it",
+            });
+        }
+        let now = now_ms();
+        let mut ids = Vec::with_capacity(readings.len());
+        for (r, geometry) in readings.iter().zip(checked) {
+            let inserted: Result<i64, sqlx::Error> = sqlx::query_scalar(
+                "INSERT INTO readings
+                     (scan_id, device, geometry, values_f64le, raw_frame, received_at_ms)
+                 VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
+            )
+            .bind(scan.0)
+            .bind(r.device.key())
+            .bind(geometry.name)
+            .bind(codec::encode_f64s(r.values.as_slice()))
+            .bind(r.raw_frame)
+            .bind(now)
+            .fetch_one(&mut *tx)
+            .await;
+            match inserted {
+                Ok(id) => ids.push(ReadingId(id)),
+                // Dropping `tx` rolls back the readings inserted so far.
+                Err(e) if backend::is_unique_violation(&e) => {
+                    return Err(StoreError::DuplicateReading {
+                        owner: owner(),
+                        geometry: geometry.name,
+                    });
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        tx.commit().await?;
+        Ok(ids)
+    }
+
+    /// measuring → complete. Refused unless the scan is `measuring` and holds all 14 readings.
+    pub async fn complete_scan(&self, scan: ScanId) -> Result<(), StoreError> {
+        // The CHECKs of `readings` pin each row to a distinct one of the 14 geometries, so a
+        // count of 14 means every geometry is present.
+        let done = sqlx::query(
+            "UPDATE scans SET state = 'complete', finished_at_ms = $2
+             WHERE id = $1 AND state = 'measuring'
+               AND (SELECT COUNT(*) FROM readings WHERE scan_id = $1) = $3",
+        )
+        .bind(scan.0)
+        .bind(now_ms())
+        .bind(GEOMETRY_COUNT as i64)
+        .execute(&self.writer)
+        .await?;
+        if done.rows_affected() == 1 {
+            return Ok(());
+        }
+        let state = scan_state(&self.writer, scan).await?;
+        if state != ScanState::Measuring {
+            return Err(StoreError::ScanState {
+                scan,
+                state,
+                expected: "measuring",
+                action: "complete it",
+            });
+        }
+        let present: Vec<String> =
+            sqlx::query_scalar("SELECT geometry FROM readings WHERE scan_id = $1")
+                .bind(scan.0)
+                .fetch_all(&self.writer)
+                .await?;
+        Err(StoreError::ScanIncomplete {
+            scan,
+            have: present.len(),
+            missing: codec::missing_geometries(&present),
+        })
+    }
+
+    /// requested | measuring → failed, with the reason (e.g. "MA-T12 timed out at 45as25").
+    /// The readings already stored are kept.
+    pub async fn fail_scan(&self, scan: ScanId, reason: &str) -> Result<(), StoreError> {
+        if reason.trim().is_empty() {
+            return Err(StoreError::Empty {
+                field: "failure reason",
+            });
+        }
+        let done = sqlx::query(
+            "UPDATE scans SET state = 'failed', reason = $2, finished_at_ms = $3
+             WHERE id = $1 AND state IN ('requested', 'measuring')",
+        )
+        .bind(scan.0)
+        .bind(reason)
+        .bind(now_ms())
+        .execute(&self.writer)
+        .await?;
+        self.explain_scan(
+            scan,
+            done.rows_affected(),
+            "requested or measuring",
+            "fail it",
+        )
+        .await
+    }
+
+    /// requested | measuring → aborted (the operator stopped it). Readings are kept.
+    pub async fn abort_scan(&self, scan: ScanId) -> Result<(), StoreError> {
+        let done = sqlx::query(
+            "UPDATE scans SET state = 'aborted', reason = 'aborted by the operator',
+                              finished_at_ms = $2
+             WHERE id = $1 AND state IN ('requested', 'measuring')",
+        )
+        .bind(scan.0)
+        .bind(now_ms())
+        .execute(&self.writer)
+        .await?;
+        self.explain_scan(
+            scan,
+            done.rows_affected(),
+            "requested or measuring",
+            "abort it",
+        )
+        .await
+    }
+
+    /// At start-up: every scan a crash left `requested` or `measuring` becomes `failed` with
+    /// the reason [`INTERRUPTED_REASON`], keeping its readings. Returns their ids, oldest first.
+    pub async fn mark_interrupted_scans_failed(&self) -> Result<Vec<ScanId>, StoreError> {
+        let mut ids: Vec<i64> = sqlx::query_scalar(
+            "UPDATE scans SET state = 'failed', reason = $1, finished_at_ms = $2
+             WHERE state IN ('requested', 'measuring')
+             RETURNING id",
+        )
+        .bind(INTERRUPTED_REASON)
+        .bind(now_ms())
+        .fetch_all(&self.writer)
+        .await?;
+        ids.sort_unstable();
+        Ok(ids.into_iter().map(ScanId).collect())
+    }
+
+    /// A scan, its readings and its reference set with that set's readings, readings in
+    /// geometry-table order.
+    pub async fn scan_detail(&self, scan: ScanId) -> Result<ScanDetail, StoreError> {
+        let row: Option<ScanRow> = sqlx::query_as(&format!("{SCAN_SUMMARY} WHERE s.id = $1"))
+            .bind(scan.0)
+            .fetch_optional(&self.reader)
+            .await?;
+        let summary = row
+            .ok_or(StoreError::NotFound {
+                what: ScanId::WHAT,
+                id: scan.0,
+            })?
+            .into_summary()?;
+        let rows: Vec<ReadingRow> = sqlx::query_as(
+            "SELECT id, device, geometry, values_f64le, raw_frame, received_at_ms AS at_ms
+             FROM readings WHERE scan_id = $1",
+        )
+        .bind(scan.0)
+        .fetch_all(&self.reader)
+        .await?;
+        let mut readings = rows
+            .into_iter()
+            .map(|r| r.into_reading("readings"))
+            .collect::<Result<Vec<_>, _>>()?;
+        codec::sort_readings(&mut readings);
+        let reference = self.reference_detail(summary.reference_id).await?;
+        Ok(ScanDetail {
+            scan: summary,
+            readings,
+            reference,
+        })
+    }
+
+    /// Scans matching `filter`, newest first.
+    pub async fn list_scans(&self, filter: &ScanFilter) -> Result<Vec<ScanSummary>, StoreError> {
+        // QueryBuilder writes each backend's placeholder, so the optional clauses stay portable.
+        let mut q = sqlx::QueryBuilder::<Db>::new(SCAN_SUMMARY);
+        q.push(" WHERE 1 = 1");
+        if let Some(state) = filter.state {
+            q.push(" AND s.state = ").push_bind(state.as_str());
+        }
+        if let Some(sample) = &filter.sample {
+            q.push(" AND sa.name = ").push_bind(sample.clone());
+        }
+        q.push(" ORDER BY s.id DESC LIMIT ")
+            .push_bind(i64::from(filter.limit));
+        let rows: Vec<ScanRow> = q.build_query_as().fetch_all(&self.reader).await?;
+        rows.into_iter().map(ScanRow::into_summary).collect()
+    }
+
+    /// Stores the measured BRDF (sr⁻¹) of a `complete` scan under one specular strategy; once
+    /// per (scan, strategy). Values must be finite.
+    pub async fn add_processed(
+        &self,
+        scan: ScanId,
+        specular: SpecularStrategy,
+        brdf: &MeasuredBrdf,
+    ) -> Result<ProcessedId, StoreError> {
+        for (g, spectrum) in brdf.values.iter().enumerate() {
+            let geometry = &crate::geometry::GEOMETRIES[g];
+            codec::check_finite(
+                &|| format!("processed scan {scan} at {}", geometry.name),
+                spectrum,
+                |i| format!("the BRDF at {} nm", wavelengths_nm()[i]),
+            )?;
+        }
+        let inserted: Result<Option<i64>, sqlx::Error> = sqlx::query_scalar(
+            "INSERT INTO processed (scan_id, specular, brdf_f64le, created_at_ms)
+             SELECT $1, $2, $3, $4
+             WHERE EXISTS (SELECT 1 FROM scans WHERE id = $1 AND state = 'complete')
+             RETURNING id",
+        )
+        .bind(scan.0)
+        .bind(specular.name())
+        .bind(codec::encode_brdf(brdf))
+        .bind(now_ms())
+        .fetch_optional(&self.writer)
+        .await;
+        match inserted {
+            Ok(Some(id)) => Ok(ProcessedId(id)),
+            Ok(None) => Err(StoreError::ScanState {
+                scan,
+                state: scan_state(&self.writer, scan).await?,
+                expected: "complete",
+                action: "store its processed BRDF",
+            }),
+            Err(e) if backend::is_unique_violation(&e) => {
+                Err(StoreError::AlreadyProcessed { scan, specular })
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// A processed scan by id (the fit worker's input).
+    pub async fn processed(&self, id: ProcessedId) -> Result<Processed, StoreError> {
+        let row: Option<ProcessedRow> = sqlx::query_as(
+            "SELECT id, scan_id, specular, brdf_f64le, created_at_ms FROM processed WHERE id = $1",
+        )
+        .bind(id.0)
+        .fetch_optional(&self.reader)
+        .await?;
+        row.ok_or(StoreError::NotFound {
+            what: ProcessedId::WHAT,
+            id: id.0,
+        })?
+        .into_processed()
+    }
+
+    /// Every processed version of a scan, by id.
+    pub async fn processed_for_scan(&self, scan: ScanId) -> Result<Vec<Processed>, StoreError> {
+        let rows: Vec<ProcessedRow> = sqlx::query_as(
+            "SELECT id, scan_id, specular, brdf_f64le, created_at_ms FROM processed
+             WHERE scan_id = $1 ORDER BY id",
+        )
+        .bind(scan.0)
+        .fetch_all(&self.reader)
+        .await?;
+        rows.into_iter().map(ProcessedRow::into_processed).collect()
+    }
+
+    /// Turns a conditional UPDATE that touched `rows` rows into Ok, or into the error that says
+    /// why it touched none (no such scan, or a state other than `expected`).
+    async fn explain_scan(
+        &self,
+        scan: ScanId,
+        rows: u64,
+        expected: &'static str,
+        action: &'static str,
+    ) -> Result<(), StoreError> {
+        if rows == 1 {
+            return Ok(());
+        }
+        Err(StoreError::ScanState {
+            scan,
+            state: scan_state(&self.writer, scan).await?,
+            expected,
+            action,
+        })
+    }
+}
