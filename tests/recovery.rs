@@ -3,8 +3,9 @@
 //! Every scan is fitted with every cost function (default method and seed). The mean ΔE00 over
 //! the 12 diffuse and the 2 specular geometries is printed per sample and cost function (run with
 //! `--nocapture` to see the table); the assertions are:
-//! - for every cost function, the fit's cost is no higher than the cost of the true parameters
-//!   (an optimiser that ends above the truth has stopped in a worse place than a known point);
+//! - for every cost function, the fit's cost is no higher than the cost of the true parameters,
+//!   up to the optimiser's stopping tolerance (1e-6 relative): an optimiser that ends above the
+//!   truth has stopped in a worse place than a known point;
 //! - `cf2`, noise-free: diffuse mean ΔE00 < 0.1 and ks, α, μ within 1 % of the truth;
 //! - `cf2`, 1 % noise: diffuse mean ΔE00 < 1.0.
 
@@ -65,14 +66,22 @@ fn rel(got: f64, want: f64) -> f64 {
 /// Fits every example of a noise level with one cost function, prints the table, checks the
 /// fit is never worse than the truth, and returns the reports.
 fn fit_and_report(noisy: bool, cf: CostFunction) -> Vec<(FitReport, GroundTruth)> {
+    use std::fmt::Write as _;
     let label = if noisy { "1 % noise" } else { "noise-free" };
     let mut out = Vec::new();
-    println!("{cf}, {label}: sample, ΔE00 diffuse mean, specular mean, ks/α/μ relative error");
+    let mut worse = Vec::new();
+    // Built whole and printed once, so tables of tests running in parallel do not interleave.
+    let mut table = String::new();
+    let _ = writeln!(
+        table,
+        "{cf}, {label}: sample, mean ΔE00 diffuse (12) and specular (2), ks/α/μ relative error"
+    );
     for (scan, truth) in examples(noisy) {
         let r = fit(&scan, cf);
         let p = &r.outcome.params;
         let t = &truth.params;
-        println!(
+        let _ = writeln!(
+            table,
             "  {:<20} {:>8.4} {:>8.3}   ks {:>7.2} %  α {:>7.2} %  μ {:>7.2} %",
             truth.sample,
             r.evaluation.diffuse.mean,
@@ -87,17 +96,17 @@ fn fit_and_report(noisy: bool, cf: CostFunction) -> Vec<(FitReport, GroundTruth)
             &brdfd::model::SpecularGeometry::all(),
         );
         let truth_cost = cost(cf, &r.measured, &at_truth);
-        assert!(
-            r.outcome.cost <= truth_cost * (1.0 + 1e-9),
-            "{cf} {label} {}: fit cost {} above the cost {} of the true parameters",
-            truth.sample,
-            r.outcome.cost,
-            truth_cost
-        );
+        if r.outcome.cost > truth_cost * (1.0 + 1e-6) {
+            worse.push(format!(
+                "{cf} {label} {}: fit cost {} above the cost {} of the true parameters",
+                truth.sample, r.outcome.cost, truth_cost
+            ));
+        }
         out.push((r, truth));
     }
     let n = out.len() as f64;
-    println!(
+    let _ = writeln!(
+        table,
         "  mean over samples: diffuse {:.4}, specular {:.3}",
         out.iter()
             .map(|(r, _)| r.evaluation.diffuse.mean)
@@ -108,6 +117,8 @@ fn fit_and_report(noisy: bool, cf: CostFunction) -> Vec<(FitReport, GroundTruth)
             .sum::<f64>()
             / n
     );
+    print!("{table}");
+    assert!(worse.is_empty(), "{}", worse.join("\n"));
     out
 }
 
