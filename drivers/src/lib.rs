@@ -8,10 +8,14 @@
 //! - [`mat12::codec`], [`sra::codec`]: the bytes, one replaceable file per instrument.
 //! - [`session`]: the line-oriented session-file format (`brdfd-session 1`) that the recording
 //!   tap writes and the simulated instruments replay, with fault directives.
+//! - [`transport`]: the transport traits [`transport::UsbBulk`] and [`transport::SerialStream`]
+//!   and their errors; real implementations in [`mat12::usb`] (rusb) and [`sra::serial`]
+//!   (serialport); the simulated ones live in `mock-devices`.
 
 pub mod mat12;
 pub mod protocol;
 pub mod session;
 pub mod sra;
+pub mod transport;
 
 pub use protocol::{Instrument, Reading, ReadingValue};
