@@ -7,6 +7,7 @@
 //! - [`model`]: the spectral Cook–Torrance/GGX model.
 //! - [`processing`]: device readings → measured BRDF against the N9 reference.
 //! - [`cost`]: the paper's three cost functions (cf1, cf2, m2) of a model against a measurement.
+//! - [`optimise`]: fits the 34 model parameters: the paper's GA and the default separable search.
 //! - [`colour`]: spectra → CIE XYZ/CIELAB (D65, 2°), CIEDE2000, 8-bit sRGB swatches.
 //! - [`evaluation`]: ΔE00 between measured and estimated BRDF per geometry, with summaries.
 //! - [`stats`]: study statistics: mean ΔE00 with 95 % t interval, exact sign test.
@@ -26,6 +27,7 @@ pub mod model;
 pub mod spectral;
 pub mod processing;
 pub mod cost;
+pub mod optimise;
 pub mod colour;
 pub mod evaluation;
 pub mod stats;

@@ -1,0 +1,79 @@
+//! Fit benchmarks (criterion): how long one scan takes to fit, and the floor under that.
+//!
+//! - `fit/<cost>`: the default (separable) method on one synthetic 14-geometry scan with 1 %
+//!   noise, for each cost function. Target: median < 20 ms on one core, release.
+//! - `fit_paper/cf2`: the paper GA with its default settings on the same scan (fewer samples:
+//!   it is slow, which is part of the point).
+//! - `cost_eval/<cost>`: one model evaluation (14 specular terms, 434 values) plus one cost,
+//!   through the public API — the price of one GA individual.
+//!
+//! Run: `cargo bench --bench fit -- --warm-up-time 1 --measurement-time 5`.
+
+use std::hint::black_box;
+
+use brdfd::cost::{CostFunction, cost};
+use brdfd::model::{FresnelCosine, SpecularGeometry, evaluate};
+use brdfd::optimise::{Method, Settings, fit, synthetic};
+use criterion::{Criterion, criterion_group, criterion_main};
+
+fn scan() -> (brdfd::processing::MeasuredBrdf, brdfd::model::Params) {
+    // "orange" with ks 0.3, α 0.25, μ 1.6.
+    let truth = synthetic::cases()[2].truth;
+    let m = synthetic::with_noise(
+        &synthetic::measured(&truth, FresnelCosine::Incidence),
+        0.01,
+        1,
+    );
+    (m, truth)
+}
+
+fn benches(c: &mut Criterion) {
+    let (m, truth) = scan();
+
+    let mut group = c.benchmark_group("fit");
+    for cf in CostFunction::ALL {
+        let settings = Settings {
+            cost: cf,
+            ..Settings::default()
+        };
+        let out = fit(&m, &settings).expect("fit");
+        eprintln!(
+            "fit/{cf}: {} evaluations, {} generations, cost {:.6e}",
+            out.evaluations, out.generations, out.cost
+        );
+        group.bench_function(cf.name(), |b| {
+            b.iter(|| fit(black_box(&m), &settings).unwrap())
+        });
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group("fit_paper");
+    group.sample_size(10);
+    let settings = Settings {
+        cost: CostFunction::Cf2,
+        method: Method::Paper,
+        ..Settings::default()
+    };
+    let out = fit(&m, &settings).expect("fit");
+    eprintln!(
+        "fit_paper/cf2: {} evaluations, {} generations, cost {:.6e}",
+        out.evaluations, out.generations, out.cost
+    );
+    group.bench_function("cf2", |b| b.iter(|| fit(black_box(&m), &settings).unwrap()));
+    group.finish();
+
+    let geos = SpecularGeometry::all();
+    let mut group = c.benchmark_group("cost_eval");
+    for cf in CostFunction::ALL {
+        group.bench_function(cf.name(), |b| {
+            b.iter(|| {
+                let model = evaluate(black_box(&truth), FresnelCosine::Incidence, &geos);
+                cost(cf, black_box(&m), &model)
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(fit_benches, benches);
+criterion_main!(fit_benches);

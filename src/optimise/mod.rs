@@ -1,0 +1,507 @@
+//! Fitting the 34 model parameters to one measured BRDF (SCIENCE.md §6).
+//!
+//! Two methods, chosen by [`Settings::method`] and recorded in every [`FitOutcome`]:
+//! - [`Method::Paper`] (`ga`): what the paper did — a plain, bounded, real-coded, elitist
+//!   genetic algorithm over all 34 parameters. Kept to reproduce the paper and as the yardstick.
+//! - [`Method::Separable`] (`separable`, the default): uses the model's structure. With
+//!   (ks, α, μ) fixed the specular term is one number per geometry, and kd(λ) enters only its
+//!   own band's residuals, so the best kd is solved exactly band by band (`problem`). What is
+//!   left is a 3-D search over (ks, α, μ): a seeded space-filling design, Nelder–Mead from its
+//!   best distinct points, and Nelder–Mead restarts at the best point to polish (`separable`).
+//!   The reliability harness (`examples/reliability.rs`) checks that it ends within 1 % of the
+//!   best cost either method ever finds, on every scan, cost function and seed.
+//!
+//! Both are deterministic: the same measured BRDF, settings and seed give the same parameters
+//! bit for bit. Progress is reported once per generation through [`fit_with_observer`], which
+//! can also cancel the fit.
+
+mod ga;
+mod nelder_mead;
+mod problem;
+mod separable;
+pub mod synthetic;
+
+use std::fmt;
+use std::ops::ControlFlow;
+use std::str::FromStr;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::cost::{CostFunction, cost};
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
+use crate::model::{Bounds, FresnelCosine, Params, SpecularGeometry, evaluate};
+use crate::processing::MeasuredBrdf;
+use crate::spectral::{BANDS, wavelengths_nm};
+
+use problem::Problem;
+
+/// How the parameters are searched for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// The paper's genetic algorithm over all 34 parameters.
+    Paper,
+    /// kd solved exactly per band, a multi-start Nelder–Mead search over (ks, α, μ).
+    #[default]
+    Separable,
+}
+
+impl Method {
+    /// Both methods, the default last.
+    pub const ALL: [Method; 2] = [Method::Paper, Method::Separable];
+
+    /// The name used on the command line, in settings and in reports.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Method::Paper => "paper",
+            Method::Separable => "separable",
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A method name that is not one of `paper`, `separable`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown fit method \"{name}\": expected one of paper, separable")]
+pub struct ParseMethodError {
+    /// The name as given.
+    pub name: String,
+}
+
+impl FromStr for Method {
+    type Err = ParseMethodError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| ParseMethodError {
+                name: s.to_string(),
+            })
+    }
+}
+
+/// Settings of the paper's genetic algorithm ([`Method::Paper`]).
+///
+/// A genome is the 34 parameters in their own units; every gene starts uniform within its
+/// bounds and is clamped back into them after crossover and mutation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GaSettings {
+    /// Individuals per generation. Default 80.
+    pub population: u32,
+    /// Generations after the initial population. Default 300 (24 000 cost evaluations with
+    /// the default population).
+    pub generations: u32,
+    /// Tournament size for parent selection (with replacement). Default 3.
+    pub tournament: u32,
+    /// Best individuals copied unchanged into the next generation (elitism). Default 2.
+    pub elite: u32,
+    /// Probability that a pair of parents is recombined by simulated binary crossover
+    /// (Deb & Agrawal 1995) rather than copied. Default 0.9.
+    pub crossover_probability: f64,
+    /// SBX distribution index η_c: larger keeps children closer to their parents. Default 15.
+    pub crossover_eta: f64,
+    /// Per-gene probability of polynomial mutation (Deb & Goyal 1996). Default 1/34, one gene
+    /// per child on average.
+    pub mutation_probability: f64,
+    /// Polynomial-mutation distribution index η_m. Default 20.
+    pub mutation_eta: f64,
+}
+
+impl Default for GaSettings {
+    fn default() -> Self {
+        GaSettings {
+            population: 80,
+            generations: 300,
+            tournament: 3,
+            elite: 2,
+            crossover_probability: 0.9,
+            crossover_eta: 15.0,
+            mutation_probability: 1.0 / 34.0,
+            mutation_eta: 20.0,
+        }
+    }
+}
+
+/// Settings of the default method ([`Method::Separable`]).
+///
+/// The search runs in unit-cube coordinates t ∈ [0, 1]³ mapped onto the bounds as
+/// ks = lo + (hi − lo)·t², α log-uniform (lo·(hi/lo)^t) and μ linear: matt samples have
+/// small ks and α, where the cost changes fastest, and these maps give those regions room.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SeparableSettings {
+    /// Points of the seeded Latin-hypercube design that surveys (ks, α, μ). Default 64.
+    pub samples: u32,
+    /// Nelder–Mead searches, started from the best design points that lie at least
+    /// `start_separation` apart. Default 4.
+    pub starts: u32,
+    /// Least ∞-norm distance (unit cube) between two starting points, so that the searches
+    /// explore different basins. Default 0.15.
+    pub start_separation: f64,
+    /// Most cost evaluations of one Nelder–Mead search. Default 300.
+    pub max_evaluations_per_search: u32,
+    /// Nelder–Mead restarts at the best point, with shrinking simplices, to polish it and to
+    /// undo a simplex that collapsed early. Default 3; stops early when a restart does not
+    /// improve the cost by more than `f_tolerance`.
+    pub polish_restarts: u32,
+    /// Stop a search when its simplex is this small (unit-cube ∞-norm). Default 1e-8.
+    pub x_tolerance: f64,
+    /// ...and its costs agree to this relative tolerance. Default 1e-10.
+    pub f_tolerance: f64,
+}
+
+impl Default for SeparableSettings {
+    fn default() -> Self {
+        SeparableSettings {
+            samples: 64,
+            starts: 4,
+            start_separation: 0.15,
+            max_evaluations_per_search: 300,
+            polish_restarts: 3,
+            x_tolerance: 1e-8,
+            f_tolerance: 1e-10,
+        }
+    }
+}
+
+/// Every setting of a fit; recorded with the fit so that it can be repeated bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
+    /// Search method. Default [`Method::Separable`].
+    pub method: Method,
+    /// Cost function minimised. Default [`CostFunction::Cf2`].
+    pub cost: CostFunction,
+    /// Parameter bounds. Default SCIENCE.md §4: kd ∈ [0, 1], ks ∈ [0, 10], α ∈ [0.01, 1],
+    /// μ ∈ [1, 3].
+    pub bounds: Bounds,
+    /// Which cosine the Fresnel term uses. Default: cos θi, as the paper.
+    pub fresnel: FresnelCosine,
+    /// Seed of the ChaCha8 generator behind every random choice. Default 1; fixed so that two
+    /// runs with default settings agree, change it to probe the optimiser.
+    pub seed: u64,
+    /// The paper GA's settings (used when `method` is `paper`).
+    pub paper: GaSettings,
+    /// The separable method's settings (used when `method` is `separable`).
+    pub separable: SeparableSettings,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            method: Method::default(),
+            cost: CostFunction::default(),
+            bounds: Bounds::default(),
+            fresnel: FresnelCosine::default(),
+            seed: 1,
+            paper: GaSettings::default(),
+            separable: SeparableSettings::default(),
+        }
+    }
+}
+
+/// A setting that cannot be used; the message names the setting and the accepted values.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct SettingsError(pub String);
+
+fn check(ok: bool, message: impl FnOnce() -> String) -> Result<(), SettingsError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(SettingsError(message()))
+    }
+}
+
+fn unit_interval(x: f64) -> bool {
+    (0.0..=1.0).contains(&x)
+}
+
+impl Settings {
+    /// Checks every setting, both methods' included (a settings file is checked whole).
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        self.bounds.validate().map_err(SettingsError)?;
+        let b = &self.bounds;
+        check(b.kd.0 >= 0.0, || {
+            format!(
+                "bounds: kd lower bound {} must be >= 0 (a BRDF is not negative)",
+                b.kd.0
+            )
+        })?;
+        check(b.ks.0 >= 0.0, || {
+            format!(
+                "bounds: ks lower bound {} must be >= 0 (a BRDF is not negative)",
+                b.ks.0
+            )
+        })?;
+
+        let p = &self.paper;
+        check(p.population >= 4, || {
+            format!("paper GA: population must be >= 4, got {}", p.population)
+        })?;
+        check(p.generations >= 1, || {
+            "paper GA: generations must be >= 1, got 0".to_string()
+        })?;
+        check(p.tournament >= 1 && p.tournament <= p.population, || {
+            format!(
+                "paper GA: tournament must be between 1 and the population ({}), got {}",
+                p.population, p.tournament
+            )
+        })?;
+        check(p.elite < p.population, || {
+            format!(
+                "paper GA: elite must be below the population ({}), got {}",
+                p.population, p.elite
+            )
+        })?;
+        check(unit_interval(p.crossover_probability), || {
+            format!(
+                "paper GA: crossover_probability must be in [0, 1], got {}",
+                p.crossover_probability
+            )
+        })?;
+        check(unit_interval(p.mutation_probability), || {
+            format!(
+                "paper GA: mutation_probability must be in [0, 1], got {}",
+                p.mutation_probability
+            )
+        })?;
+        check(
+            p.crossover_eta.is_finite() && p.crossover_eta >= 0.0,
+            || {
+                format!(
+                    "paper GA: crossover_eta must be finite and >= 0, got {}",
+                    p.crossover_eta
+                )
+            },
+        )?;
+        check(p.mutation_eta.is_finite() && p.mutation_eta >= 0.0, || {
+            format!(
+                "paper GA: mutation_eta must be finite and >= 0, got {}",
+                p.mutation_eta
+            )
+        })?;
+
+        let s = &self.separable;
+        check(s.starts >= 1, || {
+            "separable: starts must be >= 1, got 0".to_string()
+        })?;
+        check(s.samples >= s.starts, || {
+            format!(
+                "separable: samples must be >= starts ({}), got {}",
+                s.starts, s.samples
+            )
+        })?;
+        check(
+            s.start_separation.is_finite() && s.start_separation >= 0.0,
+            || {
+                format!(
+                    "separable: start_separation must be finite and >= 0, got {}",
+                    s.start_separation
+                )
+            },
+        )?;
+        check(s.max_evaluations_per_search >= 8, || {
+            format!(
+                "separable: max_evaluations_per_search must be >= 8 (a 3-D simplex needs 4), \
+                 got {}",
+                s.max_evaluations_per_search
+            )
+        })?;
+        check(s.x_tolerance > 0.0 && s.x_tolerance < 1.0, || {
+            format!(
+                "separable: x_tolerance must be in (0, 1), got {}",
+                s.x_tolerance
+            )
+        })?;
+        check(s.f_tolerance.is_finite() && s.f_tolerance >= 0.0, || {
+            format!(
+                "separable: f_tolerance must be finite and >= 0, got {}",
+                s.f_tolerance
+            )
+        })?;
+        Ok(())
+    }
+}
+
+/// Reported once per generation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Progress {
+    /// Generations finished so far, from 1.
+    pub generation: u32,
+    /// Generations the fit will run at most (the separable method may stop polishing early).
+    pub generations_total: u32,
+    /// Best cost found so far.
+    pub best_cost: f64,
+    /// Cost evaluations so far.
+    pub evaluations: u64,
+}
+
+/// The result of one fit, with what is needed to repeat and to judge it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitOutcome {
+    /// The fitted parameters, within the bounds.
+    pub params: Params,
+    /// Their cost, as [`crate::cost::cost`] computes it.
+    pub cost: f64,
+    /// Cost evaluations. For the paper GA one evaluation is a full 34-parameter model; for the
+    /// separable method it is one (ks, α, μ) point with its exact per-band kd solve.
+    pub evaluations: u64,
+    /// Generations run. The paper GA: one per GA generation. The separable method: the design
+    /// survey, each Nelder–Mead search and each polishing restart.
+    pub generations: u32,
+    /// Wall-clock time of the fit, ms.
+    pub wall_ms: f64,
+    /// Best cost after each generation (non-increasing).
+    pub best_cost_per_generation: Vec<f64>,
+    /// The method that produced the fit.
+    pub method: Method,
+    /// The seed it ran with.
+    pub seed: u64,
+}
+
+/// Why a fit did not produce parameters.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitError {
+    /// A setting is out of range; fix the settings (the message names the setting).
+    #[error("invalid fit settings: {0}")]
+    InvalidSettings(#[from] SettingsError),
+    /// The measured BRDF holds a NaN or infinity; the scan or its processing is broken.
+    #[error(
+        "measured BRDF at geometry {geometry}, band {band} ({nm} nm) is not finite; \
+         check the scan's readings and its N9 reference",
+        nm = wavelengths_nm()[*band]
+    )]
+    NonFiniteInput {
+        /// The geometry's device name.
+        geometry: &'static str,
+        /// Band index, 0 = 400 nm.
+        band: usize,
+    },
+    /// m2 takes ln(1 + cosθi·M); a measured value at or below −1/cosθi sr⁻¹ has no logarithm.
+    #[error(
+        "measured BRDF {value} sr⁻¹ at geometry {geometry}, band {band} ({nm} nm) is out of \
+         m2's domain (needs 1 + cosθi·M > 0); check the scan or fit with cf1 or cf2",
+        nm = wavelengths_nm()[*band]
+    )]
+    OutOfDomain {
+        /// The geometry's device name.
+        geometry: &'static str,
+        /// Band index, 0 = 400 nm.
+        band: usize,
+        /// The measured value, sr⁻¹.
+        value: f64,
+    },
+    /// The observer asked to stop.
+    #[error("fit cancelled")]
+    Cancelled,
+}
+
+/// Fits `measured` with `settings`.
+pub fn fit(measured: &MeasuredBrdf, settings: &Settings) -> Result<FitOutcome, FitError> {
+    fit_with_observer(measured, settings, &mut |_| ControlFlow::Continue(()))
+}
+
+/// Fits `measured` with `settings`, calling `observer` after every generation; returning
+/// `ControlFlow::Break(())` from it cancels the fit with [`FitError::Cancelled`].
+pub fn fit_with_observer(
+    measured: &MeasuredBrdf,
+    settings: &Settings,
+    observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<FitOutcome, FitError> {
+    let started = Instant::now();
+    settings.validate()?;
+    check_input(measured, settings.cost)?;
+    let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds);
+    let run = match settings.method {
+        Method::Paper => ga::run(&problem, &settings.paper, settings.seed, observer)?,
+        Method::Separable => {
+            separable::run(&problem, &settings.separable, settings.seed, observer)?
+        }
+    };
+    let model = evaluate(&run.params, settings.fresnel, &SpecularGeometry::all());
+    Ok(FitOutcome {
+        params: run.params,
+        cost: cost(settings.cost, measured, &model),
+        evaluations: run.tracker.evaluations,
+        generations: run.tracker.history.len() as u32,
+        wall_ms: started.elapsed().as_secs_f64() * 1e3,
+        best_cost_per_generation: run.tracker.history,
+        method: settings.method,
+        seed: settings.seed,
+    })
+}
+
+fn check_input(measured: &MeasuredBrdf, cf: CostFunction) -> Result<(), FitError> {
+    for g in 0..GEOMETRY_COUNT {
+        let w = GEOMETRIES[g].cos_theta_i();
+        for b in 0..BANDS {
+            let value = measured.values[g][b];
+            let geometry = GEOMETRIES[g].name;
+            if !value.is_finite() {
+                return Err(FitError::NonFiniteInput { geometry, band: b });
+            }
+            if cf == CostFunction::M2 && 1.0 + w * value <= 0.0 {
+                return Err(FitError::OutOfDomain {
+                    geometry,
+                    band: b,
+                    value,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// What a method hands back: the parameters and its bookkeeping.
+struct Run {
+    params: Params,
+    tracker: Tracker,
+}
+
+/// Counts evaluations, records the best cost per generation and talks to the observer.
+struct Tracker {
+    generations_total: u32,
+    evaluations: u64,
+    history: Vec<f64>,
+}
+
+impl Tracker {
+    fn new(generations_total: u32) -> Self {
+        Tracker {
+            generations_total,
+            evaluations: 0,
+            history: Vec::new(),
+        }
+    }
+
+    /// Closes a generation whose best cost so far is `best_cost`.
+    fn generation_done(
+        &mut self,
+        best_cost: f64,
+        observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
+    ) -> Result<(), FitError> {
+        self.history.push(best_cost);
+        let progress = Progress {
+            generation: self.history.len() as u32,
+            generations_total: self.generations_total,
+            best_cost,
+            evaluations: self.evaluations,
+        };
+        match observer(&progress) {
+            ControlFlow::Continue(()) => Ok(()),
+            ControlFlow::Break(()) => Err(FitError::Cancelled),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
