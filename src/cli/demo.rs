@@ -123,7 +123,7 @@ pub fn summary(fits: &[Vec<FitReport>], method: Method, seed: u64) -> String {
                 t,
                 "{:<20} {:<4} {:>9.3} {:>9.3} {:>9.3} {:>10.3e} {:>9.1}",
                 r.sample,
-                r.request.settings.cost,
+                r.request.settings.cost.name(),
                 e.diffuse.mean,
                 e.specular.mean,
                 e.all.mean,
@@ -146,7 +146,8 @@ pub fn summary(fits: &[Vec<FitReport>], method: Method, seed: u64) -> String {
         };
         let _ = writeln!(
             t,
-            "  {cost:<4} diffuse {}   specular {}   all {}",
+            "  {:<4} diffuse {}   specular {}   all {}",
+            cost.name(),
             ci(|r| r.evaluation.diffuse.mean),
             ci(|r| r.evaluation.specular.mean),
             ci(|r| r.evaluation.all.mean)
@@ -165,7 +166,7 @@ pub fn summary(fits: &[Vec<FitReport>], method: Method, seed: u64) -> String {
         let st = sign_test(&paired(a), &paired(b));
         let _ = writeln!(
             t,
-            "  {} vs {}: {} pairs, {} lower with {}, {} lower with {}, p = {:.4}",
+            "  {} vs {}: {} pairs, {} lower with {}, {} lower with {}, p = {}",
             CostFunction::ALL[a],
             CostFunction::ALL[b],
             st.n,
@@ -173,10 +174,19 @@ pub fn summary(fits: &[Vec<FitReport>], method: Method, seed: u64) -> String {
             CostFunction::ALL[a],
             st.plus,
             CostFunction::ALL[b],
-            st.p
+            format_p(st.p)
         );
     }
     t
+}
+
+/// A p-value readably: three decimals, or scientific notation below 0.001.
+fn format_p(p: f64) -> String {
+    if p < 1e-3 {
+        format!("{p:.1e}")
+    } else {
+        format!("{p:.3}")
+    }
 }
 
 #[cfg(test)]
