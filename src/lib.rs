@@ -21,6 +21,7 @@
 //! - [`cli`]: the `brdfd` subcommands (`fit`, `synth`, `demo`, …); `src/main.rs` only runs it.
 //!
 //! Service (async at the edges):
+//! - [`config`]: `brdfd.toml` → a checked [`config::Config`]; defaults run on simulated devices.
 //! - [`store`]: the SQLite store (sqlx, embedded migrations): scans, readings, references, fits.
 pub mod geometry;
 pub mod model;
@@ -35,4 +36,5 @@ pub mod scan;
 pub mod synth;
 pub mod fit;
 pub mod cli;
+pub mod config;
 pub mod store;
