@@ -11,11 +11,17 @@
 //! - [`transport`]: the transport traits [`transport::UsbBulk`] and [`transport::SerialStream`]
 //!   and their errors; real implementations in [`mat12::usb`] (rusb) and [`sra::serial`]
 //!   (serialport); the simulated ones live in `mock-devices`.
+//! - [`driver`]: the async driver tasks ([`driver::spawn_mat12`], [`driver::spawn_sra`]): one
+//!   OS thread per instrument owning the connection, commands in over an mpsc channel, events
+//!   out on a broadcast channel, timeouts, resends and reconnection with backoff.
 
+pub mod driver;
 pub mod mat12;
 pub mod protocol;
 pub mod session;
 pub mod sra;
 pub mod transport;
 
-pub use protocol::{Instrument, Reading, ReadingValue};
+pub use driver::{DriverConfig, DriverError, DriverHandle, Event, spawn_mat12, spawn_sra};
+pub use protocol::{Identity, Instrument, Reading, ReadingValue, Status};
+pub use transport::{SerialStream, TransportError, UsbBulk};
