@@ -386,8 +386,7 @@ mod tests {
             let m = process(&scan, &ProcessingOptions::default()).unwrap();
             let want = truth.measurable_brdf(FresnelCosine::Incidence);
             for (gi, geo) in GEOMETRIES.iter().enumerate() {
-                for b in 0..BANDS {
-                    let (got, w) = (m.values[gi][b], want[gi][b]);
+                for (b, (&got, &w)) in m.values[gi].iter().zip(&want[gi]).enumerate() {
                     assert!(
                         (got - w).abs() <= 1e-14 * w,
                         "{} {} {b}: {got} vs {w}",
