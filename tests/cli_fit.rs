@@ -191,24 +191,26 @@ fn help_lists_subcommands_and_explains_fit_options() {
 
 #[test]
 fn synth_writes_what_tests_data_holds() {
-    // The committed example files are exactly what `brdfd synth` writes.
+    // The committed example files are exactly what `brdfd synth` writes (tests/data/README.md).
     let dir = std::env::temp_dir().join(format!("brdfd-cli-synth-{}", std::process::id()));
-    let out = brdfd(&["synth", "--out", dir.to_str().unwrap(), "--noise", "0.01"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    for name in [
-        "t-prairie-green.noisy.scan.json",
-        "t-prairie-green.truth.json",
+    for (noise, scan) in [
+        ("0", "t-prairie-green.scan.json"),
+        ("0.01", "t-prairie-green.noisy.scan.json"),
     ] {
-        let made = std::fs::read_to_string(dir.join(name)).unwrap();
-        let committed = std::fs::read_to_string(example(name)).unwrap();
-        assert_eq!(
-            made, committed,
-            "{name} differs from tests/data: regenerate (tests/data/README.md)"
+        let out = brdfd(&["synth", "--out", dir.to_str().unwrap(), "--noise", noise]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
         );
+        for name in [scan, "t-prairie-green.truth.json"] {
+            let made = std::fs::read_to_string(dir.join(name)).unwrap();
+            let committed = std::fs::read_to_string(example(name)).unwrap();
+            assert_eq!(
+                made, committed,
+                "{name} differs from tests/data: regenerate it"
+            );
+        }
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
