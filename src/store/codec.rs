@@ -19,7 +19,7 @@ pub(crate) fn encode_f64s(values: &[f64]) -> Vec<u8> {
 
 /// The inverse of [`encode_f64s`]; `None` if the length is not a multiple of 8.
 pub(crate) fn decode_f64s(bytes: &[u8]) -> Option<Vec<f64>> {
-    if bytes.len() % F64 != 0 {
+    if !bytes.len().is_multiple_of(F64) {
         return None;
     }
     Some(

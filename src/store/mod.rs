@@ -45,7 +45,9 @@ pub use records::{
 
 use backend::Pool;
 
-/// The schema, from `migrations/`, embedded at compile time.
+/// The schema, from `migrations/`, embedded at compile time. Cargo rebuilds when an existing
+/// migration changes, but does not notice a new file in `migrations/`: after adding one, touch
+/// this file (or give the crate a `build.rs` printing `cargo:rerun-if-changed=migrations`).
 pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!();
 
 /// A handle on the store. Clones share the same connections.

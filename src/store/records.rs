@@ -97,6 +97,9 @@ text_enum!(
 );
 
 /// The value(s) of one reading, as the device reports them.
+// 256 bytes against 16: kept inline (and `Copy`) rather than boxing the spectrum, since most
+// readings are spectra and a box would cost an allocation each.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum ReadingValues {
