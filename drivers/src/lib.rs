@@ -14,14 +14,18 @@
 //! - [`driver`]: the async driver tasks ([`driver::spawn_mat12`], [`driver::spawn_sra`]): one
 //!   OS thread per instrument owning the connection, commands in over an mpsc channel, events
 //!   out on a broadcast channel, timeouts, resends and reconnection with backoff.
+//! - [`tap`]: the recording tap, [`tap::Tap`] around any transport, writing every frame in both
+//!   directions with timestamps to a session file through a [`tap::Recorder`].
 
 pub mod driver;
 pub mod mat12;
 pub mod protocol;
 pub mod session;
 pub mod sra;
+pub mod tap;
 pub mod transport;
 
 pub use driver::{DriverConfig, DriverError, DriverHandle, Event, spawn_mat12, spawn_sra};
 pub use protocol::{Identity, Instrument, Reading, ReadingValue, Status};
+pub use tap::{Recorder, Tap};
 pub use transport::{SerialStream, TransportError, UsbBulk};

@@ -476,9 +476,11 @@ pub trait Codec: Send + Sync + 'static {
     fn check_request(buf: &[u8]) -> Check;
     /// Framing verdict on bytes sent by the instrument.
     fn check_response(buf: &[u8]) -> Check;
-    /// Parse one whole request frame (as delimited by `check_request`).
+    /// Parse exactly one whole request frame (as delimited by `check_request`). Verifies the
+    /// framing and checksum again, so it is safe on any bytes.
     fn parse_request(frame: &[u8]) -> Result<Request, FrameError>;
-    /// Parse one whole response frame (as delimited by `check_response`).
+    /// Parse exactly one whole response frame (as delimited by `check_response`). Verifies the
+    /// framing and checksum again, so it is safe on any bytes: no reading without a valid checksum.
     fn parse_response(frame: &[u8]) -> Result<Response, FrameError>;
     fn encode_request(request: &Request) -> Result<Vec<u8>, EncodeError>;
     fn encode_response(response: &Response) -> Result<Vec<u8>, EncodeError>;

@@ -896,3 +896,64 @@ fn backoff_doubles_up_to_the_cap_and_the_deadline_covers_the_worst_case() {
         ms(4 * 10_200) + ms(12 * 4 * 1200) + reconnect + ms(1000)
     );
 }
+
+#[tokio::test]
+async fn a_scan_recorded_through_the_tap_replays_to_the_same_readings() {
+    use crate::session::{Direction, Session};
+    use crate::tap::{Recorder, Tap};
+
+    #[derive(Clone, Default)]
+    struct Sink(Arc<Mutex<Vec<u8>>>);
+    impl Write for Sink {
+        fn write(&mut self, b: &[u8]) -> io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    within(async {
+        let device = Device::<Mat12Codec>::new();
+        device.lock().unwrap().faults.push(fault(
+            RequestKind::Fetch,
+            Some("15as80"),
+            Act::Corrupt,
+            1,
+        ));
+        let sink = Sink::default();
+        let recorder =
+            Recorder::new(sink.clone(), Instrument::MaT12, &["unit test".into()]).unwrap();
+        let (d, rec) = (device.clone(), recorder.clone());
+        let handle = spawn_mat12(move || Ok(Tap::new(connect(&d)?, rec.clone())), fast());
+        let readings = handle.measure_all().await.unwrap();
+        handle.shutdown().await;
+        recorder.finish().unwrap();
+
+        let text = String::from_utf8(sink.0.lock().unwrap().clone()).unwrap();
+        let session = Session::parse(&text).unwrap();
+        let requests: Vec<Request> = session
+            .frames
+            .iter()
+            .filter(|f| f.direction == Direction::ToDevice)
+            .map(|f| Mat12Codec::parse_request(&f.bytes).unwrap())
+            .collect();
+        assert_eq!(requests[..2], [Request::Identify, Request::MeasureAll]);
+        assert_eq!(requests.len(), 2 + 12 + 1, "12 fetches and one resend");
+        // The corrupted reply is on record, marked, and the readings on record are the driver's.
+        assert!(text.contains("# not a frame: checksum mismatch"), "{text}");
+        let recorded: Vec<Reading> = session
+            .frames
+            .iter()
+            .filter(|f| f.direction == Direction::FromDevice)
+            .filter_map(|f| match Mat12Codec::parse_response(&f.bytes) {
+                Ok(Response::Fetched(r)) => Some(r),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(recorded.len(), 12, "{text}");
+        assert_bit_equal(&recorded, &readings);
+    })
+    .await
+}

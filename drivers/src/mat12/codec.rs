@@ -172,17 +172,15 @@ pub fn check(buf: &[u8]) -> Check {
     Check::Frame(total)
 }
 
-/// Split a checked frame into (opcode, payload).
+/// Split one whole frame into (opcode, payload). The checks of [`check`] are repeated (the CRC
+/// too), so `parse_*` on bytes that did not come through `check` can never yield a reading.
 fn split(frame: &[u8]) -> Result<(u8, &[u8]), FrameError> {
-    if frame.len() < HEADER_LEN + CRC_LEN || frame[..2] != MAGIC {
-        return Err(FrameError::malformed("not a whole MA-T12 frame"));
+    match check(frame) {
+        Check::Frame(len) if len == frame.len() => {}
+        Check::Reject(_, e) => return Err(e),
+        _ => return Err(FrameError::malformed("not exactly one whole MA-T12 frame")),
     }
     let declared = u16::from_le_bytes([frame[3], frame[4]]) as usize;
-    if frame.len() != HEADER_LEN + declared + CRC_LEN {
-        return Err(FrameError::malformed(
-            "frame length disagrees with its length field",
-        ));
-    }
     Ok((frame[2], &frame[HEADER_LEN..HEADER_LEN + declared]))
 }
 
@@ -577,6 +575,22 @@ mod tests {
             Mat12Codec::decode_response(&mut buf),
             Ok(Some(Response::Status(_)))
         ));
+    }
+
+    #[test]
+    fn parsing_without_the_check_step_still_verifies_the_checksum() {
+        let mut bad = golden("mat12 READING 15as-45");
+        bad[100] ^= 0x10;
+        assert!(matches!(
+            Mat12Codec::parse_response(&bad),
+            Err(FrameError::BadChecksum { .. })
+        ));
+        let mut long = golden("mat12 ABORTED");
+        long.push(0);
+        assert!(
+            Mat12Codec::parse_response(&long).is_err(),
+            "one frame exactly"
+        );
     }
 
     #[test]

@@ -178,10 +178,16 @@ pub fn check(buf: &[u8], start: u8) -> Check {
     Check::Frame(len)
 }
 
-/// The fields of a checked line.
+/// The fields of one whole line. The checks of [`check`] are repeated (the CRC too), so
+/// `parse_*` on bytes that did not come through `check` can never yield a reading.
 fn fields(frame: &[u8]) -> Result<Vec<&str>, FrameError> {
-    if frame.len() < 8 || !frame.ends_with(b"\r\n") || frame[frame.len() - 7] != b'*' {
-        return Err(FrameError::malformed("not a whole SRA line"));
+    let start = *frame
+        .first()
+        .ok_or_else(|| FrameError::malformed("empty line"))?;
+    match check(frame, start) {
+        Check::Frame(len) if len == frame.len() => {}
+        Check::Reject(_, e) => return Err(e),
+        _ => return Err(FrameError::malformed("not exactly one whole SRA line")),
     }
     let body = &frame[1..frame.len() - 7];
     if let Some(b) = body.iter().find(|b| !body_char(**b)) {
@@ -588,6 +594,21 @@ mod tests {
         assert_eq!(got, vec![Response::Fetched(intensity("sra-20", 3.1))]);
         assert!(errors >= 1);
         assert!(buf.is_empty());
+    }
+
+    #[test]
+    fn parsing_without_the_check_step_still_verifies_the_checksum() {
+        let mut bad = golden("sra READING sra-20");
+        bad[5] = b'1';
+        assert!(matches!(
+            SraCodec::parse_response(&bad),
+            Err(FrameError::BadChecksum { .. })
+        ));
+        let two = [golden("sra ABORTED"), golden("sra ABORTED")].concat();
+        assert!(
+            SraCodec::parse_response(&two).is_err(),
+            "one line at a time"
+        );
     }
 
     #[test]
