@@ -3,6 +3,10 @@
 //! with the settings of PROTOCOL.md §3. Any `serialport` port — including one end of a
 //! pseudo-terminal pair (`serialport::TTYPort::pair()`), which is how the simulated SRA is
 //! reached — is a [`SerialStream`].
+//!
+//! On a pseudo-terminal, bytes written just before the other end closes can be lost: the reader
+//! is told of the hang-up first. A simulated instrument that means to send a reply and then
+//! disconnect must let the reply be read before it closes.
 
 use std::time::Duration;
 
@@ -63,5 +67,108 @@ mod tests {
         let msg = err.to_string();
         assert!(msg.contains("brdfd-no-such-serial-port"), "{msg}");
         assert!(msg.contains("check the port name"), "{msg}");
+    }
+
+    /// The SRA driver through a real pseudo-terminal pair (the OS tty layer), against a small
+    /// device thread on the other end that answers with the codec. Then the device end closes:
+    /// the driver sees a lost link, not a timeout, and fails cleanly naming the geometry.
+    #[cfg(unix)]
+    #[tokio::test]
+    async fn the_driver_talks_through_a_real_pty_and_notices_when_it_closes() {
+        use std::io::{Read, Write};
+        use std::sync::{Arc, Mutex};
+
+        use bytes::BytesMut;
+        use serialport::TTYPort;
+
+        use crate::driver::{DriverConfig, DriverError, spawn_sra};
+        use crate::protocol::{Codec, Identity, Reading, ReadingValue, Request, Response};
+        use crate::sra::codec::SraCodec;
+
+        let (mut device_end, host_end) = TTYPort::pair().expect("a pseudo-terminal pair");
+        let device = std::thread::spawn(move || {
+            let mut inbox = BytesMut::new();
+            let mut buf = [0u8; 64];
+            SerialPort::set_timeout(&mut device_end, Duration::from_millis(20)).unwrap();
+            let mut answered = 0;
+            // Answer IDENTIFY, MEASURE-ONE, MEASURE-ALL, FETCH sra-20; hang up on FETCH sra-60. (Hanging up
+            // right after a write can lose the written bytes: the host sees the hang-up first.)
+            while answered < 5 {
+                let Ok(n) = device_end.read(&mut buf) else {
+                    continue;
+                };
+                inbox.extend_from_slice(&buf[..n]);
+                while let Ok(Some(request)) = SraCodec::decode_request(&mut inbox) {
+                    let reply = match request {
+                        Request::Identify => Response::Identity(Identity {
+                            model: "RA-532H".into(),
+                            serial: "pty".into(),
+                            firmware: "1".into(),
+                        }),
+                        Request::MeasureAll => Response::Measured { count: 2 },
+                        Request::MeasureOne { geometry } => Response::MeasuredOne(Reading {
+                            geometry,
+                            value: ReadingValue::Intensity(0.1 + 0.2),
+                        }),
+                        Request::Fetch { geometry: "sra-60" } => {
+                            answered += 1;
+                            break;
+                        }
+                        Request::Fetch { geometry } => Response::Fetched(Reading {
+                            geometry,
+                            value: ReadingValue::Intensity(0.1 + 0.2),
+                        }),
+                        other => panic!("unexpected {other}"),
+                    };
+                    device_end
+                        .write_all(&SraCodec::encode_response(&reply).unwrap())
+                        .unwrap();
+                    answered += 1;
+                }
+            }
+            // Dropping `device_end` closes the master side of the pty.
+        });
+
+        let host = Arc::new(Mutex::new(Some(host_end)));
+        let config = DriverConfig {
+            reply_timeout: Duration::from_millis(300),
+            backoff_initial: Duration::from_millis(5),
+            ..DriverConfig::default()
+        };
+        let handle = spawn_sra(
+            move || {
+                host.lock()
+                    .unwrap()
+                    .take()
+                    .ok_or(TransportError::SerialOpen {
+                        port: "pty".into(),
+                        detail: "the pseudo-terminal is gone".into(),
+                    })
+            },
+            config,
+        );
+        let one = tokio::time::timeout(Duration::from_secs(10), handle.measure_one("sra-20"))
+            .await
+            .expect("no hang")
+            .unwrap();
+        // 0.1 + 0.2 = 0.30000000000000004: the decimal on the wire keeps every bit.
+        let ReadingValue::Intensity(v) = one.value else {
+            panic!("not an intensity")
+        };
+        assert_eq!(v.to_bits(), (0.1f64 + 0.2).to_bits());
+        let err = tokio::time::timeout(Duration::from_secs(10), handle.measure_all())
+            .await
+            .expect("no hang")
+            .unwrap_err();
+        device.join().unwrap();
+        let DriverError::Disconnected { geometry, .. } = &err else {
+            panic!("expected a lost link, got {err:?}")
+        };
+        assert_eq!(
+            *geometry,
+            Some("sra-60"),
+            "sra-20 was answered, sra-60 was in progress"
+        );
+        assert!(err.to_string().contains("pseudo-terminal is gone"), "{err}");
     }
 }
