@@ -17,7 +17,7 @@
 use std::marker::PhantomData;
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use bytes::BytesMut;
@@ -224,11 +224,15 @@ enum Job {
 #[derive(Debug, Clone)]
 pub struct DriverHandle {
     instrument: Instrument,
-    jobs: mpsc::Sender<Job>,
+    /// Each job goes with the abort epoch current when it was queued.
+    jobs: mpsc::Sender<(u64, Job)>,
     events: broadcast::Sender<Event>,
-    /// Set by `abort()` so the thread sees it between exchanges without waiting for the queue;
-    /// a std atomic because the thread is not async.
-    abort: Arc<AtomicBool>,
+    /// The abort epoch: `abort()` increments it, and every job queued before that (the one
+    /// running included) fails as aborted at its next check. The thread sees it between
+    /// exchanges without waiting for the queue; a std atomic because the thread is not async.
+    /// An epoch rather than a flag, so nothing has to reset it (a cancelled `abort()` cannot
+    /// leave later commands aborted).
+    abort: Arc<AtomicU64>,
     deadline: Duration,
 }
 
@@ -278,7 +282,7 @@ fn spawn<C: Codec>(factory: Factory, config: DriverConfig) -> DriverHandle {
     let instrument = C::INSTRUMENT;
     let (jobs, rx) = mpsc::channel(config.queue_len.max(1));
     let (events, _) = broadcast::channel(config.event_capacity.max(1));
-    let abort = Arc::new(AtomicBool::new(false));
+    let abort = Arc::new(AtomicU64::new(0));
     let deadline = config.command_deadline(instrument.geometries().len());
     let mut worker = Worker::<C> {
         config,
@@ -287,6 +291,7 @@ fn spawn<C: Codec>(factory: Factory, config: DriverConfig) -> DriverHandle {
         rx_buf: BytesMut::new(),
         events: events.clone(),
         abort: abort.clone(),
+        job_epoch: 0,
         _codec: PhantomData,
     };
     std::thread::Builder::new()
@@ -326,7 +331,11 @@ impl DriverHandle {
             instrument: self.instrument,
         };
         let (tx, rx) = oneshot::channel();
-        self.jobs.send(job(tx)).await.map_err(|_| stopped.clone())?;
+        let epoch = self.abort.load(Ordering::SeqCst);
+        self.jobs
+            .send((epoch, job(tx)))
+            .await
+            .map_err(|_| stopped.clone())?;
         match tokio::time::timeout(self.deadline, rx).await {
             Ok(Ok(result)) => result,
             Ok(Err(_)) => Err(stopped),
@@ -373,7 +382,7 @@ impl DriverHandle {
     /// Abort: the command in progress fails with `Aborted` at its next exchange boundary (or
     /// while waiting for a reply), then ABORT is sent to the instrument.
     pub async fn abort(&self) -> Result<(), DriverError> {
-        self.abort.store(true, Ordering::SeqCst);
+        self.abort.fetch_add(1, Ordering::SeqCst);
         self.call(RequestKind::Abort, Job::Abort).await
     }
 
@@ -381,7 +390,7 @@ impl DriverHandle {
     /// the connection.
     pub async fn shutdown(self) {
         let (tx, rx) = oneshot::channel();
-        if self.jobs.send(Job::Shutdown(tx)).await.is_ok() {
+        if self.jobs.send((0, Job::Shutdown(tx))).await.is_ok() {
             let _ = rx.await;
         }
     }
@@ -403,7 +412,9 @@ struct Worker<C: Codec> {
     /// Bytes received and not yet decoded.
     rx_buf: BytesMut,
     events: broadcast::Sender<Event>,
-    abort: Arc<AtomicBool>,
+    abort: Arc<AtomicU64>,
+    /// Abort epoch when the job in hand was queued.
+    job_epoch: u64,
     _codec: PhantomData<C>,
 }
 
@@ -416,7 +427,7 @@ impl<C: Codec> Worker<C> {
         let _ = self.events.send(event);
     }
 
-    fn run(&mut self, mut rx: mpsc::Receiver<Job>) {
+    fn run(&mut self, mut rx: mpsc::Receiver<(u64, Job)>) {
         let span = info_span!("driver", instrument = C::INSTRUMENT.key());
         let _enter = span.enter();
         if let Err(reason) = self.connect() {
@@ -426,7 +437,8 @@ impl<C: Codec> Worker<C> {
                 reason,
             });
         }
-        while let Some(job) = rx.blocking_recv() {
+        while let Some((epoch, job)) = rx.blocking_recv() {
+            self.job_epoch = epoch;
             if let Job::Shutdown(done) = job {
                 self.link = None;
                 let _ = done.send(());
@@ -477,7 +489,6 @@ impl<C: Codec> Worker<C> {
                 self.finish(tx, r);
             }
             Job::Abort(tx) => {
-                self.abort.store(false, Ordering::SeqCst);
                 let r = self.command(&protocol::Abort, self.config.reply_timeout);
                 self.finish(tx, r);
             }
@@ -610,7 +621,9 @@ impl<C: Codec> Worker<C> {
 
     fn check_abort<K: Command>(&self, cmd: &K) -> Result<(), DriverError> {
         let request = cmd.request();
-        if request.kind() != RequestKind::Abort && self.abort.load(Ordering::SeqCst) {
+        if request.kind() != RequestKind::Abort
+            && self.abort.load(Ordering::SeqCst) > self.job_epoch
+        {
             return Err(DriverError::Aborted {
                 instrument: C::INSTRUMENT,
                 request: request.kind(),

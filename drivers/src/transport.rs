@@ -14,13 +14,16 @@ use std::time::Duration;
 /// [`TransportError::Disconnected`] as "reconnect", and the rest as "cannot connect".
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum TransportError {
+    /// No matching device, or libusb could not list the bus at all (`detail` says why).
     #[error(
-        "MA-T12 not found on USB (vendor id 0x{vendor_id:04x}{}): check the cable and udev permissions",
-        product_id.map(|p| format!(", product id 0x{p:04x}")).unwrap_or_default()
+        "MA-T12 not found on USB (vendor id 0x{vendor_id:04x}{}{}): check the cable and udev permissions",
+        product_id.map(|p| format!(", product id 0x{p:04x}")).unwrap_or_default(),
+        detail.as_ref().map(|d| format!("; {d}")).unwrap_or_default()
     )]
     UsbNotFound {
         vendor_id: u16,
         product_id: Option<u16>,
+        detail: Option<String>,
     },
     #[error(
         "MA-T12 on USB bus {bus} address {address} cannot be opened: no permission; add a udev rule \
@@ -31,10 +34,8 @@ pub enum TransportError {
         address: u8,
         vendor_id: u16,
     },
-    #[error(
-        "USB is not usable on this machine ({detail}): MA-T12 cannot be reached; check that libusb can see the bus and the udev permissions"
-    )]
-    UsbUnavailable { detail: String },
+    #[error("MA-T12 on USB: {detail}: check the cable and udev permissions")]
+    UsbOther { detail: String },
     #[error(
         "MA-T12: cannot claim USB interface {interface} ({detail}): is another program using the instrument?"
     )]
@@ -187,6 +188,7 @@ mod tests {
         let e = TransportError::UsbNotFound {
             vendor_id: 0x0765,
             product_id: None,
+            detail: None,
         };
         assert_eq!(
             e.to_string(),
@@ -195,8 +197,13 @@ mod tests {
         let e = TransportError::UsbNotFound {
             vendor_id: 0x0765,
             product_id: Some(0xd020),
+            detail: Some("libusb cannot list the bus: Other error".into()),
         };
-        assert!(e.to_string().contains("product id 0xd020"));
+        assert_eq!(
+            e.to_string(),
+            "MA-T12 not found on USB (vendor id 0x0765, product id 0xd020; libusb cannot list \
+             the bus: Other error): check the cable and udev permissions"
+        );
     }
 
     #[test]
