@@ -146,7 +146,9 @@ impl<C: Codec> Device<C> {
             },
             Request::MeasureOne { geometry } => Response::MeasuredOne(self.reading(geometry)),
             Request::Abort => {
+                // A real instrument stops measuring: replies still held back are never sent.
                 self.measured = false;
+                self.outbox.clear();
                 Response::Aborted
             }
         }
@@ -779,16 +781,26 @@ async fn abort_interrupts_a_slow_measurement() {
         device.lock().unwrap().faults.push(fault(
             RequestKind::MeasureAll,
             None,
-            Act::Delay(Duration::from_millis(120)),
+            Act::Delay(Duration::from_secs(2)),
             1,
         ));
-        let handle = mat12(&device);
+        // Generous margins so a loaded machine cannot let the measurement finish first.
+        let config = DriverConfig {
+            measure_timeout: Duration::from_secs(4),
+            ..fast()
+        };
+        let handle = mat12_with(&device, config);
         handle.identify().await.unwrap();
         let h = handle.clone();
+        let started = Instant::now();
         let scan = tokio::spawn(async move { h.measure_all().await });
-        tokio::time::sleep(Duration::from_millis(30)).await;
+        tokio::time::sleep(Duration::from_millis(50)).await;
         handle.abort().await.unwrap();
         let err = scan.await.unwrap().unwrap_err();
+        assert!(
+            started.elapsed() < Duration::from_secs(2),
+            "aborted before the reply was due"
+        );
         assert!(matches!(
             err,
             DriverError::Aborted {
