@@ -10,6 +10,8 @@
 //!   engineering design", Computer Science and Informatics 26(4), 1996 — perturbation scaled
 //!   by the gene's bound width, clamped.
 //! - Elitism: the best `elite` individuals pass unchanged to the next generation.
+//! - Stops after `generations`, or earlier when the best cost has improved by less than
+//!   `stall_tolerance` (relative) over the last `stall_generations` generations.
 //!
 //! Every random choice comes from one `ChaCha8Rng::seed_from_u64(seed)`, in a fixed order, so
 //! a run is bit-for-bit repeatable. The two population buffers are allocated once.
@@ -48,7 +50,7 @@ fn evaluate(problem: &Problem, g: &Genome) -> f64 {
     problem.full_cost(&kd, g[BANDS], g[BANDS + 1], g[BANDS + 2])
 }
 
-/// Runs the GA. Cost evaluations: population × (generations + 1) less the elite copies.
+/// Runs the GA. Cost evaluations: population × (generations run + 1) less the elite copies.
 pub(super) fn run(
     problem: &Problem,
     s: &GaSettings,
@@ -120,6 +122,14 @@ pub(super) fn run(
         std::mem::swap(&mut pop, &mut next);
         let best = pop.iter().map(|i| i.cost).fold(f64::INFINITY, f64::min);
         tracker.generation_done(best, observer)?;
+        let h = &tracker.history;
+        let window = s.stall_generations as usize;
+        if window > 0 && h.len() > window {
+            let before = h[h.len() - 1 - window];
+            if before - best <= s.stall_tolerance * before {
+                break;
+            }
+        }
     }
 
     let best = pop

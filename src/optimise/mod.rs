@@ -94,11 +94,16 @@ impl FromStr for Method {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GaSettings {
-    /// Individuals per generation. Default 80.
+    /// Individuals per generation. Default 100.
     pub population: u32,
-    /// Generations after the initial population. Default 300 (24 000 cost evaluations with
-    /// the default population).
+    /// Most generations after the initial population. Default 1000.
     pub generations: u32,
+    /// Stop early when the best cost improved by less than `stall_tolerance` (relative) over
+    /// this many generations, as MATLAB's `ga` does by default; 0 runs every generation.
+    /// Default 50.
+    pub stall_generations: u32,
+    /// Relative improvement that counts as progress for `stall_generations`. Default 1e-6.
+    pub stall_tolerance: f64,
     /// Tournament size for parent selection (with replacement). Default 3.
     pub tournament: u32,
     /// Best individuals copied unchanged into the next generation (elitism). Default 2.
@@ -118,8 +123,10 @@ pub struct GaSettings {
 impl Default for GaSettings {
     fn default() -> Self {
         GaSettings {
-            population: 80,
-            generations: 300,
+            population: 100,
+            generations: 1000,
+            stall_generations: 50,
+            stall_tolerance: 1e-6,
             tournament: 3,
             elite: 2,
             crossover_probability: 0.9,
@@ -146,15 +153,25 @@ pub struct SeparableSettings {
     /// Least ∞-norm distance (unit cube) between two starting points, so that the searches
     /// explore different basins. Default 0.15.
     pub start_separation: f64,
-    /// Most cost evaluations of one Nelder–Mead search. Default 300.
+    /// A search stops when its simplex is this small (unit-cube ∞-norm) and its costs agree
+    /// to this relative tolerance. Loose on purpose: it only has to tell basins apart (near a
+    /// smooth minimum a 1e-3 step moves the cost by ~1e-6 relative); polishing takes the best
+    /// one the rest of the way. Default 1e-3.
+    pub search_tolerance: f64,
+    /// Most cost evaluations of one search. Default 150.
     pub max_evaluations_per_search: u32,
-    /// Nelder–Mead restarts at the best point, with shrinking simplices, to polish it and to
-    /// undo a simplex that collapsed early. Default 3; stops early when a restart does not
-    /// improve the cost by more than `f_tolerance`.
+    /// Nelder–Mead restarts at the best point, each with a fresh simplex a quarter the size of
+    /// the last (the first 0.05), to polish it and to undo a simplex that collapsed early.
+    /// Default 3; stops early when a restart improves the cost by no more than `f_tolerance`.
     pub polish_restarts: u32,
-    /// Stop a search when its simplex is this small (unit-cube ∞-norm). Default 1e-8.
+    /// Most cost evaluations of one polishing restart. Default 300.
+    pub max_evaluations_per_polish: u32,
+    /// Polishing stops when the simplex is this small (unit-cube ∞-norm)... Default 1e-7,
+    /// which pins ks, α and μ to better than 1e-5 relative.
     pub x_tolerance: f64,
-    /// ...and its costs agree to this relative tolerance. Default 1e-10.
+    /// ...and its costs agree to this relative tolerance. Default 1e-8: cf2's |r|^(2/3)
+    /// turns parameter rounding into cost differences of that order near an exact fit, so a
+    /// tighter value only burns evaluations.
     pub f_tolerance: f64,
 }
 
@@ -164,10 +181,12 @@ impl Default for SeparableSettings {
             samples: 64,
             starts: 4,
             start_separation: 0.15,
-            max_evaluations_per_search: 300,
+            search_tolerance: 1e-3,
+            max_evaluations_per_search: 150,
             polish_restarts: 3,
-            x_tolerance: 1e-8,
-            f_tolerance: 1e-10,
+            max_evaluations_per_polish: 300,
+            x_tolerance: 1e-7,
+            f_tolerance: 1e-8,
         }
     }
 }
@@ -309,11 +328,18 @@ impl Settings {
                 )
             },
         )?;
-        check(s.max_evaluations_per_search >= 8, || {
+        for (name, value) in [
+            ("max_evaluations_per_search", s.max_evaluations_per_search),
+            ("max_evaluations_per_polish", s.max_evaluations_per_polish),
+        ] {
+            check(value >= 8, || {
+                format!("separable: {name} must be >= 8 (a 3-D simplex needs 4), got {value}")
+            })?;
+        }
+        check(s.search_tolerance > 0.0 && s.search_tolerance < 1.0, || {
             format!(
-                "separable: max_evaluations_per_search must be >= 8 (a 3-D simplex needs 4), \
-                 got {}",
-                s.max_evaluations_per_search
+                "separable: search_tolerance must be in (0, 1), got {}",
+                s.search_tolerance
             )
         })?;
         check(s.x_tolerance > 0.0 && s.x_tolerance < 1.0, || {
@@ -355,8 +381,9 @@ pub struct FitOutcome {
     /// Cost evaluations. For the paper GA one evaluation is a full 34-parameter model; for the
     /// separable method it is one (ks, α, μ) point with its exact per-band kd solve.
     pub evaluations: u64,
-    /// Generations run. The paper GA: one per GA generation. The separable method: the design
-    /// survey, each Nelder–Mead search and each polishing restart.
+    /// Generations run. The paper GA: one per GA generation (fewer than the maximum when it
+    /// stalls). The separable method: the design survey, each Nelder–Mead search and each
+    /// polishing restart.
     pub generations: u32,
     /// Wall-clock time of the fit, ms.
     pub wall_ms: f64,

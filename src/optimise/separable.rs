@@ -121,12 +121,12 @@ pub(super) fn run(
     tracker.evaluations = count.get();
     tracker.generation_done(best_f, observer)?;
 
-    // 2. Searches from separated starts.
+    // 2. Searches from separated starts, to the loose search tolerance.
     let search = Options {
         initial_step: 0.1,
         max_evaluations: s.max_evaluations_per_search,
-        x_tolerance: s.x_tolerance,
-        f_tolerance: s.f_tolerance,
+        x_tolerance: s.search_tolerance,
+        f_tolerance: s.search_tolerance,
     };
     for start in pick_starts(&points, &costs, s.starts as usize, s.start_separation) {
         let out = nelder_mead::minimise(&mut cost_at, points[start], costs[start], &search);
@@ -137,18 +137,15 @@ pub(super) fn run(
         tracker.generation_done(best_f, observer)?;
     }
 
-    // 3. Polish.
-    let mut step = 0.05;
+    // 3. Polish the best to the tight tolerances.
+    let mut polish = Options {
+        initial_step: 0.05,
+        max_evaluations: s.max_evaluations_per_polish,
+        x_tolerance: s.x_tolerance,
+        f_tolerance: s.f_tolerance,
+    };
     for _ in 0..s.polish_restarts {
-        let out = nelder_mead::minimise(
-            &mut cost_at,
-            best_t,
-            best_f,
-            &Options {
-                initial_step: step,
-                ..search
-            },
-        );
+        let out = nelder_mead::minimise(&mut cost_at, best_t, best_f, &polish);
         let improved = best_f - out.f > s.f_tolerance * best_f;
         if out.f < best_f {
             (best_t, best_f) = (out.x, out.f);
@@ -158,7 +155,7 @@ pub(super) fn run(
         if !improved {
             break;
         }
-        step *= 0.25;
+        polish.initial_step *= 0.25;
     }
 
     // The kd of the best point: one more profile, which writes it.

@@ -15,12 +15,14 @@ fn settings(cf: CostFunction, method: Method, seed: u64) -> Settings {
     }
 }
 
-/// A GA small enough for debug builds (2 400 evaluations instead of 24 000).
+/// A GA small enough for debug builds (2 320 evaluations instead of up to 100 000), run to
+/// its last generation.
 fn small_paper(cf: CostFunction, seed: u64) -> Settings {
     Settings {
         paper: GaSettings {
             population: 40,
             generations: 60,
+            stall_generations: 0,
             ..GaSettings::default()
         },
         ..settings(cf, Method::Paper, seed)
@@ -230,6 +232,26 @@ fn observer_sees_every_generation_and_outcome_records_them() {
 }
 
 #[test]
+fn paper_ga_stops_when_it_stalls() {
+    let m = synthetic::measured(&case(1).truth, Default::default());
+    let mut s = small_paper(CostFunction::Cf1, 4);
+    // Any improvement under 100 % counts as a stall: the GA stops as soon as it has a
+    // 5-generation window to judge, after generation 6.
+    s.paper.stall_generations = 5;
+    s.paper.stall_tolerance = 1.0;
+    let out = fit(&m, &s).unwrap();
+    assert_eq!(out.generations, 6);
+    assert_eq!(out.evaluations, 40 + 6 * 38);
+    // With a zero tolerance only a generation with no improvement at all ends it early.
+    s.paper.stall_tolerance = 0.0;
+    let out = fit(&m, &s).unwrap();
+    let h = &out.best_cost_per_generation;
+    if out.generations < 60 {
+        assert_eq!(h[h.len() - 1], h[h.len() - 6]);
+    }
+}
+
+#[test]
 fn observer_can_cancel() {
     let m = synthetic::measured(&case(2).truth, Default::default());
     for s in [
@@ -278,12 +300,12 @@ fn bad_settings_are_rejected_naming_the_setting() {
         (
             Settings {
                 paper: GaSettings {
-                    elite: 80,
+                    elite: 100,
                     ..Default::default()
                 },
                 ..Default::default()
             },
-            "paper GA: elite must be below the population (80), got 80",
+            "paper GA: elite must be below the population (100), got 100",
         ),
         (
             Settings {
@@ -398,7 +420,7 @@ fn names_and_settings_serialise() {
         serde_json::from_str(r#"{"method": "paper", "paper": {"generations": 5}}"#).unwrap();
     assert_eq!(partial.method, Method::Paper);
     assert_eq!(partial.paper.generations, 5);
-    assert_eq!(partial.paper.population, 80);
+    assert_eq!(partial.paper.population, 100);
     assert!(serde_json::from_str::<Settings>(r#"{"sead": 1}"#).is_err());
 }
 
