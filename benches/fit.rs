@@ -75,5 +75,10 @@ fn benches(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(fit_benches, benches);
+criterion_group! {
+    name = fit_benches;
+    // No HTML plots: the figures that matter are printed, and plotting needs system fonts.
+    config = Criterion::default().without_plots();
+    targets = benches
+}
 criterion_main!(fit_benches);
