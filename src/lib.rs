@@ -16,6 +16,8 @@
 //! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
 //! - [`synth`]: synthetic scans from a known ground truth (ColorChecker spectra, matt lobes).
 //! - [`fit`]: one scan → processing → optimiser → ΔE00 evaluation, and the fit report (JSON).
+//! - [`report`]: study reports: the paper's figures 4–12 (PNG, SVG), statistics, HTML/Markdown.
+//! - [`formats`]: exchange formats: CGATS.17, CxF3, CSV, JSON exports; instrument-software imports.
 //!
 //! Command line:
 //! - [`cli`]: the `brdfd` subcommands (`fit`, `synth`, `demo`, …); `src/main.rs` only runs it.
@@ -35,6 +37,8 @@ pub mod stats;
 pub mod scan;
 pub mod synth;
 pub mod fit;
+pub mod report;
+pub mod formats;
 pub mod cli;
 pub mod config;
 pub mod store;

@@ -1,0 +1,643 @@
+//! X-Rite Color Exchange Format 3 (CxF3): written valid against the CxF3 core schema
+//! (v3.0.018, kept in `src/formats/data/CxF3_Core.xsd` and checked by the tests), read from
+//! brdfd's own files and from an MA-T12's software export.
+//!
+//! Written layout (element names from the schema):
+//! - `ColorSpecificationCollection`: one `ColorSpecification` per geometry, `Id="cs-<name>"`,
+//!   whose `MeasurementSpec/GeometryChoice/MultiAngle` holds one `BRDFAngle` with
+//!   `Notation="<geometry name>"`, `IlluminationAngle` θi and `Aspecular` (degrees, SCIENCE.md
+//!   §2), the 400 nm / 10 nm `WavelengthRange` and the instrument as `Device`.
+//! - `ObjectCollection`: per sample one `Object` per data kind (and per finished fit), its
+//!   `ColorValues` holding one spectrum per geometry, and a `TagCollection Name="brdfd"`
+//!   saying `data_kind`, `sample`, `reference`, and for estimates `cost_function` and `method`.
+//! - A spectrum is a `ReflectanceSpectrum` (`StartWL="400"`) when it is a reflectance factor
+//!   inside the schema's `ReflectanceDataType` range (−0.1, 3.0); otherwise — SRA device
+//!   intensities, and specular reflectance factors above 3 — a `CustomSpectrum` of 31
+//!   `SpectralPoint`s, which the schema leaves unbounded.
+//!
+//! Read: objects are matched to geometries through their spectra's `ColorSpecification` and its
+//! `BRDFAngle/@Notation` (brdfd's geometry names); an object without brdfd's tags is the
+//! reference if named like the tile, else a sample. Bands are placed by `StartWL` (the spectrum's,
+//! else its specification's `WavelengthRange`, else 400) and the 10 nm increment.
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+
+use super::{
+    DataKind, ExportOptions, FormatError, ImportOptions, Location, Observation, Owner, Value,
+    device_spectrum, geometry_named, parse_number, reflectance,
+};
+use crate::geometry::{Device, GEOMETRIES, Geometry};
+use crate::report::study::Study;
+use crate::spectral::{BANDS, FIRST_NM, STEP_NM, Spectrum, wavelengths_nm};
+
+/// The CxF3 core namespace.
+pub const NAMESPACE: &str = "http://colorexchangeformat.com/CxF3-core";
+
+/// X-Rite's CxF3 core schema, v3.0.018, as distributed in the `colour-cxf` source package
+/// (see `src/formats/data/README.md`).
+pub const SCHEMA: &str = include_str!("data/CxF3_Core.xsd");
+
+/// The schema's `ReflectanceDataType`: −0.1 < value < 3.0.
+fn in_reflectance_range(s: &Spectrum) -> bool {
+    s.iter().all(|&v| v > -0.1 && v < 3.0)
+}
+
+/// XML text or attribute value with the five predefined entities escaped.
+fn esc(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+fn spec_id(g: &Geometry) -> String {
+    format!("cs-{}", g.name)
+}
+
+fn write_spectrum(t: &mut String, g: &Geometry, values: &Spectrum, reflectance_factor: bool) {
+    if reflectance_factor && in_reflectance_range(values) {
+        let list: Vec<String> = values.iter().map(|v| v.to_string()).collect();
+        let _ = writeln!(
+            t,
+            "          <cc:ReflectanceSpectrum Name=\"{}\" ColorSpecification=\"{}\" StartWL=\"{FIRST_NM}\">{}</cc:ReflectanceSpectrum>",
+            g.name,
+            spec_id(g),
+            list.join(" ")
+        );
+    } else {
+        let _ = writeln!(
+            t,
+            "          <cc:CustomSpectrum Name=\"{}\" ColorSpecification=\"{}\">",
+            g.name,
+            spec_id(g)
+        );
+        for (nm, v) in wavelengths_nm().iter().zip(values) {
+            let _ = writeln!(
+                t,
+                "            <cc:SpectralPoint WL=\"{nm}\">{v}</cc:SpectralPoint>"
+            );
+        }
+        let _ = writeln!(t, "          </cc:CustomSpectrum>");
+    }
+}
+
+/// The study as a CxF3 document.
+pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError> {
+    let mut t = String::new();
+    let _ = writeln!(t, "<?xml version=\"1.0\" encoding=\"UTF-8\"?>");
+    let _ = writeln!(t, "<cc:CxF xmlns:cc=\"{NAMESPACE}\">");
+    let _ = writeln!(t, "  <cc:FileInformation>");
+    let _ = writeln!(t, "    <cc:Creator>{}</cc:Creator>", esc(&opts.originator));
+    let _ = writeln!(
+        t,
+        "    <cc:CreationDate>{}</cc:CreationDate>",
+        esc(&opts.created)
+    );
+    let _ = writeln!(
+        t,
+        "    <cc:Description>Spectral BRDF study: per sample the device readings of the sample and of its reference tile, the measured reflectance factor (pi*M, relative to the tile) and each fit's estimated reflectance factor (pi*f), one spectrum per geometry.</cc:Description>"
+    );
+    let _ = writeln!(
+        t,
+        "    <cc:Comment>MA-T12 readings are reflectance factors (0-1 scale); SRA readings (sra-20, sra-60) are the device's single achromatic intensity in its own unit, repeated in every band, written as CustomSpectrum. Geometry names and angles (degrees) per brdfd's geometry table.</cc:Comment>"
+    );
+    let _ = writeln!(t, "  </cc:FileInformation>");
+    let _ = writeln!(t, "  <cc:Resources>");
+    let _ = writeln!(t, "    <cc:ObjectCollection>");
+    let mut id = 0;
+    for s in &study.samples {
+        let mut objects: Vec<(DataKind, Option<(&str, &str)>, [Spectrum; 14])> = vec![
+            (
+                DataKind::Reading,
+                None,
+                GEOMETRIES.map(|g| device_spectrum(&s.scan.readings, &g)),
+            ),
+            (
+                DataKind::Reference,
+                None,
+                GEOMETRIES.map(|g| device_spectrum(&s.scan.reference.readings, &g)),
+            ),
+            (
+                DataKind::Measured,
+                None,
+                s.measured.values.map(|f| reflectance(&f)),
+            ),
+        ];
+        for f in &s.fits {
+            if let Some(d) = f.done() {
+                objects.push((
+                    DataKind::Estimated,
+                    Some((f.cost.name(), f.method.as_str())),
+                    d.estimated.map(|f| reflectance(&f)),
+                ));
+            }
+        }
+        for (kind, fit, spectra) in objects {
+            id += 1;
+            let (object_type, name) = match kind {
+                DataKind::Reading => ("Sample", s.name.as_str()),
+                DataKind::Reference => ("Reference", s.scan.reference.name.as_str()),
+                DataKind::Measured => ("Measured", s.name.as_str()),
+                DataKind::Estimated => ("Estimated", s.name.as_str()),
+            };
+            let _ = writeln!(
+                t,
+                "      <cc:Object ObjectType=\"{object_type}\" Name=\"{}\" Id=\"o{id}\">",
+                esc(name)
+            );
+            let _ = writeln!(
+                t,
+                "        <cc:CreationDate>{}</cc:CreationDate>",
+                esc(&opts.created)
+            );
+            let comment = match (kind, fit) {
+                (DataKind::Reading, _) => format!("device readings of sample \"{}\"", s.name),
+                (DataKind::Reference, _) => format!(
+                    "device readings of reference tile \"{}\" for the scan of \"{}\"",
+                    s.scan.reference.name, s.name
+                ),
+                (DataKind::Measured, _) => format!(
+                    "measured reflectance factor of \"{}\" (specular strategy {})",
+                    s.name, s.specular
+                ),
+                (DataKind::Estimated, Some((cost, method))) => format!(
+                    "reflectance factor of the model fitted to \"{}\" with cost function {cost}, method {method}",
+                    s.name
+                ),
+                (DataKind::Estimated, None) => unreachable!("estimates carry their fit"),
+            };
+            let _ = writeln!(t, "        <cc:Comment>{}</cc:Comment>", esc(&comment));
+            let _ = writeln!(t, "        <cc:ColorValues>");
+            let is_reflectance = matches!(kind, DataKind::Measured | DataKind::Estimated);
+            for g in &GEOMETRIES {
+                let reflectance_factor = is_reflectance || g.device == Device::MaT12;
+                write_spectrum(&mut t, g, &spectra[g.index], reflectance_factor);
+            }
+            let _ = writeln!(t, "        </cc:ColorValues>");
+            let _ = writeln!(t, "        <cc:TagCollection Name=\"brdfd\">");
+            let mut tags = vec![
+                ("data_kind", kind.name().to_string()),
+                ("sample", s.name.clone()),
+                ("reference", s.scan.reference.name.clone()),
+            ];
+            if let Some((cost, method)) = fit {
+                tags.push(("cost_function", cost.to_string()));
+                tags.push(("method", method.to_string()));
+            }
+            for (k, v) in tags {
+                let _ = writeln!(t, "          <cc:Tag Name=\"{k}\" Value=\"{}\"/>", esc(&v));
+            }
+            let _ = writeln!(t, "        </cc:TagCollection>");
+            let _ = writeln!(t, "      </cc:Object>");
+        }
+    }
+    let _ = writeln!(t, "    </cc:ObjectCollection>");
+    let _ = writeln!(t, "    <cc:ColorSpecificationCollection>");
+    for g in &GEOMETRIES {
+        let (manufacturer, model) = match g.device {
+            Device::MaT12 => ("X-Rite", "MA-T12"),
+            Device::Sra => ("Canon", "RA-532H"),
+        };
+        let _ = writeln!(t, "      <cc:ColorSpecification Id=\"{}\">", spec_id(g));
+        let _ = writeln!(t, "        <cc:MeasurementSpec>");
+        let _ = writeln!(
+            t,
+            "          <cc:MeasurementType>Spectrum_Reflectance</cc:MeasurementType>"
+        );
+        let _ = writeln!(t, "          <cc:GeometryChoice>");
+        let _ = writeln!(t, "            <cc:MultiAngle>");
+        let _ = writeln!(t, "              <cc:BRDFAngle Notation=\"{}\">", g.name);
+        let _ = writeln!(
+            t,
+            "                <cc:IlluminationAngle>{}</cc:IlluminationAngle>",
+            g.theta_i_deg
+        );
+        let _ = writeln!(
+            t,
+            "                <cc:Aspecular>{}</cc:Aspecular>",
+            g.aspecular_deg
+        );
+        let _ = writeln!(t, "              </cc:BRDFAngle>");
+        let _ = writeln!(t, "            </cc:MultiAngle>");
+        let _ = writeln!(t, "          </cc:GeometryChoice>");
+        let _ = writeln!(
+            t,
+            "          <cc:WavelengthRange StartWL=\"{FIRST_NM}\" Increment=\"{STEP_NM}\"/>"
+        );
+        let _ = writeln!(t, "          <cc:Device>");
+        let _ = writeln!(
+            t,
+            "            <cc:Manufacturer>{manufacturer}</cc:Manufacturer>"
+        );
+        let _ = writeln!(t, "            <cc:Model>{model}</cc:Model>");
+        let _ = writeln!(t, "          </cc:Device>");
+        let _ = writeln!(t, "        </cc:MeasurementSpec>");
+        let _ = writeln!(t, "      </cc:ColorSpecification>");
+    }
+    let _ = writeln!(t, "    </cc:ColorSpecificationCollection>");
+    let _ = writeln!(t, "  </cc:Resources>");
+    let _ = writeln!(t, "</cc:CxF>");
+    Ok(t)
+}
+
+/// What a `ColorSpecification` says about the spectra that use it.
+struct Spec {
+    geometry: &'static Geometry,
+    start_wl: Option<f64>,
+    increment: Option<f64>,
+}
+
+fn is(node: &roxmltree::Node, name: &str) -> bool {
+    node.is_element() && node.tag_name().name() == name
+}
+
+fn child<'a, 'i>(node: roxmltree::Node<'a, 'i>, name: &str) -> Option<roxmltree::Node<'a, 'i>> {
+    node.children().find(|c| is(c, name))
+}
+
+/// The readings in a CxF3 document (objects of kind `measured` and `estimated` are skipped).
+pub(crate) fn observations(
+    file: &str,
+    text: &str,
+    opts: &ImportOptions,
+) -> Result<Vec<Observation>, FormatError> {
+    let doc = roxmltree::Document::parse(text)
+        .map_err(|e| FormatError::invalid(file, e.pos().row as usize, "xml", e.to_string()))?;
+    let line = |n: &roxmltree::Node| doc.text_pos_at(n.range().start).row as usize;
+    let root = doc.root_element();
+    if root.tag_name().name() != "CxF" {
+        return Err(FormatError::invalid(
+            file,
+            line(&root),
+            root.tag_name().name(),
+            "not a CxF document (the root element must be CxF)",
+        ));
+    }
+
+    // Geometry and wavelength grid per ColorSpecification Id.
+    let mut specs: HashMap<String, Spec> = HashMap::new();
+    for cs in root.descendants().filter(|n| is(n, "ColorSpecification")) {
+        let Some(id) = cs.attribute("Id") else {
+            return Err(FormatError::invalid(
+                file,
+                line(&cs),
+                "ColorSpecification",
+                "no Id attribute",
+            ));
+        };
+        let Some(angle) = cs.descendants().find(|n| is(n, "BRDFAngle")) else {
+            // A specification without a multi-angle geometry (e.g. a sphere) cannot be placed;
+            // only complain if a spectrum uses it (below).
+            continue;
+        };
+        let notation = angle.attribute("Notation").ok_or_else(|| {
+            FormatError::invalid(
+                file,
+                line(&angle),
+                "BRDFAngle",
+                "no Notation attribute naming the geometry",
+            )
+        })?;
+        let geometry = geometry_named(file, line(&angle), "BRDFAngle/@Notation", notation)?;
+        let range = cs.descendants().find(|n| is(n, "WavelengthRange"));
+        let num = |attr: &str| -> Result<Option<f64>, FormatError> {
+            match range.and_then(|r| r.attribute(attr)) {
+                Some(v) => Ok(Some(parse_number(
+                    file,
+                    line(&range.expect("attribute came from it")),
+                    &format!("WavelengthRange/@{attr}"),
+                    v,
+                )?)),
+                None => Ok(None),
+            }
+        };
+        specs.insert(
+            id.to_string(),
+            Spec {
+                geometry,
+                start_wl: num("StartWL")?,
+                increment: num("Increment")?,
+            },
+        );
+    }
+
+    let mut out = Vec::new();
+    for object in root.descendants().filter(|n| is(n, "Object")) {
+        let name = object.attribute("Name").unwrap_or("").trim().to_string();
+        let tags: HashMap<&str, &str> = object
+            .children()
+            .filter(|c| is(c, "TagCollection") && c.attribute("Name") == Some("brdfd"))
+            .flat_map(|c| c.children().filter(|t| is(t, "Tag")))
+            .filter_map(|t| Some((t.attribute("Name")?, t.attribute("Value")?)))
+            .collect();
+        let owner = match tags.get("data_kind") {
+            Some(kind) => {
+                let kind: DataKind = kind.parse().map_err(|e: String| {
+                    FormatError::invalid(file, line(&object), "Tag data_kind", e)
+                })?;
+                let sample = tags.get("sample").map_or(name.clone(), |s| s.to_string());
+                match kind {
+                    DataKind::Measured | DataKind::Estimated => continue,
+                    DataKind::Reading => Owner::Sample(sample),
+                    DataKind::Reference => Owner::ReferenceOf {
+                        sample,
+                        tile: tags
+                            .get("reference")
+                            .map_or(name.clone(), |s| s.to_string()),
+                    },
+                }
+            }
+            None if name == opts.reference => Owner::SharedReference,
+            None => Owner::Sample(name.clone()),
+        };
+        if let Owner::Sample(s) = &owner
+            && s.is_empty()
+        {
+            return Err(FormatError::invalid(
+                file,
+                line(&object),
+                "Object/@Name",
+                "an object with readings needs a name (the sample's)",
+            ));
+        }
+        let Some(values) = child(object, "ColorValues") else {
+            continue;
+        };
+        for sp in values
+            .children()
+            .filter(|c| is(c, "ReflectanceSpectrum") || is(c, "CustomSpectrum"))
+        {
+            let at = line(&sp);
+            let element = sp.tag_name().name();
+            let spec_ref = sp.attribute("ColorSpecification").ok_or_else(|| {
+                FormatError::invalid(file, at, element, "no ColorSpecification attribute")
+            })?;
+            let spec = specs.get(spec_ref).ok_or_else(|| {
+                FormatError::invalid(
+                    file,
+                    at,
+                    format!("{element}/@ColorSpecification"),
+                    format!("\"{spec_ref}\" names no ColorSpecification with a MultiAngle BRDFAngle; brdfd needs the geometry of every spectrum"),
+                )
+            })?;
+            let spectrum = if element == "ReflectanceSpectrum" {
+                let start = match sp.attribute("StartWL") {
+                    Some(v) => parse_number(file, at, "ReflectanceSpectrum/@StartWL", v)?,
+                    None => spec.start_wl.unwrap_or(f64::from(FIRST_NM)),
+                };
+                let step = spec.increment.unwrap_or(f64::from(STEP_NM));
+                if step != f64::from(STEP_NM) {
+                    return Err(FormatError::invalid(
+                        file,
+                        at,
+                        element,
+                        format!(
+                            "wavelength increment {step} nm; brdfd reads the MA-T12's 10 nm grid"
+                        ),
+                    ));
+                }
+                let list: Vec<&str> = sp.text().unwrap_or("").split_whitespace().collect();
+                let offset = (f64::from(FIRST_NM) - start) / step;
+                if offset < 0.0 || offset.fract() != 0.0 {
+                    return Err(FormatError::invalid(
+                        file,
+                        at,
+                        element,
+                        format!("starts at {start} nm; brdfd needs 400–700 nm every 10 nm"),
+                    ));
+                }
+                let offset = offset as usize;
+                if list.len() < offset + BANDS {
+                    return Err(FormatError::invalid(
+                        file,
+                        at,
+                        element,
+                        format!(
+                            "{} values from {start} nm do not reach 700 nm (need {})",
+                            list.len(),
+                            offset + BANDS
+                        ),
+                    ));
+                }
+                let mut s = [0.0; BANDS];
+                for (b, v) in s.iter_mut().enumerate() {
+                    *v = parse_number(
+                        file,
+                        at,
+                        &format!("ReflectanceSpectrum ({} nm)", wavelengths_nm()[b]),
+                        list[offset + b],
+                    )?;
+                }
+                s
+            } else {
+                let mut s = [None; BANDS];
+                for p in sp.children().filter(|c| is(c, "SpectralPoint")) {
+                    let pl = line(&p);
+                    let wl = parse_number(
+                        file,
+                        pl,
+                        "SpectralPoint/@WL",
+                        p.attribute("WL").unwrap_or(""),
+                    )?;
+                    let v = parse_number(file, pl, "SpectralPoint", p.text().unwrap_or(""))?;
+                    if let Some(b) = wavelengths_nm().iter().position(|&nm| f64::from(nm) == wl) {
+                        s[b] = Some(v);
+                    }
+                }
+                let mut full = [0.0; BANDS];
+                for (b, v) in s.iter().enumerate() {
+                    full[b] = v.ok_or_else(|| {
+                        FormatError::invalid(
+                            file,
+                            at,
+                            element,
+                            format!("no SpectralPoint at {} nm", wavelengths_nm()[b]),
+                        )
+                    })?;
+                }
+                full
+            };
+            let value = if spec.geometry.device == Device::Sra
+                && spectrum
+                    .iter()
+                    .all(|v| v.to_bits() == spectrum[0].to_bits())
+            {
+                Value::Intensity(spectrum[0])
+            } else {
+                Value::Spectrum(spectrum)
+            };
+            out.push(Observation {
+                owner: owner.clone(),
+                geometry: spec.geometry,
+                value,
+                at: Location {
+                    file: file.to_string(),
+                    line: at,
+                },
+                fields: wavelengths_nm()
+                    .iter()
+                    .map(|nm| format!("{element} ({nm} nm)"))
+                    .collect(),
+            });
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::{fixed, study};
+    use super::super::{Format, ImportOptions, import};
+    use super::*;
+
+    fn err(text: &str) -> String {
+        import(Format::Cxf3, "m.cxf", text, None, &ImportOptions::default())
+            .unwrap_err()
+            .to_string()
+    }
+
+    /// Validates `xml` against the embedded CxF3 core schema with `xmllint` (libxml2). No
+    /// well-kept pure-Rust crate validates XSD; the test fails, rather than skips, without it.
+    pub(crate) fn validate_with_xmllint(xml: &str) {
+        let dir = tempfile::tempdir().unwrap();
+        let xsd = dir.path().join("CxF3_Core.xsd");
+        let doc = dir.path().join("export.cxf");
+        std::fs::write(&xsd, SCHEMA).unwrap();
+        std::fs::write(&doc, xml).unwrap();
+        let out = std::process::Command::new("xmllint")
+            .arg("--noout")
+            .arg("--schema")
+            .arg(&xsd)
+            .arg(&doc)
+            .output()
+            .unwrap_or_else(|e| {
+                panic!(
+                    "cannot run xmllint ({e}); install it with `apt-get install -y libxml2-utils` (.ci/run does)"
+                )
+            });
+        assert!(
+            out.status.success(),
+            "the CxF3 export does not validate against CxF3_Core.xsd:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    #[test]
+    fn the_export_validates_against_the_cxf3_core_schema() {
+        let mut s = study();
+        // A name needing escapes, and a specular estimate above the schema's reflectance range.
+        s.samples[0].name = "Tile <A> & \"B\"".into();
+        let xml = write(&s, &fixed()).unwrap();
+        assert!(xml.contains("<cc:BRDFAngle Notation=\"45as110\">"));
+        assert!(xml.contains("<cc:CustomSpectrum Name=\"sra-20\""));
+        validate_with_xmllint(&xml);
+    }
+
+    #[test]
+    fn the_validator_catches_a_schema_violation() {
+        // Guard against a validation that passes anything: an element out of order fails.
+        let xml =
+            write(&study(), &fixed())
+                .unwrap()
+                .replacen("<cc:Aspecular>-45</cc:Aspecular>", "", 1);
+        let r = std::panic::catch_unwind(|| validate_with_xmllint(&xml));
+        assert!(r.is_err());
+    }
+
+    #[test]
+    fn an_instrument_export_reads_by_object_name() {
+        let s = study().samples[1].clone();
+        // The MA-T12 software's shape: objects named after what was measured, no brdfd tags,
+        // the grid given once in the specification, extra bands outside 400-700 nm.
+        let mut xml = format!(
+            "<?xml version=\"1.0\"?>\n<CxF xmlns=\"{NAMESPACE}\"><Resources><ObjectCollection>\n"
+        );
+        for (i, (name, r)) in [
+            ("Munsell N9", &s.scan.reference.readings),
+            (s.name.as_str(), &s.scan.readings),
+        ]
+        .iter()
+        .enumerate()
+        {
+            xml += &format!(
+                "<Object ObjectType=\"Standard\" Name=\"{name}\" Id=\"x{i}\"><CreationDate>2024-05-01T12:00:00Z</CreationDate><ColorValues>\n"
+            );
+            for g in crate::geometry::ma_t12() {
+                let vals: Vec<String> = std::iter::once("0.5".to_string())
+                    .chain(r.ma_t12[g.index].iter().map(|v| v.to_string()))
+                    .chain(std::iter::once("0.5".to_string()))
+                    .collect();
+                xml += &format!(
+                    "<ReflectanceSpectrum ColorSpecification=\"m{}\">{}</ReflectanceSpectrum>\n",
+                    g.index,
+                    vals.join(" ")
+                );
+            }
+            xml += "</ColorValues></Object>\n";
+        }
+        xml += "</ObjectCollection><ColorSpecificationCollection>";
+        for g in crate::geometry::ma_t12() {
+            xml += &format!(
+                "<ColorSpecification Id=\"m{}\"><MeasurementSpec><MeasurementType>Spectrum_Reflectance</MeasurementType><GeometryChoice><MultiAngle><BRDFAngle Notation=\"{}\"><IlluminationAngle>{}</IlluminationAngle><Aspecular>{}</Aspecular></BRDFAngle></MultiAngle></GeometryChoice><WavelengthRange StartWL=\"390\" Increment=\"10\"/></MeasurementSpec></ColorSpecification>",
+                g.index, g.name, g.theta_i_deg, g.aspecular_deg
+            );
+        }
+        xml += "</ColorSpecificationCollection></Resources></CxF>\n";
+        validate_with_xmllint(&xml);
+        let sra = super::super::sra::write_scans(std::slice::from_ref(&s.scan));
+        let got = import(
+            Format::Cxf3,
+            "m.cxf",
+            &xml,
+            Some(("s.csv", &sra)),
+            &ImportOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(got, vec![s.scan]);
+    }
+
+    #[test]
+    fn bad_files_are_rejected_naming_file_line_and_field() {
+        let good = write(&study(), &fixed()).unwrap();
+        let e = err(&good.replacen("</cc:Object>", "", 1));
+        assert!(e.starts_with("m.cxf:"), "{e}");
+        assert!(e.contains(": xml: "), "{e}");
+        let e = err(&good.replacen("Notation=\"45as25\"", "Notation=\"45as26\"", 1));
+        assert!(
+            e.contains(": BRDFAngle/@Notation: unknown geometry \"45as26\""),
+            "{e}"
+        );
+        let bad = good.replacen("StartWL=\"400\">0.", "StartWL=\"400\">x.", 1);
+        let line = bad.lines().position(|l| l.contains(">x.")).unwrap() + 1;
+        let e = err(&bad);
+        assert!(
+            e.starts_with(&format!("m.cxf:{line}: ReflectanceSpectrum (400 nm): \"x.")),
+            "{e}"
+        );
+        let e = err(&good.replacen(
+            "ColorSpecification=\"cs-15as15\"",
+            "ColorSpecification=\"cs-none\"",
+            1,
+        ));
+        assert!(
+            e.contains(
+                "ReflectanceSpectrum/@ColorSpecification: \"cs-none\" names no ColorSpecification"
+            ),
+            "{e}"
+        );
+        let e = err("<Other/>");
+        assert_eq!(
+            e,
+            "m.cxf:1: Other: not a CxF document (the root element must be CxF)"
+        );
+    }
+}

@@ -1,0 +1,747 @@
+//! Exchange formats: exports of scans and fits that colour tools read, and imports of the
+//! instruments' own software exports, so a lab can use brdfd without the wire protocols.
+//!
+//! - [`cgats`]: CGATS.17 text (one row per sample, data kind and geometry, `SPECTRAL_NM400` …
+//!   `SPECTRAL_NM700`, custom fields declared with `KEYWORD`).
+//! - [`csv`](mod@csv): the same rows as comma-separated values.
+//! - [`cxf3`]: X-Rite Color Exchange Format 3 (one `ColorSpecification` with a `MultiAngle`
+//!   `BRDFAngle` per geometry; one `Object` per sample and data kind), valid against the CxF3
+//!   core schema kept in `src/formats/data/`.
+//! - [`json`]: everything, including the fitted parameters, as one JSON document.
+//! - [`sra`]: the Canon SRA's values as CSV (`sample,geometry,intensity`).
+//!
+//! What an export holds, per sample of a [`Study`]: the device readings of the sample and of
+//! the reference tile they are normalised by (`reading`, `reference`), the measured
+//! reflectance factor `R = π·M` (`measured`) and, per finished fit, the model's reflectance
+//! factor `π·f` (`estimated`, with cost function and method). MA-T12 readings are the device's
+//! reflectance factor (0–1 scale); an SRA reading is the device's one achromatic intensity, in its
+//! own unit, written in every band (the flat spread processing applies, SCIENCE.md §3).
+//!
+//! Imports turn such files back into [`Scan`]s. Two shapes are read:
+//! - brdfd's own exports, which say per row (or per CxF3 object) whose reading it is;
+//! - an instrument's software export, which only names the measured objects: the object
+//!   named like the reference tile (`--reference`, default "Munsell N9") is the reference of
+//!   every other object in the file, and the SRA values come from a separate [`sra`] CSV.
+//!
+//! Every number is written with Rust's shortest round-trip `Display` and read with the
+//! correctly rounded `str::parse`, so export → import gives the same scan to the last bit in
+//! every format. Every error names the file, the line and the field.
+
+pub mod cgats;
+pub mod csv;
+pub mod cxf3;
+pub mod json;
+pub mod sra;
+mod table;
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use crate::cost::CostFunction;
+use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, MA_T12_COUNT};
+use crate::report::study::Study;
+use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
+use crate::spectral::{BANDS, Spectrum};
+
+/// The reference tile's name when an instrument file does not say.
+pub const DEFAULT_REFERENCE: &str = "Munsell N9";
+
+/// Everything that can be wrong with reading or writing an exchange file.
+#[derive(Debug, thiserror::Error)]
+pub enum FormatError {
+    #[error("cannot read {}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// A value or a line of the file is wrong; fix the file at that line.
+    #[error("{file}:{line}: {field}: {message}")]
+    Invalid {
+        file: String,
+        line: usize,
+        field: String,
+        message: String,
+    },
+    /// Something the file should hold is not there (no line to point at).
+    #[error("{file}: {message}")]
+    Missing { file: String, message: String },
+    /// The assembled scan does not validate (a last check; the per-value checks above
+    /// normally catch the problem first, with its line).
+    #[error("{file}: sample \"{sample}\": {source}")]
+    Scan {
+        file: String,
+        sample: String,
+        #[source]
+        source: ScanError,
+    },
+    /// The study cannot be written in this format.
+    #[error("{format}: {message}")]
+    Unwritable {
+        format: &'static str,
+        message: String,
+    },
+}
+
+impl FormatError {
+    pub(crate) fn invalid(
+        file: &str,
+        line: usize,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> FormatError {
+        FormatError::Invalid {
+            file: file.to_string(),
+            line,
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+}
+
+/// The exchange formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Format {
+    Cgats,
+    Cxf3,
+    Csv,
+    Json,
+}
+
+impl Format {
+    pub const ALL: [Format; 4] = [Format::Cgats, Format::Cxf3, Format::Csv, Format::Json];
+
+    /// The name used on the command line.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Format::Cgats => "cgats",
+            Format::Cxf3 => "cxf3",
+            Format::Csv => "csv",
+            Format::Json => "json",
+        }
+    }
+
+    /// The file extension brdfd writes.
+    pub const fn extension(self) -> &'static str {
+        match self {
+            Format::Cgats => "cgats.txt",
+            Format::Cxf3 => "cxf",
+            Format::Csv => "csv",
+            Format::Json => "json",
+        }
+    }
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Format {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Format::ALL
+            .into_iter()
+            .find(|f| f.name() == s)
+            .ok_or_else(|| format!("unknown format \"{s}\"; valid: cgats, cxf3, csv, json"))
+    }
+}
+
+/// Options of an export.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExportOptions {
+    /// Creation time written into the file (RFC 3339, UTC); CxF3 requires one per object.
+    pub created: String,
+    /// The program and version named as the file's originator.
+    pub originator: String,
+}
+
+impl Default for ExportOptions {
+    fn default() -> Self {
+        ExportOptions {
+            created: rfc3339_utc_now(),
+            originator: format!("brdfd {}", env!("CARGO_PKG_VERSION")),
+        }
+    }
+}
+
+/// Writes `study` in `format`.
+pub fn export(study: &Study, format: Format, opts: &ExportOptions) -> Result<String, FormatError> {
+    match format {
+        Format::Cgats => cgats::write(study, opts),
+        Format::Cxf3 => cxf3::write(study, opts),
+        Format::Csv => csv::write(study),
+        Format::Json => json::write(study, opts),
+    }
+}
+
+/// Options of an import.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImportOptions {
+    /// In an instrument's export, the object with this name is the reference tile.
+    pub reference: String,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        ImportOptions {
+            reference: DEFAULT_REFERENCE.to_string(),
+        }
+    }
+}
+
+/// Reads the scans in `text` (the contents of `file`, named in errors) in `format`, taking the
+/// SRA values from `sra` (an [`sra`] CSV: name and contents) when the file has none.
+pub fn import(
+    format: Format,
+    file: &str,
+    text: &str,
+    sra: Option<(&str, &str)>,
+    opts: &ImportOptions,
+) -> Result<Vec<Scan>, FormatError> {
+    let mut obs = match format {
+        Format::Cgats => table::observations(&cgats::parse(file, text)?, opts)?,
+        Format::Csv => table::observations(&csv::parse(file, text)?, opts)?,
+        Format::Cxf3 => cxf3::observations(file, text, opts)?,
+        Format::Json => return json::parse(file, text),
+    };
+    if let Some((sra_file, sra_text)) = sra {
+        obs.extend(sra::observations(sra_file, sra_text, opts)?);
+    }
+    assemble(file, obs, opts)
+}
+
+/// Reads a file into a string, naming it on failure.
+pub fn read_text(path: &Path) -> Result<String, FormatError> {
+    std::fs::read_to_string(path).map_err(|source| FormatError::Read {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Whose reading a data row or object is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum DataKind {
+    /// The sample's device reading.
+    Reading,
+    /// The reference tile's device reading, taken for this sample's scan.
+    Reference,
+    /// Measured reflectance factor `R = π·M`, relative to the reference tile.
+    Measured,
+    /// The fitted model's reflectance factor `π·f`.
+    Estimated,
+}
+
+impl DataKind {
+    pub const ALL: [DataKind; 4] = [
+        DataKind::Reading,
+        DataKind::Reference,
+        DataKind::Measured,
+        DataKind::Estimated,
+    ];
+
+    pub const fn name(self) -> &'static str {
+        match self {
+            DataKind::Reading => "reading",
+            DataKind::Reference => "reference",
+            DataKind::Measured => "measured",
+            DataKind::Estimated => "estimated",
+        }
+    }
+}
+
+impl FromStr for DataKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        DataKind::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| {
+                format!("unknown data kind \"{s}\"; valid: reading, reference, measured, estimated")
+            })
+    }
+}
+
+/// One spectrum of an export: a sample's data of one kind at one geometry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpectralRow {
+    pub sample: String,
+    pub kind: DataKind,
+    /// The reference tile's name.
+    pub reference: String,
+    /// Set for `estimated` rows.
+    pub cost_function: Option<CostFunction>,
+    /// Set for `estimated` rows.
+    pub method: Option<String>,
+    pub geometry: &'static Geometry,
+    pub values: Spectrum,
+}
+
+/// Every spectrum of a study, per sample: readings, reference, measured, then each finished
+/// fit's estimate, each over the 14 geometries in table order.
+pub fn rows(study: &Study) -> Vec<SpectralRow> {
+    let mut out = Vec::new();
+    for s in &study.samples {
+        let mut push =
+            |kind, fit: Option<(CostFunction, &str)>, spectra: [Spectrum; GEOMETRY_COUNT]| {
+                for g in &GEOMETRIES {
+                    out.push(SpectralRow {
+                        sample: s.name.clone(),
+                        kind,
+                        reference: s.scan.reference.name.clone(),
+                        cost_function: fit.map(|f| f.0),
+                        method: fit.map(|f| f.1.to_string()),
+                        geometry: g,
+                        values: spectra[g.index],
+                    });
+                }
+            };
+        push(
+            DataKind::Reading,
+            None,
+            GEOMETRIES.map(|g| device_spectrum(&s.scan.readings, &g)),
+        );
+        push(
+            DataKind::Reference,
+            None,
+            GEOMETRIES.map(|g| device_spectrum(&s.scan.reference.readings, &g)),
+        );
+        push(
+            DataKind::Measured,
+            None,
+            s.measured.values.map(|f| reflectance(&f)),
+        );
+        for f in &s.fits {
+            if let Some(d) = f.done() {
+                push(
+                    DataKind::Estimated,
+                    Some((f.cost, f.method.as_str())),
+                    d.estimated.map(|f| reflectance(&f)),
+                );
+            }
+        }
+    }
+    out
+}
+
+/// A device reading as a spectrum: the MA-T12's 31 bands, or the SRA's intensity in every band.
+pub fn device_spectrum(readings: &DeviceReadings, g: &Geometry) -> Spectrum {
+    match g.device {
+        Device::MaT12 => readings.ma_t12[g.index],
+        Device::Sra => [readings.sra[g.index - MA_T12_COUNT]; BANDS],
+    }
+}
+
+/// BRDF (sr⁻¹) → reflectance factor, `R = π·f` (SCIENCE.md §7).
+pub fn reflectance(f: &Spectrum) -> Spectrum {
+    crate::colour::brdf_to_reflectance(f)
+}
+
+/// Where a value was read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Location {
+    pub file: String,
+    pub line: usize,
+}
+
+/// Whose reading an imported value is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Owner {
+    /// A sample's own reading.
+    Sample(String),
+    /// The reference reading taken for one sample's scan (brdfd's exports), with the tile's name.
+    ReferenceOf { sample: String, tile: String },
+    /// The reference tile of every sample in the file (an instrument's export).
+    SharedReference,
+}
+
+/// An imported value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value {
+    Spectrum(Spectrum),
+    Intensity(f64),
+}
+
+/// One imported reading, before the scans are assembled.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    pub owner: Owner,
+    pub geometry: &'static Geometry,
+    pub value: Value,
+    pub at: Location,
+    /// How to name the value in an error: one name for the whole value (`ReflectanceSpectrum`,
+    /// `intensity`), or one per band (`SPECTRAL_NM400` … `SPECTRAL_NM700`).
+    pub fields: Vec<String>,
+}
+
+/// Parses a number as a field value, naming the field and line if it is not one.
+pub(crate) fn parse_number(
+    file: &str,
+    line: usize,
+    field: &str,
+    text: &str,
+) -> Result<f64, FormatError> {
+    let t = text.trim();
+    match t.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(v) => Err(FormatError::invalid(
+            file,
+            line,
+            field,
+            format!("{v} is not a finite number"),
+        )),
+        Err(_) => Err(FormatError::invalid(
+            file,
+            line,
+            field,
+            format!("\"{t}\" is not a number"),
+        )),
+    }
+}
+
+/// Looks a geometry name up (SCIENCE.md §2), or says which names are valid.
+pub(crate) fn geometry_named(
+    file: &str,
+    line: usize,
+    field: &str,
+    name: &str,
+) -> Result<&'static Geometry, FormatError> {
+    crate::geometry::by_name(name.trim()).ok_or_else(|| {
+        let valid: Vec<&str> = GEOMETRIES.iter().map(|g| g.name).collect();
+        FormatError::invalid(
+            file,
+            line,
+            field,
+            format!(
+                "unknown geometry \"{}\"; brdfd's geometry names are {}",
+                name.trim(),
+                valid.join(", ")
+            ),
+        )
+    })
+}
+
+/// Slots for the 14 readings of one surface, with where each came from.
+struct Slots {
+    values: Vec<Option<(Value, Location, Vec<String>)>>,
+}
+
+impl Slots {
+    fn new() -> Slots {
+        Slots {
+            values: vec![None; GEOMETRY_COUNT],
+        }
+    }
+
+    fn put(&mut self, who: &str, o: Observation) -> Result<(), FormatError> {
+        let slot = &mut self.values[o.geometry.index];
+        if let Some((_, first, _)) = slot {
+            return Err(FormatError::invalid(
+                &o.at.file,
+                o.at.line,
+                field_name(&o.fields, None),
+                format!(
+                    "{who} at geometry {} given twice (first at {}:{})",
+                    o.geometry.name, first.file, first.line
+                ),
+            ));
+        }
+        *slot = Some((o.value, o.at, o.fields));
+        Ok(())
+    }
+
+    /// The readings, checked value by value against `role`'s rule, or what is missing.
+    fn readings(
+        &self,
+        file: &str,
+        who: &str,
+        reference: bool,
+    ) -> Result<DeviceReadings, FormatError> {
+        let mut out = DeviceReadings {
+            ma_t12: [[0.0; BANDS]; MA_T12_COUNT],
+            sra: [0.0; crate::geometry::SRA_COUNT],
+        };
+        for g in &GEOMETRIES {
+            let Some((value, at, fields)) = &self.values[g.index] else {
+                let source = match g.device {
+                    Device::MaT12 => "the MA-T12 file",
+                    Device::Sra => "the file or the SRA CSV (--sra)",
+                };
+                return Err(FormatError::Missing {
+                    file: file.to_string(),
+                    message: format!(
+                        "{who}: no reading at geometry {} ({}); expected in {source}",
+                        g.name, g.device
+                    ),
+                });
+            };
+            let check = |v: f64, band: Option<usize>| -> Result<f64, FormatError> {
+                let ok = if reference { v > 0.0 } else { v >= 0.0 };
+                if ok {
+                    return Ok(v);
+                }
+                let at_band = band
+                    .map(|b| format!(" at {} nm", crate::spectral::wavelengths_nm()[b]))
+                    .unwrap_or_default();
+                let rule = if reference {
+                    "a reference reading must be positive; re-measure the reference tile"
+                } else {
+                    "a device reading cannot be negative"
+                };
+                Err(FormatError::invalid(
+                    &at.file,
+                    at.line,
+                    field_name(fields, band),
+                    format!("{who} at {}{at_band}: {v}: {rule}", g.name),
+                ))
+            };
+            match (g.device, value) {
+                (Device::MaT12, Value::Spectrum(s)) => {
+                    for (b, &v) in s.iter().enumerate() {
+                        check(v, Some(b))?;
+                    }
+                    out.ma_t12[g.index] = *s;
+                }
+                (Device::MaT12, Value::Intensity(_)) => {
+                    return Err(FormatError::invalid(
+                        &at.file,
+                        at.line,
+                        field_name(fields, None),
+                        format!(
+                            "{who} at {}: the MA-T12 reports a 31-band spectrum, not a single value",
+                            g.name
+                        ),
+                    ));
+                }
+                (Device::Sra, Value::Intensity(v)) => {
+                    out.sra[g.index - MA_T12_COUNT] = check(*v, None)?;
+                }
+                (Device::Sra, Value::Spectrum(s)) => {
+                    // The SRA is achromatic: brdfd writes its value in every band.
+                    if s.iter().any(|v| v.to_bits() != s[0].to_bits()) {
+                        return Err(FormatError::invalid(
+                            &at.file,
+                            at.line,
+                            field_name(fields, None),
+                            format!(
+                                "{who} at {}: the SRA reports one achromatic value; the 31 bands must be equal",
+                                g.name
+                            ),
+                        ));
+                    }
+                    out.sra[g.index - MA_T12_COUNT] = check(s[0], None)?;
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// The name of band `band`'s field, or of the whole value.
+fn field_name(fields: &[String], band: Option<usize>) -> String {
+    band.and_then(|b| fields.get(b))
+        .or(fields.first())
+        .cloned()
+        .unwrap_or_else(|| "value".into())
+}
+
+/// Builds one scan per sample from the observations of a file (and its SRA CSV), in order of
+/// each sample's first appearance.
+pub fn assemble(
+    file: &str,
+    obs: Vec<Observation>,
+    opts: &ImportOptions,
+) -> Result<Vec<Scan>, FormatError> {
+    let mut order: Vec<String> = Vec::new();
+    let mut samples: BTreeMap<String, Slots> = BTreeMap::new();
+    let mut own_refs: BTreeMap<String, (Slots, String)> = BTreeMap::new();
+    let mut shared = Slots::new();
+    for o in obs {
+        match o.owner.clone() {
+            Owner::Sample(name) => {
+                if !samples.contains_key(&name) {
+                    order.push(name.clone());
+                }
+                let who = format!("sample \"{name}\"");
+                samples
+                    .entry(name)
+                    .or_insert_with(Slots::new)
+                    .put(&who, o)?;
+            }
+            Owner::ReferenceOf { sample, tile } => {
+                let who = format!("reference \"{tile}\" of sample \"{sample}\"");
+                let entry = own_refs
+                    .entry(sample)
+                    .or_insert_with(|| (Slots::new(), tile.clone()));
+                if entry.1 != tile {
+                    return Err(FormatError::invalid(
+                        &o.at.file,
+                        o.at.line,
+                        field_name(&o.fields, None),
+                        format!(
+                            "reference tile \"{tile}\" differs from \"{}\" named before for the same sample",
+                            entry.1
+                        ),
+                    ));
+                }
+                entry.0.put(&who, o)?;
+            }
+            Owner::SharedReference => {
+                let who = format!("reference \"{}\"", opts.reference);
+                shared.put(&who, o)?;
+            }
+        }
+    }
+    if order.is_empty() {
+        return Err(FormatError::Missing {
+            file: file.to_string(),
+            message: format!(
+                "no sample readings found (an instrument export needs objects other than the reference \"{}\")",
+                opts.reference
+            ),
+        });
+    }
+    if let Some(orphan) = own_refs.keys().find(|s| !samples.contains_key(*s)) {
+        return Err(FormatError::Missing {
+            file: file.to_string(),
+            message: format!("reference readings for sample \"{orphan}\" but no readings of it"),
+        });
+    }
+    let mut scans = Vec::new();
+    for name in order {
+        let readings = samples[&name].readings(file, &format!("sample \"{name}\""), false)?;
+        let (ref_slots, tile) = match own_refs.get(&name) {
+            Some((slots, tile)) => (slots, tile.clone()),
+            None => (&shared, opts.reference.clone()),
+        };
+        let ref_readings = ref_slots.readings(
+            file,
+            &format!("reference \"{tile}\" for sample \"{name}\""),
+            true,
+        )?;
+        let scan = Scan {
+            sample: name.clone(),
+            reference: Reference {
+                name: tile,
+                readings: ref_readings,
+            },
+            readings,
+        };
+        scan.validate().map_err(|source| FormatError::Scan {
+            file: file.to_string(),
+            sample: name,
+            source,
+        })?;
+        scans.push(scan);
+    }
+    Ok(scans)
+}
+
+/// The current time as RFC 3339 UTC, whole seconds (`2024-05-01T12:00:00Z`).
+pub fn rfc3339_utc_now() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() as i64)
+        .unwrap_or(0);
+    rfc3339_utc(secs)
+}
+
+/// Seconds since the Unix epoch → RFC 3339 UTC. Civil-from-days after H. Hinnant,
+/// "chrono-Compatible Low-Level Date Algorithms" (proleptic Gregorian calendar).
+pub fn rfc3339_utc(secs: i64) -> String {
+    let days = secs.div_euclid(86_400);
+    let rem = secs.rem_euclid(86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::report::study::tests::study_from_truth;
+
+    /// Options with a fixed time, so exports are reproducible.
+    pub(crate) fn fixed() -> ExportOptions {
+        ExportOptions {
+            created: "2024-05-01T12:00:00Z".into(),
+            originator: "brdfd test".into(),
+        }
+    }
+
+    pub(crate) fn study() -> Study {
+        study_from_truth(3, Some(2))
+    }
+
+    #[test]
+    fn dates_are_rfc3339() {
+        assert_eq!(rfc3339_utc(0), "1970-01-01T00:00:00Z");
+        assert_eq!(rfc3339_utc(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(rfc3339_utc(1_714_564_800), "2024-05-01T12:00:00Z");
+        assert_eq!(rfc3339_utc(4_107_542_399), "2100-02-28T23:59:59Z");
+    }
+
+    #[test]
+    fn rows_cover_every_kind_and_geometry() {
+        let study = study();
+        let rows = rows(&study);
+        // 3 samples × (reading + reference + measured) × 14, plus 8 finished fits × 14.
+        assert_eq!(rows.len(), (3 * 3 + 8) * 14);
+        let s = &study.samples[0];
+        let r = &rows[12];
+        assert_eq!((r.kind, r.geometry.name), (DataKind::Reading, "sra-20"));
+        assert_eq!(r.values, [s.scan.readings.sra[0]; BANDS]);
+        let m = rows
+            .iter()
+            .find(|r| r.kind == DataKind::Measured && r.geometry.name == "45as45")
+            .unwrap();
+        assert_eq!(m.values, reflectance(&s.measured.values[9]));
+    }
+
+    #[test]
+    fn every_format_round_trips_the_scans_bit_for_bit() {
+        let study = study();
+        let want: Vec<Scan> = study.samples.iter().map(|s| s.scan.clone()).collect();
+        for format in Format::ALL {
+            let text = export(&study, format, &fixed()).unwrap();
+            let got = import(format, "x", &text, None, &ImportOptions::default())
+                .unwrap_or_else(|e| panic!("{format}: {e}"));
+            assert_eq!(got.len(), want.len(), "{format}");
+            for (g, w) in got.iter().zip(&want) {
+                // PartialEq on f64 would let -0.0 == 0.0 slip; compare bits.
+                let bits = |s: &Scan| -> Vec<u64> {
+                    let r = |d: &DeviceReadings| {
+                        d.ma_t12
+                            .iter()
+                            .flatten()
+                            .chain(&d.sra)
+                            .map(|v| v.to_bits())
+                            .collect::<Vec<_>>()
+                    };
+                    [r(&s.readings), r(&s.reference.readings)].concat()
+                };
+                assert_eq!(g, w, "{format}");
+                assert_eq!(bits(g), bits(w), "{format}");
+            }
+        }
+    }
+}

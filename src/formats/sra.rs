@@ -1,0 +1,151 @@
+//! The Canon RA-532H (SRA) values as CSV, as its software exports them for a session: a header
+//! `sample,geometry,intensity`, then one row per measured object and geometry (`sra-20`,
+//! `sra-60`, SCIENCE.md §2), the intensity in the device's own unit. The row named like the
+//! reference tile (`--reference`, default "Munsell N9") is the reference of every sample in the
+//! file. Columns are found by name, case-insensitively; others are ignored.
+
+use std::fmt::Write as _;
+
+use super::{
+    FormatError, ImportOptions, Location, Observation, Owner, Value, geometry_named, parse_number,
+};
+use crate::geometry::{Device, sra};
+use crate::scan::Scan;
+
+/// The SRA values of `scans` as the SRA's software would export them: each sample's two rows,
+/// then the reference tile's (from the first scan: a session has one tile reading).
+pub fn write_scans(scans: &[Scan]) -> String {
+    let mut t = String::from("sample,geometry,intensity\n");
+    let q = |s: &str| {
+        if s.contains([',', '"', '\n']) {
+            format!("\"{}\"", s.replace('"', "\"\""))
+        } else {
+            s.to_string()
+        }
+    };
+    for s in scans {
+        for (g, v) in sra().iter().zip(s.readings.sra) {
+            let _ = writeln!(t, "{},{},{v}", q(&s.sample), g.name);
+        }
+    }
+    if let Some(first) = scans.first() {
+        for (g, v) in sra().iter().zip(first.reference.readings.sra) {
+            let _ = writeln!(t, "{},{},{v}", q(&first.reference.name), g.name);
+        }
+    }
+    t
+}
+
+/// The readings an SRA CSV holds.
+pub(crate) fn observations(
+    file: &str,
+    text: &str,
+    opts: &ImportOptions,
+) -> Result<Vec<Observation>, FormatError> {
+    let table = super::csv::parse(file, text)?;
+    let col = |name: &str| -> Result<usize, FormatError> {
+        table
+            .fields
+            .iter()
+            .position(|f| f.eq_ignore_ascii_case(name))
+            .ok_or_else(|| {
+                FormatError::invalid(
+                    file,
+                    1,
+                    "header",
+                    format!(
+                        "no \"{name}\" column; an SRA CSV has the columns sample,geometry,intensity"
+                    ),
+                )
+            })
+    };
+    let (sample, geometry, intensity) = (col("sample")?, col("geometry")?, col("intensity")?);
+    let mut out = Vec::new();
+    for (line, values) in &table.rows {
+        let line = *line;
+        let name = values[sample].trim();
+        if name.is_empty() {
+            return Err(FormatError::invalid(
+                file,
+                line,
+                "sample",
+                "sample name must not be empty",
+            ));
+        }
+        let g = geometry_named(file, line, "geometry", &values[geometry])?;
+        if g.device != Device::Sra {
+            return Err(FormatError::invalid(
+                file,
+                line,
+                "geometry",
+                format!(
+                    "{} is an MA-T12 geometry; an SRA CSV holds sra-20 and sra-60 only",
+                    g.name
+                ),
+            ));
+        }
+        let v = parse_number(file, line, "intensity", &values[intensity])?;
+        let owner = if name == opts.reference {
+            Owner::SharedReference
+        } else {
+            Owner::Sample(name.to_string())
+        };
+        out.push(Observation {
+            owner,
+            geometry: g,
+            value: Value::Intensity(v),
+            at: Location {
+                file: file.to_string(),
+                line,
+            },
+            fields: vec!["intensity".into()],
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn err(text: &str) -> String {
+        observations("s.csv", text, &ImportOptions::default())
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn rows_are_read_with_their_owner() {
+        let obs = observations(
+            "s.csv",
+            "Sample,Geometry,Intensity\n\"Red, glossy\",sra-60,7.25\nMunsell N9,sra-20,0.245\n",
+            &ImportOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(obs.len(), 2);
+        assert_eq!(obs[0].owner, Owner::Sample("Red, glossy".into()));
+        assert_eq!(obs[0].value, Value::Intensity(7.25));
+        assert_eq!(obs[0].at.line, 2);
+        assert_eq!(obs[1].owner, Owner::SharedReference);
+    }
+
+    #[test]
+    fn bad_files_name_file_line_and_field() {
+        assert_eq!(
+            err("sample,geometry,value\n"),
+            "s.csv:1: header: no \"intensity\" column; an SRA CSV has the columns sample,geometry,intensity"
+        );
+        assert_eq!(
+            err("sample,geometry,intensity\nA,sra-20,1\nA,45as45,2\n"),
+            "s.csv:3: geometry: 45as45 is an MA-T12 geometry; an SRA CSV holds sra-20 and sra-60 only"
+        );
+        assert_eq!(
+            err("sample,geometry,intensity\nA,sra-20,high\n"),
+            "s.csv:2: intensity: \"high\" is not a number"
+        );
+        assert!(
+            err("sample,geometry,intensity\nA,sra-30,1\n")
+                .starts_with("s.csv:2: geometry: unknown geometry \"sra-30\"")
+        );
+    }
+}

@@ -1,0 +1,286 @@
+//! The study model a report and the exchange-format exports are built from: per sample, the
+//! scan, its measured BRDF and one fit per cost function (done, failed or unfinished).
+//!
+//! It is plain data with no I/O, so the figures, the statistics and the exports are tested on
+//! studies built in memory ([`Study::from_fit_reports`]); [`super::load`] builds one from the
+//! store. The estimated BRDF of a fit is always the model evaluated at the fit's parameters
+//! (with the Fresnel cosine it was fitted with), and its evaluation is recomputed from measured
+//! and estimated, so the three can never disagree.
+
+use crate::cost::CostFunction;
+use crate::evaluation::{Evaluation, evaluate};
+use crate::fit::FitReport;
+use crate::geometry::GEOMETRY_COUNT;
+use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
+use crate::processing::{MeasuredBrdf, SpecularStrategy};
+use crate::scan::Scan;
+use crate::spectral::Spectrum;
+
+/// Every sample of a study, in the order they are reported.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Study {
+    pub samples: Vec<SampleStudy>,
+}
+
+/// One sample (one scan) of a study.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleStudy {
+    /// The name shown in figures and tables: the scan's sample name, made unique within the
+    /// study by the loader (a sample scanned twice gets its scan id appended).
+    pub name: String,
+    /// The store's scan id, when the study was loaded from a store.
+    pub scan_id: Option<i64>,
+    /// The scan: the sample's readings and the reference readings they were normalised by.
+    pub scan: Scan,
+    /// How the SRA readings were turned into spectra for `measured`.
+    pub specular: SpecularStrategy,
+    /// The measured BRDF, sr⁻¹, at the 14 geometries.
+    pub measured: MeasuredBrdf,
+    /// One entry per cost function the sample was fitted with, in [`CostFunction::ALL`] order.
+    pub fits: Vec<FitStudy>,
+}
+
+/// The fit of one sample under one cost function.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitStudy {
+    pub cost: CostFunction,
+    /// The optimiser method's name ("paper", "separable").
+    pub method: String,
+    pub state: FitState,
+}
+
+/// Where a fit ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FitState {
+    /// Finished, with parameters, estimated BRDF and evaluation.
+    Done(Box<DoneFit>),
+    /// The optimiser or the evaluation failed; the reason as recorded.
+    Failed { reason: String },
+    /// Queued, running or cancelled: no result to report (the store's status text).
+    Unfinished { status: String },
+}
+
+/// A finished fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DoneFit {
+    pub params: Params,
+    /// The Fresnel cosine the model was fitted with.
+    pub fresnel: FresnelCosine,
+    /// The model at the fitted parameters, sr⁻¹, at the 14 geometries.
+    pub estimated: [Spectrum; GEOMETRY_COUNT],
+    /// ΔE00 between measured and estimated colour.
+    pub evaluation: Evaluation,
+}
+
+impl DoneFit {
+    /// A finished fit from its parameters: the estimated BRDF and the evaluation follow.
+    pub fn from_params(measured: &MeasuredBrdf, params: Params, fresnel: FresnelCosine) -> DoneFit {
+        let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
+        let evaluation = evaluate(&measured.values, &estimated);
+        DoneFit {
+            params,
+            fresnel,
+            estimated,
+            evaluation,
+        }
+    }
+}
+
+impl FitStudy {
+    /// The finished fit, if it finished.
+    pub fn done(&self) -> Option<&DoneFit> {
+        match &self.state {
+            FitState::Done(d) => Some(d),
+            _ => None,
+        }
+    }
+
+    /// Why this fit has no result, in words for the report (`None` when done).
+    pub fn problem(&self) -> Option<String> {
+        match &self.state {
+            FitState::Done(_) => None,
+            FitState::Failed { reason } => Some(format!("{} fit failed: {reason}", self.cost)),
+            FitState::Unfinished { status } => {
+                Some(format!("{} fit not finished (status {status})", self.cost))
+            }
+        }
+    }
+}
+
+impl SampleStudy {
+    /// The fit under `cost`, if the sample was fitted with it.
+    pub fn fit(&self, cost: CostFunction) -> Option<&FitStudy> {
+        self.fits.iter().find(|f| f.cost == cost)
+    }
+
+    /// The finished fit under `cost`.
+    pub fn done(&self, cost: CostFunction) -> Option<&DoneFit> {
+        self.fit(cost).and_then(FitStudy::done)
+    }
+}
+
+impl Study {
+    /// The cost functions any sample was fitted with, in [`CostFunction::ALL`] order.
+    pub fn cost_functions(&self) -> Vec<CostFunction> {
+        CostFunction::ALL
+            .into_iter()
+            .filter(|c| self.samples.iter().any(|s| s.fit(*c).is_some()))
+            .collect()
+    }
+
+    /// The methods of all fits, deduplicated in order of first use (for captions).
+    pub fn methods(&self) -> Vec<String> {
+        let mut out: Vec<String> = Vec::new();
+        for f in self.samples.iter().flat_map(|s| &s.fits) {
+            if !out.contains(&f.method) {
+                out.push(f.method.clone());
+            }
+        }
+        out
+    }
+
+    /// The methods used under one cost function, joined for a caption ("separable").
+    pub fn method_of(&self, cost: CostFunction) -> String {
+        let mut out: Vec<&str> = Vec::new();
+        for f in self.samples.iter().filter_map(|s| s.fit(cost)) {
+            if !out.contains(&f.method.as_str()) {
+                out.push(&f.method);
+            }
+        }
+        if out.is_empty() {
+            "none".into()
+        } else {
+            out.join(" + ")
+        }
+    }
+
+    /// The specular strategies in use, deduplicated (for captions).
+    pub fn specular_strategies(&self) -> Vec<SpecularStrategy> {
+        let mut out = Vec::new();
+        for s in &self.samples {
+            if !out.contains(&s.specular) {
+                out.push(s.specular);
+            }
+        }
+        out
+    }
+
+    /// A study from fits made in this process (`brdfd demo`, tests): `reports[i]` are the fits
+    /// of `scans[i]`, all made from the same processing of the scan. Panics if the lengths
+    /// differ or a sample has no report (a programming error, not a data error).
+    pub fn from_fit_reports(scans: &[Scan], reports: &[Vec<FitReport>]) -> Study {
+        assert_eq!(
+            scans.len(),
+            reports.len(),
+            "one list of fit reports per scan"
+        );
+        let samples = scans
+            .iter()
+            .zip(reports)
+            .map(|(scan, reports)| {
+                let first = reports.first().expect("every scan has at least one fit");
+                let mut fits: Vec<FitStudy> = reports
+                    .iter()
+                    .map(|r| FitStudy {
+                        cost: r.request.settings.cost,
+                        method: r.outcome.method.to_string(),
+                        state: FitState::Done(Box::new(DoneFit::from_params(
+                            &r.measured,
+                            r.outcome.params,
+                            r.request.settings.fresnel,
+                        ))),
+                    })
+                    .collect();
+                fits.sort_by_key(|f| CostFunction::ALL.iter().position(|c| *c == f.cost));
+                SampleStudy {
+                    name: scan.sample.clone(),
+                    scan_id: None,
+                    scan: scan.clone(),
+                    specular: first.request.processing.specular,
+                    measured: first.measured,
+                    fits,
+                }
+            })
+            .collect();
+        Study { samples }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::synth::{SynthOptions, paper_samples, synth_scan};
+
+    /// A small study without running an optimiser: the synthetic samples' ground-truth
+    /// parameters, perturbed per cost function so that the fits differ. Sample `failed` (if
+    /// any) has its m2 fit failed.
+    pub(crate) fn study_from_truth(n: usize, failed: Option<usize>) -> Study {
+        let truths = paper_samples();
+        let samples = truths
+            .iter()
+            .take(n)
+            .enumerate()
+            .map(|(i, truth)| {
+                let scan = synth_scan(truth, &SynthOptions::default()).unwrap();
+                let measured = crate::processing::process(&scan, &Default::default()).unwrap();
+                let fits = CostFunction::ALL
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &cost)| {
+                        let state = if failed == Some(i) && cost == CostFunction::M2 {
+                            FitState::Failed {
+                                reason: "cancelled by the operator".into(),
+                            }
+                        } else {
+                            let mut p = truth.params;
+                            // Different, sample-dependent errors per cost function.
+                            let f = 1.0 + 0.03 * (k as f64 + 1.0) * (1.0 + (i % 3) as f64);
+                            p.kd = p.kd.map(|v| v * f);
+                            p.alpha *= 1.0 + 0.1 * k as f64;
+                            FitState::Done(Box::new(DoneFit::from_params(
+                                &measured,
+                                p,
+                                FresnelCosine::Incidence,
+                            )))
+                        };
+                        FitStudy {
+                            cost,
+                            method: "separable".into(),
+                            state,
+                        }
+                    })
+                    .collect();
+                SampleStudy {
+                    name: scan.sample.clone(),
+                    scan_id: None,
+                    scan,
+                    specular: SpecularStrategy::Ratio,
+                    measured,
+                    fits,
+                }
+            })
+            .collect();
+        Study { samples }
+    }
+
+    #[test]
+    fn a_done_fit_is_the_model_at_its_parameters() {
+        let study = study_from_truth(2, Some(1));
+        let s = &study.samples[0];
+        let d = s.done(CostFunction::Cf1).unwrap();
+        assert_eq!(
+            d.estimated,
+            model::evaluate(&d.params, d.fresnel, &SpecularGeometry::all())
+        );
+        assert_eq!(d.evaluation, evaluate(&s.measured.values, &d.estimated));
+        assert!(d.evaluation.all.mean > 0.0);
+        assert_eq!(study.cost_functions(), CostFunction::ALL.to_vec());
+        assert_eq!(study.methods(), vec!["separable".to_string()]);
+        let m2 = study.samples[1].fit(CostFunction::M2).unwrap();
+        assert!(m2.done().is_none());
+        assert_eq!(
+            m2.problem().unwrap(),
+            "m2 fit failed: cancelled by the operator"
+        );
+    }
+}
