@@ -15,6 +15,10 @@
 //! (`crate::optimise`) uses allocation-free equivalents and reports every final cost through
 //! this function.
 
+// Numeric loops index parallel per-geometry and per-band arrays; `for g in 0..G` reads
+// closest to the equations.
+#![allow(clippy::needless_range_loop)]
+
 use std::fmt;
 use std::str::FromStr;
 

@@ -1,7 +1,7 @@
 //! Fitting the 34 model parameters to one measured BRDF (SCIENCE.md §6).
 //!
 //! Two methods, chosen by [`Settings::method`] and recorded in every [`FitOutcome`]:
-//! - [`Method::Paper`] (`ga`): what the paper did — a plain, bounded, real-coded, elitist
+//! - [`Method::Paper`] (`paper`): what the paper did — a plain, bounded, real-coded, elitist
 //!   genetic algorithm over all 34 parameters. Kept to reproduce the paper and as the yardstick.
 //! - [`Method::Separable`] (`separable`, the default): uses the model's structure. With
 //!   (ks, α, μ) fixed the specular term is one number per geometry, and kd(λ) enters only its
@@ -14,6 +14,10 @@
 //! Both are deterministic: the same measured BRDF, settings and seed give the same parameters
 //! bit for bit. Progress is reported once per generation through [`fit_with_observer`], which
 //! can also cancel the fit.
+
+// Numeric loops index parallel per-geometry and per-band arrays; `for g in 0..G` reads
+// closest to the equations.
+#![allow(clippy::needless_range_loop)]
 
 mod ga;
 mod nelder_mead;

@@ -10,6 +10,10 @@
 //! Derivative-free on purpose: the cf2 profile cost has kinks wherever a band's best kd
 //! switches from one geometry to another, so gradients are not to be trusted.
 
+// Numeric loops index parallel per-geometry and per-band arrays; `for g in 0..G` reads
+// closest to the equations.
+#![allow(clippy::needless_range_loop)]
+
 /// When to stop one run.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Options {

@@ -11,6 +11,10 @@
 //! Both return the cost exactly as [`crate::cost::cost`] defines it (up to rounding: cf2 uses a
 //! fast cube root accurate to a few ulps, see [`pow23`]).
 
+// Numeric loops index parallel per-geometry and per-band arrays; `for g in 0..G` reads
+// closest to the equations.
+#![allow(clippy::needless_range_loop)]
+
 use crate::cost::{CostFunction, TERMS, weights};
 use crate::geometry::GEOMETRY_COUNT as G;
 use crate::model::{Bounds, FresnelCosine, SpecularGeometry, specular_term};

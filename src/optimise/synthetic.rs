@@ -11,6 +11,10 @@
 //!
 //! These are measured BRDFs, not device scans; the scan simulator builds device-level scans.
 
+// Numeric loops index parallel per-geometry and per-band arrays; `for g in 0..G` reads
+// closest to the equations.
+#![allow(clippy::needless_range_loop)]
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -23,6 +27,8 @@ use crate::spectral::{BANDS, Spectrum};
 ///
 /// Source: BabelColor average of 30 ColorChecker charts (D. Pascale, "RGB coordinates of the
 /// Macbeth ColorChecker", BabelColor, 2012), the `colorchecker_babelcolor_avg_10nm.csv` table.
+// Measured data: 0.3180 (yellow green, 630 nm) is a reflectance, not an approximation of 1/π.
+#[allow(clippy::approx_constant)]
 const PATCHES: [(&str, Spectrum); 6] = [
     (
         "dark skin",
