@@ -454,8 +454,14 @@ impl Engine {
         let mut carried = Duration::ZERO;
         for reply in &exchange.replies {
             let k = reply.index;
+            let slow = self.slow(k);
+            if !slow.is_zero() {
+                self.report
+                    .faults_fired
+                    .push(format!("slow frame {k} (+{} ms)", slow.as_millis()));
+            }
             let mut delay =
-                carried + self.options.scale(reply.t_ms.saturating_sub(previous_t)) + self.slow(k);
+                carried + self.options.scale(reply.t_ms.saturating_sub(previous_t)) + slow;
             carried = Duration::ZERO;
             previous_t = reply.t_ms;
             let due = {
