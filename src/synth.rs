@@ -133,11 +133,24 @@ impl GroundTruth {
     /// MA-T12 geometries, and the band mean of it, flat, at the 2 SRA ones (the SRA is achromatic).
     pub fn measurable_brdf(&self, fresnel: FresnelCosine) -> [Spectrum; GEOMETRY_COUNT] {
         let mut f = self.brdf(fresnel);
-        for s in f.iter_mut().skip(MA_T12_COUNT) {
-            *s = [s.iter().sum::<f64>() / BANDS as f64; BANDS];
-        }
+        flatten_sra(&mut f);
         f
     }
+}
+
+/// Replaces each SRA geometry's spectrum by its band mean: the SRA reports one achromatic value
+/// per geometry (SCIENCE.md §3), which processing spreads flat over the 31 bands.
+pub fn flatten_sra(brdf: &mut [Spectrum; GEOMETRY_COUNT]) {
+    for s in brdf.iter_mut().skip(MA_T12_COUNT) {
+        *s = [s.iter().sum::<f64>() / BANDS as f64; BANDS];
+    }
+}
+
+/// One standard normal draw by the Box–Muller transform (keeps the crate free of rand_distr).
+pub(crate) fn standard_normal(rng: &mut ChaCha8Rng) -> f64 {
+    let u1 = 1.0 - rng.random::<f64>(); // (0, 1]: ln is finite
+    let u2 = rng.random::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
 }
 
 /// A file-system friendly name: "T.Freesia pink" → "t-freesia-pink".
@@ -261,10 +274,7 @@ impl Noise {
             return 1.0;
         }
         loop {
-            let u1 = 1.0 - self.rng.random::<f64>(); // (0, 1]: ln is finite
-            let u2 = self.rng.random::<f64>();
-            let z = (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos();
-            let f = 1.0 + self.sigma * z;
+            let f = 1.0 + self.sigma * standard_normal(&mut self.rng);
             if f > 0.0 {
                 return f;
             }

@@ -15,7 +15,7 @@
 // closest to the equations.
 #![allow(clippy::needless_range_loop)]
 
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT};
@@ -23,69 +23,20 @@ use crate::model::{FresnelCosine, Params, SpecularGeometry, evaluate};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, Spectrum};
 
-/// Spectral reflectance factors of six ColorChecker patches, 400–700 nm every 10 nm.
-///
-/// Source: BabelColor average of 30 ColorChecker charts (D. Pascale, "RGB coordinates of the
-/// Macbeth ColorChecker", BabelColor, 2012), the `colorchecker_babelcolor_avg_10nm.csv` table.
-// Measured data: 0.3180 (yellow green, 630 nm) is a reflectance, not an approximation of 1/π.
-#[allow(clippy::approx_constant)]
-const PATCHES: [(&str, Spectrum); 6] = [
-    (
-        "dark skin",
-        [
-            0.0610, 0.0620, 0.0620, 0.0620, 0.0620, 0.0620, 0.0620, 0.0620, 0.0620, 0.0630, 0.0650,
-            0.0700, 0.0760, 0.0790, 0.0810, 0.0840, 0.0910, 0.1030, 0.1190, 0.1340, 0.1430, 0.1470,
-            0.1510, 0.1580, 0.1680, 0.1790, 0.1880, 0.1900, 0.1860, 0.1810, 0.1820,
-        ],
-    ),
-    (
-        "foliage",
-        [
-            0.0560, 0.0570, 0.0580, 0.0590, 0.0600, 0.0610, 0.0620, 0.0630, 0.0650, 0.0670, 0.0750,
-            0.1010, 0.1450, 0.1780, 0.1840, 0.1700, 0.1490, 0.1330, 0.1220, 0.1150, 0.1090, 0.1050,
-            0.1040, 0.1060, 0.1090, 0.1120, 0.1140, 0.1140, 0.1120, 0.1120, 0.1150,
-        ],
-    ),
-    (
-        "orange",
-        [
-            0.0530, 0.0540, 0.0540, 0.0550, 0.0550, 0.0550, 0.0560, 0.0570, 0.0580, 0.0610, 0.0680,
-            0.0890, 0.1250, 0.1540, 0.1740, 0.1990, 0.2480, 0.3350, 0.4440, 0.5380, 0.5870, 0.5950,
-            0.5910, 0.5870, 0.5840, 0.5840, 0.5900, 0.6030, 0.6200, 0.6390, 0.6550,
-        ],
-    ),
-    (
-        "purplish blue",
-        [
-            0.2290, 0.2860, 0.3270, 0.3610, 0.3880, 0.4000, 0.3920, 0.3620, 0.3160, 0.2600, 0.2090,
-            0.1680, 0.1380, 0.1170, 0.1040, 0.0960, 0.0900, 0.0860, 0.0840, 0.0840, 0.0840, 0.0840,
-            0.0840, 0.0850, 0.0900, 0.0980, 0.1090, 0.1230, 0.1430, 0.1690, 0.2050,
-        ],
-    ),
-    (
-        "yellow green",
-        [
-            0.0620, 0.0630, 0.0640, 0.0660, 0.0690, 0.0750, 0.0850, 0.1050, 0.1390, 0.1920, 0.2710,
-            0.3760, 0.4760, 0.5310, 0.5490, 0.5460, 0.5280, 0.5040, 0.4710, 0.4280, 0.3810, 0.3470,
-            0.3270, 0.3180, 0.3120, 0.3100, 0.3140, 0.3270, 0.3450, 0.3630, 0.3760,
-        ],
-    ),
-    (
-        "neutral 5 (.70 D)",
-        [
-            0.1630, 0.1800, 0.1860, 0.1900, 0.1930, 0.1940, 0.1940, 0.1920, 0.1910, 0.1910, 0.1910,
-            0.1920, 0.1920, 0.1920, 0.1920, 0.1920, 0.1920, 0.1930, 0.1920, 0.1920, 0.1910, 0.1890,
-            0.1880, 0.1860, 0.1840, 0.1820, 0.1810, 0.1790, 0.1780, 0.1760, 0.1740,
-        ],
-    ),
+/// The six ColorChecker patches the cases take their diffuse colour from (BabelColor average
+/// of 30 charts, D. Pascale 2012, embedded by [`crate::synth`]).
+const PATCHES: [&str; 6] = [
+    "dark skin",
+    "foliage",
+    "orange",
+    "purplish blue",
+    "yellow green",
+    "neutral 5 (.70 D)",
 ];
 
 /// The reflectance factor (0–1) of one of the embedded ColorChecker patches, by its name.
 pub fn colorchecker(patch: &str) -> Option<Spectrum> {
-    PATCHES
-        .iter()
-        .find(|(name, _)| *name == patch)
-        .map(|(_, r)| *r)
+    crate::synth::colorchecker_patch(patch)
 }
 
 /// A synthetic sample: a ColorChecker patch as its diffuse colour and its true parameters.
@@ -110,7 +61,8 @@ pub fn cases() -> [SyntheticCase; 6] {
         (0.08, 0.60, 1.40),
     ];
     std::array::from_fn(|i| {
-        let (patch, reflectance) = PATCHES[i];
+        let patch = PATCHES[i];
+        let reflectance = colorchecker(patch).expect("the six case patches are in the table");
         let (ks, alpha, ior) = SPECULAR[i];
         SyntheticCase {
             patch,
@@ -135,11 +87,7 @@ pub fn consistent(truth: &Params, fresnel: FresnelCosine) -> MeasuredBrdf {
 /// geometry's spectrum replaced by its mean over the bands (the SRA is achromatic).
 pub fn measured(truth: &Params, fresnel: FresnelCosine) -> MeasuredBrdf {
     let mut m = consistent(truth, fresnel);
-    for geo in GEOMETRIES.iter().filter(|g| g.device == Device::Sra) {
-        let row = &mut m.values[geo.index];
-        let mean = row.iter().sum::<f64>() / BANDS as f64;
-        *row = [mean; BANDS];
-    }
+    crate::synth::flatten_sra(&mut m.values);
     m
 }
 
@@ -153,11 +101,11 @@ pub fn with_noise(measured: &MeasuredBrdf, relative_sigma: f64, seed: u64) -> Me
         match GEOMETRIES[g].device {
             Device::MaT12 => {
                 for x in out.values[g].iter_mut() {
-                    *x *= 1.0 + relative_sigma * standard_normal(&mut rng);
+                    *x *= 1.0 + relative_sigma * crate::synth::standard_normal(&mut rng);
                 }
             }
             Device::Sra => {
-                let f = 1.0 + relative_sigma * standard_normal(&mut rng);
+                let f = 1.0 + relative_sigma * crate::synth::standard_normal(&mut rng);
                 for x in out.values[g].iter_mut() {
                     *x *= f;
                 }
@@ -165,14 +113,6 @@ pub fn with_noise(measured: &MeasuredBrdf, relative_sigma: f64, seed: u64) -> Me
         }
     }
     out
-}
-
-/// One standard normal draw by the Box–Muller transform (keeps the crate free of rand_distr).
-fn standard_normal(rng: &mut ChaCha8Rng) -> f64 {
-    // 1 − u lies in (0, 1], so the logarithm is finite.
-    let u1: f64 = 1.0 - rng.random::<f64>();
-    let u2: f64 = rng.random::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 #[cfg(test)]
