@@ -25,6 +25,10 @@
 //! Service (async at the edges):
 //! - [`config`]: `brdfd.toml` → a checked [`config::Config`]; defaults run on simulated devices.
 //! - [`store`]: the SQLite store (sqlx, embedded migrations): scans, readings, references, fits.
+//! - [`service`]: the daemon: scan orchestrator (both instruments at once, every reading stored
+//!   as it arrives), fit worker (blocking threads behind a semaphore), events, shutdown.
+//! - [`api`]: the local HTTP API (axum) and its server-sent event stream.
+//! - [`client`]: the operator commands' side of the HTTP API (`brdfd scan`, `scans`, …).
 pub mod geometry;
 pub mod model;
 pub mod spectral;
@@ -42,3 +46,6 @@ pub mod formats;
 pub mod cli;
 pub mod config;
 pub mod store;
+pub mod service;
+pub mod api;
+pub mod client;

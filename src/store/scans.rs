@@ -343,13 +343,24 @@ impl Store {
 
     /// requested | measuring → aborted (the operator stopped it). Readings are kept.
     pub async fn abort_scan(&self, scan: ScanId) -> Result<(), StoreError> {
+        self.abort_scan_because(scan, "aborted by the operator").await
+    }
+
+    /// requested | measuring → aborted, with the reason (e.g. "the daemon was shut down
+    /// during the measurement"). Readings are kept.
+    pub async fn abort_scan_because(&self, scan: ScanId, reason: &str) -> Result<(), StoreError> {
+        if reason.trim().is_empty() {
+            return Err(StoreError::Empty {
+                field: "abort reason",
+            });
+        }
         let done = sqlx::query(
-            "UPDATE scans SET state = 'aborted', reason = 'aborted by the operator',
-                              finished_at_ms = $2
+            "UPDATE scans SET state = 'aborted', reason = $3, finished_at_ms = $2
              WHERE id = $1 AND state IN ('requested', 'measuring')",
         )
         .bind(scan.0)
         .bind(now_ms())
+        .bind(reason)
         .execute(&self.writer)
         .await?;
         self.explain_scan(

@@ -1,0 +1,212 @@
+//! The operator commands' side of the HTTP API: a small blocking client (`ureq`) that the
+//! `brdfd reference`, `scan`, `scans`, `show`, `refit`, `abort`, `status`, `export` and
+//! `import` commands use, and a reader of the server-sent event stream for live progress.
+//!
+//! Responses are handled as `serde_json::Value`: the CLI only formats them, and a client
+//! that does not insist on every field keeps working against a newer daemon.
+
+use std::io::{BufRead, BufReader};
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use serde_json::Value;
+
+/// The address `brdfd serve` listens on by default (`[api] listen`).
+pub const DEFAULT_ADDR: &str = "127.0.0.1:7878";
+
+/// Why a request to the daemon failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ClientError {
+    /// Nothing listens on the address.
+    #[error("no brdfd daemon is listening on {addr} — start one with `brdfd serve`")]
+    NotRunning { addr: SocketAddr },
+    /// The daemon refused the request; its message says why and what to do.
+    #[error("{message}")]
+    Refused { status: u16, message: String },
+    /// The connection failed in another way.
+    #[error("talking to the brdfd daemon on {addr}: {detail}")]
+    Transport { addr: SocketAddr, detail: String },
+}
+
+impl ClientError {
+    /// Whether the daemon answered 409 Conflict (busy, or a state that forbids the request).
+    pub fn is_conflict(&self) -> bool {
+        matches!(self, ClientError::Refused { status: 409, .. })
+    }
+}
+
+/// A client of one daemon.
+#[derive(Debug, Clone)]
+pub struct Client {
+    addr: SocketAddr,
+    agent: ureq::Agent,
+    /// For the event stream: no overall timeout (it lasts as long as the scan).
+    stream_agent: ureq::Agent,
+}
+
+impl Client {
+    pub fn new(addr: SocketAddr) -> Client {
+        let agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .timeout_connect(Some(Duration::from_secs(2)))
+            .timeout_global(Some(Duration::from_secs(60)))
+            .build()
+            .into();
+        let stream_agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .timeout_connect(Some(Duration::from_secs(2)))
+            .build()
+            .into();
+        Client {
+            addr,
+            agent,
+            stream_agent,
+        }
+    }
+
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    fn url(&self, path: &str) -> String {
+        format!("http://{}{path}", self.addr)
+    }
+
+    fn transport(&self, e: ureq::Error) -> ClientError {
+        let refused = match &e {
+            ureq::Error::ConnectionFailed => true,
+            ureq::Error::Io(io) => matches!(
+                io.kind(),
+                std::io::ErrorKind::ConnectionRefused | std::io::ErrorKind::ConnectionReset
+            ),
+            _ => false,
+        };
+        if refused {
+            ClientError::NotRunning { addr: self.addr }
+        } else {
+            ClientError::Transport {
+                addr: self.addr,
+                detail: e.to_string(),
+            }
+        }
+    }
+
+    fn finish(
+        &self,
+        response: Result<ureq::http::Response<ureq::Body>, ureq::Error>,
+    ) -> Result<String, ClientError> {
+        let mut response = response.map_err(|e| self.transport(e))?;
+        let status = response.status().as_u16();
+        let body = response
+            .body_mut()
+            .read_to_string()
+            .map_err(|e| self.transport(e))?;
+        if (200..300).contains(&status) {
+            Ok(body)
+        } else {
+            let message = serde_json::from_str::<Value>(&body)
+                .ok()
+                .and_then(|v| v.get("error").and_then(Value::as_str).map(str::to_string))
+                .unwrap_or_else(|| format!("HTTP {status}: {body}"));
+            Err(ClientError::Refused { status, message })
+        }
+    }
+
+    fn json(&self, text: String) -> Result<Value, ClientError> {
+        serde_json::from_str(&text).map_err(|e| ClientError::Transport {
+            addr: self.addr,
+            detail: format!("the daemon's answer is not JSON: {e}"),
+        })
+    }
+
+    /// `GET path` → JSON.
+    pub fn get(&self, path: &str) -> Result<Value, ClientError> {
+        let text = self.finish(self.agent.get(&self.url(path)).call())?;
+        self.json(text)
+    }
+
+    /// `GET path` → text.
+    pub fn get_text(&self, path: &str) -> Result<String, ClientError> {
+        self.finish(self.agent.get(&self.url(path)).call())
+    }
+
+    /// `POST path` with a JSON body (or none) → JSON.
+    pub fn post(&self, path: &str, body: Option<&Value>) -> Result<Value, ClientError> {
+        let request = self.agent.post(&self.url(path));
+        let response = match body {
+            Some(b) => request.send_json(b),
+            None => request.send_empty(),
+        };
+        let text = self.finish(response)?;
+        self.json(text)
+    }
+
+    /// `POST path` with a text body (a scan file) → JSON.
+    pub fn post_text(&self, path: &str, body: &str) -> Result<Value, ClientError> {
+        let response = self
+            .agent
+            .post(&self.url(path))
+            .header("content-type", "application/json")
+            .send(body);
+        let text = self.finish(response)?;
+        self.json(text)
+    }
+
+    /// Opens the event stream. Subscribe before making a request whose progress you want,
+    /// so no event is missed.
+    pub fn events(&self) -> Result<EventStream, ClientError> {
+        let response = self
+            .stream_agent
+            .get(&self.url("/events"))
+            .call()
+            .map_err(|e| self.transport(e))?;
+        if !response.status().is_success() {
+            return Err(ClientError::Refused {
+                status: response.status().as_u16(),
+                message: "the daemon refused the event stream".into(),
+            });
+        }
+        Ok(EventStream {
+            lines: Box::new(BufReader::new(response.into_body().into_reader())),
+        })
+    }
+}
+
+/// The server-sent events of `GET /events`, one JSON object per event.
+pub struct EventStream {
+    lines: Box<dyn BufRead + Send>,
+}
+
+impl std::fmt::Debug for EventStream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("EventStream")
+    }
+}
+
+impl Iterator for EventStream {
+    type Item = Value;
+
+    /// The next event's JSON (with its `"type"`); `None` when the daemon closed the stream.
+    fn next(&mut self) -> Option<Value> {
+        let mut data = String::new();
+        loop {
+            let mut line = String::new();
+            match self.lines.read_line(&mut line) {
+                Ok(0) | Err(_) => return None,
+                Ok(_) => {}
+            }
+            let line = line.trim_end_matches(['\r', '\n']);
+            if line.is_empty() {
+                // End of one event; keep-alive comments have no data.
+                if !data.is_empty() {
+                    if let Ok(v) = serde_json::from_str(&data) {
+                        return Some(v);
+                    }
+                    data.clear();
+                }
+            } else if let Some(d) = line.strip_prefix("data:") {
+                data.push_str(d.strip_prefix(' ').unwrap_or(d));
+            }
+        }
+    }
+}

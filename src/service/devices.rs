@@ -1,0 +1,293 @@
+//! The two instruments as the service sees them: a [`Devices`] pair of driver handles, built
+//! from the `[devices.*]` configuration — the simulated instruments of `mock-devices` replaying
+//! a session (the embedded recordings by default), or the real USB and serial transports — with
+//! the drivers' recording tap around every connection when `record` is set.
+//!
+//! The service only ever talks to [`drivers::DriverHandle`]s, so tests build a [`Devices`]
+//! from any transport factory they like (faults, a cable that can be pulled).
+
+use std::path::{Path, PathBuf};
+
+use drivers::mat12::usb::{RusbBulk, UsbIds};
+use drivers::sra::serial::open_serial;
+use drivers::{DriverConfig, DriverHandle, Instrument, Recorder, Tap};
+use mock_devices::{MockError, ReplayOptions, ReplayReport, Script, SimMat12, SimSra};
+
+use crate::config::{DevicesConfig, MaT12Transport, SraTransport};
+
+/// Why the instruments could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum DeviceSetupError {
+    /// A session file for a simulated instrument could not be read.
+    #[error("cannot read the {instrument} session file {path}: {source}; check [devices] session")]
+    ReadSession {
+        instrument: Instrument,
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A session file or the replay options are unusable.
+    #[error("simulated {instrument}: {source}")]
+    Simulation {
+        instrument: Instrument,
+        #[source]
+        source: MockError,
+    },
+    /// The recording tap's session file could not be created.
+    #[error("cannot create the {instrument} recording {path}: {source}; check [devices] record")]
+    Record {
+        instrument: Instrument,
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// The simulated instruments behind a [`Devices`], kept for their replay reports.
+#[derive(Debug, Clone)]
+pub struct Simulators {
+    pub ma_t12: Option<SimMat12>,
+    pub sra: Option<SimSra>,
+}
+
+/// Both instruments' driver tasks.
+#[derive(Debug, Clone)]
+pub struct Devices {
+    pub ma_t12: DriverHandle,
+    pub sra: DriverHandle,
+    /// The simulated instruments, where simulated.
+    pub simulators: Simulators,
+    /// The recording taps' session writers, to be finished at shutdown.
+    pub recorders: Vec<Recorder>,
+}
+
+impl Devices {
+    /// Both handles from drivers started elsewhere (tests).
+    pub fn new(ma_t12: DriverHandle, sra: DriverHandle) -> Devices {
+        Devices {
+            ma_t12,
+            sra,
+            simulators: Simulators {
+                ma_t12: None,
+                sra: None,
+            },
+            recorders: Vec::new(),
+        }
+    }
+
+    /// Simulated instruments replaying the given scripts, with the drivers' default timeouts.
+    pub fn simulated(
+        ma_t12: Script,
+        sra: Script,
+        options: &ReplayOptions,
+        record: [Option<&Path>; 2],
+    ) -> Result<Devices, DeviceSetupError> {
+        let sim_m = SimMat12::new(ma_t12, options.clone()).map_err(|source| {
+            DeviceSetupError::Simulation {
+                instrument: Instrument::MaT12,
+                source,
+            }
+        })?;
+        let sim_s =
+            SimSra::new(sra, options.clone()).map_err(|source| DeviceSetupError::Simulation {
+                instrument: Instrument::Sra,
+                source,
+            })?;
+        let mut recorders = Vec::new();
+        let ma_t12 = spawn_mat12_with(
+            sim_m.factory(),
+            DriverConfig::default(),
+            recorder(Instrument::MaT12, record[0], &mut recorders)?,
+        );
+        let sra = spawn_sra_with(
+            sim_s.factory(),
+            DriverConfig::default(),
+            recorder(Instrument::Sra, record[1], &mut recorders)?,
+        );
+        Ok(Devices {
+            ma_t12,
+            sra,
+            simulators: Simulators {
+                ma_t12: Some(sim_m),
+                sra: Some(sim_s),
+            },
+            recorders,
+        })
+    }
+
+    /// The instruments the configuration describes. Simulated instruments replay with
+    /// `options` (the daemon uses lenient matching, so that any sequence of references and
+    /// scans gets answers; `brdfd replay` uses strict).
+    pub fn from_config(
+        config: &DevicesConfig,
+        options: &ReplayOptions,
+    ) -> Result<Devices, DeviceSetupError> {
+        let mut recorders = Vec::new();
+        let mut simulators = Simulators {
+            ma_t12: None,
+            sra: None,
+        };
+        let m = &config.ma_t12;
+        let m_cfg = DriverConfig {
+            measure_timeout: m.timeout,
+            max_resends: m.retries,
+            ..DriverConfig::default()
+        };
+        let m_rec = recorder(Instrument::MaT12, m.record.as_deref(), &mut recorders)?;
+        let ma_t12 = match &m.transport {
+            MaT12Transport::Simulated { session } => {
+                let script = script(Instrument::MaT12, session.as_deref())?;
+                let sim = SimMat12::new(script, options.clone()).map_err(|source| {
+                    DeviceSetupError::Simulation {
+                        instrument: Instrument::MaT12,
+                        source,
+                    }
+                })?;
+                let handle = spawn_mat12_with(sim.factory(), m_cfg, m_rec);
+                simulators.ma_t12 = Some(sim);
+                handle
+            }
+            MaT12Transport::Usb { product_id } => {
+                let ids = UsbIds {
+                    product_id: *product_id,
+                    ..UsbIds::default()
+                };
+                spawn_mat12_with(move || RusbBulk::open(ids), m_cfg, m_rec)
+            }
+        };
+        let s = &config.sra;
+        let s_cfg = DriverConfig {
+            measure_timeout: s.timeout,
+            max_resends: s.retries,
+            ..DriverConfig::default()
+        };
+        let s_rec = recorder(Instrument::Sra, s.record.as_deref(), &mut recorders)?;
+        let sra = match &s.transport {
+            SraTransport::Simulated { session } => {
+                let script = script(Instrument::Sra, session.as_deref())?;
+                let sim = SimSra::new(script, options.clone()).map_err(|source| {
+                    DeviceSetupError::Simulation {
+                        instrument: Instrument::Sra,
+                        source,
+                    }
+                })?;
+                let handle = spawn_sra_with(sim.factory(), s_cfg, s_rec);
+                simulators.sra = Some(sim);
+                handle
+            }
+            SraTransport::Serial { port, baud } => {
+                let (port, baud) = (port.clone(), *baud);
+                spawn_sra_with(move || open_serial(&port, baud), s_cfg, s_rec)
+            }
+        };
+        Ok(Devices {
+            ma_t12,
+            sra,
+            simulators,
+            recorders,
+        })
+    }
+
+    /// The handle for one instrument.
+    pub fn handle(&self, instrument: Instrument) -> &DriverHandle {
+        match instrument {
+            Instrument::MaT12 => &self.ma_t12,
+            Instrument::Sra => &self.sra,
+        }
+    }
+
+    /// The simulated instruments' replay reports (strict-mode mismatches, faults fired).
+    pub fn replay_reports(&self) -> Vec<(Instrument, ReplayReport)> {
+        let mut out = Vec::new();
+        if let Some(s) = &self.simulators.ma_t12 {
+            out.push((Instrument::MaT12, s.report()));
+        }
+        if let Some(s) = &self.simulators.sra {
+            out.push((Instrument::Sra, s.report()));
+        }
+        out
+    }
+
+    /// Stops both driver tasks (waiting for their threads to close the connections) and
+    /// finishes the recordings. Returns the first recording error, if any.
+    pub async fn shutdown(self) -> std::io::Result<()> {
+        self.ma_t12.shutdown().await;
+        self.sra.shutdown().await;
+        let mut first = Ok(());
+        for r in &self.recorders {
+            let done = r.finish();
+            if first.is_ok() {
+                first = done;
+            }
+        }
+        first
+    }
+}
+
+/// The script a simulated instrument replays: the session file given, or every embedded
+/// recording back to back (the Munsell N9 reference, then the eight samples).
+fn script(instrument: Instrument, session: Option<&Path>) -> Result<Script, DeviceSetupError> {
+    let sim_err = |source| DeviceSetupError::Simulation { instrument, source };
+    match session {
+        None => mock_devices::recordings::playlist(instrument).map_err(sim_err),
+        Some(path) => {
+            let text =
+                std::fs::read_to_string(path).map_err(|source| DeviceSetupError::ReadSession {
+                    instrument,
+                    path: path.to_path_buf(),
+                    source,
+                })?;
+            Script::parse(&text).map_err(sim_err)
+        }
+    }
+}
+
+fn recorder(
+    instrument: Instrument,
+    path: Option<&Path>,
+    all: &mut Vec<Recorder>,
+) -> Result<Option<Recorder>, DeviceSetupError> {
+    let Some(path) = path else { return Ok(None) };
+    let notes = vec![format!("recorded by brdfd {}", env!("CARGO_PKG_VERSION"))];
+    let r =
+        Recorder::create(path, instrument, &notes).map_err(|source| DeviceSetupError::Record {
+            instrument,
+            path: path.to_path_buf(),
+            source,
+        })?;
+    all.push(r.clone());
+    Ok(Some(r))
+}
+
+/// Starts the MA-T12 driver, with every connection the factory opens wrapped in the tap when
+/// recording.
+pub fn spawn_mat12_with<T, F>(
+    mut factory: F,
+    config: DriverConfig,
+    recorder: Option<Recorder>,
+) -> DriverHandle
+where
+    T: drivers::UsbBulk,
+    F: FnMut() -> Result<T, drivers::TransportError> + Send + 'static,
+{
+    match recorder {
+        None => drivers::spawn_mat12(factory, config),
+        Some(r) => drivers::spawn_mat12(move || Ok(Tap::new(factory()?, r.clone())), config),
+    }
+}
+
+/// Starts the SRA driver, with every connection wrapped in the tap when recording.
+pub fn spawn_sra_with<T, F>(
+    mut factory: F,
+    config: DriverConfig,
+    recorder: Option<Recorder>,
+) -> DriverHandle
+where
+    T: drivers::SerialStream,
+    F: FnMut() -> Result<T, drivers::TransportError> + Send + 'static,
+{
+    match recorder {
+        None => drivers::spawn_sra(factory, config),
+        Some(r) => drivers::spawn_sra(move || Ok(Tap::new(factory()?, r.clone())), config),
+    }
+}

@@ -1,0 +1,236 @@
+//! Progress events: what the daemon tells every subscriber (the HTTP event stream, the CLI's
+//! progress bars, the logs) as a reference, a scan or a fit moves along.
+//!
+//! One [`tokio::sync::broadcast`] channel carries them all. A subscriber that falls more than
+//! [`CAPACITY`] events behind loses the oldest (it is told how many), which suits progress: the
+//! store, not the event stream, is the record. Every event is also logged through `tracing`
+//! when it is sent, so the logs need no subscriber of their own.
+
+use serde::Serialize;
+use tokio::sync::broadcast;
+
+use crate::cost::CostFunction;
+use crate::store::{FitRunId, ReferenceId, ScanId};
+
+/// Events kept for a slow subscriber. A scan makes ~20, a fit ~15 plus one per generation of
+/// the paper GA (up to 1000): enough for a client that reads at human speed.
+pub const CAPACITY: usize = 4096;
+
+/// One thing that happened. Serialised as JSON with a `"type"` tag (the SSE event name is the
+/// same tag).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Event {
+    /// A reference measurement (the Munsell N9 tile) started.
+    ReferenceStarted { reference: ReferenceId },
+    /// One reference reading was stored (`k` of 14).
+    ReferenceReading {
+        reference: ReferenceId,
+        device: &'static str,
+        geometry: &'static str,
+        k: usize,
+        n: usize,
+    },
+    /// The reference set is complete and in force for new scans.
+    ReferenceComplete { reference: ReferenceId },
+    /// The reference measurement failed; the previous reference (if any) stays in force.
+    ReferenceFailed {
+        reference: ReferenceId,
+        reason: String,
+    },
+    /// A scan was requested and the instruments are starting.
+    ScanStarted {
+        scan: ScanId,
+        sample: String,
+        reference: ReferenceId,
+    },
+    /// One reading of a scan was stored (`k` of 14).
+    ScanReading {
+        scan: ScanId,
+        device: &'static str,
+        geometry: &'static str,
+        k: usize,
+        n: usize,
+    },
+    /// All 14 readings are in; the scan is complete.
+    ScanComplete { scan: ScanId },
+    /// The scan failed (a device error); it keeps the readings it got.
+    ScanFailed { scan: ScanId, reason: String },
+    /// The scan was aborted (operator or shutdown); it keeps the readings it got.
+    ScanAborted { scan: ScanId, reason: String },
+    /// The scan's reference is older than the configured limit: it was not fitted.
+    ReferenceStale {
+        scan: ScanId,
+        reference: ReferenceId,
+        age_hours: f64,
+        max_age_hours: f64,
+    },
+    /// A complete scan could not be processed into a measured BRDF: it was not fitted.
+    ProcessingFailed { scan: ScanId, reason: String },
+    /// A fit was queued.
+    FitQueued {
+        fit: FitRunId,
+        scan: ScanId,
+        cost_function: CostFunction,
+    },
+    /// The fit worker started a fit.
+    FitStarted {
+        fit: FitRunId,
+        scan: ScanId,
+        cost_function: CostFunction,
+    },
+    /// Progress of a running fit, once per optimiser generation.
+    FitProgress {
+        fit: FitRunId,
+        scan: ScanId,
+        generation: u32,
+        generations_total: u32,
+        best_cost: f64,
+    },
+    /// A fit finished; its result and ΔE00 are stored.
+    FitDone {
+        fit: FitRunId,
+        scan: ScanId,
+        cost_function: CostFunction,
+        cost: f64,
+        delta_e00_mean: f64,
+        delta_e00_diffuse_mean: f64,
+        delta_e00_specular_mean: f64,
+        wall_ms: f64,
+    },
+    /// A fit failed (an optimiser error or a panic inside the fit); the daemon goes on.
+    FitFailed {
+        fit: FitRunId,
+        scan: ScanId,
+        error: String,
+    },
+    /// A fit was cancelled.
+    FitCancelled { fit: FitRunId, scan: ScanId },
+    /// An instrument's driver reported a state change.
+    Device {
+        device: &'static str,
+        state: &'static str,
+        detail: String,
+    },
+    /// The daemon is shutting down.
+    ShuttingDown,
+}
+
+impl Event {
+    /// The tag, also used as the SSE event name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Event::ReferenceStarted { .. } => "reference_started",
+            Event::ReferenceReading { .. } => "reference_reading",
+            Event::ReferenceComplete { .. } => "reference_complete",
+            Event::ReferenceFailed { .. } => "reference_failed",
+            Event::ScanStarted { .. } => "scan_started",
+            Event::ScanReading { .. } => "scan_reading",
+            Event::ScanComplete { .. } => "scan_complete",
+            Event::ScanFailed { .. } => "scan_failed",
+            Event::ScanAborted { .. } => "scan_aborted",
+            Event::ReferenceStale { .. } => "reference_stale",
+            Event::ProcessingFailed { .. } => "processing_failed",
+            Event::FitQueued { .. } => "fit_queued",
+            Event::FitStarted { .. } => "fit_started",
+            Event::FitProgress { .. } => "fit_progress",
+            Event::FitDone { .. } => "fit_done",
+            Event::FitFailed { .. } => "fit_failed",
+            Event::FitCancelled { .. } => "fit_cancelled",
+            Event::Device { .. } => "device",
+            Event::ShuttingDown => "shutting_down",
+        }
+    }
+
+    /// The event as one JSON object (what the SSE `data:` line carries).
+    pub fn to_json(&self) -> String {
+        // Every field is a plain number, string or id: serialisation cannot fail, but a
+        // non-finite cost would become `null`, which is what a reader should see.
+        serde_json::to_string(self).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
+    }
+}
+
+/// The sending side of the event channel; cheap to clone.
+#[derive(Debug, Clone)]
+pub struct EventBus {
+    tx: broadcast::Sender<Event>,
+}
+
+impl Default for EventBus {
+    fn default() -> Self {
+        EventBus::new()
+    }
+}
+
+impl EventBus {
+    pub fn new() -> EventBus {
+        let (tx, _) = broadcast::channel(CAPACITY);
+        EventBus { tx }
+    }
+
+    /// Sends `event` to every subscriber and logs it. Progress events are logged at debug
+    /// level (one per generation would drown the log); failures at warn.
+    pub fn send(&self, event: Event) {
+        match &event {
+            Event::FitProgress { .. }
+            | Event::ScanReading { .. }
+            | Event::ReferenceReading { .. } => {
+                tracing::debug!(event = %event.to_json(), "{}", event.kind())
+            }
+            Event::ScanFailed { .. }
+            | Event::ReferenceFailed { .. }
+            | Event::FitFailed { .. }
+            | Event::ReferenceStale { .. }
+            | Event::ProcessingFailed { .. } => {
+                tracing::warn!(event = %event.to_json(), "{}", event.kind())
+            }
+            _ => tracing::info!(event = %event.to_json(), "{}", event.kind()),
+        }
+        // No subscriber is not an error.
+        let _ = self.tx.send(event);
+    }
+
+    /// Events from now on.
+    pub fn subscribe(&self) -> broadcast::Receiver<Event> {
+        self.tx.subscribe()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn events_serialise_with_their_tag_and_fields() {
+        let e = Event::ScanReading {
+            scan: ScanId(4),
+            device: "sra",
+            geometry: "sra-20",
+            k: 13,
+            n: 14,
+        };
+        assert_eq!(
+            e.to_json(),
+            r#"{"type":"scan_reading","scan":4,"device":"sra","geometry":"sra-20","k":13,"n":14}"#
+        );
+        assert_eq!(e.kind(), "scan_reading");
+        let v: serde_json::Value = serde_json::from_str(&Event::ShuttingDown.to_json()).unwrap();
+        assert_eq!(v["type"], Event::ShuttingDown.kind());
+    }
+
+    #[tokio::test]
+    async fn every_subscriber_gets_every_event() {
+        let bus = EventBus::new();
+        let mut a = bus.subscribe();
+        let mut b = bus.subscribe();
+        bus.send(Event::ScanComplete { scan: ScanId(1) });
+        assert_eq!(
+            a.recv().await.unwrap(),
+            Event::ScanComplete { scan: ScanId(1) }
+        );
+        assert_eq!(
+            b.recv().await.unwrap(),
+            Event::ScanComplete { scan: ScanId(1) }
+        );
+    }
+}

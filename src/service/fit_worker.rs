@@ -1,0 +1,365 @@
+//! The fit worker: runs queued fits off the async runtime, a bounded number at a time, each
+//! cancellable, a panic inside one failing that fit only.
+//!
+//! Shape (sqlx/tokio idiom): a dispatcher task takes fit ids from an unbounded channel, waits
+//! for a [`Semaphore`] permit (`[fit] max_concurrent_fits`), and spawns a task per fit that
+//! moves the permit into its `spawn_blocking` closure, so the permit is released exactly when
+//! the CPU-bound work ends, whoever awaits it. The closure wraps the fit in `catch_unwind`; a
+//! panic becomes a `failed` fit with the panic's message, and the worker takes the next fit.
+//!
+//! Cancellation goes through the optimiser's observer, called once per generation: it returns
+//! `Break` when the fit's flag is set ([`Service::cancel_fit`]) or the daemon is stopping. A fit
+//! stopped by shutdown is left `running`; the next start queues it again (same seed, same
+//! result).
+
+use std::ops::ControlFlow;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use tokio::sync::{Semaphore, mpsc};
+
+use crate::cost::CostFunction;
+use crate::fit::{FitReport, FitRequest, FitScanError, fit_measured};
+use crate::optimise::{FitError, Progress, Settings};
+use crate::processing::{MeasuredBrdf, ProcessingOptions};
+use crate::store::{FitResult, FitRunId, FitStatus, ScanId};
+
+use super::events::Event;
+use super::{Service, ServiceError, Timings};
+
+/// One fit, as the worker hands it to the fit computation.
+#[derive(Debug, Clone)]
+pub struct FitJob {
+    pub fit: FitRunId,
+    pub scan: ScanId,
+    pub sample: String,
+    /// The processed scan, sr⁻¹.
+    pub measured: MeasuredBrdf,
+    pub request: FitRequest,
+}
+
+/// The fit computation: the job and a per-generation observer (`Break` cancels) → a report.
+pub type FitFn = Arc<
+    dyn Fn(&FitJob, &mut dyn FnMut(&Progress) -> ControlFlow<()>) -> Result<FitReport, FitScanError>
+        + Send
+        + Sync,
+>;
+
+/// The real computation: [`crate::fit::fit_measured`].
+pub fn default_fit_fn() -> FitFn {
+    Arc::new(|job, observer| fit_measured(&job.sample, job.measured, &job.request, observer))
+}
+
+/// The text of a panic payload.
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
+}
+
+/// How a fit computation ended.
+enum Ended {
+    Done(Box<FitReport>),
+    Failed(String),
+    Cancelled,
+    Stopped,
+}
+
+impl Service {
+    /// Starts the dispatcher.
+    pub(crate) async fn start_fit_worker(&self, mut rx: mpsc::UnboundedReceiver<FitRunId>) {
+        let Ok((guard, mut stop)) = self.task_slot().await else {
+            return;
+        };
+        let permits = Arc::new(Semaphore::new(
+            self.inner.settings.max_concurrent_fits.max(1),
+        ));
+        let service = self.clone();
+        tokio::spawn(async move {
+            loop {
+                let fit = tokio::select! {
+                    fit = rx.recv() => match fit { Some(f) => f, None => break },
+                    _ = stop.recv() => break,
+                };
+                let permit = tokio::select! {
+                    p = permits.clone().acquire_owned() => p.expect("the semaphore is never closed"),
+                    _ = stop.recv() => break,
+                };
+                let Ok((fit_guard, _)) = service.task_slot().await else {
+                    break;
+                };
+                let s = service.clone();
+                tokio::spawn(async move {
+                    s.run_fit(fit, permit).await;
+                    drop(fit_guard);
+                });
+            }
+            drop(guard);
+        });
+    }
+
+    /// Hands a queued fit to the worker.
+    pub(crate) fn submit_fit(&self, fit: FitRunId) {
+        self.inner
+            .cancels
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .entry(fit)
+            .or_insert_with(|| Arc::new(AtomicBool::new(false)));
+        self.inner.fits_queued.fetch_add(1, Ordering::Relaxed);
+        if self.inner.fit_tx.send(fit).is_err() {
+            // The worker has stopped (shutdown): the fit stays queued in the store and runs at
+            // the next start.
+            self.inner.fits_queued.fetch_sub(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Cancels a queued or running fit. A running fit stops at its next generation.
+    pub async fn cancel_fit(&self, fit: FitRunId) -> Result<(), ServiceError> {
+        let detail = self.inner.store.fit_detail(fit).await?;
+        match detail.run.status {
+            FitStatus::Queued | FitStatus::Running => {}
+            status => {
+                return Err(ServiceError::BadRequest(format!(
+                    "fit run {fit} is {status}: only a queued or running fit can be cancelled"
+                )));
+            }
+        }
+        let flag = self
+            .inner
+            .cancels
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(&fit)
+            .cloned();
+        match flag {
+            Some(flag) => flag.store(true, Ordering::SeqCst),
+            // Queued in the store but not handed to this worker: cancel it there.
+            None => {
+                self.inner.store.cancel_fit(fit).await?;
+                self.inner.events.send(Event::FitCancelled {
+                    fit,
+                    scan: detail.run.scan,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    async fn run_fit(&self, fit: FitRunId, permit: tokio::sync::OwnedSemaphorePermit) {
+        self.inner.fits_queued.fetch_sub(1, Ordering::Relaxed);
+        let cancel = self
+            .inner
+            .cancels
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(&fit)
+            .cloned()
+            .unwrap_or_default();
+        let prepared = self.prepare_fit(fit).await;
+        let (job, cost) = match prepared {
+            Ok(Some(p)) => p,
+            Ok(None) => {
+                self.forget(fit);
+                return;
+            }
+            Err((scan, e)) => {
+                let error = format!("cannot start the fit: {e}");
+                let _ = self
+                    .timed_store(self.inner.store.fail_fit(fit, &error))
+                    .await;
+                self.inner
+                    .events
+                    .send(Event::FitFailed { fit, scan, error });
+                self.forget(fit);
+                return;
+            }
+        };
+        let scan = job.scan;
+        if cancel.load(Ordering::SeqCst) {
+            let _ = self.timed_store(self.inner.store.cancel_fit(fit)).await;
+            self.inner.events.send(Event::FitCancelled { fit, scan });
+            self.forget(fit);
+            return;
+        }
+        if let Err(e) = self.timed_store(self.inner.store.start_fit(fit)).await {
+            tracing::warn!(error = %e, %fit, "fit not started");
+            self.forget(fit);
+            return;
+        }
+        self.inner.fits_running.fetch_add(1, Ordering::Relaxed);
+        self.inner.events.send(Event::FitStarted {
+            fit,
+            scan,
+            cost_function: cost,
+        });
+
+        let events = self.inner.events.clone();
+        let stopping = self.inner.stopping.clone();
+        let fit_fn = self.inner.fit_fn.clone();
+        let cancel_flag = cancel.clone();
+        let started = Instant::now();
+        let joined = tokio::task::spawn_blocking(move || {
+            // Held for as long as the computation runs, released when this closure returns or
+            // unwinds.
+            let _permit = permit;
+            let mut observer = |p: &Progress| {
+                events.send(Event::FitProgress {
+                    fit,
+                    scan,
+                    generation: p.generation,
+                    generations_total: p.generations_total,
+                    best_cost: p.best_cost,
+                });
+                if cancel_flag.load(Ordering::Relaxed) || stopping.load(Ordering::Relaxed) {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            };
+            catch_unwind(AssertUnwindSafe(|| fit_fn(&job, &mut observer)))
+        })
+        .await;
+        Timings::add(&self.inner.timings.fit_ns, started.elapsed());
+        self.inner.fits_running.fetch_sub(1, Ordering::Relaxed);
+
+        let ended = match joined {
+            Ok(Ok(Ok(report))) => Ended::Done(Box::new(report)),
+            Ok(Ok(Err(FitScanError::Fit {
+                source: FitError::Cancelled,
+                ..
+            }))) => {
+                if cancel.load(Ordering::SeqCst) {
+                    Ended::Cancelled
+                } else {
+                    Ended::Stopped
+                }
+            }
+            Ok(Ok(Err(e))) => Ended::Failed(e.to_string()),
+            Ok(Err(payload)) => Ended::Failed(format!(
+                "the fit panicked ({}); this is a bug in brdfd: report it with the scan \
+                 (`brdfd export {scan}`)",
+                panic_message(payload.as_ref())
+            )),
+            Err(join) => Ended::Failed(format!("the fit's thread ended abnormally: {join}")),
+        };
+        self.record_fit_end(fit, scan, cost, ended).await;
+        self.forget(fit);
+    }
+
+    fn forget(&self, fit: FitRunId) {
+        self.inner
+            .cancels
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&fit);
+    }
+
+    /// Loads what a queued fit needs. `Ok(None)`: it is no longer queued (cancelled meanwhile).
+    #[allow(clippy::type_complexity)]
+    async fn prepare_fit(
+        &self,
+        fit: FitRunId,
+    ) -> Result<Option<(FitJob, CostFunction)>, (ScanId, ServiceError)> {
+        let store = &self.inner.store;
+        let detail = self
+            .timed_store(store.fit_detail(fit))
+            .await
+            .map_err(|e| (ScanId(0), e.into()))?;
+        let run = detail.run;
+        if run.status != FitStatus::Queued {
+            return Ok(None);
+        }
+        let scan = run.scan;
+        let fail = |e: ServiceError| (scan, e);
+        let processed = self
+            .timed_store(store.processed(run.processed))
+            .await
+            .map_err(|e| fail(e.into()))?;
+        let scan_detail = self
+            .timed_store(store.scan_detail(scan))
+            .await
+            .map_err(|e| fail(e.into()))?;
+        let settings: Settings = serde_json::from_value(run.settings.clone()).map_err(|e| {
+            fail(ServiceError::BadRequest(format!(
+                "fit run {fit}: stored settings unreadable: {e}"
+            )))
+        })?;
+        let request = FitRequest {
+            processing: ProcessingOptions {
+                specular: processed.specular,
+                reference_reflectance: scan_detail.reference.reference.rho_ref,
+            },
+            settings,
+        };
+        Ok(Some((
+            FitJob {
+                fit,
+                scan,
+                sample: scan_detail.scan.sample,
+                measured: processed.brdf,
+                request,
+            },
+            run.cost_function,
+        )))
+    }
+
+    async fn record_fit_end(&self, fit: FitRunId, scan: ScanId, cost: CostFunction, ended: Ended) {
+        let store = &self.inner.store;
+        match ended {
+            Ended::Done(report) => {
+                let outcome = &report.outcome;
+                let result = FitResult {
+                    cost: outcome.cost,
+                    params: serde_json::to_value(outcome.params).unwrap_or_default(),
+                    best_cost_per_generation: outcome.best_cost_per_generation.clone(),
+                    evaluations: outcome.evaluations,
+                    generations: outcome.generations,
+                    wall_ms: outcome.wall_ms,
+                };
+                let e = &report.evaluation;
+                match self
+                    .timed_store(store.finish_fit(fit, &result, &e.per_geometry))
+                    .await
+                {
+                    Ok(()) => self.inner.events.send(Event::FitDone {
+                        fit,
+                        scan,
+                        cost_function: cost,
+                        cost: outcome.cost,
+                        delta_e00_mean: e.all.mean,
+                        delta_e00_diffuse_mean: e.diffuse.mean,
+                        delta_e00_specular_mean: e.specular.mean,
+                        wall_ms: outcome.wall_ms,
+                    }),
+                    Err(err) => {
+                        let error = format!("cannot store the result: {err}");
+                        let _ = self.timed_store(store.fail_fit(fit, &error)).await;
+                        self.inner
+                            .events
+                            .send(Event::FitFailed { fit, scan, error });
+                    }
+                }
+            }
+            Ended::Failed(error) => {
+                if let Err(e) = self.timed_store(store.fail_fit(fit, &error)).await {
+                    tracing::error!(error = %e, %fit, "cannot mark the fit failed");
+                }
+                self.inner
+                    .events
+                    .send(Event::FitFailed { fit, scan, error });
+            }
+            Ended::Cancelled => {
+                let _ = self.timed_store(store.cancel_fit(fit)).await;
+                self.inner.events.send(Event::FitCancelled { fit, scan });
+            }
+            Ended::Stopped => {
+                tracing::info!(%fit, "fit interrupted by shutdown; it runs again at the next start");
+            }
+        }
+    }
+}

@@ -1,0 +1,542 @@
+//! The acquisition service: what `brdfd serve` runs, and what `brdfd replay`, `brdfd demo` and
+//! the end-to-end tests run in-process.
+//!
+//! Data flow (ARCHITECTURE.md): an operator's request → the scan orchestrator
+//! (`orchestrator.rs`) → both instruments' driver tasks measuring concurrently → every reading
+//! stored the moment it arrives (with its raw frame) → the scan completes only with all 14 →
+//! processing against the reference in force (a reference older than the configured limit is
+//! flagged, and the scan not fitted) → one fit per configured cost function queued → the fit
+//! worker (`fit_worker.rs`: CPU-bound work on blocking threads behind a semaphore, cancellable,
+//! a panic failing only that fit) → fits and ΔE00 stored → [`events::Event`]s to every
+//! subscriber all along.
+//!
+//! - [`Service`] is the handle (cheap to clone) the HTTP API and the in-process callers use.
+//! - [`devices`] builds the instruments (simulated or real, with the recording tap).
+//! - [`shutdown`] is the mini-redis style stop signal and task tracking.
+//! - [`ServiceError`] says why a request was refused.
+//!
+//! The instruments do one thing at a time: a reference or scan requested while one is being
+//! measured is refused with [`ServiceError::Busy`] (HTTP 409), never queued — an operator who
+//! has put a new sample on the bench must not get the previous request's readings.
+
+pub mod devices;
+mod error;
+pub mod events;
+mod fit_worker;
+mod orchestrator;
+pub mod shutdown;
+
+use std::collections::HashMap;
+use std::future::Future;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use tokio::sync::{Notify, broadcast};
+
+use crate::config::Config;
+use crate::cost::CostFunction;
+use crate::optimise::{Method, Settings};
+use crate::processing::SpecularStrategy;
+use crate::scan::Scan;
+use crate::store::{FitRunId, ReferenceId, ReferenceSummary, ScanId, ScanState, Store};
+
+pub use devices::{DeviceSetupError, Devices};
+pub use error::ServiceError;
+pub use events::{Event, EventBus};
+pub use fit_worker::{FitFn, FitJob, default_fit_fn};
+pub use orchestrator::{IMPORTED_SUFFIX, scan_from_detail};
+
+use shutdown::Coordinator;
+
+/// What the service does with a complete scan, from `[scan]` and `[fit]` of the configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServiceSettings {
+    /// A scan taken longer than this after its reference was measured is not fitted.
+    pub reference_max_age: Duration,
+    /// One fit per cost function, per complete scan.
+    pub cost_functions: Vec<CostFunction>,
+    pub method: Method,
+    pub seed: u64,
+    /// Fits running at once, each on one blocking thread.
+    pub max_concurrent_fits: usize,
+    /// How the SRA readings become spectra.
+    pub specular: SpecularStrategy,
+    /// How long shutdown waits for the scan in progress and the fits to stop.
+    pub shutdown_grace: Duration,
+}
+
+impl ServiceSettings {
+    pub fn from_config(config: &Config) -> ServiceSettings {
+        ServiceSettings {
+            reference_max_age: config.scan.reference_max_age,
+            cost_functions: config.fit.cost_functions.clone(),
+            method: config.fit.method,
+            seed: config.fit.seed,
+            max_concurrent_fits: config.fit.max_concurrent_fits.get(),
+            specular: config.fit.specular,
+            shutdown_grace: Duration::from_secs(10),
+        }
+    }
+
+    /// The optimiser settings of one fit.
+    pub fn fit_settings(&self, cost: CostFunction, method: Method, seed: u64) -> Settings {
+        Settings {
+            method,
+            cost,
+            seed,
+            ..Settings::default()
+        }
+    }
+}
+
+impl Default for ServiceSettings {
+    fn default() -> Self {
+        ServiceSettings::from_config(&Config::default())
+    }
+}
+
+/// Extension points that normal use never sets: only code (tests) can.
+#[derive(Clone, Default)]
+pub struct ServiceOptions {
+    /// Replaces the fit computation (`fit::fit_measured`); the end-to-end tests use it to make
+    /// a fit panic and check that only that fit fails.
+    pub fit_fn: Option<FitFn>,
+}
+
+impl std::fmt::Debug for ServiceOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ServiceOptions")
+            .field("fit_fn", &self.fit_fn.as_ref().map(|_| "custom"))
+            .finish()
+    }
+}
+
+/// Where the time went, cumulated since start-up (the demo's timing split).
+#[derive(Debug, Default)]
+pub struct Timings {
+    /// Wall time the instruments spent measuring (from a request to its last reading).
+    acquire_ns: AtomicU64,
+    /// Time spent in store calls made by the orchestrator and the fit worker.
+    store_ns: AtomicU64,
+    /// Wall time of the fit computations, summed over fits (they may overlap).
+    fit_ns: AtomicU64,
+}
+
+/// A snapshot of [`Timings`], in seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TimingSplit {
+    pub acquire_s: f64,
+    pub store_s: f64,
+    pub fit_s: f64,
+}
+
+impl Timings {
+    fn add(counter: &AtomicU64, d: Duration) {
+        counter.fetch_add(d.as_nanos() as u64, Ordering::Relaxed);
+    }
+
+    pub fn split(&self) -> TimingSplit {
+        let s = |c: &AtomicU64| c.load(Ordering::Relaxed) as f64 / 1e9;
+        TimingSplit {
+            acquire_s: s(&self.acquire_ns),
+            store_s: s(&self.store_ns),
+            fit_s: s(&self.fit_ns),
+        }
+    }
+}
+
+/// What the instruments are doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Operation {
+    Reference { reference: ReferenceId },
+    Scan { scan: ScanId },
+}
+
+impl std::fmt::Display for Operation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Operation::Reference { reference } => write!(f, "reference {reference}"),
+            Operation::Scan { scan } => write!(f, "scan {scan}"),
+        }
+    }
+}
+
+/// The operation in progress and how to stop it.
+#[derive(Debug)]
+struct Busy {
+    operation: Operation,
+    since: Instant,
+    /// Notified by [`Service::abort`].
+    abort: Arc<Notify>,
+}
+
+/// `GET /status`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Status {
+    pub version: &'static str,
+    /// What the instruments are doing, if anything.
+    pub busy: Option<BusyStatus>,
+    /// The reference new scans are normalised by.
+    pub reference: Option<ReferenceInForce>,
+    pub fits_queued: usize,
+    pub fits_running: usize,
+    /// Whether each instrument is simulated.
+    pub simulated: SimulatedStatus,
+    pub timings: TimingSplit,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BusyStatus {
+    pub operation: Operation,
+    pub seconds: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReferenceInForce {
+    pub id: ReferenceId,
+    pub name: String,
+    pub completed_at_ms: Option<i64>,
+    pub age_hours: f64,
+    /// Older than `[scan] reference_max_age_hours`: scans will not be fitted.
+    pub stale: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct SimulatedStatus {
+    pub ma_t12: bool,
+    pub sra: bool,
+}
+
+/// What a refit asks for.
+#[derive(Debug, Clone, PartialEq, Default, serde::Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RefitRequest {
+    /// Cost functions to fit; empty = the configured ones.
+    pub cost_functions: Vec<CostFunction>,
+    /// Optimiser; `None` = the configured one.
+    pub method: Option<Method>,
+    /// Seed; `None` = the configured one.
+    pub seed: Option<u64>,
+    /// Fit even though the scan's reference is older than the configured limit.
+    pub allow_stale_reference: bool,
+}
+
+/// Shared state of the running service.
+struct Inner {
+    store: Store,
+    events: EventBus,
+    devices: Devices,
+    settings: ServiceSettings,
+    fit_fn: FitFn,
+    busy: Mutex<Option<Busy>>,
+    /// The reference new scans use: the last one this daemon (or a previous run) measured.
+    /// Imported references (which come with their scans) never take its place.
+    reference: Mutex<Option<ReferenceId>>,
+    coordinator: tokio::sync::Mutex<Coordinator>,
+    /// Set at shutdown, before the stop signal: fits break off at their next generation and are
+    /// left `running` for the next start to queue again.
+    stopping: Arc<AtomicBool>,
+    /// Cancellation flags of queued and running fits.
+    cancels: Mutex<HashMap<FitRunId, Arc<AtomicBool>>>,
+    fit_tx: tokio::sync::mpsc::UnboundedSender<FitRunId>,
+    fits_queued: AtomicUsize,
+    fits_running: AtomicUsize,
+    timings: Timings,
+}
+
+/// The running service; clones share it.
+#[derive(Clone)]
+pub struct Service {
+    inner: Arc<Inner>,
+}
+
+impl std::fmt::Debug for Service {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Service").finish_non_exhaustive()
+    }
+}
+
+impl Service {
+    /// Starts the service on an open store and started instruments: marks scans a crash left
+    /// half-measured as failed, queues again the fits a crash left running, records the
+    /// instruments' identities, and starts the fit worker.
+    pub async fn start(
+        store: Store,
+        devices: Devices,
+        settings: ServiceSettings,
+        options: ServiceOptions,
+    ) -> Result<Service, ServiceError> {
+        let interrupted = store.mark_interrupted_scans_failed().await?;
+        if !interrupted.is_empty() {
+            tracing::warn!(scans = ?interrupted, "scans left unfinished by the last run marked failed");
+        }
+        let requeued = store.requeue_interrupted_fits().await?;
+        if !requeued.is_empty() {
+            tracing::info!(fits = ?requeued, "fits interrupted by the last run queued again");
+        }
+        let reference = match store.latest_reference().await? {
+            Some(r) if !r.name.ends_with(IMPORTED_SUFFIX) => Some(r.id),
+            _ => None,
+        };
+        let (fit_tx, fit_rx) = tokio::sync::mpsc::unbounded_channel();
+        let inner = Arc::new(Inner {
+            store,
+            events: EventBus::new(),
+            devices,
+            fit_fn: options.fit_fn.unwrap_or_else(default_fit_fn),
+            settings,
+            busy: Mutex::new(None),
+            reference: Mutex::new(reference),
+            coordinator: tokio::sync::Mutex::new(Coordinator::new()),
+            stopping: Arc::new(AtomicBool::new(false)),
+            cancels: Mutex::new(HashMap::new()),
+            fit_tx,
+            fits_queued: AtomicUsize::new(0),
+            fits_running: AtomicUsize::new(0),
+            timings: Timings::default(),
+        });
+        let service = Service { inner };
+        service.start_fit_worker(fit_rx).await;
+        service.watch_devices().await;
+        for fit in service.inner.store.queued_fits().await? {
+            service.submit_fit(fit.id);
+        }
+        Ok(service)
+    }
+
+    /// The store the service writes to.
+    pub fn store(&self) -> &Store {
+        &self.inner.store
+    }
+
+    /// The instruments.
+    pub fn devices(&self) -> &Devices {
+        &self.inner.devices
+    }
+
+    pub fn settings(&self) -> &ServiceSettings {
+        &self.inner.settings
+    }
+
+    /// Events from now on.
+    pub fn subscribe(&self) -> broadcast::Receiver<Event> {
+        self.inner.events.subscribe()
+    }
+
+    /// Cumulated timings since start-up.
+    pub fn timings(&self) -> TimingSplit {
+        self.inner.timings.split()
+    }
+
+    /// Runs a store call, adding its time to the store timing.
+    async fn timed_store<T>(&self, fut: impl Future<Output = T>) -> T {
+        let t = Instant::now();
+        let out = fut.await;
+        Timings::add(&self.inner.timings.store_ns, t.elapsed());
+        out
+    }
+
+    /// Claims the instruments for `operation`, or says who has them.
+    fn claim(&self, operation: Operation) -> Result<Arc<Notify>, ServiceError> {
+        let mut busy = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(b) = busy.as_ref() {
+            return Err(ServiceError::Busy {
+                operation: b.operation.to_string(),
+                seconds: b.since.elapsed().as_secs_f64(),
+            });
+        }
+        let abort = Arc::new(Notify::new());
+        *busy = Some(Busy {
+            operation,
+            since: Instant::now(),
+            abort: abort.clone(),
+        });
+        Ok(abort)
+    }
+
+    /// Fails with `Busy` if the instruments are in use (checked before writing anything).
+    fn check_idle(&self) -> Result<(), ServiceError> {
+        let busy = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
+        match busy.as_ref() {
+            Some(b) => Err(ServiceError::Busy {
+                operation: b.operation.to_string(),
+                seconds: b.since.elapsed().as_secs_f64(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn release(&self) {
+        *self.inner.busy.lock().unwrap_or_else(|p| p.into_inner()) = None;
+    }
+
+    /// What the instruments are doing now.
+    pub fn current_operation(&self) -> Option<Operation> {
+        self.inner
+            .busy
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+            .map(|b| b.operation)
+    }
+
+    /// Stops the reference or scan in progress: the instruments abort, the readings already
+    /// stored are kept, and a scan is marked `aborted`. Returns what was aborted.
+    pub fn abort(&self) -> Result<Operation, ServiceError> {
+        let busy = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
+        match busy.as_ref() {
+            Some(b) => {
+                b.abort.notify_one();
+                Ok(b.operation)
+            }
+            None => Err(ServiceError::Idle),
+        }
+    }
+
+    /// The reference in force, with its age.
+    pub async fn reference_in_force(&self) -> Result<Option<ReferenceInForce>, ServiceError> {
+        let id = *self
+            .inner
+            .reference
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        let Some(id) = id else { return Ok(None) };
+        let detail = self.inner.store.reference_detail(id).await?;
+        Ok(Some(self.in_force_view(&detail.reference)))
+    }
+
+    fn in_force_view(&self, r: &ReferenceSummary) -> ReferenceInForce {
+        let done = r.completed_at_ms.unwrap_or(r.taken_at_ms);
+        let age_hours = (crate_now_ms() - done).max(0) as f64 / 3.6e6;
+        ReferenceInForce {
+            id: r.id,
+            name: r.name.clone(),
+            completed_at_ms: r.completed_at_ms,
+            age_hours,
+            stale: age_hours * 3600.0 > self.inner.settings.reference_max_age.as_secs_f64(),
+        }
+    }
+
+    /// The daemon's state.
+    pub async fn status(&self) -> Result<Status, ServiceError> {
+        let busy = {
+            let b = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
+            b.as_ref().map(|b| BusyStatus {
+                operation: b.operation,
+                seconds: b.since.elapsed().as_secs_f64(),
+            })
+        };
+        Ok(Status {
+            version: env!("CARGO_PKG_VERSION"),
+            busy,
+            reference: self.reference_in_force().await?,
+            fits_queued: self.inner.fits_queued.load(Ordering::Relaxed),
+            fits_running: self.inner.fits_running.load(Ordering::Relaxed),
+            simulated: SimulatedStatus {
+                ma_t12: self.inner.devices.simulators.ma_t12.is_some(),
+                sra: self.inner.devices.simulators.sra.is_some(),
+            },
+            timings: self.timings(),
+        })
+    }
+
+    /// Whether a scan has nothing more coming: it is not being measured, and none of its fits
+    /// is queued or running.
+    pub async fn scan_settled(&self, scan: ScanId) -> Result<bool, ServiceError> {
+        if self.current_operation() == Some(Operation::Scan { scan }) {
+            return Ok(false);
+        }
+        let detail = self.inner.store.scan_detail(scan).await?;
+        if matches!(
+            detail.scan.state,
+            ScanState::Requested | ScanState::Measuring
+        ) {
+            return Ok(false);
+        }
+        let fits = self.inner.store.fits_for_scan(scan).await?;
+        Ok(fits.iter().all(|f| {
+            !matches!(
+                f.status,
+                crate::store::FitStatus::Queued | crate::store::FitStatus::Running
+            )
+        }))
+    }
+
+    /// Waits until [`Service::scan_settled`], polling; `false` if `timeout` passed first.
+    pub async fn wait_settled(
+        &self,
+        scan: ScanId,
+        timeout: Duration,
+    ) -> Result<bool, ServiceError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if self.scan_settled(scan).await? {
+                return Ok(true);
+            }
+            if Instant::now() >= deadline {
+                return Ok(false);
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    }
+
+    /// Waits until the instruments are free (the reference or scan in progress has ended and
+    /// its fits are queued); `false` if `timeout` passed first.
+    pub async fn wait_idle(&self, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        while self.current_operation().is_some() {
+            if Instant::now() >= deadline {
+                return false;
+            }
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        true
+    }
+
+    /// Exports a complete scan as a `brdfd.scan/1` scan (with its reference readings).
+    pub async fn export_scan(&self, scan: ScanId) -> Result<Scan, ServiceError> {
+        let detail = self.inner.store.scan_detail(scan).await?;
+        if detail.scan.state != ScanState::Complete {
+            return Err(ServiceError::NotComplete {
+                scan,
+                state: detail.scan.state,
+                action: "exporting it",
+            });
+        }
+        Ok(scan_from_detail(&detail)?)
+    }
+
+    /// Graceful shutdown: the reference or scan in progress is aborted (its readings kept, a
+    /// scan marked `aborted` with the reason), running fits stop at their next generation and
+    /// are left to be queued again at the next start, the instruments' connections are closed,
+    /// the recordings finished and the store closed. Returns whether every task ended within
+    /// the grace period.
+    pub async fn shutdown(&self) -> bool {
+        self.inner.stopping.store(true, Ordering::SeqCst);
+        self.inner.events.send(Event::ShuttingDown);
+        let grace = self.inner.settings.shutdown_grace;
+        let all_ended = self.inner.coordinator.lock().await.stop(grace).await;
+        if !all_ended {
+            tracing::warn!("some tasks did not stop within {} s", grace.as_secs());
+        }
+        if let Err(e) = self.inner.devices.clone().shutdown().await {
+            tracing::warn!(error = %e, "the session recording is incomplete");
+        }
+        self.inner.store.close().await;
+        all_ended
+    }
+}
+
+/// Now, ms since the Unix epoch (the store's clock).
+fn crate_now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as i64)
+        .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests;
