@@ -131,7 +131,7 @@ async fn a_missing_reply_times_out_and_is_requested_again() {
     for e in must_fail_naming_geometry(&[no_reply(4)], ReplayOptions::strict().accelerated()).await
     {
         let msg = e.to_string();
-        assert!(msg.contains("no reply within 250 ms"), "{msg}");
+        assert!(msg.contains("no reply within 500 ms"), "{msg}");
         assert!(msg.contains("after 4 sends"), "{msg}");
     }
 }
@@ -163,7 +163,7 @@ async fn garbage_before_a_reply_is_dropped_without_a_resend() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn slow_replies_succeed_under_the_timeout_and_fail_cleanly_beyond_it() {
-    // Every device frame 100 ms late, under the 250 ms reply timeout.
+    // Every device frame 100 ms late, under the 500 ms reply timeout.
     let under = Fault::Slow {
         delay_ms: 100,
         frame: None,
@@ -171,9 +171,9 @@ async fn slow_replies_succeed_under_the_timeout_and_fail_cleanly_beyond_it() {
     for (report, _) in must_recover(&[under]).await {
         assert_eq!(report.requests as usize, 2 + report_geometries(&report));
     }
-    // One reading 1.1 s late: beyond the four 250 ms waits of its four sends.
+    // One reading 2.2 s late: beyond the four 500 ms waits of its four sends.
     let beyond = Fault::Slow {
-        delay_ms: 1100,
+        delay_ms: 2200,
         frame: Some(READING_K),
     };
     for e in must_fail_naming_geometry(&[beyond], ReplayOptions::strict().accelerated()).await {

@@ -221,6 +221,9 @@ fn the_pty_is_raw_and_carries_every_byte_value_unchanged() {
     assert_eq!(report.requests, 1);
 }
 
+// The std lock only serialises pty tests, each on its own runtime; blocking while another
+// test holds it is the point.
+#[allow(clippy::await_holding_lock)]
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_sra_port_opened_by_name_like_a_real_one_replays_too() {
     let _pty = pty_lock();
@@ -244,6 +247,9 @@ async fn the_sra_port_opened_by_name_like_a_real_one_replays_too() {
 /// The N9 reference and the eight samples, each instrument's nine sessions back to back on one
 /// connection, both drivers at once, accelerated: the demo's workload. Prints the wall time;
 /// `cargo bench -p brdfd-mock-devices --bench replay` measures it in a release build.
+// The std lock only serialises pty tests, each on its own runtime; blocking while another
+// test holds it is the point.
+#[allow(clippy::await_holding_lock)]
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn replaying_all_recordings_through_both_drivers_is_fast() {
     let _pty = pty_lock();
