@@ -21,7 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT};
 use crate::model::{FresnelCosine, Params, SpecularGeometry, evaluate};
 use crate::processing::MeasuredBrdf;
-use crate::spectral::{BANDS, Spectrum};
+use crate::spectral::Spectrum;
 
 /// The six ColorChecker patches the cases take their diffuse colour from (BabelColor average
 /// of 30 charts, D. Pascale 2012, embedded by [`crate::synth`]).
@@ -118,6 +118,7 @@ pub fn with_noise(measured: &MeasuredBrdf, relative_sigma: f64, seed: u64) -> Me
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::spectral::BANDS;
     use crate::geometry::by_name;
 
     #[test]
