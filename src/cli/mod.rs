@@ -7,7 +7,9 @@
 use clap::{Parser, Subcommand};
 
 pub mod demo;
+pub mod exchange;
 pub mod fit;
+pub mod report;
 pub mod synth;
 
 /// brdfd: spectral BRDF from two handheld instruments (X-Rite MA-T12 + Canon RA-532H).
@@ -27,6 +29,15 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Fit the eight embedded example scans with all three cost functions and compare them.
     Demo(demo::DemoArgs),
+    /// Write the study report of stored scans: the paper's figures 4–12 (PNG and SVG) and a
+    /// summary (HTML, Markdown) with ΔE00 per sample and cost function, means with 95 % CI and
+    /// sign tests.
+    Report(report::ReportArgs),
+    /// Export stored scans and fits as CGATS.17, X-Rite CxF3, CSV or JSON.
+    ExportFormat(exchange::ExportArgs),
+    /// Turn an instrument software export (MA-T12 CGATS or CxF3 + SRA CSV) or a brdfd export
+    /// into brdfd.scan/1 files.
+    ImportFormat(exchange::ImportArgs),
 }
 
 /// Runs one parsed command line.
@@ -35,6 +46,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fit(args) => fit::run(&args),
         Command::Synth(args) => synth::run(&args),
         Command::Demo(args) => demo::run(&args),
+        Command::Report(args) => report::run(&args),
+        Command::ExportFormat(args) => exchange::export(&args),
+        Command::ImportFormat(args) => exchange::import(&args),
     }
 }
 

@@ -1,7 +1,137 @@
-//! Study reports: the paper's figures 4–12 and statistics (SCIENCE.md §8–9) from a [`Study`].
+//! Study reports: the paper's figures 4–12 and its statistics (SCIENCE.md §8–9), built from an
+//! in-memory [`Study`] so that everything is testable without a database.
 //!
-//! - [`study`]: the in-memory study model (samples, measured BRDF, fits per cost function).
+//! - [`study`]: the study model (samples, measured BRDF, fits per cost function).
+//! - [`analysis`]: which samples take part, mean ΔE00 with 95 % CI, sign tests.
+//! - [`figures`]: figures 4–12 as PNG and SVG (plotters, embedded DejaVu Sans).
+//! - [`summary`]: the summary page in Markdown and HTML.
+//! - [`load`]: builds a study from the store.
+//!
+//! [`write_report`] writes all of it into one directory, showing progress on stderr.
 
+pub mod analysis;
+pub mod figures;
+pub mod load;
 pub mod study;
+pub mod summary;
 
+use std::path::{Path, PathBuf};
+
+pub use analysis::Analysis;
 pub use study::{DoneFit, FitState, FitStudy, SampleStudy, Study};
+
+/// Why a report could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Nothing to report: no sample was selected, or none has a processed scan.
+    #[error("the study has no samples; scan and fit some first, or check the scan ids given")]
+    Empty,
+    #[error("cannot create the report directory {}: {source}", path.display())]
+    Directory {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// A figure could not be drawn or saved (the message is plotters').
+    #[error("cannot draw {}: {message}", path.display())]
+    Figure { path: PathBuf, message: String },
+}
+
+/// What a report wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReportFiles {
+    /// Every figure: PNG and SVG paths.
+    pub figures: Vec<[PathBuf; 2]>,
+    pub markdown: PathBuf,
+    pub html: PathBuf,
+}
+
+/// Writes every figure and the summary pages of `study` into `dir` (created if missing).
+/// `progress` is told each step's name before it runs (a progress bar, or nothing).
+pub fn write_report(
+    study: &Study,
+    dir: &Path,
+    progress: &mut dyn FnMut(&str, usize, usize),
+) -> Result<ReportFiles, ReportError> {
+    if study.samples.is_empty() {
+        return Err(ReportError::Empty);
+    }
+    std::fs::create_dir_all(dir).map_err(|source| ReportError::Directory {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let analysis = Analysis::of(study);
+    let figs = figures::figures(study);
+    let total = figs.len() + 1;
+    let mut written = Vec::new();
+    for (i, f) in figs.iter().enumerate() {
+        progress(&f.stem, i, total);
+        written.push(figures::render(f, study, &analysis, dir)?);
+    }
+    progress("summary", figs.len(), total);
+    let write = |name: &str, text: String| -> Result<PathBuf, ReportError> {
+        let path = dir.join(name);
+        std::fs::write(&path, text).map_err(|source| ReportError::Write {
+            path: path.clone(),
+            source,
+        })?;
+        Ok(path)
+    };
+    let markdown = write("summary.md", summary::markdown(study, &analysis, &figs))?;
+    let html = write("index.html", summary::html(study, &analysis, &figs))?;
+    progress("done", total, total);
+    Ok(ReportFiles {
+        figures: written,
+        markdown,
+        html,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::study::tests::study_from_truth;
+    use super::*;
+
+    #[test]
+    fn a_report_writes_every_figure_and_both_summaries() {
+        let study = study_from_truth(3, Some(2));
+        let dir = tempfile::tempdir().unwrap();
+        let mut steps = Vec::new();
+        let files =
+            write_report(&study, dir.path(), &mut |s, _, _| steps.push(s.to_string())).unwrap();
+        // 4, 5, 6, 7×3, 8×3, 9, 10, 11, 12.
+        assert_eq!(files.figures.len(), 3 + 3 + 3 + 4);
+        for [png, svg] in &files.figures {
+            let bytes = std::fs::read(png).unwrap();
+            assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", png.display());
+            let text = std::fs::read_to_string(svg).unwrap();
+            assert!(text.contains("<svg"), "{}", svg.display());
+        }
+        assert_eq!(steps.first().unwrap(), "fig04-measured-swatches");
+        assert_eq!(steps.last().unwrap(), "done");
+        let md = std::fs::read_to_string(&files.markdown).unwrap();
+        assert!(
+            md.contains("| cf1 vs cf2 | separable / separable |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("- T.Manzana green: m2 fit failed: cancelled by the operator"),
+            "{md}"
+        );
+        assert!(md.contains("![fig12-mean-delta-e](fig12-mean-delta-e.png)"));
+        let html = std::fs::read_to_string(&files.html).unwrap();
+        assert!(html.contains("<img src=\"fig04-measured-swatches.png\""));
+        assert!(html.contains("<td>T.Manzana green</td>"));
+    }
+
+    #[test]
+    fn an_empty_study_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = write_report(&Study::default(), dir.path(), &mut |_, _, _| {}).unwrap_err();
+        assert!(matches!(e, ReportError::Empty));
+    }
+}

@@ -1,0 +1,111 @@
+//! `brdfd export-format` and `brdfd import-format`: scans and fits in the exchange formats
+//! colour tools read (CGATS.17, CxF3, CSV, JSON), and the instruments' own software exports
+//! (MA-T12 CGATS or CxF3 with the SRA's CSV) turned into `brdfd.scan/1` files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+use crate::formats::{self, ExportOptions, Format, ImportOptions};
+use crate::scan::ScanError;
+
+use super::report::StoreSelection;
+
+fn parse_format(s: &str) -> Result<Format, String> {
+    s.parse()
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    /// `cgats` (CGATS.17 text), `cxf3` (X-Rite CxF3 XML), `csv`, or `json` (everything,
+    /// including fitted parameters).
+    #[arg(long, value_name = "cgats|cxf3|csv|json", value_parser = parse_format)]
+    pub format: Format,
+
+    #[command(flatten)]
+    pub select: StoreSelection,
+
+    /// File to write.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+}
+
+pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
+    let study = args.select.load()?;
+    let text = formats::export(&study, args.format, &ExportOptions::default())?;
+    std::fs::write(&args.out, text).with_context(|| format!("writing {}", args.out.display()))?;
+    println!(
+        "{} samples as {} in {}",
+        study.samples.len(),
+        args.format,
+        args.out.display()
+    );
+    Ok(())
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ImportArgs {
+    /// The MA-T12's export (CGATS or CxF3), or a brdfd export in any format.
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+
+    /// Format of FILE; default: from its extension (.cxf → cxf3, .csv, .json, else cgats).
+    #[arg(long, value_name = "cgats|cxf3|csv|json", value_parser = parse_format)]
+    pub format: Option<Format>,
+
+    /// The SRA's CSV export (`sample,geometry,intensity`), needed when FILE has no SRA values.
+    #[arg(long, value_name = "SRA.csv")]
+    pub sra: Option<PathBuf>,
+
+    /// In an instrument's export, the object with this name is the white reference tile.
+    #[arg(long, value_name = "NAME", default_value = formats::DEFAULT_REFERENCE)]
+    pub reference: String,
+
+    /// Directory to write one `brdfd.scan/1` file per sample into (`<sample>.scan.json`);
+    /// `brdfd import` then puts them in the store.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+}
+
+fn format_of(path: &Path) -> Format {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("cxf") | Some("xml") => Format::Cxf3,
+        Some("csv") => Format::Csv,
+        Some("json") => Format::Json,
+        _ => Format::Cgats,
+    }
+}
+
+pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
+    let format = args.format.unwrap_or_else(|| format_of(&args.file));
+    let text = formats::read_text(&args.file)?;
+    let sra = match &args.sra {
+        Some(p) => Some((p.display().to_string(), formats::read_text(p)?)),
+        None => None,
+    };
+    let scans = formats::import(
+        format,
+        &args.file.display().to_string(),
+        &text,
+        sra.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
+        &ImportOptions {
+            reference: args.reference.clone(),
+        },
+    )?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    for scan in &scans {
+        let path = args
+            .out
+            .join(format!("{}.scan.json", crate::synth::slug(&scan.sample)));
+        scan.write_file(&path)
+            .map_err(|e: ScanError| anyhow::anyhow!(e))?;
+        println!("{} → {}", scan.sample, path.display());
+    }
+    Ok(())
+}

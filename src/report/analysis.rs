@@ -1,0 +1,165 @@
+//! The study's statistics (SCIENCE.md §8): which samples take part, the mean ΔE00 per cost
+//! function with its 95 % Student-t interval, and the pairwise sign tests.
+//!
+//! - A sample whose fit failed (or did not finish) under any of the study's cost functions is
+//!   left out of every comparison, as the paper did, and named with the reason.
+//! - The mean is over samples of each sample's mean ΔE00 (over its 14 geometries, and split
+//!   into diffuse and specular); n is the number of samples that take part.
+//! - The sign test pairs the ΔE00 of two cost functions per (sample, geometry): 14 pairs per
+//!   sample, ties dropped. `plus` counts pairs where the first cost function has the larger
+//!   ΔE00 (fits worse).
+
+use crate::cost::CostFunction;
+use crate::evaluation::Evaluation;
+use crate::stats::{MeanCi, SignTest, mean_ci95, sign_test};
+
+use super::study::Study;
+
+/// A sample left out of the comparison, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Exclusion {
+    pub sample: String,
+    /// One entry per cost function whose fit is missing, failed or unfinished.
+    pub reasons: Vec<String>,
+}
+
+/// Mean ΔE00 over samples under one cost function.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CostSummary {
+    pub cost: CostFunction,
+    /// The method(s) that produced the fits.
+    pub method: String,
+    /// Over all 14 geometries; `None` with fewer than two samples.
+    pub all: Option<MeanCi>,
+    pub diffuse: Option<MeanCi>,
+    pub specular: Option<MeanCi>,
+}
+
+/// A sign test between two cost functions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SignRow {
+    pub a: CostFunction,
+    pub b: CostFunction,
+    pub test: SignTest,
+}
+
+/// Everything the summary tables show.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Analysis {
+    pub cost_functions: Vec<CostFunction>,
+    /// Indices into `study.samples` of the samples that take part.
+    pub included: Vec<usize>,
+    pub excluded: Vec<Exclusion>,
+    pub per_cost: Vec<CostSummary>,
+    pub sign_tests: Vec<SignRow>,
+}
+
+impl Analysis {
+    pub fn of(study: &Study) -> Analysis {
+        let cost_functions = study.cost_functions();
+        let mut included = Vec::new();
+        let mut excluded = Vec::new();
+        for (i, s) in study.samples.iter().enumerate() {
+            let reasons: Vec<String> = cost_functions
+                .iter()
+                .filter_map(|&c| match s.fit(c) {
+                    None => Some(format!("no {c} fit")),
+                    Some(f) => f.problem(),
+                })
+                .collect();
+            if reasons.is_empty() {
+                included.push(i);
+            } else {
+                excluded.push(Exclusion {
+                    sample: s.name.clone(),
+                    reasons,
+                });
+            }
+        }
+        let evaluation = |i: usize, c: CostFunction| -> &Evaluation {
+            &study.samples[i]
+                .done(c)
+                .expect("included samples have every fit done")
+                .evaluation
+        };
+        let per_cost = cost_functions
+            .iter()
+            .map(|&c| {
+                let ci = |pick: fn(&Evaluation) -> f64| {
+                    let xs: Vec<f64> = included.iter().map(|&i| pick(evaluation(i, c))).collect();
+                    mean_ci95(&xs)
+                };
+                CostSummary {
+                    cost: c,
+                    method: study.method_of(c),
+                    all: ci(|e| e.all.mean),
+                    diffuse: ci(|e| e.diffuse.mean),
+                    specular: ci(|e| e.specular.mean),
+                }
+            })
+            .collect();
+        let mut sign_tests = Vec::new();
+        for (k, &a) in cost_functions.iter().enumerate() {
+            for &b in &cost_functions[k + 1..] {
+                let paired = |c: CostFunction| -> Vec<f64> {
+                    included
+                        .iter()
+                        .flat_map(|&i| evaluation(i, c).per_geometry)
+                        .collect()
+                };
+                sign_tests.push(SignRow {
+                    a,
+                    b,
+                    test: sign_test(&paired(a), &paired(b)),
+                });
+            }
+        }
+        Analysis {
+            cost_functions,
+            included,
+            excluded,
+            per_cost,
+            sign_tests,
+        }
+    }
+}
+
+/// A p-value readably: four decimals, or scientific notation below 0.0001.
+pub fn format_p(p: f64) -> String {
+    if p < 1e-4 {
+        format!("{p:.2e}")
+    } else {
+        format!("{p:.4}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::study::tests::study_from_truth;
+    use super::*;
+
+    #[test]
+    fn a_sample_failed_under_one_cost_function_is_left_out_of_all() {
+        let study = study_from_truth(5, Some(3));
+        let a = Analysis::of(&study);
+        assert_eq!(a.included, vec![0, 1, 2, 4]);
+        assert_eq!(a.excluded.len(), 1);
+        assert_eq!(a.excluded[0].sample, study.samples[3].name);
+        assert_eq!(
+            a.excluded[0].reasons,
+            vec!["m2 fit failed: cancelled by the operator".to_string()]
+        );
+        // cf1 is left out for the failed sample too, though it finished.
+        assert_eq!(a.per_cost[0].all.unwrap().n, 4);
+        assert_eq!(a.sign_tests.len(), 3);
+        let t = a.sign_tests[0].test;
+        assert_eq!(t.n + t.ties, 4 * 14);
+    }
+
+    #[test]
+    fn p_values_print_readably() {
+        assert_eq!(format_p(0.0703125), "0.0703");
+        assert_eq!(format_p(1.0), "1.0000");
+        assert_eq!(format_p(3.2e-6), "3.20e-6");
+    }
+}

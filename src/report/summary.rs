@@ -1,0 +1,302 @@
+//! The report's summary page, in Markdown (`summary.md`) and HTML (`index.html`) from one
+//! list of blocks: the study, per-sample ΔE00 per cost function, the means with 95 % CI, the
+//! sign tests with n and p, the samples left out and why, and every figure with its caption.
+
+use std::fmt::Write as _;
+
+use crate::stats::MeanCi;
+
+use super::analysis::{Analysis, format_p};
+use super::figures::Figure;
+use super::study::{FitState, Study};
+
+/// A piece of the page.
+enum Block {
+    Heading(String),
+    Para(String),
+    Table {
+        caption: String,
+        head: Vec<String>,
+        rows: Vec<Vec<String>>,
+    },
+    List(Vec<String>),
+    Figure {
+        stem: String,
+        caption: String,
+    },
+}
+
+fn ci(c: &Option<MeanCi>) -> String {
+    match c {
+        Some(c) => format!(
+            "{:.3} ± {:.3} [{:.3}, {:.3}]",
+            c.mean, c.half_width, c.lo, c.hi
+        ),
+        None => "n/a (fewer than 2 samples)".into(),
+    }
+}
+
+fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> {
+    let costs = &analysis.cost_functions;
+    let cost_list = costs
+        .iter()
+        .map(|c| c.name())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let methods = study.methods().join(", ");
+    let strategies = study
+        .specular_strategies()
+        .iter()
+        .map(|s| s.name())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let mut b = vec![
+        Block::Heading("brdfd study report".into()),
+        Block::Para(format!(
+            "{} samples; cost functions {cost_list}; fit method {methods}; SRA readings processed with the {strategies} strategy. Colour: CIE D65, 2° observer, CIELAB, ΔE00 = CIEDE2000 between measured and estimated colour, per geometry (12 MA-T12 + 2 SRA). {} samples take part in the comparison, {} left out.",
+            study.samples.len(),
+            analysis.included.len(),
+            analysis.excluded.len()
+        )),
+        Block::Heading("Mean ΔE00 per sample and cost function".into()),
+    ];
+    let mut head = vec!["sample".to_string()];
+    for c in costs {
+        for part in ["all", "diffuse", "specular", "max"] {
+            head.push(format!("{c} {part}"));
+        }
+    }
+    let rows = study
+        .samples
+        .iter()
+        .map(|s| {
+            let mut row = vec![s.name.clone()];
+            for &c in costs {
+                match s.fit(c).map(|f| &f.state) {
+                    Some(FitState::Done(d)) => {
+                        let e = &d.evaluation;
+                        row.extend(
+                            [e.all.mean, e.diffuse.mean, e.specular.mean, e.all.max]
+                                .map(|v| format!("{v:.3}")),
+                        );
+                    }
+                    Some(FitState::Failed { .. }) => {
+                        row.extend(["failed".into(), "".into(), "".into(), "".into()])
+                    }
+                    Some(FitState::Unfinished { status }) => {
+                        row.extend([status.clone(), "".into(), "".into(), "".into()])
+                    }
+                    None => row.extend(["no fit".into(), "".into(), "".into(), "".into()]),
+                }
+            }
+            row
+        })
+        .collect();
+    b.push(Block::Table {
+        caption: format!(
+            "Table 1. Mean ΔE00 between measured and estimated colour per sample: over all 14 geometries, the 12 diffuse (MA-T12) and the 2 specular (SRA) ones, and the maximum; per cost function ({cost_list}), method {methods}."
+        ),
+        head,
+        rows,
+    });
+    b.push(Block::Heading(
+        "Mean ΔE00 per cost function, 95 % confidence interval".into(),
+    ));
+    b.push(Block::Table {
+        caption: format!(
+            "Table 2. Mean over the {} samples that take part of each sample's mean ΔE00, ± half-width [low, high] of the 95 % confidence interval (Student t, n − 1 degrees of freedom).",
+            analysis.included.len()
+        ),
+        head: ["cost function", "method", "n", "all geometries", "diffuse (MA-T12)", "specular (SRA)"]
+            .map(String::from)
+            .to_vec(),
+        rows: analysis
+            .per_cost
+            .iter()
+            .map(|s| {
+                vec![
+                    s.cost.to_string(),
+                    s.method.clone(),
+                    s.all.map_or(analysis.included.len(), |c| c.n).to_string(),
+                    ci(&s.all),
+                    ci(&s.diffuse),
+                    ci(&s.specular),
+                ]
+            })
+            .collect(),
+    });
+    b.push(Block::Heading("Sign tests between cost functions".into()));
+    b.push(Block::Table {
+        caption: "Table 3. Exact two-sided sign test on the paired ΔE00 of two cost functions per (sample, geometry) of the samples that take part, ties dropped: n pairs, \"A worse\" where the first has the larger ΔE00, p = min(1, 2·P(X ≤ min(k, n − k))), X ~ Bin(n, ½).".into(),
+        head: ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"]
+            .map(String::from)
+            .to_vec(),
+        rows: analysis
+            .sign_tests
+            .iter()
+            .map(|r| {
+                vec![
+                    format!("{} vs {}", r.a, r.b),
+                    format!("{} / {}", study.method_of(r.a), study.method_of(r.b)),
+                    r.test.n.to_string(),
+                    r.test.plus.to_string(),
+                    r.test.minus.to_string(),
+                    r.test.ties.to_string(),
+                    format_p(r.test.p),
+                ]
+            })
+            .collect(),
+    });
+    b.push(Block::Heading("Samples left out".into()));
+    if analysis.excluded.is_empty() {
+        b.push(Block::Para(
+            "None: every sample's fit finished under every cost function.".into(),
+        ));
+    } else {
+        b.push(Block::Para(
+            "A sample whose fit failed under any cost function is left out of the means, the confidence intervals and the sign tests for all cost functions (as the paper did); its finished fits still appear in Table 1 and the figures.".into(),
+        ));
+        b.push(Block::List(
+            analysis
+                .excluded
+                .iter()
+                .map(|e| format!("{}: {}", e.sample, e.reasons.join("; ")))
+                .collect(),
+        ));
+    }
+    b.push(Block::Heading("Figures".into()));
+    for f in figures {
+        b.push(Block::Figure {
+            stem: f.stem.clone(),
+            caption: f.caption.clone(),
+        });
+    }
+    b
+}
+
+fn md_cell(s: &str) -> String {
+    s.replace('|', "\\|")
+}
+
+/// The summary as Markdown.
+pub fn markdown(study: &Study, analysis: &Analysis, figures: &[Figure]) -> String {
+    let mut t = String::new();
+    for block in blocks(study, analysis, figures) {
+        match block {
+            Block::Heading(h) if t.is_empty() => {
+                let _ = writeln!(t, "# {h}\n");
+            }
+            Block::Heading(h) => {
+                let _ = writeln!(t, "## {h}\n");
+            }
+            Block::Para(p) => {
+                let _ = writeln!(t, "{p}\n");
+            }
+            Block::Table {
+                caption,
+                head,
+                rows,
+            } => {
+                let _ = writeln!(t, "{caption}\n");
+                let _ = writeln!(
+                    t,
+                    "| {} |",
+                    head.iter()
+                        .map(|h| md_cell(h))
+                        .collect::<Vec<_>>()
+                        .join(" | ")
+                );
+                let _ = writeln!(t, "|{}", "---|".repeat(head.len()));
+                for r in rows {
+                    let _ = writeln!(
+                        t,
+                        "| {} |",
+                        r.iter().map(|c| md_cell(c)).collect::<Vec<_>>().join(" | ")
+                    );
+                }
+                t.push('\n');
+            }
+            Block::List(items) => {
+                for i in items {
+                    let _ = writeln!(t, "- {i}");
+                }
+                t.push('\n');
+            }
+            Block::Figure { stem, caption } => {
+                let _ = writeln!(
+                    t,
+                    "![{stem}]({stem}.png)\n\n{caption} ([SVG]({stem}.svg))\n"
+                );
+            }
+        }
+    }
+    t
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// The summary as a self-contained HTML page (figures linked beside it).
+pub fn html(study: &Study, analysis: &Analysis, figures: &[Figure]) -> String {
+    let mut t = String::from(
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>brdfd study report</title>\n<style>\nbody{font-family:sans-serif;max-width:1300px;margin:2em auto;padding:0 1em;line-height:1.4}\ntable{border-collapse:collapse;margin:.5em 0 1.5em}\nth,td{border:1px solid #aaa;padding:.25em .6em;text-align:right}\nth:first-child,td:first-child{text-align:left}\ncaption{caption-side:top;text-align:left;padding:.3em 0;max-width:1100px}\nfigure{margin:1.5em 0}\nimg{max-width:100%;border:1px solid #ddd}\n</style>\n</head>\n<body>\n",
+    );
+    let mut first = true;
+    for block in blocks(study, analysis, figures) {
+        match block {
+            Block::Heading(h) => {
+                let tag = if first { "h1" } else { "h2" };
+                first = false;
+                let _ = writeln!(t, "<{tag}>{}</{tag}>", esc(&h));
+            }
+            Block::Para(p) => {
+                let _ = writeln!(t, "<p>{}</p>", esc(&p));
+            }
+            Block::Table {
+                caption,
+                head,
+                rows,
+            } => {
+                let _ = writeln!(t, "<table>\n<caption>{}</caption>", esc(&caption));
+                let _ = writeln!(
+                    t,
+                    "<tr>{}</tr>",
+                    head.iter()
+                        .map(|h| format!("<th>{}</th>", esc(h)))
+                        .collect::<String>()
+                );
+                for r in rows {
+                    let _ = writeln!(
+                        t,
+                        "<tr>{}</tr>",
+                        r.iter()
+                            .map(|c| format!("<td>{}</td>", esc(c)))
+                            .collect::<String>()
+                    );
+                }
+                let _ = writeln!(t, "</table>");
+            }
+            Block::List(items) => {
+                let _ = writeln!(t, "<ul>");
+                for i in items {
+                    let _ = writeln!(t, "<li>{}</li>", esc(&i));
+                }
+                let _ = writeln!(t, "</ul>");
+            }
+            Block::Figure { stem, caption } => {
+                let _ = writeln!(
+                    t,
+                    "<figure>\n<img src=\"{stem}.png\" alt=\"{}\">\n<figcaption>{} (<a href=\"{stem}.svg\">SVG</a>)</figcaption>\n</figure>",
+                    esc(&caption),
+                    esc(&caption)
+                );
+            }
+        }
+    }
+    t.push_str("</body>\n</html>\n");
+    t
+}
