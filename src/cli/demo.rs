@@ -1,66 +1,36 @@
-//! `brdfd demo`: the main job on the embedded default — fit the eight example scans (synthetic,
-//! 1 % noise, from `tests/data/`) with all three cost functions and compare them as the paper
-//! does: mean ΔE00 per sample and cost function (diffuse and specular), the mean over samples
-//! with its 95 % confidence interval, and sign tests between cost functions (SCIENCE.md §8).
+//! `brdfd demo`: the main job on the embedded default, through the whole daemon. With nothing
+//! configured it replays the committed recordings — the Munsell N9 reference, then the eight
+//! synthetic matt samples — on the simulated MA-T12 and SRA (strict, accelerated), through the
+//! driver tasks, the scan orchestrator and the store (a local SQLite file, by default
+//! `./brdfd-demo/brdfd.db`), fits every scan with the three cost functions on the fit worker,
+//! and prints per sample and cost function the mean ΔE00 (diffuse and specular), the mean over
+//! samples with its 95 % interval and the sign tests between cost functions (SCIENCE.md §8),
+//! where the database and the outputs are, and where the time went (replay, store, fit).
+//!
+//! Running it again reuses the database: the new run's reference, scans and fits are added
+//! beside the old ones (nothing is deleted), and the report covers the new run. The outputs
+//! (`report.txt`, `scans/*.scan.json`) are rewritten.
 
 use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
 use crate::cost::CostFunction;
-use crate::fit::{FitReport, FitRequest, fit_scan};
 use crate::optimise::{Method, Settings};
-use crate::scan::Scan;
+use crate::service::{ServiceSettings, TimingSplit, scan_from_detail};
 use crate::stats::{mean_ci95, sign_test};
+use crate::store::{EvaluationRecord, FitDetail, Store};
 
-/// The embedded example scans: (file name, document).
-pub const EXAMPLE_SCANS: [(&str, &str); 8] = [
-    (
-        "t-freesia-pink.noisy.scan.json",
-        include_str!("../../tests/data/t-freesia-pink.noisy.scan.json"),
-    ),
-    (
-        "t-prairie-green.noisy.scan.json",
-        include_str!("../../tests/data/t-prairie-green.noisy.scan.json"),
-    ),
-    (
-        "t-manzana-green.noisy.scan.json",
-        include_str!("../../tests/data/t-manzana-green.noisy.scan.json"),
-    ),
-    (
-        "t-mandarin-orange.noisy.scan.json",
-        include_str!("../../tests/data/t-mandarin-orange.noisy.scan.json"),
-    ),
-    (
-        "t-saffron-yellow.noisy.scan.json",
-        include_str!("../../tests/data/t-saffron-yellow.noisy.scan.json"),
-    ),
-    (
-        "t-lavender-blue.noisy.scan.json",
-        include_str!("../../tests/data/t-lavender-blue.noisy.scan.json"),
-    ),
-    (
-        "t-sky-blue.noisy.scan.json",
-        include_str!("../../tests/data/t-sky-blue.noisy.scan.json"),
-    ),
-    (
-        "t-pebble-grey.noisy.scan.json",
-        include_str!("../../tests/data/t-pebble-grey.noisy.scan.json"),
-    ),
-];
-
-/// The embedded example scans, parsed.
-pub fn example_scans() -> anyhow::Result<Vec<Scan>> {
-    EXAMPLE_SCANS
-        .iter()
-        .map(|(name, text)| {
-            Scan::from_json(text.as_bytes()).with_context(|| format!("embedded scan {name}"))
-        })
-        .collect()
-}
+use super::replay::{ReplayObject, ReplayOutcome, ReplaySetup, default_jobs, fits_of, options};
 
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
+    /// Directory for the database and the outputs (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "brdfd-demo")]
+    pub dir: PathBuf,
+
     /// Optimiser for every fit (see `brdfd fit --help`).
     #[arg(long, value_name = "NAME", default_value_t = Method::default())]
     pub method: Method,
@@ -68,67 +38,215 @@ pub struct DemoArgs {
     /// Seed of every fit.
     #[arg(long, value_name = "N", default_value_t = Settings::default().seed)]
     pub seed: u64,
+
+    /// Fits running at once (default: one per core).
+    #[arg(long, value_name = "N")]
+    pub jobs: Option<usize>,
 }
 
-/// Every fit of the demo: `fits[sample][cost function]`, cost functions in [`CostFunction::ALL`] order.
-pub fn fit_all(scans: &[Scan], method: Method, seed: u64) -> anyhow::Result<Vec<Vec<FitReport>>> {
-    scans
-        .iter()
-        .map(|scan| {
-            CostFunction::ALL
+/// One row of the report: a sample's fit under one cost function.
+#[derive(Debug, Clone)]
+pub struct DemoRow {
+    pub sample: String,
+    pub scan: i64,
+    pub cost_function: CostFunction,
+    pub evaluation: EvaluationRecord,
+    pub cost: f64,
+    pub wall_ms: f64,
+}
+
+/// Everything the demo measured, for the report.
+#[derive(Debug, Clone)]
+pub struct DemoResult {
+    /// `rows[sample][cost function]`, cost functions in [`CostFunction::ALL`] order.
+    pub rows: Vec<Vec<DemoRow>>,
+    pub outcome: ReplayOutcome,
+    pub timings: TimingSplit,
+    pub jobs: usize,
+    pub method: Method,
+    pub seed: u64,
+}
+
+/// Runs the demo into `db`; the service is stopped at the end, the store left open.
+pub async fn run_demo(store: &Store, args: &DemoArgs) -> anyhow::Result<DemoResult> {
+    let objects = ReplayObject::builtin()?;
+    let jobs = args.jobs.unwrap_or_else(default_jobs).max(1);
+    let settings = ServiceSettings {
+        cost_functions: CostFunction::ALL.to_vec(),
+        method: args.method,
+        seed: args.seed,
+        max_concurrent_fits: jobs,
+        ..ServiceSettings::default()
+    };
+    let setup = ReplaySetup {
+        options: options(false, false),
+        settings,
+        timeout: Duration::from_secs(600),
+    };
+    let (outcome, timings) = super::replay::replay_objects(store.clone(), &objects, &setup).await?;
+    if !outcome.problems.is_empty() {
+        anyhow::bail!("the replay went wrong: {}", outcome.problems.join("; "));
+    }
+    let fits = fits_of(store, &outcome.scans).await?;
+    let mut rows = Vec::new();
+    for ((sample, scan), fits) in outcome.scans.iter().zip(fits) {
+        let mut per_cost = Vec::new();
+        for cost in CostFunction::ALL {
+            let f = fits
                 .iter()
-                .map(|&cost| {
-                    let request = FitRequest {
-                        settings: Settings {
-                            method,
-                            cost,
-                            seed,
-                            ..Settings::default()
-                        },
-                        ..FitRequest::default()
-                    };
-                    Ok(fit_scan(scan, &request)?)
-                })
-                .collect()
-        })
-        .collect()
+                .find(|f| f.run.cost_function == cost)
+                .with_context(|| format!("scan {scan} has no {cost} fit"))?;
+            per_cost.push(row(sample, scan.0, f)?);
+        }
+        rows.push(per_cost);
+    }
+    Ok(DemoResult {
+        rows,
+        outcome,
+        timings,
+        jobs,
+        method: args.method,
+        seed: args.seed,
+    })
+}
+
+fn row(sample: &str, scan: i64, f: &FitDetail) -> anyhow::Result<DemoRow> {
+    let (Some(evaluation), Some(result)) = (f.evaluation, f.run.result.as_ref()) else {
+        anyhow::bail!(
+            "fit {} of scan {scan} ({}) is {}{}",
+            f.run.id,
+            f.run.cost_function,
+            f.run.status,
+            f.run
+                .error
+                .as_deref()
+                .map(|e| format!(": {e}"))
+                .unwrap_or_default()
+        );
+    };
+    Ok(DemoRow {
+        sample: sample.to_string(),
+        scan,
+        cost_function: f.run.cost_function,
+        evaluation,
+        cost: result.cost,
+        wall_ms: result.wall_ms,
+    })
 }
 
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
-    let scans = example_scans()?;
-    let fits = fit_all(&scans, args.method, args.seed)?;
-    print!("{}", summary(&fits, args.method, args.seed));
+    crate::cli::serve::init_logging(crate::config::LogLevel::Warn, false);
+    let started = Instant::now();
+    std::fs::create_dir_all(&args.dir)
+        .with_context(|| format!("cannot create {}", args.dir.display()))?;
+    let db = args.dir.join("brdfd.db");
+    let existed = db.exists();
+    crate::cli::serve::runtime()?.block_on(async {
+        let store = Store::open(&db).await?;
+        let result = run_demo(&store, args).await?;
+        let scans_dir = args.dir.join("scans");
+        write_scans(&store, &result, &scans_dir).await?;
+        store.close().await;
+        let wall = started.elapsed();
+        let mut text = summary(&result);
+        let _ = writeln!(
+            text,
+            "timing: {:.2} s wall in all; replay of the 9 recordings through the devices {:.2} s \
+             (instruments measuring {:.2} s), store {:.3} s, fitting {:.2} s of fit time on {} \
+             thread(s), fits all done {:.2} s after the first request",
+            wall.as_secs_f64(),
+            result.outcome.replay_wall.as_secs_f64(),
+            result.timings.acquire_s,
+            result.timings.store_s,
+            result.timings.fit_s,
+            result.jobs,
+            result.outcome.total_wall.as_secs_f64()
+        );
+        let report = args.dir.join("report.txt");
+        let _ = writeln!(
+            text,
+            "database: {} ({}; `brdfd serve --db {}` serves it, `sqlite3` reads it)",
+            db.display(),
+            if existed {
+                "reused: this run's scans were added"
+            } else {
+                "new"
+            },
+            db.display()
+        );
+        let _ = writeln!(
+            text,
+            "outputs: {} (this report), {}/ (the 8 scans as brdfd.scan/1; `brdfd fit --input` \
+             refits one)",
+            report.display(),
+            scans_dir.display()
+        );
+        std::fs::write(&report, &text)
+            .with_context(|| format!("cannot write {}", report.display()))?;
+        print!("{text}");
+        Ok(())
+    })
+}
+
+async fn write_scans(store: &Store, result: &DemoResult, dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    for (sample, scan) in &result.outcome.scans {
+        let detail = store.scan_detail(*scan).await?;
+        let file = scan_from_detail(&detail)?;
+        let path = dir.join(format!("{}.scan.json", crate::synth::slug(sample)));
+        file.write_file(&path)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     Ok(())
 }
 
 /// The demo's printed report.
-pub fn summary(fits: &[Vec<FitReport>], method: Method, seed: u64) -> String {
+pub fn summary(result: &DemoResult) -> String {
+    let rows = &result.rows;
     let mut t = String::new();
+    let scans: Vec<String> = result
+        .outcome
+        .scans
+        .iter()
+        .map(|(_, id)| id.to_string())
+        .collect();
     let _ = writeln!(
         t,
-        "{} example scans (synthetic, 1 % noise) × {} cost functions, method {method}, seed {seed}",
-        fits.len(),
-        CostFunction::ALL.len()
+        "replayed the committed recordings (synthetic N9 reference + {} samples) through the \
+         daemon: reference {}, scans {}; {} cost functions, method {}, seed {}",
+        rows.len(),
+        result
+            .outcome
+            .references
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(","),
+        scans.join(","),
+        CostFunction::ALL.len(),
+        result.method,
+        result.seed
     );
     let _ = writeln!(t, "mean ΔE00 between measured and fitted colour per sample");
     let _ = writeln!(
         t,
-        "{:<20} {:<4} {:>9} {:>9} {:>9} {:>10} {:>9}",
-        "sample", "cost", "diffuse", "specular", "all", "cost value", "wall ms"
+        "{:<20} {:>4} {:<4} {:>9} {:>9} {:>9} {:>10} {:>9}",
+        "sample", "scan", "cost", "diffuse", "specular", "all", "cost value", "wall ms"
     );
-    for sample in fits {
+    for sample in rows {
         for r in sample {
             let e = &r.evaluation;
             let _ = writeln!(
                 t,
-                "{:<20} {:<4} {:>9.3} {:>9.3} {:>9.3} {:>10.3e} {:>9.1}",
+                "{:<20} {:>4} {:<4} {:>9.3} {:>9.3} {:>9.3} {:>10.3e} {:>9.1}",
                 r.sample,
-                r.request.settings.cost.name(),
+                r.scan,
+                r.cost_function.name(),
                 e.diffuse.mean,
                 e.specular.mean,
                 e.all.mean,
-                r.outcome.cost,
-                r.outcome.wall_ms
+                r.cost,
+                r.wall_ms
             );
         }
     }
@@ -137,8 +255,8 @@ pub fn summary(fits: &[Vec<FitReport>], method: Method, seed: u64) -> String {
         "over samples: mean of the per-sample means, 95 % CI (Student t)"
     );
     for (k, cost) in CostFunction::ALL.iter().enumerate() {
-        let ci = |pick: fn(&FitReport) -> f64| {
-            let xs: Vec<f64> = fits.iter().map(|s| pick(&s[k])).collect();
+        let ci = |pick: fn(&DemoRow) -> f64| {
+            let xs: Vec<f64> = rows.iter().map(|s| pick(&s[k])).collect();
             match mean_ci95(&xs) {
                 Some(c) => format!("{:.3} ± {:.3}", c.mean, c.half_width),
                 None => "n/a".to_string(),
@@ -158,7 +276,7 @@ pub fn summary(fits: &[Vec<FitReport>], method: Method, seed: u64) -> String {
         "sign tests on paired ΔE00 per (sample, geometry), ties dropped"
     );
     let paired = |k: usize| -> Vec<f64> {
-        fits.iter()
+        rows.iter()
             .flat_map(|s| s[k].evaluation.per_geometry)
             .collect()
     };
@@ -186,21 +304,5 @@ fn format_p(p: f64) -> String {
         format!("{p:.1e}")
     } else {
         format!("{p:.3}")
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn embedded_scans_parse_and_are_the_eight_samples() {
-        let scans = example_scans().unwrap();
-        let names: Vec<&str> = scans.iter().map(|s| s.sample.as_str()).collect();
-        let truths: Vec<String> = crate::synth::paper_samples()
-            .into_iter()
-            .map(|t| t.sample)
-            .collect();
-        assert_eq!(names, truths);
     }
 }

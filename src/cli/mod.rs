@@ -9,7 +9,11 @@ use clap::{Parser, Subcommand};
 pub mod demo;
 pub mod exchange;
 pub mod fit;
+pub mod ops;
+pub mod record;
+pub mod replay;
 pub mod report;
+pub mod serve;
 pub mod synth;
 
 /// brdfd: spectral BRDF from two handheld instruments (X-Rite MA-T12 + Canon RA-532H).
@@ -27,7 +31,9 @@ pub enum Command {
     Fit(fit::FitArgs),
     /// Write the eight synthetic example scans and their ground truth to a directory.
     Synth(synth::SynthArgs),
-    /// Fit the eight embedded example scans with all three cost functions and compare them.
+    /// The main job on the embedded default: replay the committed recordings (N9 reference and
+    /// eight samples) through the whole daemon into a local SQLite file, fit all three cost
+    /// functions, and compare them.
     Demo(demo::DemoArgs),
     /// Write the study report of stored scans: the paper's figures 4–12 (PNG and SVG) and a
     /// summary (HTML, Markdown) with ΔE00 per sample and cost function, means with 95 % CI and
@@ -38,6 +44,31 @@ pub enum Command {
     /// Turn an instrument software export (MA-T12 CGATS or CxF3 + SRA CSV) or a brdfd export
     /// into brdfd.scan/1 files.
     ImportFormat(exchange::ImportArgs),
+    /// Run the daemon: instruments, scan orchestrator, fit worker and the local HTTP API.
+    Serve(serve::ServeArgs),
+    /// Ask the running daemon to measure the white reference tile (Munsell N9).
+    Reference(ops::ReferenceArgs),
+    /// Ask the running daemon to scan a sample, with live progress per reading and per fit.
+    Scan(ops::ScanArgs),
+    /// List the scans in the running daemon's store, newest first.
+    Scans(ops::ScansArgs),
+    /// Show one scan: its state, readings, reference and fits with their ΔE00.
+    Show(ops::ShowArgs),
+    /// Fit a stored scan again (other cost functions, method or seed).
+    Refit(ops::RefitArgs),
+    /// Stop the reference or scan in progress (its readings are kept).
+    Abort(ops::DaemonArgs),
+    /// The running daemon's state: what it is doing, the reference in force, fits pending.
+    Status(ops::DaemonArgs),
+    /// Write a stored scan as a brdfd.scan/1 file.
+    Export(ops::ExportArgs),
+    /// Import a brdfd.scan/1 file into the store; the daemon fits it.
+    Import(ops::ImportArgs),
+    /// Replay recorded session files against the whole daemon in-process (simulated devices →
+    /// store → fits).
+    Replay(replay::ReplayArgs),
+    /// Measure once and record every frame to and from both instruments into session files.
+    Record(record::RecordArgs),
 }
 
 /// Runs one parsed command line.
@@ -49,6 +80,18 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Report(args) => report::run(&args),
         Command::ExportFormat(args) => exchange::export(&args),
         Command::ImportFormat(args) => exchange::import(&args),
+        Command::Serve(args) => serve::run(&args),
+        Command::Reference(args) => ops::reference(&args),
+        Command::Scan(args) => ops::scan(&args),
+        Command::Scans(args) => ops::scans(&args),
+        Command::Show(args) => ops::show(&args),
+        Command::Refit(args) => ops::refit(&args),
+        Command::Abort(args) => ops::abort(&args),
+        Command::Status(args) => ops::status(&args),
+        Command::Export(args) => ops::export(&args),
+        Command::Import(args) => ops::import(&args),
+        Command::Replay(args) => replay::run(&args),
+        Command::Record(args) => record::run(&args),
     }
 }
 

@@ -515,6 +515,14 @@ impl Service {
     /// the recordings finished and the store closed. Returns whether every task ended within
     /// the grace period.
     pub async fn shutdown(&self) -> bool {
+        let all_ended = self.stop_keeping_store().await;
+        self.inner.store.close().await;
+        all_ended
+    }
+
+    /// [`Service::shutdown`] without closing the store, for callers that read it afterwards
+    /// (`brdfd replay`, `brdfd demo`, tests).
+    pub async fn stop_keeping_store(&self) -> bool {
         self.inner.stopping.store(true, Ordering::SeqCst);
         self.inner.events.send(Event::ShuttingDown);
         let grace = self.inner.settings.shutdown_grace;
@@ -525,7 +533,6 @@ impl Service {
         if let Err(e) = self.inner.devices.clone().shutdown().await {
             tracing::warn!(error = %e, "the session recording is incomplete");
         }
-        self.inner.store.close().await;
         all_ended
     }
 }

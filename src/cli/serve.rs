@@ -1,0 +1,121 @@
+//! `brdfd serve`: the daemon. Reads the configuration (`--config`, else the defaults: simulated
+//! instruments replaying the embedded recordings, `brdfd.db` in the working directory, the API
+//! on 127.0.0.1:7878), opens the store, starts the instruments' driver tasks, the service and
+//! the HTTP API, prints one line saying where it listens, and runs until SIGTERM or SIGINT,
+//! when it shuts down gracefully (see [`crate::service::Service::shutdown`]).
+//!
+//! Simulated instruments answer in lenient mode at the recorded timing: any sequence of
+//! references and scans gets the recorded readings in turn, at the pace of real instruments.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+
+use crate::api::ApiServer;
+use crate::config::{Config, LogLevel};
+use crate::service::{Devices, Service, ServiceOptions, ServiceSettings};
+use crate::store::Store;
+
+#[derive(Debug, clap::Args)]
+pub struct ServeArgs {
+    /// The configuration file (see config/brdfd.toml, every key commented). Without it the
+    /// defaults run on simulated instruments.
+    #[arg(long, short, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+
+    /// Listen here instead of [api] listen (port 0: any free port; the line printed at start
+    /// says which).
+    #[arg(long, value_name = "IP:PORT")]
+    pub listen: Option<SocketAddr>,
+
+    /// Use this SQLite file instead of [store] path.
+    #[arg(long, value_name = "FILE")]
+    pub db: Option<PathBuf>,
+}
+
+/// Sets up `tracing` output on stderr: text or one JSON object per line, at `level` (the
+/// `RUST_LOG` environment variable, if set, takes precedence). Safe to call twice.
+pub fn init_logging(level: LogLevel, json: bool) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level.as_str()));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    let _ = if json {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}
+
+/// A runtime for the daemon: two worker threads (the lab PC has two cores; fits run on the
+/// blocking pool), which also keeps the idle footprint small.
+pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
+}
+
+pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
+    let mut config = Config::load_or_default(args.config.as_deref())?;
+    if let Some(listen) = args.listen {
+        config.api.listen = listen;
+    }
+    if let Some(db) = &args.db {
+        config.store.path = db.clone();
+    }
+    init_logging(config.log.level, config.log.json);
+    runtime()?.block_on(serve(config))
+}
+
+async fn serve(config: Config) -> anyhow::Result<()> {
+    let store = Store::open(&config.store.path).await?;
+    let devices = Devices::from_config(&config.devices, &mock_devices::ReplayOptions::lenient())?;
+    let service = Service::start(
+        store,
+        devices,
+        ServiceSettings::from_config(&config),
+        ServiceOptions::default(),
+    )
+    .await?;
+    let api = ApiServer::start(service.clone(), config.api.listen).await?;
+    // The one line on stdout: scripts (and the end-to-end tests) read the address from it.
+    println!(
+        "brdfd {} listening on http://{} (store {})",
+        env!("CARGO_PKG_VERSION"),
+        api.local_addr(),
+        config.store.path.display()
+    );
+    tracing::info!(addr = %api.local_addr(), store = %config.store.path.display(), "serving");
+    wait_for_signal().await?;
+    tracing::info!("shutting down");
+    let clean = service.shutdown().await;
+    api.stop(Duration::from_secs(1)).await;
+    if !clean {
+        anyhow::bail!("some tasks did not stop within the grace period");
+    }
+    tracing::info!("stopped");
+    Ok(())
+}
+
+/// SIGTERM (systemd's stop) or SIGINT (Ctrl-C).
+async fn wait_for_signal() -> anyhow::Result<()> {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        let mut term = signal(SignalKind::terminate()).context("cannot listen for SIGTERM")?;
+        tokio::select! {
+            _ = term.recv() => {}
+            r = tokio::signal::ctrl_c() => r.context("cannot listen for SIGINT")?,
+        }
+    }
+    #[cfg(not(unix))]
+    tokio::signal::ctrl_c()
+        .await
+        .context("cannot listen for Ctrl-C")?;
+    Ok(())
+}
