@@ -12,6 +12,9 @@ use crate::report::load::{Selection, from_store};
 use crate::report::{Study, write_report};
 use crate::store::{ScanId, Store};
 
+/// Where `brdfd demo` writes its store by default (its `--dir`, then `brdfd.db`).
+pub const DEMO_STORE: &str = "brdfd-demo/brdfd.db";
+
 /// Which stored scans, and where the store is.
 #[derive(Debug, clap::Args)]
 #[command(group = clap::ArgGroup::new("which").required(true).args(["all", "scans"]))]
@@ -24,7 +27,9 @@ pub struct StoreSelection {
     #[arg(value_name = "SCAN")]
     pub scans: Vec<i64>,
 
-    /// The SQLite store to read; default: the `[store] path` of the configuration.
+    /// The SQLite store to read; default: the `[store] path` of the configuration
+    /// (`brdfd.db`), or, when that file does not exist, the store `brdfd demo` writes
+    /// (`brdfd-demo/brdfd.db`).
     #[arg(long, value_name = "PATH")]
     pub db: Option<PathBuf>,
 
@@ -37,10 +42,22 @@ pub struct StoreSelection {
 impl StoreSelection {
     /// The store file this selection reads.
     pub fn db_path(&self) -> anyhow::Result<PathBuf> {
-        match &self.db {
-            Some(p) => Ok(p.clone()),
-            None => Ok(Config::load_or_default(self.config.as_deref())?.store.path),
+        if let Some(p) = &self.db {
+            return Ok(p.clone());
         }
+        let configured = Config::load_or_default(self.config.as_deref())?.store.path;
+        // `brdfd demo` then `brdfd report --all` should just work on a fresh machine, where
+        // the daemon's store does not exist but the demo's does.
+        let demo = Path::new(DEMO_STORE);
+        if self.config.is_none() && !configured.exists() && demo.exists() {
+            eprintln!(
+                "no store at {}; reading the demo's store {}",
+                configured.display(),
+                demo.display()
+            );
+            return Ok(demo.to_path_buf());
+        }
+        Ok(configured)
     }
 
     fn selection(&self) -> Selection {
