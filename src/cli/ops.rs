@@ -427,7 +427,7 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
             id(&r, "id"),
             s(&r, "sample"),
             s(&r, "state"),
-            r["reading_count"],
+            id(&r, "reading_count"),
             utc(r["requested_at_ms"].as_i64().unwrap_or(0)),
             s(&r, "reason")
         );

@@ -1,0 +1,140 @@
+//! Helpers shared by the daemon's end-to-end tests (`tests/daemon_*.rs`): a service started
+//! in-process on simulated instruments and a store in a temporary directory, driver settings
+//! with short reconnection times, the embedded recordings as scripts, a lock that runs one
+//! daemon test at a time, and a bound on every test.
+
+#![allow(dead_code)] // each test binary uses a different subset
+
+use std::future::Future;
+use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard};
+use std::time::Duration;
+
+use brdfd::service::{Devices, Service, ServiceOptions, ServiceSettings};
+use brdfd::store::{ReferenceId, ReferenceStatus, ScanId, Store};
+use drivers::{DriverConfig, Instrument};
+use mock_devices::{ReplayOptions, Script};
+use tempfile::TempDir;
+
+/// Every test body runs under this: a hang fails the test instead of stalling the suite.
+pub const TEST_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// How long one measurement or one scan's fits may take before a helper gives up.
+pub const STEP_TIMEOUT: Duration = Duration::from_secs(60);
+
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// Daemon tests take this: each starts driver threads, pseudo-terminals and fits, and the
+/// timing-sensitive ones (a scan killed mid-way) should not compete for the two cores.
+pub fn serial() -> MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Runs `body` under [`TEST_TIMEOUT`].
+pub async fn bounded<T>(body: impl Future<Output = T>) -> T {
+    tokio::time::timeout(TEST_TIMEOUT, body)
+        .await
+        .expect("the test did not finish within its time bound")
+}
+
+/// Driver settings with quick reconnection: a pulled cable fails the command in well under a
+/// second instead of the default's few seconds.
+pub fn fast_driver_config() -> DriverConfig {
+    DriverConfig {
+        reconnect_attempts: 3,
+        backoff_initial: Duration::from_millis(10),
+        backoff_max: Duration::from_millis(40),
+        ..DriverConfig::default()
+    }
+}
+
+/// Service settings for tests: the defaults (three cost functions, separable, seed 1), two
+/// fits at once.
+pub fn settings() -> ServiceSettings {
+    ServiceSettings {
+        max_concurrent_fits: 2,
+        ..ServiceSettings::default()
+    }
+}
+
+/// One instrument's script of every embedded recording, N9 first.
+pub fn playlist(instrument: Instrument) -> Script {
+    mock_devices::recordings::playlist(instrument).expect("embedded recordings")
+}
+
+/// Strict, accelerated replay.
+pub fn strict_fast() -> ReplayOptions {
+    ReplayOptions::strict().accelerated()
+}
+
+/// A service and the temporary directory of its store.
+pub struct TestDaemon {
+    pub service: Service,
+    pub store: Store,
+    pub db: PathBuf,
+    pub dir: TempDir,
+}
+
+/// Starts a service on `devices` with a store file in a new temporary directory.
+pub async fn start(
+    devices: Devices,
+    settings: ServiceSettings,
+    options: ServiceOptions,
+) -> TestDaemon {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let db = dir.path().join("brdfd.db");
+    let store = Store::open(&db).await.expect("store opens");
+    let service = Service::start(store.clone(), devices, settings, options)
+        .await
+        .expect("service starts");
+    TestDaemon {
+        service,
+        store,
+        db,
+        dir,
+    }
+}
+
+/// Starts a service on simulated instruments replaying every embedded recording.
+pub async fn start_builtin(options: ReplayOptions) -> TestDaemon {
+    let devices = Devices::simulated(
+        playlist(Instrument::MaT12),
+        playlist(Instrument::Sra),
+        &options,
+        [None, None],
+    )
+    .expect("simulated instruments");
+    start(devices, settings(), ServiceOptions::default()).await
+}
+
+/// Measures the reference and checks it completed.
+pub async fn measure_reference(service: &Service) -> ReferenceId {
+    let id = service
+        .request_reference()
+        .await
+        .expect("reference accepted");
+    assert!(service.wait_idle(STEP_TIMEOUT).await, "reference finishes");
+    let r = service.store().reference_detail(id).await.unwrap();
+    assert_eq!(
+        r.reference.status,
+        ReferenceStatus::Complete,
+        "reference {id}: {:?}",
+        r.reference.reason
+    );
+    id
+}
+
+/// Scans `sample` and waits until the scan and its fits have ended.
+pub async fn scan_and_settle(service: &Service, sample: &str) -> ScanId {
+    let id = service.request_scan(sample).await.expect("scan accepted");
+    assert!(
+        service.wait_settled(id, STEP_TIMEOUT).await.unwrap(),
+        "scan {id} and its fits end"
+    );
+    id
+}
+
+/// Whether two reading values are identical bit for bit.
+pub fn bit_eq(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}

@@ -1,0 +1,297 @@
+//! The daemon in-process on simulated instruments replaying the committed recordings
+//! (strict, accelerated): a reference, a scan and three fits land in the store with every row,
+//! each value checked against the recording it came from and against the standalone fit
+//! pipeline; export and import round-trip; the imported reference never takes over.
+
+mod common;
+
+use brdfd::cost::CostFunction;
+use brdfd::fit::{FitRequest, fit_scan};
+use brdfd::geometry::{Device, GEOMETRIES};
+use brdfd::optimise::{Method, Settings};
+use brdfd::processing::{self, ProcessingOptions, SpecularStrategy};
+use brdfd::service::{Event, RefitRequest};
+use brdfd::store::{FitStatus, ReadingValues, ReferenceStatus, ScanState};
+use drivers::mat12::codec::Mat12Codec;
+use drivers::protocol::{Codec, Response};
+use drivers::sra::codec::SraCodec;
+use drivers::{Instrument, ReadingValue};
+
+use common::*;
+
+/// The readings a recording holds for one object, by geometry name.
+fn recorded(
+    r: &mock_devices::recordings::Recording,
+) -> std::collections::HashMap<&'static str, Vec<f64>> {
+    let mut out = std::collections::HashMap::new();
+    for instrument in [Instrument::MaT12, Instrument::Sra] {
+        for reading in r.script(instrument).unwrap().readings() {
+            let values = match reading.value {
+                ReadingValue::Reflectance(s) => s.to_vec(),
+                ReadingValue::Intensity(v) => vec![v],
+            };
+            out.insert(reading.geometry, values);
+        }
+    }
+    out
+}
+
+/// Checks one stored reading: its values are the recording's, bit for bit, and its raw frame
+/// is a valid reply frame carrying exactly those values.
+fn check_reading(
+    r: &brdfd::store::Reading,
+    truth: &std::collections::HashMap<&'static str, Vec<f64>>,
+) {
+    let want = &truth[r.geometry.name];
+    assert!(
+        bit_eq(r.values.as_slice(), want),
+        "{}: stored values differ from the recording",
+        r.geometry.name
+    );
+    assert!(
+        !r.raw_frame.is_empty(),
+        "{}: raw frame stored",
+        r.geometry.name
+    );
+    let parsed = match r.device {
+        Device::MaT12 => Mat12Codec::parse_response(&r.raw_frame),
+        Device::Sra => SraCodec::parse_response(&r.raw_frame),
+    }
+    .unwrap_or_else(|e| panic!("{}: raw frame does not parse: {e}", r.geometry.name));
+    let Response::Fetched(reading) = parsed else {
+        panic!("{}: raw frame is not a FETCH reply", r.geometry.name)
+    };
+    assert_eq!(reading.geometry, r.geometry.name);
+    let values = match reading.value {
+        ReadingValue::Reflectance(s) => s.to_vec(),
+        ReadingValue::Intensity(v) => vec![v],
+    };
+    assert!(
+        bit_eq(&values, want),
+        "{}: raw frame values",
+        r.geometry.name
+    );
+    // The frame is the one recorded: it occurs verbatim in the session file.
+    let hex = drivers::session::to_hex(&r.raw_frame);
+    let recordings = mock_devices::recordings::all();
+    assert!(
+        recordings
+            .iter()
+            .any(|rec| rec.ma_t12.contains(&hex) || rec.sra.contains(&hex)),
+        "{}: raw frame not found in the recordings",
+        r.geometry.name
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_reference_a_scan_and_three_fits_land_in_the_store_with_every_row() {
+    let _serial = serial();
+    bounded(async {
+        let d = start_builtin(strict_fast()).await;
+        let service = &d.service;
+        let mut events = service.subscribe();
+
+        // Reference: 14 readings, the N9 recording's values, raw frames.
+        let reference = measure_reference(service).await;
+        let rd = d.store.reference_detail(reference).await.unwrap();
+        assert_eq!(rd.reference.status, ReferenceStatus::Complete);
+        assert_eq!(rd.reference.name, "Munsell N9");
+        assert_eq!(rd.readings.len(), 14);
+        let n9 = recorded(mock_devices::recordings::reference());
+        for r in &rd.readings {
+            check_reading(r, &n9);
+        }
+        assert_eq!(
+            service.reference_in_force().await.unwrap().unwrap().id,
+            reference
+        );
+
+        // Scan: 14 readings from the first sample's recording.
+        let first = &mock_devices::recordings::samples()[0];
+        let sample = first.sample.unwrap();
+        let scan = scan_and_settle(service, sample).await;
+        let detail = d.store.scan_detail(scan).await.unwrap();
+        assert_eq!(
+            detail.scan.state,
+            ScanState::Complete,
+            "{:?}",
+            detail.scan.reason
+        );
+        assert_eq!(detail.scan.sample, sample);
+        assert_eq!(detail.scan.reference_id, reference);
+        assert_eq!(detail.readings.len(), 14);
+        assert!(detail.scan.started_at_ms.is_some() && detail.scan.finished_at_ms.is_some());
+        let truth = recorded(first);
+        for (r, g) in detail.readings.iter().zip(GEOMETRIES.iter()) {
+            assert_eq!(r.geometry.name, g.name, "readings in table order");
+            check_reading(r, &truth);
+        }
+
+        // The processed BRDF is processing of the exported scan, bit for bit.
+        let exported = service.export_scan(scan).await.unwrap();
+        let processed = d.store.processed_for_scan(scan).await.unwrap();
+        assert_eq!(processed.len(), 1);
+        assert_eq!(processed[0].specular, SpecularStrategy::Ratio);
+        let want = processing::process(&exported, &ProcessingOptions::default()).unwrap();
+        for (a, b) in processed[0].brdf.values.iter().zip(&want.values) {
+            assert!(bit_eq(a, b), "processed BRDF");
+        }
+
+        // Three fits, done, each equal to the standalone pipeline with the same settings.
+        let fits = d.store.fits_for_scan(scan).await.unwrap();
+        assert_eq!(fits.len(), 3);
+        let costs: Vec<CostFunction> = fits.iter().map(|f| f.cost_function).collect();
+        assert_eq!(costs, CostFunction::ALL);
+        for f in &fits {
+            assert_eq!(f.status, FitStatus::Done, "fit {}: {:?}", f.id, f.error);
+            assert_eq!(f.method, "separable");
+            assert_eq!(f.seed, 1);
+            assert_eq!(f.processed, processed[0].id);
+            let settings: Settings = serde_json::from_value(f.settings.clone()).unwrap();
+            assert_eq!(settings.cost, f.cost_function);
+            assert_eq!(settings.method, Method::Separable);
+            let result = f.result.as_ref().expect("result stored");
+            assert!(!result.best_cost_per_generation.is_empty());
+            assert!(result.evaluations > 0 && result.generations > 0);
+            assert!(f.started_at_ms.is_some() && f.finished_at_ms.is_some());
+
+            let standalone = fit_scan(
+                &exported,
+                &FitRequest {
+                    processing: ProcessingOptions::default(),
+                    settings,
+                },
+            )
+            .unwrap();
+            let params: brdfd::model::Params =
+                serde_json::from_value(result.params.clone()).unwrap();
+            assert!(bit_eq(&params.kd, &standalone.outcome.params.kd), "kd");
+            assert_eq!(params.ks.to_bits(), standalone.outcome.params.ks.to_bits());
+            assert_eq!(result.cost.to_bits(), standalone.outcome.cost.to_bits());
+            assert_eq!(
+                result.best_cost_per_generation,
+                standalone.outcome.best_cost_per_generation
+            );
+
+            let detail = d.store.fit_detail(f.id).await.unwrap();
+            let e = detail.evaluation.expect("evaluation stored");
+            assert!(bit_eq(&e.per_geometry, &standalone.evaluation.per_geometry));
+            // The store sums the sorted values for its summaries: equal to rounding.
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs().max(1.0);
+            assert!(close(e.all.mean, standalone.evaluation.all.mean));
+            assert!(close(e.diffuse.mean, standalone.evaluation.diffuse.mean));
+            assert!(close(e.specular.mean, standalone.evaluation.specular.mean));
+        }
+
+        // Both instruments are recorded with the identities they gave.
+        let instruments = d.store.instruments().await.unwrap();
+        let serials: Vec<&str> = instruments.iter().map(|i| i.serial.as_str()).collect();
+        assert!(serials.contains(&"SIM-MAT12-0001"), "{serials:?}");
+        assert!(serials.contains(&"SIM-SRA-0001"), "{serials:?}");
+
+        // Every subscriber saw the whole story, in order.
+        let mut seen = Vec::new();
+        while let Ok(ev) = events.try_recv() {
+            seen.push(ev);
+        }
+        let readings = seen
+            .iter()
+            .filter(|e| matches!(e, Event::ScanReading { scan: s, .. } if *s == scan))
+            .count();
+        assert_eq!(readings, 14);
+        let pos = |pred: &dyn Fn(&Event) -> bool| seen.iter().position(pred);
+        let complete = pos(&|e| matches!(e, Event::ScanComplete { scan: s } if *s == scan));
+        let last_reading = seen
+            .iter()
+            .rposition(|e| matches!(e, Event::ScanReading { scan: s, .. } if *s == scan));
+        assert!(last_reading < complete, "readings before completion");
+        let done = seen
+            .iter()
+            .filter(|e| matches!(e, Event::FitDone { scan: s, .. } if *s == scan))
+            .count();
+        assert_eq!(done, 3);
+
+        // Strict replay: every request matched the recording.
+        for (instrument, report) in service.devices().replay_reports() {
+            assert!(
+                report.mismatches.is_empty(),
+                "{instrument}: {:?}",
+                report.mismatches
+            );
+        }
+        assert_eq!(d.store.integrity_check().await.unwrap(), ["ok"]);
+        assert!(service.shutdown().await);
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn export_then_import_gives_the_same_scan_and_fits_and_keeps_the_reference_in_force() {
+    let _serial = serial();
+    bounded(async {
+        let d = start_builtin(strict_fast()).await;
+        let service = &d.service;
+        let reference = measure_reference(service).await;
+        let sample = mock_devices::recordings::samples()[0].sample.unwrap();
+        let scan = scan_and_settle(service, sample).await;
+        let exported = service.export_scan(scan).await.unwrap();
+        // Through the file format, as `brdfd export` / `brdfd import` do.
+        let text = exported.to_json_pretty().unwrap();
+        let file = brdfd::scan::Scan::from_json(text.as_bytes()).unwrap();
+        assert_eq!(file, exported);
+
+        let (imported, fits) = service.import_scan(&file).await.unwrap();
+        assert_eq!(fits.len(), 3);
+        assert!(service.wait_settled(imported, STEP_TIMEOUT).await.unwrap());
+        assert_eq!(service.export_scan(imported).await.unwrap(), exported);
+        let a = d.store.fits_for_scan(scan).await.unwrap();
+        let b = d.store.fits_for_scan(imported).await.unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(y.status, FitStatus::Done);
+            assert_eq!(
+                x.result.as_ref().unwrap().cost,
+                y.result.as_ref().unwrap().cost
+            );
+        }
+        // Imported readings carry no device traffic.
+        let detail = d.store.scan_detail(imported).await.unwrap();
+        assert!(detail.readings.iter().all(|r| r.raw_frame.is_empty()));
+        assert!(detail.reference.reference.name.ends_with(" (imported)"));
+        // New scans still use the measured reference.
+        assert_eq!(
+            service.reference_in_force().await.unwrap().unwrap().id,
+            reference
+        );
+
+        // A refit with another seed and one cost function.
+        let refits = service
+            .refit(
+                scan,
+                &RefitRequest {
+                    cost_functions: vec![CostFunction::Cf1],
+                    seed: Some(7),
+                    ..RefitRequest::default()
+                },
+            )
+            .await
+            .unwrap();
+        assert_eq!(refits.len(), 1);
+        assert!(service.wait_settled(scan, STEP_TIMEOUT).await.unwrap());
+        let run = d.store.fit_detail(refits[0]).await.unwrap().run;
+        assert_eq!((run.status, run.seed), (FitStatus::Done, 7));
+
+        // An incomplete scan file is refused naming the field.
+        let mut bad = text.clone();
+        bad = bad.replacen("\"sra-60\"", "\"sra-61\"", 1);
+        let e = brdfd::scan::Scan::from_json(bad.as_bytes()).unwrap_err();
+        assert!(e.to_string().contains("sra-61"), "{e}");
+
+        // A reading value of a stored scan survives the round trip through ReadingValues.
+        assert!(matches!(
+            detail.readings[12].values,
+            ReadingValues::Intensity(_)
+        ));
+        service.shutdown().await;
+    })
+    .await;
+}
