@@ -75,7 +75,7 @@ async fn fill(path: &Path) -> Vec<Scan> {
                     &NewFit {
                         method: settings.method.to_string(),
                         cost_function: cost,
-                        settings: serde_json::to_value(&settings).unwrap(),
+                        settings: serde_json::to_value(settings).unwrap(),
                         seed: settings.seed,
                     },
                 )

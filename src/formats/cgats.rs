@@ -338,7 +338,7 @@ mod tests {
             "{e}"
         );
         assert!(e.contains("SRA CSV (--sra)"), "{e}");
-        let sra = super::super::sra::write_scans(&[s.scan.clone()]);
+        let sra = super::super::sra::write_scans(std::slice::from_ref(&s.scan));
         let got = import(
             Format::Cgats,
             "m.txt",

@@ -115,7 +115,9 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
     let _ = writeln!(t, "    <cc:ObjectCollection>");
     let mut id = 0;
     for s in &study.samples {
-        let mut objects: Vec<(DataKind, Option<(&str, &str)>, [Spectrum; 14])> = vec![
+        // (kind, (cost function, method) of an estimate, one spectrum per geometry)
+        type Object<'a> = (DataKind, Option<(&'a str, &'a str)>, [Spectrum; 14]);
+        let mut objects: Vec<Object> = vec![
             (
                 DataKind::Reading,
                 None,

@@ -793,11 +793,8 @@ fn mean_ci<DB: DrawingBackend>(
     analysis: &Analysis,
 ) -> DrawResult<DB> {
     let costs = &analysis.cost_functions;
-    let groups: [(
-        &str,
-        fn(&super::analysis::CostSummary) -> Option<crate::stats::MeanCi>,
-        RGBColor,
-    ); 3] = [
+    type Pick = fn(&super::analysis::CostSummary) -> Option<crate::stats::MeanCi>;
+    let groups: [(&str, Pick, RGBColor); 3] = [
         ("all 14 geometries", |s| s.all, PALETTE[0]),
         ("diffuse (MA-T12)", |s| s.diffuse, PALETTE[5]),
         ("specular (SRA)", |s| s.specular, PALETTE[6]),
