@@ -6,7 +6,6 @@
 mod common;
 
 use std::net::SocketAddr;
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use brdfd::api::ApiServer;
@@ -16,10 +15,7 @@ use serde_json::{Value, json};
 use common::*;
 
 fn brdfd(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_brdfd"))
-        .args(args)
-        .output()
-        .expect("the brdfd binary runs")
+    run_brdfd(args, None)
 }
 
 /// Polls `GET /status` in a blocking thread until the instruments are idle.

@@ -1,0 +1,179 @@
+//! The `brdfd` binary's in-process daemon commands: `demo` (the README's main command, run
+//! twice on the same directory), `replay` of the embedded recordings and of session files,
+//! and `record` → `replay` round trips (a recording replays strictly).
+
+mod common;
+
+use std::path::Path;
+use std::process::Output;
+
+use brdfd::store::{FitStatus, ScanFilter, ScanState, Store};
+
+use common::*;
+
+fn brdfd(args: &[&str], cwd: &Path) -> Output {
+    run_brdfd(args, Some(cwd))
+}
+
+fn text(o: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn demo_replays_the_recordings_into_a_local_store_and_runs_twice() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let first = brdfd(&["demo"], dir.path());
+    let (out, err) = text(&first);
+    assert!(first.status.success(), "{err}");
+    // One row per sample and cost function, with diffuse and specular ΔE00.
+    let rows: Vec<&str> = out
+        .lines()
+        .filter(|l| {
+            l.starts_with("T.")
+                && (l.contains(" cf1 ") || l.contains(" cf2 ") || l.contains(" m2 "))
+        })
+        .collect();
+    assert_eq!(rows.len(), 24, "{out}");
+    assert!(out.contains("diffuse") && out.contains("specular"));
+    assert!(out.contains("database: brdfd-demo/brdfd.db (new"), "{out}");
+    assert!(out.contains("outputs: brdfd-demo/report.txt"), "{out}");
+    assert!(out.contains("timing:") && out.contains("store") && out.contains("fitting"));
+    let report = std::fs::read_to_string(dir.path().join("brdfd-demo/report.txt")).unwrap();
+    assert_eq!(report, out, "the report file is what was printed");
+    let scans = std::fs::read_dir(dir.path().join("brdfd-demo/scans"))
+        .unwrap()
+        .count();
+    assert_eq!(scans, 8);
+
+    // Twice: the database is reused and the second run's scans are added.
+    let second = brdfd(&["demo"], dir.path());
+    let (out2, err2) = text(&second);
+    assert!(second.status.success(), "{err2}");
+    assert!(
+        out2.contains("(reused: this run's scans were added"),
+        "{out2}"
+    );
+    // Same recordings, same seed: the same ΔE00 table (scan ids differ).
+    let table = |o: &str| -> Vec<String> {
+        o.lines()
+            .filter(|l| l.starts_with("T."))
+            .map(|l| {
+                let mut cols: Vec<&str> = l.split_whitespace().collect();
+                cols.retain(|c| c.parse::<i64>().is_err()); // drop the scan id
+                cols.truncate(cols.len() - 1); // and the wall time
+                cols.join(" ")
+            })
+            .collect()
+    };
+    assert_eq!(table(&out), table(&out2));
+
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let store = Store::open(dir.path().join("brdfd-demo/brdfd.db"))
+            .await
+            .unwrap();
+        assert_eq!(store.integrity_check().await.unwrap(), ["ok"]);
+        let all = store
+            .list_scans(&ScanFilter {
+                limit: 100,
+                ..ScanFilter::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(all.len(), 16);
+        assert!(
+            all.iter()
+                .all(|s| s.state == ScanState::Complete && s.reading_count == 14)
+        );
+        for s in &all {
+            let fits = store.fits_for_scan(s.id).await.unwrap();
+            assert_eq!(fits.len(), 3);
+            assert!(fits.iter().all(|f| f.status == FitStatus::Done));
+        }
+        store.close().await;
+    });
+}
+
+#[test]
+fn record_then_replay_strictly_through_the_whole_daemon() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("sessions");
+    let o = out_dir.display().to_string();
+    // On the default (simulated) instruments: the reference, then a sample.
+    let r = brdfd(&["record", "--out", &o], dir.path());
+    assert!(r.status.success(), "{}", text(&r).1);
+    let s = brdfd(
+        &["record", "--sample", "T.Recorded", "--out", &o],
+        dir.path(),
+    );
+    assert!(s.status.success(), "{}", text(&s).1);
+    assert!(
+        text(&s)
+            .0
+            .contains("recorded 12 MA-T12 and 2 SRA readings of T.Recorded")
+    );
+    let files = [
+        out_dir.join("reference.ma_t12.session"),
+        out_dir.join("reference.sra.session"),
+        out_dir.join("t-recorded.ma_t12.session"),
+        out_dir.join("t-recorded.sra.session"),
+    ];
+    for f in &files {
+        let session = drivers::session::Session::parse(&std::fs::read_to_string(f).unwrap())
+            .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        // IDENTIFY, MEASURE-ALL and a FETCH per geometry, both ways.
+        let n = session.instrument.geometries().len();
+        assert_eq!(session.frames.len(), 2 * (2 + n), "{}", f.display());
+    }
+    let db = dir.path().join("replayed.db");
+    let args: Vec<String> = files
+        .iter()
+        .map(|f| f.display().to_string())
+        .chain(["--db".to_string(), db.display().to_string()])
+        .collect();
+    let args: Vec<&str> = std::iter::once("replay")
+        .chain(args.iter().map(String::as_str))
+        .collect();
+    let replay = brdfd(&args, dir.path());
+    let (out, err) = text(&replay);
+    assert!(replay.status.success(), "{out}\n{err}");
+    assert!(out.contains("scan 1 \"T.Recorded\": complete"), "{out}");
+    assert_eq!(out.matches(": mean ΔE00").count(), 3, "{out}");
+    assert!(out.contains("(strict, accelerated)"), "{out}");
+
+    // Sessions given out of pairs are refused with what to do.
+    let bad = brdfd(&["replay", &files[0].display().to_string()], dir.path());
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(
+        text(&bad)
+            .1
+            .contains("1 MA-T12 session(s) but 0 SRA session(s)")
+    );
+}
+
+#[test]
+fn replay_of_the_embedded_recordings_is_strict_and_clean() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let o = brdfd(&["replay", "builtin"], dir.path());
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{out}\n{err}");
+    assert_eq!(
+        out.lines().filter(|l| l.ends_with(": complete")).count(),
+        8,
+        "{out}"
+    );
+    assert!(
+        out.contains("1 reference(s), 8 scan(s) replayed (strict, accelerated)"),
+        "{out}"
+    );
+    assert!(out.contains("store: in memory"), "{out}");
+}
