@@ -1,1 +1,126 @@
-//! Tests of the service in-process.
+//! Unit tests of the service's own rules; the whole daemon is tested end to end in `tests/`.
+
+use super::*;
+use crate::store::ScanState;
+use drivers::Instrument;
+
+async fn service() -> Service {
+    let devices = Devices::simulated(
+        mock_devices::recordings::playlist(Instrument::MaT12).unwrap(),
+        mock_devices::recordings::playlist(Instrument::Sra).unwrap(),
+        &mock_devices::ReplayOptions::strict().accelerated(),
+        [None, None],
+    )
+    .unwrap();
+    Service::start(
+        Store::open_in_memory().await.unwrap(),
+        devices,
+        ServiceSettings::default(),
+        ServiceOptions::default(),
+    )
+    .await
+    .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_instruments_are_claimed_by_one_operation_at_a_time() {
+    let s = service().await;
+    let first = s.claim(Operation::Scan { scan: ScanId(3) }).unwrap();
+    let e = s
+        .claim(Operation::Reference {
+            reference: ReferenceId(1),
+        })
+        .unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with("the instruments are busy: scan 3 is in progress"),
+        "{msg}"
+    );
+    assert!(msg.contains("brdfd abort"), "{msg}");
+    assert!(matches!(s.check_idle(), Err(ServiceError::Busy { .. })));
+    // Abort reaches the claimant.
+    assert_eq!(s.abort().unwrap(), Operation::Scan { scan: ScanId(3) });
+    tokio::time::timeout(Duration::from_secs(1), first.notified())
+        .await
+        .expect("abort notified");
+    s.release();
+    assert!(s.check_idle().is_ok());
+    assert!(matches!(s.abort(), Err(ServiceError::Idle)));
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scans_are_refused_before_a_reference_and_after_shutdown() {
+    let s = service().await;
+    assert!(matches!(
+        s.request_scan("T.Early").await,
+        Err(ServiceError::NoReference)
+    ));
+    assert!(matches!(
+        s.request_scan("  ").await,
+        Err(ServiceError::BadRequest(_))
+    ));
+    // Nothing was written for the refused requests.
+    assert!(
+        s.store()
+            .list_scans(&Default::default())
+            .await
+            .unwrap()
+            .is_empty()
+    );
+    assert!(s.stop_keeping_store().await);
+    assert!(matches!(
+        s.request_reference().await,
+        Err(ServiceError::ShuttingDown)
+    ));
+    s.store().close().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn export_refuses_an_incomplete_scan() {
+    let s = service().await;
+    let store = s.store().clone();
+    let r = store.begin_reference("Munsell N9", None).await.unwrap();
+    for g in &crate::geometry::GEOMETRIES {
+        let v = match g.device {
+            crate::geometry::Device::MaT12 => crate::store::ReadingValues::Spectrum([0.7; 31]),
+            crate::geometry::Device::Sra => crate::store::ReadingValues::Intensity(0.2),
+        };
+        store
+            .add_reference_reading(r, g.device, g, &v, &[])
+            .await
+            .unwrap();
+    }
+    store.complete_reference(r).await.unwrap();
+    let scan = store.request_scan("T.Half", r).await.unwrap();
+    store.start_measuring(scan).await.unwrap();
+    let e = s.export_scan(scan).await.unwrap_err();
+    assert!(
+        matches!(
+            e,
+            ServiceError::NotComplete {
+                state: ScanState::Measuring,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("needs all 14 readings"), "{e}");
+    s.shutdown().await;
+}
+
+#[test]
+fn settings_follow_the_configuration() {
+    let mut config = Config::default();
+    config.fit.seed = 9;
+    config.fit.cost_functions = vec![CostFunction::M2];
+    let s = ServiceSettings::from_config(&config);
+    assert_eq!(s.seed, 9);
+    assert_eq!(s.cost_functions, [CostFunction::M2]);
+    assert_eq!(s.reference_max_age, config.scan.reference_max_age);
+    let f = s.fit_settings(CostFunction::Cf1, Method::Paper, 4);
+    assert_eq!(
+        (f.cost, f.method, f.seed),
+        (CostFunction::Cf1, Method::Paper, 4)
+    );
+}
