@@ -3,6 +3,10 @@
 //! the daemon's message), listing, showing, exporting and importing, the event stream, and
 //! the message when no daemon is listening.
 
+// `serial()` is held for a whole test on purpose: each test has its own runtime, so holding
+// it across awaits cannot deadlock, and it keeps the daemon tests from competing for cores.
+#![allow(clippy::await_holding_lock)]
+
 mod common;
 
 use std::net::SocketAddr;

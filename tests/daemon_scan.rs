@@ -3,6 +3,10 @@
 //! each value checked against the recording it came from and against the standalone fit
 //! pipeline; export and import round-trip; the imported reference never takes over.
 
+// `serial()` is held for a whole test on purpose: each test has its own runtime, so holding
+// it across awaits cannot deadlock, and it keeps the daemon tests from competing for cores.
+#![allow(clippy::await_holding_lock)]
+
 mod common;
 
 use brdfd::cost::CostFunction;

@@ -299,8 +299,10 @@ pub fn default_jobs() -> usize {
 pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
     crate::cli::serve::init_logging(crate::config::LogLevel::Warn, false);
     let objects = objects_from_args(&args.sessions)?;
-    let mut settings = ServiceSettings::default();
-    settings.max_concurrent_fits = args.jobs.unwrap_or_else(default_jobs).max(1);
+    let settings = ServiceSettings {
+        max_concurrent_fits: args.jobs.unwrap_or_else(default_jobs).max(1),
+        ..ServiceSettings::default()
+    };
     let setup = ReplaySetup {
         options: options(args.lenient, args.realtime),
         settings,
