@@ -1,15 +1,18 @@
 //! The async driver tasks: one per instrument, each owning its connection on a dedicated OS
 //! thread (the transports are blocking), taking commands over an mpsc channel with a oneshot
-//! reply, and emitting typed state events and readings on a broadcast channel.
+//! reply, and emitting typed state events and readings on a broadcast channel. Each reading
+//! travels with the bytes of the reply frame that carried it, as received (not re-encoded), so
+//! the daemon can store what the instrument actually sent.
 //!
 //! The rules (PROTOCOL.md §4): every exchange has a reply timeout; a reply with a bad checksum,
 //! a malformed reply, a timeout, or an instrument's BAD-CHECKSUM/BUSY error leads to a
 //! byte-identical resend, at most [`DriverConfig::max_resends`] times; a lost link leads to
 //! reconnection through the transport factory with exponential backoff, at most
 //! [`DriverConfig::reconnect_attempts`] attempts per command, after which the command fails with
-//! an error naming the instrument and the geometry in progress. Every byte from the instrument
-//! goes through the codec, which returns errors rather than panicking; a panic in the worker
-//! would still only fail the command in hand.
+//! an error naming the instrument and the geometry in progress. Garbage — bytes that never form
+//! a frame — is dropped without a resend, since the reply may still follow it. Every byte from
+//! the instrument goes through the codec, which returns errors rather than panicking; a panic in
+//! the worker would still only fail the command in hand.
 //!
 //! `tracing`: span `driver{instrument}` around the thread, span `command{request}` around each
 //! command.
@@ -26,7 +29,7 @@ use tracing::{debug, info, info_span, warn};
 
 use crate::mat12::codec::Mat12Codec;
 use crate::protocol::{
-    self, Answer, Codec, Command, ErrorCode, FrameError, Identity, Instrument, Reading,
+    self, Answer, Codec, Command, ErrorCode, Identity, Instrument, Reading, ReceivedReading,
     RequestKind, Status,
 };
 use crate::sra::codec::SraCodec;
@@ -121,10 +124,11 @@ pub enum Event {
         n: usize,
         geometry: &'static str,
     },
-    /// A reading arrived (from MEASURE-ALL or MEASURE-ONE).
+    /// A reading arrived (from MEASURE-ALL or MEASURE-ONE), with the reply frame that carried
+    /// it as received.
     Reading {
         instrument: Instrument,
-        reading: Reading,
+        reading: ReceivedReading,
     },
     /// The link is gone (or could not be opened).
     Disconnected {
@@ -213,8 +217,8 @@ enum Job {
     Identify(Reply<Identity>),
     Status(Reply<Status>),
     Calibrate(Reply<()>),
-    MeasureAll(Reply<Vec<Reading>>),
-    MeasureOne(&'static str, Reply<Reading>),
+    MeasureAll(Reply<Vec<ReceivedReading>>),
+    MeasureOne(&'static str, Reply<ReceivedReading>),
     Abort(Reply<()>),
     Shutdown(oneshot::Sender<()>),
 }
@@ -360,14 +364,25 @@ impl DriverHandle {
         self.call(RequestKind::Calibrate, Job::Calibrate).await
     }
 
-    /// Measure every geometry and fetch the readings, in SCIENCE.md §2 order. Emits
-    /// `Measuring` and `Reading` events as it goes.
-    pub async fn measure_all(&self) -> Result<Vec<Reading>, DriverError> {
+    /// Measure every geometry and fetch the readings, in SCIENCE.md §2 order, each with the
+    /// reply frame that carried it as received. Emits `Measuring` and `Reading` events as it
+    /// goes.
+    pub async fn measure_all_received(&self) -> Result<Vec<ReceivedReading>, DriverError> {
         self.call(RequestKind::MeasureAll, Job::MeasureAll).await
     }
 
-    /// Measure one geometry, by its wire name.
-    pub async fn measure_one(&self, geometry: &str) -> Result<Reading, DriverError> {
+    /// [`DriverHandle::measure_all_received`] without the frames: the readings' values only.
+    pub async fn measure_all(&self) -> Result<Vec<Reading>, DriverError> {
+        let received = self.measure_all_received().await?;
+        Ok(received.into_iter().map(|r| r.reading).collect())
+    }
+
+    /// Measure one geometry, by its wire name; the reading comes with the reply frame that
+    /// carried it as received.
+    pub async fn measure_one_received(
+        &self,
+        geometry: &str,
+    ) -> Result<ReceivedReading, DriverError> {
         let Some(g) = self.instrument.geometry(geometry) else {
             return Err(DriverError::UnknownGeometry {
                 instrument: self.instrument,
@@ -377,6 +392,11 @@ impl DriverHandle {
         };
         self.call(RequestKind::MeasureOne, |tx| Job::MeasureOne(g, tx))
             .await
+    }
+
+    /// [`DriverHandle::measure_one_received`] without the frame: the reading's values only.
+    pub async fn measure_one(&self, geometry: &str) -> Result<Reading, DriverError> {
+        Ok(self.measure_one_received(geometry).await?.reading)
     }
 
     /// Abort: the command in progress fails with `Aborted` at its next exchange boundary (or
@@ -476,14 +496,16 @@ impl<C: Codec> Worker<C> {
                 self.finish(tx, r);
             }
             Job::MeasureOne(geometry, tx) => {
-                let r = self.command(
-                    &protocol::MeasureOne { geometry },
-                    self.config.measure_timeout,
-                );
+                let r = self
+                    .command_framed(
+                        &protocol::MeasureOne { geometry },
+                        self.config.measure_timeout,
+                    )
+                    .map(received);
                 if let Ok(reading) = &r {
                     self.emit(Event::Reading {
                         instrument: C::INSTRUMENT,
-                        reading: *reading,
+                        reading: reading.clone(),
                     });
                 }
                 self.finish(tx, r);
@@ -508,7 +530,7 @@ impl<C: Codec> Worker<C> {
         let _ = tx.send(result);
     }
 
-    fn measure_all(&mut self) -> Result<Vec<Reading>, DriverError> {
+    fn measure_all(&mut self) -> Result<Vec<ReceivedReading>, DriverError> {
         let geometries = C::INSTRUMENT.geometries();
         let n = geometries.len();
         let count = self.command(&protocol::MeasureAll, self.config.measure_timeout)?;
@@ -527,10 +549,12 @@ impl<C: Codec> Worker<C> {
                 n,
                 geometry,
             });
-            let reading = self.command(&protocol::Fetch { geometry }, self.config.reply_timeout)?;
+            let reading = received(
+                self.command_framed(&protocol::Fetch { geometry }, self.config.reply_timeout)?,
+            );
             self.emit(Event::Reading {
                 instrument: C::INSTRUMENT,
-                reading,
+                reading: reading.clone(),
             });
             readings.push(reading);
         }
@@ -543,6 +567,15 @@ impl<C: Codec> Worker<C> {
         cmd: &K,
         timeout: Duration,
     ) -> Result<K::Output, DriverError> {
+        self.command_framed(cmd, timeout).map(|(out, _)| out)
+    }
+
+    /// [`Worker::command`] that also returns the reply frame that answered, as received.
+    fn command_framed<K: Command>(
+        &mut self,
+        cmd: &K,
+        timeout: Duration,
+    ) -> Result<(K::Output, BytesMut), DriverError> {
         let request = cmd.request();
         let span = info_span!("command", request = %request);
         let _enter = span.enter();
@@ -601,7 +634,7 @@ impl<C: Codec> Worker<C> {
         self.link = Some(link);
         self.rx_buf.clear();
         match self.exchange(&protocol::Identify, self.config.reply_timeout) {
-            Ok(identity) => {
+            Ok((identity, _)) => {
                 info!(%identity, "connected");
                 self.emit(Event::Connected {
                     instrument: C::INSTRUMENT,
@@ -634,7 +667,12 @@ impl<C: Codec> Worker<C> {
     }
 
     /// Send the request and wait for its answer on the current link, resending as allowed.
-    fn exchange<K: Command>(&mut self, cmd: &K, timeout: Duration) -> Result<K::Output, Failure> {
+    /// Returns the answer and the reply frame it came in.
+    fn exchange<K: Command>(
+        &mut self,
+        cmd: &K,
+        timeout: Duration,
+    ) -> Result<(K::Output, BytesMut), Failure> {
         let request = cmd.request();
         let bytes = cmd.to_bytes::<C>().map_err(|e| {
             // Only reachable with a geometry from another instrument; the handle checks names.
@@ -682,21 +720,22 @@ impl<C: Codec> Worker<C> {
         }))
     }
 
-    /// Read and decode until the reply to `cmd` arrives, the timeout passes, or a corrupted
+    /// Read and decode until the reply to `cmd` arrives, the timeout passes, or a damaged
     /// frame calls for a resend. Outer `Err`: link lost or final; inner `Err`: resend.
+    /// `Ok(Ok(_))` carries the answering frame's bytes as they were received.
     fn await_answer<K: Command>(
         &mut self,
         cmd: &K,
         timeout: Duration,
-    ) -> Result<Result<K::Output, Retry>, Failure> {
+    ) -> Result<Result<(K::Output, BytesMut), Retry>, Failure> {
         let request = cmd.request();
         let deadline = Instant::now() + timeout;
         let mut chunk = Vec::with_capacity(256);
         loop {
             loop {
-                match C::decode_response(&mut self.rx_buf) {
-                    Ok(Some(response)) => match cmd.parse_response(response) {
-                        Answer::Done(out) => return Ok(Ok(out)),
+                match C::decode_response_frame(&mut self.rx_buf) {
+                    Ok(Some((response, frame))) => match cmd.parse_response(response) {
+                        Answer::Done(out) => return Ok(Ok((out, frame))),
                         Answer::Refused(ErrorCode::BadChecksum) => {
                             return Ok(Err(Retry::Because(
                                 "the instrument received a corrupted request".into(),
@@ -716,9 +755,11 @@ impl<C: Codec> Worker<C> {
                         }
                     },
                     Ok(None) => break,
-                    Err(FrameError::Garbage { skipped }) => {
-                        debug!(skipped, "dropped garbage between frames")
-                    }
+                    // Bytes that never formed a frame (PROTOCOL.md §4): the reply may follow
+                    // them, so keep waiting; if it does not, the timeout resends.
+                    Err(e) if e.is_garbage() => debug!(error = %e, "dropped garbage"),
+                    // A whole frame that failed its checks: the reply was damaged and will not
+                    // come again unasked, so resend at once.
                     Err(e) => return Ok(Err(Retry::Because(e.to_string()))),
                 }
             }
@@ -744,6 +785,14 @@ impl<C: Codec> Worker<C> {
 enum Retry {
     Busy,
     Because(String),
+}
+
+/// A reading and the bytes of the frame it came in.
+fn received((reading, frame): (Reading, BytesMut)) -> ReceivedReading {
+    ReceivedReading {
+        reading,
+        raw: frame.to_vec(),
+    }
 }
 
 #[cfg(test)]

@@ -13,7 +13,8 @@
 //!   (serialport); the simulated ones live in `mock-devices`.
 //! - [`driver`]: the async driver tasks ([`driver::spawn_mat12`], [`driver::spawn_sra`]): one
 //!   OS thread per instrument owning the connection, commands in over an mpsc channel, events
-//!   out on a broadcast channel, timeouts, resends and reconnection with backoff.
+//!   out on a broadcast channel, timeouts, resends and reconnection with backoff. Readings
+//!   come as [`protocol::ReceivedReading`]s: the values and the reply frame exactly as received.
 //! - [`tap`]: the recording tap, [`tap::Tap`] around any transport, writing every frame in both
 //!   directions with timestamps to a session file through a [`tap::Recorder`].
 
@@ -26,6 +27,6 @@ pub mod tap;
 pub mod transport;
 
 pub use driver::{DriverConfig, DriverError, DriverHandle, Event, spawn_mat12, spawn_sra};
-pub use protocol::{Identity, Instrument, Reading, ReadingValue, Status};
+pub use protocol::{Identity, Instrument, Reading, ReadingValue, ReceivedReading, Status};
 pub use tap::{Recorder, Tap};
 pub use transport::{SerialStream, TransportError, UsbBulk};

@@ -144,6 +144,19 @@ impl Reading {
     }
 }
 
+/// A reading together with the reply frame that carried it, byte for byte as received: what the
+/// driver hands out (in [`crate::Event::Reading`] and from the `measure_*_received` commands) so
+/// that the bytes an instrument sent can be kept for forensics — when a vendor's real codec is
+/// written, a stored frame shows what actually arrived, not what brdfd's codec would have sent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReceivedReading {
+    pub reading: Reading,
+    /// The whole validated reply frame as it came off the wire: for the MA-T12 the message from
+    /// its `MT` magic to its CRC, for the SRA the line from its `!` to its `\r\n`. Bytes dropped
+    /// before it (garbage, damaged frames) are not included.
+    pub raw: Vec<u8>,
+}
+
 impl fmt::Display for Reading {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.value {
@@ -392,6 +405,8 @@ pub enum FrameError {
     BadLength { declared: usize, max: usize },
     #[error("line of {len} bytes without a terminator exceeds the protocol's {max}: dropped")]
     LineTooLong { len: usize, max: usize },
+    #[error("{len}-byte line does not end in *XXXX\\r\\n, so it cannot be a frame: dropped")]
+    NotALine { len: usize },
     #[error("checksum mismatch (frame says {received:04X}, bytes give {computed:04X}): dropped")]
     BadChecksum { computed: u16, received: u16 },
     #[error("frame is not well formed: {detail}")]
@@ -405,6 +420,26 @@ pub enum FrameError {
 }
 
 impl FrameError {
+    /// Whether the dropped bytes never formed a frame — bytes before a frame start, an MA-T12
+    /// header declaring an impossible length, an SRA run without a line end within the limit,
+    /// an SRA line without the `*XXXX\r\n` tail — rather than a whole frame that failed its
+    /// checks (bad checksum, malformed body). The driver keeps waiting after garbage (the reply
+    /// may follow it) and resends at once after a damaged frame (the reply is lost):
+    /// PROTOCOL.md §4.
+    pub fn is_garbage(&self) -> bool {
+        match self {
+            FrameError::Garbage { .. }
+            | FrameError::BadLength { .. }
+            | FrameError::LineTooLong { .. }
+            | FrameError::NotALine { .. } => true,
+            FrameError::BadChecksum { .. }
+            | FrameError::Malformed { .. }
+            | FrameError::UnknownOpcode { .. }
+            | FrameError::UnknownGeometry { .. }
+            | FrameError::NonFinite { .. } => false,
+        }
+    }
+
     pub(crate) fn malformed(detail: impl Into<String>) -> FrameError {
         FrameError::Malformed {
             detail: detail.into(),
@@ -488,11 +523,19 @@ pub trait Codec: Send + Sync + 'static {
     /// Take one request off the front of `buf`. `Ok(None)`: incomplete, read more. `Err`: the
     /// offending bytes were dropped; call again to continue after them.
     fn decode_request(buf: &mut BytesMut) -> Result<Option<Request>, FrameError> {
-        decode_with(buf, Self::check_request, Self::parse_request)
+        Ok(decode_with(buf, Self::check_request, Self::parse_request)?.map(|(request, _)| request))
     }
 
     /// Take one response off the front of `buf`; same contract as [`Codec::decode_request`].
     fn decode_response(buf: &mut BytesMut) -> Result<Option<Response>, FrameError> {
+        Ok(Self::decode_response_frame(buf)?.map(|(response, _)| response))
+    }
+
+    /// [`Codec::decode_response`] that also hands back the frame's bytes exactly as they were
+    /// taken off the buffer (the driver keeps them with a reading).
+    fn decode_response_frame(
+        buf: &mut BytesMut,
+    ) -> Result<Option<(Response, BytesMut)>, FrameError> {
         decode_with(buf, Self::check_response, Self::parse_response)
     }
 }
@@ -501,7 +544,7 @@ fn decode_with<T>(
     buf: &mut BytesMut,
     check: fn(&[u8]) -> Check,
     parse: fn(&[u8]) -> Result<T, FrameError>,
-) -> Result<Option<T>, FrameError> {
+) -> Result<Option<(T, BytesMut)>, FrameError> {
     match check(buf) {
         Check::Incomplete => Ok(None),
         Check::Reject(len, err) => {
@@ -510,7 +553,8 @@ fn decode_with<T>(
         }
         Check::Frame(len) => {
             let frame = buf.split_to(len);
-            parse(&frame).map(Some)
+            let parsed = parse(&frame)?;
+            Ok(Some((parsed, frame)))
         }
     }
 }

@@ -7,11 +7,11 @@
 //! - Readings are taken from the drivers' event stream, not from the result of
 //!   `measure_all`, so each is committed as it arrives; the result is used afterwards only to
 //!   store any reading whose event was lost to a lagging channel.
-//! - The raw frame stored with a reading is the reply frame as the instrument's codec encodes
-//!   that reading. The codecs round-trip every reading bit for bit and have one encoding per
-//!   reading (drivers' golden-frame and property tests), so these are the bytes received; the
-//!   driver API does not hand out the received buffer itself. Imported readings (from a scan
-//!   file) had no device traffic and store an empty frame.
+//! - The raw frame stored with a reading is the reply frame exactly as the driver received it
+//!   ([`drivers::ReceivedReading::raw`]), never a re-encoding: when a vendor's real codec is
+//!   written, the store shows what the instrument actually sent, including anything brdfd's
+//!   codec would have written differently. Imported readings (from a scan file) had no device
+//!   traffic and store an empty frame.
 //! - One instrument failing does not stop the other: its readings are stored too, and the scan
 //!   fails with every device's reason.
 //! - A scan is complete only through `Store::complete_scan`, which refuses fewer than 14
@@ -20,10 +20,7 @@
 use std::collections::HashSet;
 use std::time::Instant;
 
-use drivers::mat12::codec::Mat12Codec;
-use drivers::protocol::{Codec, Response};
-use drivers::sra::codec::SraCodec;
-use drivers::{DriverError, Instrument, ReadingValue};
+use drivers::{DriverError, Instrument, ReadingValue, ReceivedReading};
 use tokio::sync::{Notify, broadcast};
 
 use crate::geometry::{self, Device, GEOMETRY_COUNT, Geometry, MA_T12_COUNT, SRA_COUNT};
@@ -67,11 +64,12 @@ fn device_of(instrument: Instrument) -> Device {
     }
 }
 
-/// A driver reading as the store takes it: device, geometry, values, raw frame.
+/// A driver reading as the store takes it: device, geometry, values (the raw frame goes to the
+/// store as received).
 fn convert(
     instrument: Instrument,
     reading: &drivers::Reading,
-) -> Result<(Device, &'static Geometry, ReadingValues, Vec<u8>), String> {
+) -> Result<(Device, &'static Geometry, ReadingValues), String> {
     let geometry = geometry::by_name(reading.geometry).ok_or_else(|| {
         format!(
             "{instrument} reported geometry {} which is not in the geometry table",
@@ -82,13 +80,7 @@ fn convert(
         ReadingValue::Reflectance(s) => ReadingValues::Spectrum(s),
         ReadingValue::Intensity(v) => ReadingValues::Intensity(v),
     };
-    let response = Response::Fetched(*reading);
-    let raw = match instrument {
-        Instrument::MaT12 => Mat12Codec::encode_response(&response),
-        Instrument::Sra => SraCodec::encode_response(&response),
-    }
-    .map_err(|e| format!("{instrument} reading at {}: {e}", reading.geometry))?;
-    Ok((device_of(instrument), geometry, values, raw))
+    Ok((device_of(instrument), geometry, values))
 }
 
 /// A stored scan (complete, with its reference) as a `brdfd.scan/1` scan.
@@ -350,11 +342,11 @@ impl Service {
         // Subscribe before the commands go out, so no reading event can be missed.
         let mut rx_m = devices.ma_t12.subscribe();
         let mut rx_s = devices.sra.subscribe();
-        let m = devices.ma_t12.measure_all();
-        let s = devices.sra.measure_all();
+        let m = devices.ma_t12.measure_all_received();
+        let s = devices.sra.measure_all_received();
         tokio::pin!(m, s);
-        let mut m_done: Option<Result<Vec<drivers::Reading>, DriverError>> = None;
-        let mut s_done: Option<Result<Vec<drivers::Reading>, DriverError>> = None;
+        let mut m_done: Option<Result<Vec<ReceivedReading>, DriverError>> = None;
+        let mut s_done: Option<Result<Vec<ReceivedReading>, DriverError>> = None;
         let (mut m_open, mut s_open) = (true, true);
         let mut acquired = Acquired::default();
         while m_done.is_none() || s_done.is_none() {
@@ -389,9 +381,9 @@ impl Service {
             match done.expect("both commands finished") {
                 Ok(readings) => {
                     for r in &readings {
-                        if !acquired.stored.contains(r.geometry) {
+                        if !acquired.stored.contains(r.reading.geometry) {
                             tracing::warn!(
-                                geometry = r.geometry,
+                                geometry = r.reading.geometry,
                                 "reading event lost; storing it from the command's result"
                             );
                             self.store_reading(target, instrument, r, &mut acquired)
@@ -431,7 +423,7 @@ impl Service {
                 instrument,
                 reading,
             }) => {
-                if !acquired.stored.contains(reading.geometry) {
+                if !acquired.stored.contains(reading.reading.geometry) {
                     self.store_reading(target, instrument, &reading, acquired)
                         .await;
                 }
@@ -453,24 +445,25 @@ impl Service {
         &self,
         target: Target,
         instrument: Instrument,
-        reading: &drivers::Reading,
+        received: &ReceivedReading,
         acquired: &mut Acquired,
     ) {
-        let (device, geometry, values, raw) = match convert(instrument, reading) {
+        let (device, geometry, values) = match convert(instrument, &received.reading) {
             Ok(c) => c,
             Err(e) => {
                 acquired.errors.push(e);
                 return;
             }
         };
+        let raw = &received.raw;
         let store = &self.inner.store;
         let stored = match target {
             Target::Scan(scan) => {
-                self.timed_store(store.add_reading(scan, device, geometry, &values, &raw))
+                self.timed_store(store.add_reading(scan, device, geometry, &values, raw))
                     .await
             }
             Target::Reference(r) => {
-                self.timed_store(store.add_reference_reading(r, device, geometry, &values, &raw))
+                self.timed_store(store.add_reference_reading(r, device, geometry, &values, raw))
                     .await
             }
         };

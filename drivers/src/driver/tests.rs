@@ -66,6 +66,9 @@ struct Device<C: Codec> {
     /// Bytes for the host, each run available from its instant.
     outbox: VecDeque<(Instant, Vec<u8>)>,
     last_reply: Option<Vec<u8>>,
+    /// Every reply frame put on the wire, with the request it answered (after any fault
+    /// altered it; garbage and duplicates not included).
+    sent: Vec<(Request, Vec<u8>)>,
     /// Connection generation: a transport whose generation is older is dead.
     generation: u32,
     /// Connections the factory should refuse from now on.
@@ -103,6 +106,7 @@ impl<C: Codec> Device<C> {
             inbox: BytesMut::new(),
             outbox: VecDeque::new(),
             last_reply: None,
+            sent: Vec::new(),
             generation: 0,
             refuse_connections: 0,
             connections: 0,
@@ -212,6 +216,7 @@ impl<C: Codec> Device<C> {
                 }
             }
             self.last_reply = Some(reply.clone());
+            self.sent.push((request, reply.clone()));
             self.outbox.push_back((at, reply));
         }
     }
@@ -397,14 +402,46 @@ fn assert_bit_equal(got: &[Reading], want: &[Reading]) {
     }
 }
 
+/// The readings without their frames.
+fn values(received: &[ReceivedReading]) -> Vec<Reading> {
+    received.iter().map(|r| r.reading).collect()
+}
+
+/// The last reply frame the fake device sent to `request`.
+fn last_reply_to<C: Codec>(device: &Shared<C>, request: Request) -> Vec<u8> {
+    let d = device.lock().unwrap();
+    d.sent
+        .iter()
+        .rev()
+        .find(|(r, _)| *r == request)
+        .map(|(_, bytes)| bytes.clone())
+        .unwrap_or_else(|| panic!("the device never answered {request}"))
+}
+
+/// Each reading's frame is, byte for byte, the last reply the device sent to its FETCH.
+fn assert_fetched_frames_as_sent<C: Codec>(device: &Shared<C>, received: &[ReceivedReading]) {
+    for r in received {
+        let geometry = r.reading.geometry;
+        assert_eq!(
+            r.raw,
+            last_reply_to(device, Request::Fetch { geometry }),
+            "{geometry}: the frame as the device sent it"
+        );
+    }
+}
+
 #[tokio::test]
 async fn mat12_measures_all_twelve_bit_for_bit_with_events() {
     within(async {
         let device = Device::<Mat12Codec>::new();
         let handle = mat12(&device);
         let mut events = handle.subscribe();
-        let readings = handle.measure_all().await.unwrap();
+        let received = handle.measure_all_received().await.unwrap();
+        let readings = values(&received);
         assert_bit_equal(&readings, &device.lock().unwrap().readings);
+        assert_fetched_frames_as_sent(&device, &received);
+        // 256-byte frames (four 64-byte USB packets), each reassembled exactly.
+        assert!(received.iter().all(|r| r.raw.len() == 256));
         let names: Vec<_> = readings.iter().map(|r| r.geometry).collect();
         assert_eq!(names, crate::mat12::codec::GEOMETRY_NAMES);
         let events = drain(&mut events);
@@ -418,11 +455,15 @@ async fn mat12_measures_all_twelve_bit_for_bit_with_events() {
         assert_eq!(measuring.len(), 12);
         assert_eq!(measuring[0], (1, 12, "15as-45"));
         assert_eq!(measuring[11], (12, 12, "45as110"));
-        let read = events
+        // The events carry the same readings with the same frames, in order.
+        let read: Vec<&ReceivedReading> = events
             .iter()
-            .filter(|e| matches!(e, Event::Reading { .. }))
-            .count();
-        assert_eq!(read, 12);
+            .filter_map(|e| match e {
+                Event::Reading { reading, .. } => Some(reading),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(read, received.iter().collect::<Vec<_>>());
         // First connection was made at spawn, with IDENTIFY first on the wire.
         assert_eq!(device.lock().unwrap().seen[0], Request::Identify);
         handle.shutdown().await;
@@ -435,10 +476,19 @@ async fn sra_measures_both_geometries_through_a_chunked_stream() {
     within(async {
         let device = Device::<SraCodec>::new();
         let handle = sra(&device);
-        let readings = handle.measure_all().await.unwrap();
-        assert_bit_equal(&readings, &device.lock().unwrap().readings);
-        let one = handle.measure_one("sra-60").await.unwrap();
-        assert!(one.bit_eq(&device.lock().unwrap().readings[1]));
+        let received = handle.measure_all_received().await.unwrap();
+        assert_bit_equal(&values(&received), &device.lock().unwrap().readings);
+        // Lines that came in 5-byte pieces are handed back whole, `!` to `\r\n`.
+        assert_fetched_frames_as_sent(&device, &received);
+        assert!(received.iter().all(|r| r.raw.ends_with(b"\r\n")));
+        let one = handle.measure_one_received("sra-60").await.unwrap();
+        assert!(one.reading.bit_eq(&device.lock().unwrap().readings[1]));
+        assert_eq!(
+            one.raw,
+            last_reply_to(&device, Request::MeasureOne { geometry: "sra-60" })
+        );
+        let values_only = handle.measure_one("sra-20").await.unwrap();
+        assert!(values_only.bit_eq(&device.lock().unwrap().readings[0]));
         assert_eq!(handle.status().await.unwrap().state, DeviceState::Ready);
         handle.calibrate().await.unwrap();
         assert_eq!(handle.identify().await.unwrap().model, "fake sra");
@@ -457,13 +507,26 @@ async fn a_corrupted_reading_is_refetched_and_then_used() {
             2,
         ));
         let handle = mat12(&device);
-        let readings = handle.measure_all().await.unwrap();
-        assert_bit_equal(&readings, &device.lock().unwrap().readings);
+        let received = handle.measure_all_received().await.unwrap();
+        assert_bit_equal(&values(&received), &device.lock().unwrap().readings);
         assert_eq!(
             fetches(&device, "45as25"),
             3,
             "two corrupted replies, one good"
         );
+        // The frame kept is the good third reply, not one of the corrupted ones.
+        assert_fetched_frames_as_sent(&device, &received);
+        let fetch = Request::Fetch { geometry: "45as25" };
+        let replies: Vec<Vec<u8>> = device
+            .lock()
+            .unwrap()
+            .sent
+            .iter()
+            .filter(|(r, _)| *r == fetch)
+            .map(|(_, b)| b.clone())
+            .collect();
+        assert_eq!(replies.len(), 3);
+        assert_ne!(replies[0], replies[2]);
         assert_eq!(fetches(&device, "45as15"), 1);
     })
     .await
@@ -640,14 +703,85 @@ async fn garbage_and_stale_duplicates_are_dropped_without_a_resend() {
             ));
         }
         let handle = sra(&device);
-        let readings = handle.measure_all().await.unwrap();
-        assert_bit_equal(&readings, &device.lock().unwrap().readings);
+        let received = handle.measure_all_received().await.unwrap();
+        assert_bit_equal(&values(&received), &device.lock().unwrap().readings);
+        // The garbage before the reading is not part of its frame.
+        assert_fetched_frames_as_sent(&device, &received);
         assert_eq!(fetches(&device, "sra-20"), 1);
         assert_eq!(
             fetches(&device, "sra-60"),
             1,
             "the duplicate sra-20 reading was not taken"
         );
+    })
+    .await
+}
+
+#[tokio::test]
+async fn garbage_that_looks_like_a_broken_frame_costs_no_resend() {
+    // PROTOCOL.md §4: bytes that never form a frame are dropped and the reply that follows
+    // them is used. Here: an MA-T12 header with an impossible length, and SRA noise holding a
+    // start character and a line end but no `*XXXX` tail.
+    within(async {
+        let device = Device::<Mat12Codec>::new();
+        device.lock().unwrap().faults.push(fault(
+            RequestKind::Fetch,
+            Some("15as15"),
+            Act::Garbage(vec![0x4D, 0x54, 0xFF, 0xFF, 0xFF, 0x00, 0x4D]),
+            1,
+        ));
+        let handle = mat12(&device);
+        let received = handle.measure_all_received().await.unwrap();
+        assert_bit_equal(&values(&received), &device.lock().unwrap().readings);
+        assert_fetched_frames_as_sent(&device, &received);
+        assert_eq!(fetches(&device, "15as15"), 1, "no resend");
+
+        let device = Device::<SraCodec>::new();
+        device.lock().unwrap().faults.push(fault(
+            RequestKind::Fetch,
+            Some("sra-20"),
+            Act::Garbage(b"!\r\n!$\x00\r\n!RD,20,3.1F721\r\n".to_vec()),
+            1,
+        ));
+        let handle = sra(&device);
+        let received = handle.measure_all_received().await.unwrap();
+        assert_bit_equal(&values(&received), &device.lock().unwrap().readings);
+        assert_fetched_frames_as_sent(&device, &received);
+        assert_eq!(fetches(&device, "sra-20"), 1, "no resend");
+    })
+    .await
+}
+
+#[tokio::test]
+async fn the_frame_kept_is_the_one_received_not_a_re_encoding() {
+    // `3.10` is a valid SRA intensity that brdfd's codec would write `3.1`: only a frame kept
+    // as received can hold it.
+    within(async {
+        let device = Device::<SraCodec>::new();
+        let sent = crate::sra::codec::line(b'!', "RD,20,3.10");
+        device.lock().unwrap().faults.push(fault(
+            RequestKind::Fetch,
+            Some("sra-20"),
+            Act::Replace(sent.clone()),
+            1,
+        ));
+        let handle = sra(&device);
+        let mut events = handle.subscribe();
+        let received = handle.measure_all_received().await.unwrap();
+        assert!(received[0].reading.bit_eq(&Reading {
+            geometry: "sra-20",
+            value: ReadingValue::Intensity(3.1),
+        }));
+        assert_eq!(received[0].raw, sent);
+        let canonical = SraCodec::encode_response(&Response::Fetched(received[0].reading));
+        assert_ne!(canonical.unwrap(), sent);
+        let event_frame = drain(&mut events).into_iter().find_map(|e| match e {
+            Event::Reading { reading, .. } if reading.reading.geometry == "sra-20" => {
+                Some(reading.raw)
+            }
+            _ => None,
+        });
+        assert_eq!(event_frame, Some(sent));
     })
     .await
 }
@@ -946,7 +1080,8 @@ async fn a_scan_recorded_through_the_tap_replays_to_the_same_readings() {
             Recorder::new(sink.clone(), Instrument::MaT12, &["unit test".into()]).unwrap();
         let (d, rec) = (device.clone(), recorder.clone());
         let handle = spawn_mat12(move || Ok(Tap::new(connect(&d)?, rec.clone())), fast());
-        let readings = handle.measure_all().await.unwrap();
+        let received = handle.measure_all_received().await.unwrap();
+        let readings = values(&received);
         handle.shutdown().await;
         recorder.finish().unwrap();
 
@@ -962,17 +1097,22 @@ async fn a_scan_recorded_through_the_tap_replays_to_the_same_readings() {
         assert_eq!(requests.len(), 2 + 12 + 1, "12 fetches and one resend");
         // The corrupted reply is on record, marked, and the readings on record are the driver's.
         assert!(text.contains("# not a frame: checksum mismatch"), "{text}");
-        let recorded: Vec<Reading> = session
+        let recorded: Vec<(Reading, &[u8])> = session
             .frames
             .iter()
             .filter(|f| f.direction == Direction::FromDevice)
             .filter_map(|f| match Mat12Codec::parse_response(&f.bytes) {
-                Ok(Response::Fetched(r)) => Some(r),
+                Ok(Response::Fetched(r)) => Some((r, &f.bytes[..])),
                 _ => None,
             })
             .collect();
         assert_eq!(recorded.len(), 12, "{text}");
-        assert_bit_equal(&recorded, &readings);
+        let (values_on_record, frames_on_record): (Vec<Reading>, Vec<&[u8]>) =
+            recorded.into_iter().unzip();
+        assert_bit_equal(&values_on_record, &readings);
+        // And each reading's frame is the `<` line on record for its FETCH, byte for byte.
+        let frames: Vec<&[u8]> = received.iter().map(|r| &r.raw[..]).collect();
+        assert_eq!(frames, frames_on_record);
     })
     .await
 }

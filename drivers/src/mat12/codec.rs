@@ -611,6 +611,37 @@ mod tests {
     }
 
     #[test]
+    fn an_impossible_length_is_garbage_and_a_bad_checksum_a_damaged_frame() {
+        // `MT` with a declared length over 1024 cannot be delimited: only the magic is dropped,
+        // as garbage (no resend, PROTOCOL.md §4); the reply behind it decodes.
+        let reply = golden("mat12 MEASURED 12");
+        let mut buf = BytesMut::from(&[0x4D, 0x54, 0xFF, 0xFF, 0xFF][..]);
+        buf.extend_from_slice(&reply);
+        let e = Mat12Codec::decode_response(&mut buf).unwrap_err();
+        assert_eq!(
+            e,
+            FrameError::BadLength {
+                declared: 0xFFFF,
+                max: MAX_PAYLOAD
+            }
+        );
+        assert!(e.is_garbage());
+        let e = Mat12Codec::decode_response(&mut buf).unwrap_err();
+        assert_eq!(e, FrameError::Garbage { skipped: 3 });
+        assert!(e.is_garbage());
+        let (response, raw) = Mat12Codec::decode_response_frame(&mut buf)
+            .unwrap()
+            .unwrap();
+        assert_eq!(response, Response::Measured { count: 12 });
+        assert_eq!(raw[..], reply[..], "the frame's bytes as received");
+        // A delimited frame that fails its checksum was a reply, damaged.
+        let mut bad = reply.clone();
+        bad[5] ^= 0x01;
+        let e = Mat12Codec::decode_response(&mut BytesMut::from(&bad[..])).unwrap_err();
+        assert!(matches!(e, FrameError::BadChecksum { .. }) && !e.is_garbage());
+    }
+
+    #[test]
     fn every_single_bit_flip_of_the_golden_reading_is_caught() {
         let good = golden("mat12 READING 15as-45");
         for byte in 0..good.len() {

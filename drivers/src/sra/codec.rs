@@ -152,12 +152,11 @@ pub fn check(buf: &[u8], start: u8) -> Check {
     if len > MAX_LINE {
         return Check::Reject(len, FrameError::LineTooLong { len, max: MAX_LINE });
     }
-    // <start><body>*XXXX\r\n: at least 1 + 0 + 5 + 2 bytes.
+    // <start><body>*XXXX\r\n: at least 1 + 0 + 5 + 2 bytes. Without that tail the bytes
+    // cannot be a line of this protocol (noise that happens to hold a start character and a
+    // line end): garbage, which does not cost the driver a resend (PROTOCOL.md §4).
     if len < 8 || buf[nl - 1] != b'\r' || buf[nl - 6] != b'*' {
-        return Check::Reject(
-            len,
-            FrameError::malformed("line does not end in *XXXX\\r\\n"),
-        );
+        return Check::Reject(len, FrameError::NotALine { len });
     }
     let digits = &buf[nl - 5..nl - 1];
     if !digits
@@ -649,6 +648,51 @@ mod tests {
                 "{v:?} accepted"
             );
         }
+    }
+
+    #[test]
+    fn lines_without_the_checksum_tail_are_garbage_and_damaged_lines_are_not() {
+        // Too short, no `\r`, no `*`: noise holding a start character and a line end. Dropped
+        // as garbage (no resend, PROTOCOL.md §4); the reply behind it decodes.
+        let reply = golden("sra READING sra-20");
+        for noise in [
+            &b"!\r\n"[..],
+            b"!$\x00\r\n",
+            b"!RD,20,3.1*F721\n",
+            b"!RD,20,3.1F721\r\n",
+        ] {
+            let mut buf = BytesMut::from(noise);
+            buf.extend_from_slice(&reply);
+            let e = SraCodec::decode_response(&mut buf).unwrap_err();
+            assert_eq!(e, FrameError::NotALine { len: noise.len() }, "{noise:?}");
+            assert!(e.is_garbage());
+            let (response, raw) = SraCodec::decode_response_frame(&mut buf).unwrap().unwrap();
+            assert_eq!(response, Response::Fetched(intensity("sra-20", 3.1)));
+            assert_eq!(raw[..], reply[..], "the line's bytes as received");
+        }
+        // A whole line whose checksum fails, or is not upper-case hex, was a reply, damaged.
+        let n = reply.len();
+        for (at, b) in [(5, b'1'), (n - 6, b'f')] {
+            let mut bad = reply.clone();
+            bad[at] = b;
+            let Check::Reject(len, e) = check(&bad, REPLY_START) else {
+                panic!("byte {at} = {b} accepted")
+            };
+            assert_eq!(len, n, "dropped whole");
+            assert!(!e.is_garbage(), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_non_canonical_intensity_is_read_and_its_bytes_kept() {
+        // `3.10` is not how the codec writes 3.1, but it is a valid line: the value is read
+        // and the frame handed back is the one received, not a re-encoding.
+        let received = line(REPLY_START, "RD,20,3.10");
+        let mut buf = BytesMut::from(&received[..]);
+        let (response, raw) = SraCodec::decode_response_frame(&mut buf).unwrap().unwrap();
+        assert_eq!(response, Response::Fetched(intensity("sra-20", 3.1)));
+        assert_eq!(raw[..], received[..]);
+        assert_ne!(SraCodec::encode_response(&response).unwrap(), received);
     }
 
     #[test]
