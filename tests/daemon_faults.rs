@@ -1,6 +1,7 @@
-//! The daemon in-process when things go wrong: an instrument unplugged mid-scan, a fit that
-//! panics, a reference too old to fit against, a fit cancelled, a scan aborted. Each leaves the
-//! store consistent and the daemon ready for the next scan.
+//! The daemon in-process when things go wrong: an instrument unplugged mid-scan, damaged replies
+//! and garbage on the wire, a fit that panics, a reference too old to fit against, a fit
+//! cancelled, a scan aborted. Each leaves the store consistent (readings stored with the reply
+//! frames as received) and the daemon ready for the next scan.
 
 // `serial()` is held for a whole test on purpose: each test has its own runtime, so holding
 // it across awaits cannot deadlock, and it keeps the daemon tests from competing for cores.
@@ -120,6 +121,15 @@ async fn an_unplugged_instrument_fails_the_scan_keeping_its_readings_and_the_nex
             "the five readings fetched before the link dropped"
         );
         assert_eq!(sra_readings, 2, "the SRA finished its part");
+        // What was stored before the link dropped is what the instruments sent.
+        let frames = recorded_fetch_replies(&mock_devices::recordings::all()[1]);
+        for r in &detail.readings {
+            assert_eq!(
+                r.raw_frame, frames[r.geometry.name],
+                "{}: the recorded reply",
+                r.geometry.name
+            );
+        }
         assert!(d.store.fits_for_scan(failed).await.unwrap().is_empty());
 
         // Plugged back in: the next scan reconnects and completes with the next recording.
@@ -141,6 +151,80 @@ async fn an_unplugged_instrument_fails_the_scan_keeping_its_readings_and_the_nex
             "the instrument was reconnected"
         );
         assert_eq!(d.store.integrity_check().await.unwrap(), ["ok"]);
+        service.shutdown().await;
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn damaged_replies_and_garbage_leave_only_the_frames_received_whole_in_the_store() {
+    let _serial = serial();
+    bounded(async {
+        let (ma, sra, fifth_fetch_reply, [first, _]) = three_objects();
+        // MA-T12: the first sample's fifth reading arrives damaged twice (a payload byte
+        // flipped: bad CRC, refetched), after garbage that looks like a header with an
+        // impossible length (dropped without a refetch).
+        let ma = ma
+            .with_fault(Fault::Corrupt {
+                frame: fifth_fetch_reply,
+                offset: 100,
+                xor: 0x10,
+                times: 2,
+            })
+            .unwrap()
+            .with_fault(Fault::Garbage {
+                frame: fifth_fetch_reply,
+                bytes: vec![0x4D, 0x54, 0xFF, 0xFF, 0xFF],
+            })
+            .unwrap();
+        // SRA: noise holding reply starts and line ends before the first sample's first reading.
+        let sra_first_reply = sra
+            .exchanges()
+            .iter()
+            .find(|e| e.session == 1 && matches!(e.parsed, Some(Request::Fetch { .. })))
+            .expect("a FETCH")
+            .replies[0]
+            .index;
+        let sra = sra
+            .with_fault(Fault::Garbage {
+                frame: sra_first_reply,
+                bytes: b"!\r\n!$\x00\r\n".to_vec(),
+            })
+            .unwrap();
+        let devices = Devices::simulated(ma, sra, &strict_fast(), [None, None]).unwrap();
+        let d = start(devices, settings(), ServiceOptions::default()).await;
+        let service = &d.service;
+        measure_reference(service).await;
+        let scan = scan_and_settle(service, first).await;
+        let detail = d.store.scan_detail(scan).await.unwrap();
+        assert_eq!(
+            detail.scan.state,
+            ScanState::Complete,
+            "{:?}",
+            detail.scan.reason
+        );
+        // Every stored frame is the recorded reply, byte for byte: neither a damaged copy nor
+        // the garbage before it.
+        let frames = recorded_fetch_replies(&mock_devices::recordings::all()[1]);
+        assert_eq!(detail.readings.len(), 14);
+        for r in &detail.readings {
+            assert_eq!(
+                r.raw_frame, frames[r.geometry.name],
+                "{}: the recorded reply",
+                r.geometry.name
+            );
+        }
+        for (instrument, report) in service.devices().replay_reports() {
+            assert!(report.mismatches.is_empty(), "{instrument}: {report:?}");
+            let fired = report.faults_fired.join("; ");
+            let want: &[&str] = match instrument {
+                Instrument::MaT12 => &["(1 of 2)", "(2 of 2)", "garbage before frame"],
+                Instrument::Sra => &["garbage before frame"],
+            };
+            for w in want {
+                assert!(fired.contains(w), "{instrument}: {w} not in {fired}");
+            }
+        }
         service.shutdown().await;
     })
     .await;

@@ -1,7 +1,9 @@
 //! The daemon in-process on simulated instruments replaying the committed recordings
 //! (strict, accelerated): a reference, a scan and three fits land in the store with every row,
 //! each value checked against the recording it came from and against the standalone fit
-//! pipeline; export and import round-trip; the imported reference never takes over.
+//! pipeline, each reading's raw frame byte for byte the recorded reply to its FETCH (also when
+//! the instrument writes digits brdfd's codec would not); export and import round-trip; the
+//! imported reference never takes over.
 
 // `serial()` is held for a whole test on purpose: each test has its own runtime, so holding
 // it across awaits cannot deadlock, and it keeps the daemon tests from competing for cores.
@@ -16,7 +18,6 @@ use brdfd::optimise::{Method, Settings};
 use brdfd::processing::{self, ProcessingOptions, SpecularStrategy};
 use brdfd::service::{Event, RefitRequest};
 use brdfd::store::{FitStatus, ReadingValues, ReferenceStatus, ScanState};
-use drivers::mat12::codec::Mat12Codec;
 use drivers::protocol::{Codec, Response};
 use drivers::sra::codec::SraCodec;
 use drivers::{Instrument, ReadingValue};
@@ -41,49 +42,22 @@ fn recorded(
 }
 
 /// Checks one stored reading: its values are the recording's, bit for bit, and its raw frame
-/// is a valid reply frame carrying exactly those values.
+/// is, byte for byte, the reply frame the recording holds for that geometry's FETCH (the
+/// session file's `<` line): the bytes as received, not a re-encoding.
 fn check_reading(
     r: &brdfd::store::Reading,
     truth: &std::collections::HashMap<&'static str, Vec<f64>>,
+    frames: &std::collections::HashMap<&'static str, Vec<u8>>,
 ) {
-    let want = &truth[r.geometry.name];
+    let name = r.geometry.name;
     assert!(
-        bit_eq(r.values.as_slice(), want),
-        "{}: stored values differ from the recording",
-        r.geometry.name
+        bit_eq(r.values.as_slice(), &truth[name]),
+        "{name}: stored values differ from the recording"
     );
-    assert!(
-        !r.raw_frame.is_empty(),
-        "{}: raw frame stored",
-        r.geometry.name
-    );
-    let parsed = match r.device {
-        Device::MaT12 => Mat12Codec::parse_response(&r.raw_frame),
-        Device::Sra => SraCodec::parse_response(&r.raw_frame),
-    }
-    .unwrap_or_else(|e| panic!("{}: raw frame does not parse: {e}", r.geometry.name));
-    let Response::Fetched(reading) = parsed else {
-        panic!("{}: raw frame is not a FETCH reply", r.geometry.name)
-    };
-    assert_eq!(reading.geometry, r.geometry.name);
-    let values = match reading.value {
-        ReadingValue::Reflectance(s) => s.to_vec(),
-        ReadingValue::Intensity(v) => vec![v],
-    };
-    assert!(
-        bit_eq(&values, want),
-        "{}: raw frame values",
-        r.geometry.name
-    );
-    // The frame is the one recorded: it occurs verbatim in the session file.
-    let hex = drivers::session::to_hex(&r.raw_frame);
-    let recordings = mock_devices::recordings::all();
-    assert!(
-        recordings
-            .iter()
-            .any(|rec| rec.ma_t12.contains(&hex) || rec.sra.contains(&hex)),
-        "{}: raw frame not found in the recordings",
-        r.geometry.name
+    assert_eq!(
+        drivers::session::to_hex(&r.raw_frame),
+        drivers::session::to_hex(&frames[name]),
+        "{name}: the stored raw frame is the recorded reply to its FETCH"
     );
 }
 
@@ -101,9 +75,10 @@ async fn a_reference_a_scan_and_three_fits_land_in_the_store_with_every_row() {
         assert_eq!(rd.reference.status, ReferenceStatus::Complete);
         assert_eq!(rd.reference.name, "Munsell N9");
         assert_eq!(rd.readings.len(), 14);
-        let n9 = recorded(mock_devices::recordings::reference());
+        let n9 = mock_devices::recordings::reference();
+        let (n9_values, n9_frames) = (recorded(n9), recorded_fetch_replies(n9));
         for r in &rd.readings {
-            check_reading(r, &n9);
+            check_reading(r, &n9_values, &n9_frames);
         }
         assert_eq!(
             service.reference_in_force().await.unwrap().unwrap().id,
@@ -125,10 +100,10 @@ async fn a_reference_a_scan_and_three_fits_land_in_the_store_with_every_row() {
         assert_eq!(detail.scan.reference_id, reference);
         assert_eq!(detail.readings.len(), 14);
         assert!(detail.scan.started_at_ms.is_some() && detail.scan.finished_at_ms.is_some());
-        let truth = recorded(first);
+        let (truth, frames) = (recorded(first), recorded_fetch_replies(first));
         for (r, g) in detail.readings.iter().zip(GEOMETRIES.iter()) {
             assert_eq!(r.geometry.name, g.name, "readings in table order");
-            check_reading(r, &truth);
+            check_reading(r, &truth, &frames);
         }
 
         // The processed BRDF is processing of the exported scan, bit for bit.
@@ -296,6 +271,87 @@ async fn export_then_import_gives_the_same_scan_and_fits_and_keeps_the_reference
             ReadingValues::Intensity(_)
         ));
         service.shutdown().await;
+    })
+    .await;
+}
+
+/// Rewrites each SRA reading line of `session` with a trailing zero on its value (`0.25` →
+/// `0.250`, `2.5e-7` → `2.50e-7`): the same reading, in digits brdfd's codec never writes.
+/// Returns the new lines by geometry.
+fn widen_sra_readings(
+    session: &mut drivers::session::Session,
+) -> std::collections::HashMap<&'static str, Vec<u8>> {
+    let widen = |m: &str| {
+        if m.contains('.') {
+            format!("{m}0")
+        } else {
+            format!("{m}.0")
+        }
+    };
+    let wanted = fetch_replies(session);
+    let mut out = std::collections::HashMap::new();
+    for frame in &mut session.frames {
+        let Some((&geometry, _)) = wanted.iter().find(|(_, b)| **b == frame.bytes) else {
+            continue;
+        };
+        let text = std::str::from_utf8(&frame.bytes).unwrap();
+        // `!RD,<code>,<value>*XXXX\r\n`
+        let body = &text[1..text.len() - 7];
+        let (head, value) = body.rsplit_once(',').unwrap();
+        let value = match value.split_once('e') {
+            Some((m, e)) => format!("{}e{e}", widen(m)),
+            None => widen(value),
+        };
+        frame.bytes = drivers::sra::codec::line(b'!', &format!("{head},{value}"));
+        out.insert(geometry, frame.bytes.clone());
+    }
+    assert_eq!(out.len(), 2, "both SRA readings rewritten");
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_stored_frame_is_the_one_received_even_in_digits_brdfd_would_not_write() {
+    let _serial = serial();
+    bounded(async {
+        let n9 = mock_devices::recordings::reference();
+        let mut sra = n9.session(Instrument::Sra).unwrap();
+        let sent = widen_sra_readings(&mut sra);
+        let devices = brdfd::service::Devices::simulated(
+            n9.script(Instrument::MaT12).unwrap(),
+            mock_devices::Script::new(sra).unwrap(),
+            &strict_fast(),
+            [None, None],
+        )
+        .unwrap();
+        let d = start(
+            devices,
+            settings(),
+            brdfd::service::ServiceOptions::default(),
+        )
+        .await;
+        let reference = measure_reference(&d.service).await;
+        let rd = d.store.reference_detail(reference).await.unwrap();
+        let truth = recorded(n9);
+        let mut frames = recorded_fetch_replies(n9);
+        frames.extend(sent.clone());
+        for r in &rd.readings {
+            check_reading(r, &truth, &frames);
+        }
+        // The codec would have written those readings differently: a re-encoding could not
+        // have produced the stored frames.
+        for r in rd.readings.iter().filter(|r| r.device == Device::Sra) {
+            let ReadingValues::Intensity(v) = r.values else {
+                panic!("{}: not an intensity", r.geometry.name)
+            };
+            let canonical = SraCodec::encode_response(&Response::Fetched(drivers::Reading {
+                geometry: r.geometry.name,
+                value: ReadingValue::Intensity(v),
+            }))
+            .unwrap();
+            assert_ne!(canonical, r.raw_frame, "{}", r.geometry.name);
+            assert_eq!(r.raw_frame, sent[r.geometry.name]);
+        }
+        assert!(d.service.shutdown().await);
     })
     .await;
 }

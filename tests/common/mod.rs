@@ -134,6 +134,45 @@ pub async fn scan_and_settle(service: &Service, sample: &str) -> ScanId {
     id
 }
 
+/// The reply frame a session file holds for each FETCH, by geometry: the `<` line that follows
+/// the `>` FETCH line, byte for byte (what the simulated instrument sends back).
+pub fn fetch_replies(
+    session: &drivers::session::Session,
+) -> std::collections::HashMap<&'static str, Vec<u8>> {
+    use drivers::protocol::{Codec, Request};
+    use drivers::session::Direction;
+    let frames = &session.frames;
+    let mut out = std::collections::HashMap::new();
+    for (i, f) in frames.iter().enumerate() {
+        if f.direction != Direction::ToDevice {
+            continue;
+        }
+        let request = match session.instrument {
+            Instrument::MaT12 => drivers::mat12::codec::Mat12Codec::parse_request(&f.bytes),
+            Instrument::Sra => drivers::sra::codec::SraCodec::parse_request(&f.bytes),
+        };
+        if let Ok(Request::Fetch { geometry }) = request {
+            let reply = frames[i + 1..]
+                .iter()
+                .find(|g| g.direction == Direction::FromDevice)
+                .unwrap_or_else(|| panic!("no `<` line after FETCH {geometry}"));
+            let before = out.insert(geometry, reply.bytes.clone());
+            assert!(before.is_none(), "one FETCH of {geometry} per session");
+        }
+    }
+    out
+}
+
+/// [`fetch_replies`] of both of a recording's session files.
+pub fn recorded_fetch_replies(
+    r: &mock_devices::recordings::Recording,
+) -> std::collections::HashMap<&'static str, Vec<u8>> {
+    let mut out = fetch_replies(&r.session(Instrument::MaT12).unwrap());
+    out.extend(fetch_replies(&r.session(Instrument::Sra).unwrap()));
+    assert_eq!(out.len(), 14, "{}: a FETCH reply per geometry", r.name);
+    out
+}
+
 /// Whether two reading values are identical bit for bit.
 pub fn bit_eq(a: &[f64], b: &[f64]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
