@@ -110,6 +110,9 @@ impl DriverConfig {
 }
 
 /// What a driver reports to every subscriber.
+// `Reading` holds a spectrum inline (see `protocol::ReadingValue`) and its frame: a few dozen
+// events per scan, so the size costs nothing, while a box would add an allocation per event.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Event {
     /// A connection is open and the instrument answered IDENTIFY.
