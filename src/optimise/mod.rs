@@ -8,6 +8,9 @@
 //!   own band's residuals, so the best kd is solved exactly band by band (`problem`). What is
 //!   left is a 3-D search over (ks, α, μ): a seeded space-filling design, Nelder–Mead from its
 //!   best distinct points, and Nelder–Mead restarts at the best point to polish (`separable`).
+//!   For cf2 and m2 the same search first runs on smoother criteria (cf1, then for cf2 the
+//!   weighted L1 error), whose optima are extra starting points: cf2's landscape has many
+//!   local minima, and this continuation is what makes its fits agree across seeds.
 //!   The reliability harness (`examples/reliability.rs`) checks that it ends within 1 % of the
 //!   best cost either method ever finds, on every scan, cost function and seed.
 //!
@@ -151,8 +154,9 @@ impl Default for GaSettings {
 pub struct SeparableSettings {
     /// Points of the seeded Latin-hypercube design that surveys (ks, α, μ). Default 64.
     pub samples: u32,
-    /// Nelder–Mead searches, started from the best design points that lie at least
-    /// `start_separation` apart. Default 4.
+    /// Nelder–Mead searches per stage from the design, started from the best design points
+    /// that lie at least `start_separation` apart (and that far from the warm starts, which
+    /// are searched as well). Default 4.
     pub starts: u32,
     /// Least ∞-norm distance (unit cube) between two starting points, so that the searches
     /// explore different basins. Default 0.15.
@@ -177,6 +181,11 @@ pub struct SeparableSettings {
     /// turns parameter rounding into cost differences of that order near an exact fit, so a
     /// tighter value only burns evaluations.
     pub f_tolerance: f64,
+    /// Continuation: before the fit's own cost, run the same survey–search–polish on the same
+    /// design for smoother criteria — cf2: cf1, then the weighted L1 error; m2: cf1; cf1:
+    /// none — and search from their optima too. Default true; false gives the plain
+    /// multi-start search (fits then miss cf2's best basin for some seeds).
+    pub continuation: bool,
 }
 
 impl Default for SeparableSettings {
@@ -191,6 +200,7 @@ impl Default for SeparableSettings {
             max_evaluations_per_polish: 300,
             x_tolerance: 1e-7,
             f_tolerance: 1e-8,
+            continuation: true,
         }
     }
 }
@@ -383,11 +393,13 @@ pub struct FitOutcome {
     /// Their cost, as [`crate::cost::cost`] computes it.
     pub cost: f64,
     /// Cost evaluations. For the paper GA one evaluation is a full 34-parameter model; for the
-    /// separable method it is one (ks, α, μ) point with its exact per-band kd solve.
+    /// separable method it is one (ks, α, μ) point with its exact per-band kd solve, for the
+    /// fit's own cost or (continuation) a surrogate criterion — cf1's and L1's are 10–20 times
+    /// cheaper than cf2's.
     pub evaluations: u64,
     /// Generations run. The paper GA: one per GA generation (fewer than the maximum when it
-    /// stalls). The separable method: the design survey, each Nelder–Mead search and each
-    /// polishing restart.
+    /// stalls). The separable method: each continuation stage, the design survey, each
+    /// Nelder–Mead search and each polishing restart.
     pub generations: u32,
     /// Wall-clock time of the fit, ms.
     pub wall_ms: f64,

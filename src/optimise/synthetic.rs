@@ -118,8 +118,8 @@ pub fn with_noise(measured: &MeasuredBrdf, relative_sigma: f64, seed: u64) -> Me
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spectral::BANDS;
     use crate::geometry::by_name;
+    use crate::spectral::BANDS;
 
     #[test]
     fn cases_use_the_colorchecker_spectra_over_pi() {
