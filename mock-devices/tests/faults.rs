@@ -150,15 +150,18 @@ async fn garbage_before_a_reply_is_dropped_without_a_resend() {
         assert_eq!(report.requests as usize, 2 + report_geometries(&report));
     }
     // Garbage that looks like the start of a broken frame (an MA-T12 header with an impossible
-    // length; an SRA reply line too short to hold its checksum): the driver may take it for a
-    // corrupted reply and resend, but the scan still ends with the recorded readings.
+    // length; an SRA reply line too short to hold its checksum) is garbage too (PROTOCOL.md §4):
+    // no resend, and the scan ends with the recorded readings.
     let broken = Fault::Garbage {
         frame: READING_K,
         bytes: vec![
             0x4d, 0x54, 0xff, 0xff, 0xff, 0x21, 0x24, 0x00, 0x0d, 0x0a, 0x4d,
         ],
     };
-    must_recover(&[broken]).await;
+    for (report, _) in must_recover(&[broken]).await {
+        assert_eq!(report.faults_fired.len(), 1);
+        assert_eq!(report.requests as usize, 2 + report_geometries(&report));
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
