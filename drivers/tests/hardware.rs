@@ -23,14 +23,24 @@ fn product_id() -> Option<u16> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn ma_t12_identifies_and_measures_every_geometry() {
-    let ids = UsbIds { product_id: product_id(), ..UsbIds::default() };
+    let ids = UsbIds {
+        product_id: product_id(),
+        ..UsbIds::default()
+    };
     let handle = spawn_mat12(move || RusbBulk::open(ids), DriverConfig::default());
     let identity = handle.identify().await.expect("MA-T12 IDENTIFY");
     println!("MA-T12: {identity:?}");
-    let readings = handle.measure_all_received().await.expect("MA-T12 MEASURE-ALL");
+    let readings = handle
+        .measure_all_received()
+        .await
+        .expect("MA-T12 MEASURE-ALL");
     assert_eq!(readings.len(), handle.geometries().len());
     for r in &readings {
-        assert!(!r.raw.is_empty(), "{}: no raw frame kept", r.reading.geometry);
+        assert!(
+            !r.raw.is_empty(),
+            "{}: no raw frame kept",
+            r.reading.geometry
+        );
     }
 }
 
@@ -38,9 +48,15 @@ async fn ma_t12_identifies_and_measures_every_geometry() {
 async fn sra_identifies_and_measures_both_geometries() {
     let port = std::env::var("BRDFD_SRA_PORT")
         .expect("BRDFD_SRA_PORT: the serial port of the Canon RA-532H, e.g. /dev/ttyUSB0");
-    let handle = spawn_sra(move || open_serial(&port, BAUD_RATE), DriverConfig::default());
+    let handle = spawn_sra(
+        move || open_serial(&port, BAUD_RATE),
+        DriverConfig::default(),
+    );
     let identity = handle.identify().await.expect("SRA IDENTIFY");
     println!("SRA: {identity:?}");
-    let readings = handle.measure_all_received().await.expect("SRA MEASURE-ALL");
+    let readings = handle
+        .measure_all_received()
+        .await
+        .expect("SRA MEASURE-ALL");
     assert_eq!(readings.len(), handle.geometries().len());
 }
