@@ -3,8 +3,8 @@
 //! - `fit/<cost>`: the default (separable) method on one synthetic 14-geometry scan with 1 %
 //!   noise, for each cost function. Target: median < 20 ms on one core, release. A cf2 fit
 //!   includes its continuation stages (cf1, then weighted L1; `optimise::separable`), which
-//!   are what make it reliable: measured 0.38 ms (cf1), 15.0 ms (cf2, ~2 990 evaluations of
-//!   which ~1 300 are cf2's own) and 8.0 ms (m2) on the development machine.
+//!   are what make it reliable. Measured on the development machine: cf1 0.38 ms, cf2 15.0 ms
+//!   (2 988 evaluations: 848 cf1, 987 L1, 1 153 cf2), m2 8.0 ms.
 //! - `fit_paper/cf2`: the paper GA with its default settings on the same scan (fewer samples:
 //!   it is slow, which is part of the point).
 //! - `cost_eval/<cost>`: one model evaluation (14 specular terms, 434 values) plus one cost,
