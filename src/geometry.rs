@@ -63,7 +63,15 @@ const fn g(
     phi_r_deg: f64,
     aspecular_deg: f64,
 ) -> Geometry {
-    Geometry { index, device, name, theta_i_deg, theta_r_deg, phi_r_deg, aspecular_deg }
+    Geometry {
+        index,
+        device,
+        name,
+        theta_i_deg,
+        theta_r_deg,
+        phi_r_deg,
+        aspecular_deg,
+    }
 }
 
 /// Number of geometries in a full scan.

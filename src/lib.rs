@@ -29,23 +29,23 @@
 //!   as it arrives), fit worker (blocking threads behind a semaphore), events, shutdown.
 //! - [`api`]: the local HTTP API (axum) and its server-sent event stream.
 //! - [`client`]: the operator commands' side of the HTTP API (`brdfd scan`, `scans`, …).
+pub mod api;
+pub mod cli;
+pub mod client;
+pub mod colour;
+pub mod config;
+pub mod cost;
+pub mod evaluation;
+pub mod fit;
+pub mod formats;
 pub mod geometry;
 pub mod model;
-pub mod spectral;
-pub mod processing;
-pub mod cost;
 pub mod optimise;
-pub mod colour;
-pub mod evaluation;
-pub mod stats;
-pub mod scan;
-pub mod synth;
-pub mod fit;
+pub mod processing;
 pub mod report;
-pub mod formats;
-pub mod cli;
-pub mod config;
-pub mod store;
+pub mod scan;
 pub mod service;
-pub mod api;
-pub mod client;
+pub mod spectral;
+pub mod stats;
+pub mod store;
+pub mod synth;

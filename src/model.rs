@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{GEOMETRY_COUNT, GEOMETRIES, Geometry, Vec3};
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, Geometry, Vec3};
 use crate::spectral::{BANDS, Spectrum};
 
 /// Which cosine the Schlick Fresnel term uses.
@@ -45,25 +45,41 @@ pub struct Bounds {
 impl Default for Bounds {
     /// SCIENCE.md §4: kd ∈ [0, 1], ks ∈ [0, 10], α ∈ [0.01, 1], μ ∈ [1.0, 3.0].
     fn default() -> Self {
-        Bounds { kd: (0.0, 1.0), ks: (0.0, 10.0), alpha: (0.01, 1.0), ior: (1.0, 3.0) }
+        Bounds {
+            kd: (0.0, 1.0),
+            ks: (0.0, 10.0),
+            alpha: (0.01, 1.0),
+            ior: (1.0, 3.0),
+        }
     }
 }
 
 impl Bounds {
     /// Checks every interval is finite and ordered, and that α stays positive (GGX needs α > 0).
     pub fn validate(&self) -> Result<(), String> {
-        for (name, (lo, hi)) in
-            [("kd", self.kd), ("ks", self.ks), ("alpha", self.alpha), ("ior", self.ior)]
-        {
+        for (name, (lo, hi)) in [
+            ("kd", self.kd),
+            ("ks", self.ks),
+            ("alpha", self.alpha),
+            ("ior", self.ior),
+        ] {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-                return Err(format!("bounds: {name} = [{lo}, {hi}] must be finite with lo <= hi"));
+                return Err(format!(
+                    "bounds: {name} = [{lo}, {hi}] must be finite with lo <= hi"
+                ));
             }
         }
         if self.alpha.0 <= 0.0 {
-            return Err(format!("bounds: alpha lower bound {} must be > 0", self.alpha.0));
+            return Err(format!(
+                "bounds: alpha lower bound {} must be > 0",
+                self.alpha.0
+            ));
         }
         if self.ior.0 < 1.0 {
-            return Err(format!("bounds: ior lower bound {} must be >= 1", self.ior.0));
+            return Err(format!(
+                "bounds: ior lower bound {} must be >= 1",
+                self.ior.0
+            ));
         }
         Ok(())
     }
@@ -168,7 +184,13 @@ pub fn evaluate(
     geometries: &[SpecularGeometry; GEOMETRY_COUNT],
 ) -> [Spectrum; GEOMETRY_COUNT] {
     std::array::from_fn(|gi| {
-        let s = specular_term(params.ks, params.alpha, params.ior, fresnel, &geometries[gi]);
+        let s = specular_term(
+            params.ks,
+            params.alpha,
+            params.ior,
+            fresnel,
+            &geometries[gi],
+        );
         let mut out = [0.0; BANDS];
         for (o, kd) in out.iter_mut().zip(params.kd.iter()) {
             *o = kd + s;
@@ -257,7 +279,12 @@ mod tests {
 
     #[test]
     fn evaluate_adds_kd_to_the_specular_lobe() {
-        let params = Params { kd: [0.1; BANDS], ks: 1.0, alpha: 0.3, ior: 1.5 };
+        let params = Params {
+            kd: [0.1; BANDS],
+            ks: 1.0,
+            alpha: 0.3,
+            ior: 1.5,
+        };
         let geos = SpecularGeometry::all();
         let a = evaluate(&params, FresnelCosine::Incidence, &geos);
         close(a[12][0], 0.1 + 0.0506963787, 1e-9);
@@ -267,7 +294,10 @@ mod tests {
     #[test]
     fn default_bounds_validate() {
         Bounds::default().validate().unwrap();
-        let bad = Bounds { alpha: (0.0, 1.0), ..Bounds::default() };
+        let bad = Bounds {
+            alpha: (0.0, 1.0),
+            ..Bounds::default()
+        };
         assert!(bad.validate().is_err());
     }
 }

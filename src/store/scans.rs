@@ -343,7 +343,8 @@ impl Store {
 
     /// requested | measuring → aborted (the operator stopped it). Readings are kept.
     pub async fn abort_scan(&self, scan: ScanId) -> Result<(), StoreError> {
-        self.abort_scan_because(scan, "aborted by the operator").await
+        self.abort_scan_because(scan, "aborted by the operator")
+            .await
     }
 
     /// requested | measuring → aborted, with the reason (e.g. "the daemon was shut down
