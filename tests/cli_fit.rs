@@ -214,3 +214,47 @@ fn synth_writes_what_tests_data_holds() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn synth_sessions_are_the_committed_recordings_of_the_same_readings() {
+    // `brdfd synth --noise 0.01 --sessions` encodes the noisy example scans as device sessions;
+    // the committed sample recordings of mock-devices were made from those same scans, so the
+    // frames must agree exactly (only the `note` lines, which name the truth file, differ).
+    let dir = std::env::temp_dir().join(format!("brdfd-cli-sessions-{}", std::process::id()));
+    let out = brdfd(&[
+        "synth",
+        "--out",
+        dir.to_str().unwrap(),
+        "--noise",
+        "0.01",
+        "--sessions",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let frames = |text: &str| -> Vec<String> {
+        text.lines()
+            .filter(|l| !l.starts_with('#') && !l.starts_with("note "))
+            .map(str::to_string)
+            .collect()
+    };
+    let recordings =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("mock-devices/recordings");
+    for slug in ["t-freesia-pink", "t-sky-blue", "t-pebble-grey"] {
+        for device in ["ma_t12", "sra"] {
+            let made =
+                std::fs::read_to_string(dir.join(format!("{slug}.{device}.session"))).unwrap();
+            let committed = std::fs::read_to_string(
+                recordings.join(format!("synthetic-{slug}.{device}.session")),
+            )
+            .unwrap();
+            let (made, committed) = (frames(&made), frames(&committed));
+            assert!(made.len() > 4, "{slug}.{device}: too few frames");
+            assert_eq!(made, committed, "{slug}.{device}.session");
+        }
+    }
+    assert!(dir.join("n9.ma_t12.session").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,12 +1,19 @@
 //! `brdfd synth`: write the eight synthetic example scans and their ground truth.
 //!
 //! This is how `tests/data/` is generated: `brdfd synth --out tests/data` for the noise-free
-//! scans and `brdfd synth --out tests/data --noise 0.01` for the 1 % noise ones.
+//! scans and `brdfd synth --out tests/data --noise 0.01` for the 1 % noise ones. With
+//! `--sessions`, the same readings are also written as device session files (the frames the
+//! drivers and an instrument speaking `drivers/PROTOCOL.md` would exchange), ready for
+//! `brdfd replay`.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
+use mock_devices::generate::{GenerateOptions, Readings, SessionPair};
+use mock_devices::{generate_reference_session, generate_sample_session};
+
+use crate::scan::DeviceReadings;
 use crate::synth::{GroundTruth, SynthOptions, paper_samples, slug, synth_scan};
 
 #[derive(Debug, clap::Args)]
@@ -24,6 +31,12 @@ pub struct SynthArgs {
     /// Seed of the noise; sample i (0–7, in the listed order) uses seed + i.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub seed: u64,
+
+    /// Also write device session files for `brdfd replay`: `n9.{ma_t12,sra}.session` (the
+    /// reference readings of the first sample's scan) and `<slug>.{ma_t12,sra}.session` per
+    /// sample. Replay them with `brdfd replay DIR/n9.*.session DIR/<slug>.*.session`.
+    #[arg(long)]
+    pub sessions: bool,
 }
 
 /// The file names of one sample's scan and truth for a given noise level.
@@ -51,6 +64,39 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         scan.write_file(args.out.join(&scan_name))?;
         write_truth(&args.out.join(&truth_name), truth)?;
         println!("{}  {}  {}", truth.sample, scan_name, truth_name);
+        if args.sessions {
+            if i == 0 {
+                let pair = generate_reference_session(
+                    &device_readings(&scan.reference.readings),
+                    &GenerateOptions::default(),
+                )?;
+                write_sessions(&args.out, "n9", &pair)?;
+            }
+            let pair = generate_sample_session(
+                &truth.sample,
+                &device_readings(&scan.readings),
+                &GenerateOptions::default(),
+            )?;
+            write_sessions(&args.out, &slug(&truth.sample), &pair)?;
+        }
+    }
+    Ok(())
+}
+
+/// A scan's readings in the session generator's form (both in geometry-table order).
+fn device_readings(readings: &DeviceReadings) -> Readings {
+    Readings {
+        ma_t12: readings.ma_t12,
+        sra: readings.sra,
+    }
+}
+
+fn write_sessions(dir: &Path, stem: &str, pair: &SessionPair) -> anyhow::Result<()> {
+    for (device, session) in [("ma_t12", &pair.ma_t12), ("sra", &pair.sra)] {
+        let path = dir.join(format!("{stem}.{device}.session"));
+        std::fs::write(&path, session.to_text())
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("  {}", path.display());
     }
     Ok(())
 }
