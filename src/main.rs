@@ -25,11 +25,26 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    if !matches!(parsed.command, cli::Command::Serve(_)) {
+        stop_quietly_on_closed_pipe();
+    }
     match cli::run(parsed) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", cli::one_line(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// `brdfd scans | head` should end quietly when `head` closes the pipe, as other Unix tools do,
+/// instead of panicking inside `println!`. Rust ignores SIGPIPE by default; the default action
+/// is restored for every command but `serve`, which keeps ignoring it so that nothing a client
+/// does can kill the daemon (socket writes use MSG_NOSIGNAL and never raise it anyway).
+fn stop_quietly_on_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: called once at start-up before any thread is spawned; SIG_DFL is a valid handler.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
