@@ -1003,3 +1003,96 @@ mod tests {
         assert!(matches!(e, ConfigError::Read { .. }), "{e}");
     }
 }
+
+/// Property tests: whatever text a configuration file holds, [`Config::from_toml`] returns
+/// (never panics), an error names a problem, and a configuration it accepts keeps the rules
+/// its checks enforce.
+#[cfg(test)]
+mod proptests {
+    use super::*;
+    use crate::scan::proptests::{apply, assert_names_a_problem, mutations};
+    use proptest::prelude::*;
+
+    fn check(text: &str) -> Result<(), TestCaseError> {
+        match Config::from_toml(text, "brdfd.toml") {
+            Err(e) => assert_names_a_problem(&e)?,
+            Ok(c) => {
+                prop_assert!(c.api.allow_remote || c.api.listen.ip().is_loopback());
+                for d in [&c.devices.ma_t12.timeout, &c.devices.sra.timeout] {
+                    prop_assert!(*d >= Duration::from_millis(1));
+                    prop_assert!(*d <= Duration::from_millis(600_000));
+                }
+                prop_assert!(c.devices.ma_t12.retries <= 10 && c.devices.sra.retries <= 10);
+                prop_assert!(!c.fit.cost_functions.is_empty());
+                prop_assert!(c.fit.max_concurrent_fits.get() <= 256);
+                let age = c.scan.reference_max_age;
+                prop_assert!(age > Duration::ZERO && age <= Duration::from_secs(8760 * 3600));
+                if let SraTransport::Serial { port, baud } = &c.devices.sra.transport {
+                    prop_assert!(!port.trim().is_empty() && (50..=4_000_000).contains(baud));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Pieces of brdfd.toml: tables, keys, values, TOML punctuation.
+    const PIECES: [&str; 36] = [
+        "[store]",
+        "[api]",
+        "[devices.ma_t12]",
+        "[devices.sra]",
+        "[scan]",
+        "[fit]",
+        "[log]",
+        "[[fit]]",
+        "path",
+        "listen",
+        "allow_remote",
+        "transport",
+        "timeout_ms",
+        "baud",
+        "reference_max_age_hours",
+        "cost_functions",
+        "max_concurrent_fits",
+        "level",
+        " = ",
+        "\n",
+        "\"\"",
+        "\"0.0.0.0:1\"",
+        "\"serial\"",
+        "\"usb\"",
+        "[\"cf1\", \"m2\"]",
+        "true",
+        "0",
+        "-1",
+        "1e999",
+        "nan",
+        "inf",
+        "18446744073709551616",
+        "0x10000",
+        "\"é",
+        "'''",
+        "# ",
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_text_is_rejected_or_checked(text in any::<String>()) {
+            check(&text)?;
+        }
+
+        #[test]
+        fn toml_pieces_are_rejected_or_checked(
+            pieces in proptest::collection::vec(proptest::sample::select(PIECES.to_vec()), 0..24)
+        ) {
+            check(&pieces.concat())?;
+        }
+
+        #[test]
+        fn a_mutated_shipped_file_is_rejected_or_checked(ms in mutations()) {
+            check(&apply(SHIPPED, &ms))?;
+        }
+    }
+}

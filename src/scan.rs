@@ -895,3 +895,278 @@ mod tests {
         assert!(scan.readings.spectrum(s).is_none());
     }
 }
+
+/// Property tests: whatever bytes arrive, [`Scan::from_json`] returns (never panics), an error
+/// names a problem, and a document it accepts validates and writes back to itself.
+///
+/// The mutations of a valid file live here and are shared by the property tests of the other
+/// parsers of outside input ([`crate::config`], [`crate::formats`]): a mutation is a small
+/// edit (delete, insert, truncate, swap a number for an awkward literal, drop or repeat a line,
+/// splice in a few characters) and a case is one to three of them, so a failing case is
+/// reported as the edits, not as the whole mutated file.
+#[cfg(test)]
+pub(crate) mod proptests {
+    use super::*;
+    use proptest::prelude::*;
+    use proptest::sample::Index;
+
+    /// What a mutation puts where a number was: out of f64 range, negative, zero, past the
+    /// integer types, not a number, another JSON type, nothing.
+    const NUMBER_SWAPS: [&str; 24] = [
+        "1e999",
+        "-1e999",
+        "1e-400",
+        "-1",
+        "-0",
+        "0",
+        "0.0",
+        "1e308",
+        "-1e300",
+        "1e20",
+        "4294967296",
+        "18446744073709551616",
+        "-9223372036854775809",
+        "99999999999999999999999999",
+        "NaN",
+        "inf",
+        "-inf",
+        "0x10",
+        "x",
+        "\"x\"",
+        "null",
+        "[]",
+        "{}",
+        "",
+    ];
+
+    /// Characters that mean something to one of the formats (JSON, TOML, CGATS, CSV, XML).
+    const STRUCTURAL: [char; 22] = [
+        '{', '}', '[', ']', '"', '\'', ',', ':', '=', '#', '\n', '\r', '\t', ' ', '\\', '<', '>',
+        '/', '&', ';', '.', '\u{e9}',
+    ];
+
+    /// One small edit of a text.
+    #[derive(Debug, Clone)]
+    pub(crate) enum Mutation {
+        Delete(Index),
+        Insert(Index, char),
+        Truncate(Index),
+        /// Replace a number token by a literal of [`NUMBER_SWAPS`].
+        Number(Index, &'static str),
+        DropLine(Index),
+        /// Insert a copy of one line before another.
+        RepeatLine(Index, Index),
+        /// Replace up to `.1` characters at `.0` by `.2`.
+        Splice(Index, usize, String),
+    }
+
+    fn mutation() -> impl Strategy<Value = Mutation> {
+        let ch = prop_oneof![
+            3 => proptest::sample::select(STRUCTURAL.to_vec()),
+            1 => any::<char>(),
+        ];
+        // A number swapped is the edit most likely to get past the syntax to the checks.
+        prop_oneof![
+            2 => any::<Index>().prop_map(Mutation::Delete),
+            2 => (any::<Index>(), ch).prop_map(|(i, c)| Mutation::Insert(i, c)),
+            1 => any::<Index>().prop_map(Mutation::Truncate),
+            6 => (any::<Index>(), proptest::sample::select(NUMBER_SWAPS.to_vec()))
+                .prop_map(|(i, s)| Mutation::Number(i, s)),
+            1 => any::<Index>().prop_map(Mutation::DropLine),
+            1 => (any::<Index>(), any::<Index>()).prop_map(|(a, b)| Mutation::RepeatLine(a, b)),
+            2 => (any::<Index>(), 0..16usize, ".{0,8}")
+                .prop_map(|(i, n, s)| Mutation::Splice(i, n, s)),
+        ]
+    }
+
+    /// One to three mutations, applied in order by [`apply`].
+    pub(crate) fn mutations() -> impl Strategy<Value = Vec<Mutation>> {
+        proptest::collection::vec(mutation(), 1..4)
+    }
+
+    /// The byte offset of a char boundary picked by `i` (the end of the text included).
+    fn boundary(text: &str, i: &Index) -> usize {
+        let count = text.chars().count();
+        let k = i.index(count + 1);
+        text.char_indices().nth(k).map_or(text.len(), |(at, _)| at)
+    }
+
+    /// Byte ranges of the number tokens of `text`: runs of `[0-9.eE+-]` holding a digit that
+    /// are not part of a word (so `SPECTRAL_NM400` and `15as-45` stay whole).
+    fn numbers(text: &str) -> Vec<std::ops::Range<usize>> {
+        let b = text.as_bytes();
+        let numeric = |c: u8| c.is_ascii_digit() || matches!(c, b'.' | b'e' | b'E' | b'+' | b'-');
+        let word = |c: u8| c.is_ascii_alphanumeric() || c == b'_' || c >= 0x80;
+        let mut out = Vec::new();
+        let mut i = 0;
+        while i < b.len() {
+            if !numeric(b[i]) {
+                i += 1;
+                continue;
+            }
+            let start = i;
+            while i < b.len() && numeric(b[i]) {
+                i += 1;
+            }
+            let run = &b[start..i];
+            let before_ok = start == 0 || !word(b[start - 1]);
+            let after_ok = i == b.len() || !word(b[i]);
+            if run.iter().any(u8::is_ascii_digit) && before_ok && after_ok {
+                out.push(start..i);
+            }
+        }
+        out
+    }
+
+    /// Byte ranges of the lines of `text`, each with its line break.
+    fn lines(text: &str) -> Vec<std::ops::Range<usize>> {
+        let mut out = Vec::new();
+        let mut start = 0;
+        for (i, c) in text.char_indices() {
+            if c == '\n' {
+                out.push(start..i + 1);
+                start = i + 1;
+            }
+        }
+        if start < text.len() {
+            out.push(start..text.len());
+        }
+        out
+    }
+
+    impl Mutation {
+        fn apply(&self, t: &mut String) {
+            match self {
+                Mutation::Delete(i) => {
+                    let at = boundary(t, i);
+                    if at < t.len() {
+                        t.remove(at);
+                    }
+                }
+                Mutation::Insert(i, c) => {
+                    let at = boundary(t, i);
+                    t.insert(at, *c);
+                }
+                Mutation::Truncate(i) => {
+                    let at = boundary(t, i);
+                    t.truncate(at);
+                }
+                Mutation::Number(i, with) => {
+                    let spans = numbers(t);
+                    if !spans.is_empty() {
+                        t.replace_range(spans[i.index(spans.len())].clone(), with);
+                    }
+                }
+                Mutation::DropLine(i) => {
+                    let ls = lines(t);
+                    if !ls.is_empty() {
+                        t.replace_range(ls[i.index(ls.len())].clone(), "");
+                    }
+                }
+                Mutation::RepeatLine(from, to) => {
+                    let ls = lines(t);
+                    if !ls.is_empty() {
+                        let mut line = t[ls[from.index(ls.len())].clone()].to_string();
+                        if !line.ends_with('\n') {
+                            line.push('\n');
+                        }
+                        t.insert_str(ls[to.index(ls.len())].start, &line);
+                    }
+                }
+                Mutation::Splice(i, n, with) => {
+                    let at = boundary(t, i);
+                    let end = t[at..]
+                        .char_indices()
+                        .nth(*n)
+                        .map_or(t.len(), |(k, _)| at + k);
+                    t.replace_range(at..end, with);
+                }
+            }
+        }
+    }
+
+    /// `valid` with `ms` applied in order.
+    pub(crate) fn apply(valid: &str, ms: &[Mutation]) -> String {
+        let mut t = valid.to_string();
+        for m in ms {
+            m.apply(&mut t);
+        }
+        t
+    }
+
+    /// Checks that an error names a problem: some text, and not only a location (`file:3: `).
+    pub(crate) fn assert_names_a_problem(e: &dyn std::error::Error) -> Result<(), TestCaseError> {
+        let shown = e.to_string();
+        prop_assert!(
+            !shown.trim().is_empty() && !shown.trim_end().ends_with(':'),
+            "error without a message: {shown:?} ({e:?})"
+        );
+        Ok(())
+    }
+
+    const VALID: &str = include_str!("../tests/data/t-sky-blue.scan.json");
+
+    /// Parses `bytes`: an error must name a problem; an accepted scan must validate and write a
+    /// document that reads back equal.
+    fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
+        match Scan::from_json(bytes) {
+            Err(e) => assert_names_a_problem(&e)?,
+            Ok(scan) => {
+                if let Err(e) = scan.validate() {
+                    return Err(TestCaseError::fail(format!(
+                        "accepted a scan that does not validate: {e}"
+                    )));
+                }
+                let text = scan
+                    .to_json_pretty()
+                    .map_err(|e| TestCaseError::fail(format!("cannot write it back: {e}")))?;
+                let back = Scan::from_json(text.as_bytes())
+                    .map_err(|e| TestCaseError::fail(format!("cannot read it back: {e}")))?;
+                prop_assert_eq!(back, scan);
+            }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn number_tokens_are_numbers_outside_words() {
+        let text = "\"15as-45\": [0.5, -1e-3], SPECTRAL_NM400 = 7\n2,x3";
+        let found: Vec<&str> = numbers(text).into_iter().map(|r| &text[r]).collect();
+        assert_eq!(found, ["0.5", "-1e-3", "7", "2"]);
+        Scan::from_json(VALID.as_bytes()).unwrap();
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_bytes_are_rejected_or_valid(
+            bytes in proptest::collection::vec(any::<u8>(), 0..512)
+        ) {
+            check(&bytes)?;
+        }
+
+        #[test]
+        fn json_like_text_after_the_format_tag_is_rejected_or_valid(
+            body in "[{}\\[\\]\",: 0-9a-z_.\\-]{0,200}"
+        ) {
+            check(format!("{{\"format\": \"{FORMAT}\", {body}").as_bytes())?;
+        }
+
+        #[test]
+        fn a_mutated_valid_file_is_rejected_or_valid(ms in mutations()) {
+            check(apply(VALID, &ms).as_bytes())?;
+        }
+
+        #[test]
+        fn a_valid_file_with_a_byte_changed_is_rejected_or_valid(
+            at in any::<Index>(),
+            byte in any::<u8>(),
+        ) {
+            let mut bytes = VALID.as_bytes().to_vec();
+            let i = at.index(bytes.len());
+            bytes[i] = byte;
+            check(&bytes)?;
+        }
+    }
+}

@@ -500,7 +500,7 @@ fn check_fault(fault: &Fault, frames: &[Frame]) -> Result<(), String> {
 mod tests {
     use super::*;
 
-    const EXAMPLE: &str = "\
+    pub(super) const EXAMPLE: &str = "\
 brdfd-session 1
 device sra
 note synthetic: made up for this test
@@ -620,6 +620,138 @@ fault disconnect after=2
         ] {
             let r = Session::parse(&format!("{base}{fault}\n{frames}"));
             assert_eq!(r.is_ok(), ok, "{fault}: {r:?}");
+        }
+    }
+}
+
+/// Property tests: whatever text a session file holds, [`Session::parse`] returns (never
+/// panics), an error names a problem, and a session it accepts writes a file that reads back
+/// to the same text.
+#[cfg(test)]
+mod proptests {
+    use super::*;
+    use proptest::prelude::*;
+    use proptest::sample::{Index, select};
+
+    /// Words of the format, and values that are out of range or not what a key takes.
+    const WORDS: [&str; 30] = [
+        "brdfd-session 1",
+        "brdfd-session 2",
+        "device sra",
+        "device ma_t12",
+        "note",
+        "fault",
+        "corrupt",
+        "no-reply",
+        "garbage",
+        "slow",
+        "disconnect",
+        "frame=0",
+        "frame=99",
+        "offset=18446744073709551616",
+        "xor=00",
+        "xor=fff",
+        "times=0",
+        "bytes=0",
+        "after=1",
+        "delay_ms=5",
+        ">",
+        "<",
+        "0",
+        "18446744073709551616",
+        "00ff",
+        "0g",
+        "#",
+        " ",
+        "\n",
+        "\r\n",
+    ];
+
+    /// A valid session, edited.
+    #[derive(Debug, Clone)]
+    enum Edit {
+        Delete(Index),
+        Insert(Index, &'static str),
+        Truncate(Index),
+    }
+
+    fn edit() -> impl Strategy<Value = Edit> {
+        prop_oneof![
+            any::<Index>().prop_map(Edit::Delete),
+            (any::<Index>(), select(WORDS.to_vec())).prop_map(|(i, w)| Edit::Insert(i, w)),
+            any::<Index>().prop_map(Edit::Truncate),
+        ]
+    }
+
+    fn apply(text: &str, edits: &[Edit]) -> String {
+        let mut t = text.to_string();
+        for e in edits {
+            // A char boundary picked by the index, the end of the text included.
+            let at = |i: &Index, t: &str| {
+                let k = i.index(t.chars().count() + 1);
+                t.char_indices().nth(k).map_or(t.len(), |(at, _)| at)
+            };
+            match e {
+                Edit::Delete(i) => {
+                    let k = at(i, &t);
+                    if k < t.len() {
+                        t.remove(k);
+                    }
+                }
+                Edit::Insert(i, w) => {
+                    let k = at(i, &t);
+                    t.insert_str(k, w);
+                }
+                Edit::Truncate(i) => {
+                    let k = at(i, &t);
+                    t.truncate(k);
+                }
+            }
+        }
+        t
+    }
+
+    fn check(text: &str) -> Result<(), TestCaseError> {
+        match Session::parse(text) {
+            Err(e) => {
+                let shown = e.to_string();
+                prop_assert!(
+                    !shown.trim().is_empty() && !shown.trim_end().ends_with(':'),
+                    "error without a message: {shown:?}"
+                );
+            }
+            Ok(s) => {
+                // Notes and comments lose lone carriage returns on writing; the written text
+                // itself reads back to the same text.
+                let written = s.to_text();
+                let again = Session::parse(&written)
+                    .map_err(|e| TestCaseError::fail(format!("cannot read it back: {e}")))?;
+                prop_assert_eq!(again.to_text(), written);
+            }
+        }
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_text_is_rejected_or_read(text in any::<String>()) {
+            check(&text)?;
+        }
+
+        #[test]
+        fn session_words_are_rejected_or_read(
+            words in proptest::collection::vec(select(WORDS.to_vec()), 0..40)
+        ) {
+            check(&words.concat())?;
+        }
+
+        #[test]
+        fn an_edited_session_is_rejected_or_read(
+            edits in proptest::collection::vec(edit(), 1..4)
+        ) {
+            check(&apply(tests::EXAMPLE, &edits))?;
         }
     }
 }

@@ -421,3 +421,69 @@ mod tests {
         );
     }
 }
+
+/// Property tests: whatever text arrives as CGATS, the import returns (never panics), an error
+/// names a problem, and the scans of an accepted file validate.
+#[cfg(test)]
+mod proptests {
+    use super::super::Format;
+    use super::super::proptests::{check_import, soup, valid};
+    use crate::scan::proptests::{apply, mutations};
+    use proptest::prelude::*;
+
+    const PIECES: [&str; 34] = [
+        "CGATS.17\n",
+        "BEGIN_DATA_FORMAT",
+        "END_DATA_FORMAT",
+        "BEGIN_DATA",
+        "END_DATA",
+        "NUMBER_OF_FIELDS 3",
+        "KEYWORD \"GEOMETRY\"",
+        "SAMPLE_ID",
+        "SAMPLE_NAME",
+        "DATA_KIND",
+        "REFERENCE_NAME",
+        "GEOMETRY",
+        "SPECTRAL_NM400",
+        "SPECTRAL_NM700",
+        "\"reading\"",
+        "\"reference\"",
+        "\"measured\"",
+        "\"Munsell N9\"",
+        "\"A\"",
+        "45as45",
+        "sra-20",
+        "\"",
+        "#",
+        "\n",
+        "\n",
+        "\t",
+        " ",
+        "1",
+        "0",
+        "-1",
+        "0.5",
+        "1e999",
+        "NaN",
+        "é",
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_text_is_rejected_or_valid(text in any::<String>()) {
+            check_import(Format::Cgats, &text, None)?;
+        }
+
+        #[test]
+        fn cgats_pieces_are_rejected_or_valid(text in soup(&PIECES)) {
+            check_import(Format::Cgats, &text, None)?;
+        }
+
+        #[test]
+        fn a_mutated_export_is_rejected_or_valid(ms in mutations()) {
+            check_import(Format::Cgats, &apply(valid(Format::Cgats), &ms), None)?;
+        }
+    }
+}

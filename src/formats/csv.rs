@@ -177,3 +177,61 @@ mod tests {
         );
     }
 }
+
+/// Property tests: whatever text arrives as CSV, the import returns (never panics), an error
+/// names a problem, and the scans of an accepted file validate.
+#[cfg(test)]
+mod proptests {
+    use super::super::Format;
+    use super::super::proptests::{check_import, soup, valid};
+    use crate::scan::proptests::{apply, mutations};
+    use proptest::prelude::*;
+
+    const PIECES: [&str; 26] = [
+        "sample",
+        "data_kind",
+        "reference",
+        "geometry",
+        "nm400",
+        "nm700",
+        "reading",
+        "measured",
+        "Munsell N9",
+        "A",
+        "45as45",
+        "sra-60",
+        ",",
+        ",",
+        "\"",
+        "\"\"",
+        "\n",
+        "\n",
+        "\r\n",
+        " ",
+        "1",
+        "0",
+        "-1",
+        "1e999",
+        "NaN",
+        "é",
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_text_is_rejected_or_valid(text in any::<String>()) {
+            check_import(Format::Csv, &text, None)?;
+        }
+
+        #[test]
+        fn csv_pieces_are_rejected_or_valid(text in soup(&PIECES)) {
+            check_import(Format::Csv, &text, None)?;
+        }
+
+        #[test]
+        fn a_mutated_export_is_rejected_or_valid(ms in mutations()) {
+            check_import(Format::Csv, &apply(valid(Format::Csv), &ms), None)?;
+        }
+    }
+}

@@ -253,3 +253,63 @@ mod tests {
         );
     }
 }
+
+/// Property tests: whatever text arrives as JSON, the import returns (never panics), an error
+/// names a problem, and the scans of an accepted document validate.
+#[cfg(test)]
+mod proptests {
+    use super::super::Format;
+    use super::super::proptests::{check_import, soup, valid};
+    use crate::scan::proptests::{apply, mutations};
+    use proptest::prelude::*;
+
+    const PIECES: [&str; 28] = [
+        "{",
+        "}",
+        "[",
+        "]",
+        ",",
+        ":",
+        "\"format\"",
+        "\"brdfd.study/1\"",
+        "\"brdfd.scan/1\"",
+        "\"samples\"",
+        "\"scan\"",
+        "\"name\"",
+        "\"sample\"",
+        "\"readings\"",
+        "\"reference\"",
+        "\"ma_t12\"",
+        "\"sra\"",
+        "\"sra-20\"",
+        "\"wavelengths_nm\"",
+        "\"\"",
+        "null",
+        "true",
+        "1",
+        "-1",
+        "0.5",
+        "1e999",
+        " ",
+        "\n",
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_text_is_rejected_or_valid(text in any::<String>()) {
+            check_import(Format::Json, &text, None)?;
+        }
+
+        #[test]
+        fn json_pieces_are_rejected_or_valid(text in soup(&PIECES)) {
+            check_import(Format::Json, &text, None)?;
+        }
+
+        #[test]
+        fn a_mutated_export_is_rejected_or_valid(ms in mutations()) {
+            check_import(Format::Json, &apply(valid(Format::Json), &ms), None)?;
+        }
+    }
+}

@@ -735,3 +735,82 @@ pub(crate) mod tests {
         }
     }
 }
+
+/// What the property tests of each format share: the valid exports they mutate, and the check
+/// that an import either names a problem or returns scans that validate.
+#[cfg(test)]
+pub(crate) mod proptests {
+    use std::sync::LazyLock;
+
+    use super::*;
+    use crate::report::study::tests::study_from_truth;
+    use crate::scan::proptests::assert_names_a_problem;
+    use proptest::prelude::*;
+
+    /// A two-sample study (the second with a failed fit) exported in every format, made once:
+    /// small enough that a few edits often land somewhere that matters.
+    static EXPORTS: LazyLock<Vec<(Format, String)>> = LazyLock::new(|| {
+        let study = study_from_truth(2, Some(1));
+        Format::ALL
+            .into_iter()
+            .map(|f| (f, export(&study, f, &tests::fixed()).unwrap()))
+            .collect()
+    });
+
+    /// The scans of that study.
+    pub(crate) static SCANS: LazyLock<Vec<Scan>> = LazyLock::new(|| {
+        study_from_truth(2, Some(1))
+            .samples
+            .into_iter()
+            .map(|s| s.scan)
+            .collect()
+    });
+
+    /// The export of the study in `format`.
+    pub(crate) fn valid(format: Format) -> &'static str {
+        let (_, text) = EXPORTS
+            .iter()
+            .find(|(f, _)| *f == format)
+            .expect("every format is exported");
+        text
+    }
+
+    /// Imports `text` (with `sra` as the SRA CSV, if given): an error must name a problem, and
+    /// every scan of an accepted file must validate.
+    pub(crate) fn check_import(
+        format: Format,
+        text: &str,
+        sra: Option<&str>,
+    ) -> Result<(), TestCaseError> {
+        let sra = sra.map(|s| ("s.csv", s));
+        match import(format, "x", text, sra, &ImportOptions::default()) {
+            Err(e) => assert_names_a_problem(&e)?,
+            Ok(scans) => {
+                for s in scans {
+                    if let Err(e) = s.validate() {
+                        return Err(TestCaseError::fail(format!(
+                            "{format}: accepted sample \"{}\" that does not validate: {e}",
+                            s.sample
+                        )));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Text made of `pieces` (a format's keywords, names, numbers and punctuation), which gets
+    /// further into a parser than arbitrary characters do.
+    pub(crate) fn soup(pieces: &'static [&'static str]) -> impl Strategy<Value = String> {
+        proptest::collection::vec(proptest::sample::select(pieces), 0..64).prop_map(|p| p.concat())
+    }
+
+    #[test]
+    fn the_valid_exports_import() {
+        for format in Format::ALL {
+            let got = import(format, "x", valid(format), None, &ImportOptions::default())
+                .unwrap_or_else(|e| panic!("{format}: {e}"));
+            assert_eq!(got, *SCANS, "{format}");
+        }
+    }
+}

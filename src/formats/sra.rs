@@ -149,3 +149,109 @@ mod tests {
         );
     }
 }
+
+/// Property tests: whatever text arrives as the SRA CSV, the import returns (never panics), an
+/// error names a problem, and the scans of an accepted pair of files validate.
+#[cfg(test)]
+mod proptests {
+    use super::super::proptests::{SCANS, check_import, soup};
+    use super::super::{Format, ImportOptions, import};
+    use super::*;
+    use crate::scan::proptests::{apply, assert_names_a_problem, mutations};
+    use crate::spectral::wavelengths_nm;
+    use proptest::prelude::*;
+    use std::sync::LazyLock;
+
+    /// The MA-T12 half of an instrument export of [`SCANS`] as CSV (the reference tile once,
+    /// by name, then each sample), which the SRA CSV completes.
+    static MA_T12_CSV: LazyLock<String> = LazyLock::new(|| {
+        let mut t = String::from("sample,geometry");
+        for nm in wavelengths_nm() {
+            let _ = write!(t, ",nm{nm}");
+        }
+        t.push('\n');
+        let tile = &SCANS[0].reference;
+        let objects = std::iter::once((&tile.name, &tile.readings))
+            .chain(SCANS.iter().map(|s| (&s.sample, &s.readings)));
+        for (name, readings) in objects {
+            for g in crate::geometry::ma_t12() {
+                let _ = write!(t, "{name},{}", g.name);
+                for v in readings.ma_t12[g.index] {
+                    let _ = write!(t, ",{v}");
+                }
+                t.push('\n');
+            }
+        }
+        t
+    });
+
+    static VALID: LazyLock<String> = LazyLock::new(|| write_scans(&SCANS));
+
+    const PIECES: [&str; 18] = [
+        "sample",
+        "geometry",
+        "intensity",
+        "Munsell N9",
+        "T.Freesia pink",
+        "sra-20",
+        "sra-60",
+        "45as45",
+        ",",
+        ",",
+        "\"",
+        "\n",
+        "\n",
+        "1",
+        "0",
+        "-1",
+        "1e999",
+        "NaN",
+    ];
+
+    /// Reads `text` alone, then as the SRA half of the instrument export.
+    fn check(text: &str) -> Result<(), TestCaseError> {
+        if let Err(e) = observations("s.csv", text, &ImportOptions::default()) {
+            assert_names_a_problem(&e)?;
+        }
+        check_import(Format::Csv, &MA_T12_CSV, Some(text))
+    }
+
+    #[test]
+    fn the_two_halves_import_to_the_scans() {
+        let got = import(
+            Format::Csv,
+            "m.csv",
+            &MA_T12_CSV,
+            Some(("s.csv", &VALID)),
+            &ImportOptions::default(),
+        )
+        .unwrap();
+        let want: Vec<Scan> = SCANS
+            .iter()
+            .map(|s| Scan {
+                reference: SCANS[0].reference.clone(),
+                ..s.clone()
+            })
+            .collect();
+        assert_eq!(got, want);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_text_is_rejected_or_valid(text in any::<String>()) {
+            check(&text)?;
+        }
+
+        #[test]
+        fn sra_csv_pieces_are_rejected_or_valid(text in soup(&PIECES)) {
+            check(&text)?;
+        }
+
+        #[test]
+        fn a_mutated_sra_csv_is_rejected_or_valid(ms in mutations()) {
+            check(&apply(&VALID, &ms))?;
+        }
+    }
+}
