@@ -274,7 +274,10 @@ pub(crate) fn observations(
 ) -> Result<Vec<Observation>, FormatError> {
     let doc = roxmltree::Document::parse(text)
         .map_err(|e| FormatError::invalid(file, e.pos().row as usize, "xml", e.to_string()))?;
-    let line = |n: &roxmltree::Node| doc.text_pos_at(n.range().start).row as usize;
+    // The line of a node, as `doc.text_pos_at` counts it, without its scan from the start of
+    // the text for every spectrum and point (quadratic in the file's size).
+    let breaks: Vec<usize> = text.match_indices('\n').map(|(i, _)| i).collect();
+    let line = |n: &roxmltree::Node| breaks.partition_point(|&b| b < n.range().start) + 1;
     let root = doc.root_element();
     if root.tag_name().name() != "CxF" {
         return Err(FormatError::invalid(
@@ -409,7 +412,9 @@ pub(crate) fn observations(
                 }
                 let list: Vec<&str> = sp.text().unwrap_or("").split_whitespace().collect();
                 let offset = (f64::from(FIRST_NM) - start) / step;
-                if offset < 0.0 || offset.fract() != 0.0 {
+                // A negative start is no wavelength (and, far enough below 0, would put 400 nm
+                // past the end of the index range).
+                if start < 0.0 || offset < 0.0 || offset.fract() != 0.0 {
                     return Err(FormatError::invalid(
                         file,
                         at,
@@ -608,6 +613,29 @@ mod tests {
     }
 
     #[test]
+    fn a_start_wavelength_far_below_400_nm_is_rejected_not_overflowed() {
+        // StartWL="-1e300" made the band offset saturate to usize::MAX: adding the 31 bands
+        // overflowed (debug builds), or wrapped and indexed past the values (release). The
+        // mutated-export property found it in a 30 000-case run; this keeps it found.
+        let good = write(&study(), &fixed()).unwrap();
+        let bad = good.replacen("StartWL=\"400\">", "StartWL=\"-1e300\">", 1);
+        let line = bad.lines().position(|l| l.contains("-1e300")).unwrap() + 1;
+        let e = err(&bad);
+        assert!(
+            e.starts_with(&format!(
+                "m.cxf:{line}: ReflectanceSpectrum: starts at -1000"
+            )),
+            "{e}"
+        );
+        assert!(
+            e.ends_with(" nm; brdfd needs 400–700 nm every 10 nm"),
+            "{e}"
+        );
+        let e = err(&good.replacen("StartWL=\"400\">", "StartWL=\"-10\">", 1));
+        assert!(e.contains("ReflectanceSpectrum: starts at -10 nm"), "{e}");
+    }
+
+    #[test]
     fn bad_files_are_rejected_naming_file_line_and_field() {
         let good = write(&study(), &fixed()).unwrap();
         let e = err(&good.replacen("</cc:Object>", "", 1));
@@ -641,5 +669,67 @@ mod tests {
             e,
             "m.cxf:1: Other: not a CxF document (the root element must be CxF)"
         );
+    }
+}
+
+/// Property tests: whatever text arrives as CxF3, the import returns (never panics), an error
+/// names a problem, and the scans of an accepted file validate.
+#[cfg(test)]
+mod proptests {
+    use super::super::Format;
+    use super::super::proptests::{check_import, soup, valid};
+    use crate::scan::proptests::{apply, mutations};
+    use proptest::prelude::*;
+
+    const PIECES: [&str; 30] = [
+        "<CxF>",
+        "</CxF>",
+        "<Object Name=\"A\">",
+        "<Object Name=\"Munsell N9\">",
+        "<Object>",
+        "</Object>",
+        "<ColorValues>",
+        "</ColorValues>",
+        "<ReflectanceSpectrum ColorSpecification=\"s\">",
+        "<ReflectanceSpectrum ColorSpecification=\"s\" StartWL=\"-1e300\">",
+        "</ReflectanceSpectrum>",
+        "<CustomSpectrum ColorSpecification=\"s\">",
+        "</CustomSpectrum>",
+        "<SpectralPoint WL=\"400\">",
+        "</SpectralPoint>",
+        "<ColorSpecification Id=\"s\">",
+        "</ColorSpecification>",
+        "<BRDFAngle Notation=\"sra-20\"/>",
+        "<BRDFAngle Notation=\"45as45\"/>",
+        "<WavelengthRange StartWL=\"390\" Increment=\"10\"/>",
+        "<TagCollection Name=\"brdfd\">",
+        "</TagCollection>",
+        "<Tag Name=\"data_kind\" Value=\"reference\"/>",
+        "0.5 ",
+        "1 ",
+        "-1 ",
+        "1e999 ",
+        "&amp;",
+        "\n",
+        "é",
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_text_is_rejected_or_valid(text in any::<String>()) {
+            check_import(Format::Cxf3, &text, None)?;
+        }
+
+        #[test]
+        fn cxf3_pieces_are_rejected_or_valid(text in soup(&PIECES)) {
+            check_import(Format::Cxf3, &text, None)?;
+        }
+
+        #[test]
+        fn a_mutated_export_is_rejected_or_valid(ms in mutations()) {
+            check_import(Format::Cxf3, &apply(valid(Format::Cxf3), &ms), None)?;
+        }
     }
 }
