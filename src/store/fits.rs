@@ -116,19 +116,7 @@ async fn fit_status<'e, E>(ex: E, id: FitRunId) -> Result<FitStatus, StoreError>
 where
     E: sqlx::Executor<'e, Database = Db>,
 {
-    let status: Option<String> = sqlx::query_scalar("SELECT status FROM fit_runs WHERE id = $1")
-        .bind(id.0)
-        .fetch_optional(ex)
-        .await?;
-    let status = status.ok_or(StoreError::NotFound {
-        what: FitRunId::WHAT,
-        id: id.0,
-    })?;
-    status.parse().map_err(|detail| StoreError::Corrupt {
-        table: "fit_runs",
-        id: id.0,
-        detail,
-    })
+    super::lifecycle(ex, "fit_runs", "status", FitRunId::WHAT, id.0).await
 }
 
 fn to_json(field: &'static str, value: &impl serde::Serialize) -> Result<String, StoreError> {

@@ -45,9 +45,8 @@ pub use records::{
 
 use backend::Pool;
 
-/// The schema, from `migrations/`, embedded at compile time. Cargo rebuilds when an existing
-/// migration changes, but does not notice a new file in `migrations/`: after adding one, touch
-/// this file (or give the crate a `build.rs` printing `cargo:rerun-if-changed=migrations`).
+/// The schema, from `migrations/`, embedded at compile time (`build.rs` makes Cargo rebuild
+/// when a migration is added or changed).
 pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!();
 
 /// A handle on the store. Clones share the same connections.
@@ -117,6 +116,27 @@ pub(crate) fn now_ms() -> i64 {
         .duration_since(UNIX_EPOCH)
         .map(|d| d.as_millis() as i64)
         .unwrap_or(0)
+}
+
+/// The life-cycle column (`state` or `status`) of row `id` of `table`, parsed; `NotFound`
+/// naming `what` when there is no such row, `Corrupt` when the stored word is unknown.
+/// `table` and `column` are always constants of this module, never outside input.
+async fn lifecycle<'e, E, T>(
+    ex: E,
+    table: &'static str,
+    column: &'static str,
+    what: &'static str,
+    id: i64,
+) -> Result<T, StoreError>
+where
+    E: sqlx::Executor<'e, Database = backend::Db>,
+    T: std::str::FromStr<Err = String>,
+{
+    let sql = format!("SELECT {column} FROM {table} WHERE id = $1");
+    let word: Option<String> = sqlx::query_scalar(&sql).bind(id).fetch_optional(ex).await?;
+    let word = word.ok_or(StoreError::NotFound { what, id })?;
+    word.parse()
+        .map_err(|detail| StoreError::Corrupt { table, id, detail })
 }
 
 #[cfg(test)]

@@ -76,20 +76,7 @@ pub(crate) async fn reference_status<'e, E>(
 where
     E: sqlx::Executor<'e, Database = Db>,
 {
-    let status: Option<String> =
-        sqlx::query_scalar("SELECT status FROM reference_sets WHERE id = $1")
-            .bind(id.0)
-            .fetch_optional(ex)
-            .await?;
-    let status = status.ok_or(StoreError::NotFound {
-        what: ReferenceId::WHAT,
-        id: id.0,
-    })?;
-    status.parse().map_err(|detail| StoreError::Corrupt {
-        table: "reference_sets",
-        id: id.0,
-        detail,
-    })
+    super::lifecycle(ex, "reference_sets", "status", ReferenceId::WHAT, id.0).await
 }
 
 impl Store {

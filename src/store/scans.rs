@@ -100,19 +100,7 @@ async fn scan_state<'e, E>(ex: E, id: ScanId) -> Result<ScanState, StoreError>
 where
     E: sqlx::Executor<'e, Database = Db>,
 {
-    let state: Option<String> = sqlx::query_scalar("SELECT state FROM scans WHERE id = $1")
-        .bind(id.0)
-        .fetch_optional(ex)
-        .await?;
-    let state = state.ok_or(StoreError::NotFound {
-        what: ScanId::WHAT,
-        id: id.0,
-    })?;
-    state.parse().map_err(|detail| StoreError::Corrupt {
-        table: "scans",
-        id: id.0,
-        detail,
-    })
+    super::lifecycle(ex, "scans", "state", ScanId::WHAT, id.0).await
 }
 
 impl Store {
