@@ -109,9 +109,12 @@ pub struct ScansArgs {
     /// Only scans of this sample.
     #[arg(long, value_name = "NAME")]
     pub sample: Option<String>,
-    /// At most this many.
+    /// At most this many (1 to 500).
     #[arg(long, value_name = "N", default_value_t = 50)]
     pub limit: u32,
+    /// Only scans older than scan ID: the next page after a listing whose last id was ID.
+    #[arg(long, value_name = "ID")]
+    pub before: Option<i64>,
     /// Print the daemon's JSON.
     #[arg(long)]
     pub json: bool,
@@ -190,8 +193,57 @@ fn f(v: &Value, key: &str) -> f64 {
     v.get(key).and_then(Value::as_f64).unwrap_or(f64::NAN)
 }
 
-fn s<'a>(v: &'a Value, key: &str) -> &'a str {
-    v.get(key).and_then(Value::as_str).unwrap_or("")
+/// A text field for the terminal: control characters (an escape sequence in a name stored
+/// before names were checked) are shown escaped, never sent to the terminal.
+fn s(v: &Value, key: &str) -> String {
+    terminal_safe(v.get(key).and_then(Value::as_str).unwrap_or(""))
+}
+
+/// `text` with every control character escaped (`\u{1b}`), as it is printed.
+pub fn terminal_safe(text: &str) -> String {
+    if text.chars().any(char::is_control) {
+        text.chars()
+            .map(|c| {
+                if c.is_control() {
+                    c.escape_unicode().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect()
+    } else {
+        text.to_string()
+    }
+}
+
+/// One instrument's provenance as `show` prints it.
+fn instrument_line(p: &Value) -> String {
+    let simulated = match p["simulated"].as_bool() {
+        Some(true) => " — SIMULATED",
+        Some(false) => "",
+        None => " — simulated or real: not recorded",
+    };
+    format!(
+        "{} serial {} firmware {}{simulated}",
+        s(p, "model"),
+        s(p, "serial"),
+        s(p, "firmware")
+    )
+}
+
+/// "sim" when either instrument was simulated, "?" when not recorded, "" for real ones.
+fn simulated_mark(provenance: &Value) -> &'static str {
+    let flags = [
+        provenance["ma_t12"]["simulated"].as_bool(),
+        provenance["sra"]["simulated"].as_bool(),
+    ];
+    if flags.contains(&Some(true)) {
+        "sim"
+    } else if flags.contains(&None) {
+        "?"
+    } else {
+        ""
+    }
 }
 
 /// Progress display: bars on a terminal, plain lines otherwise.
@@ -252,7 +304,7 @@ fn follow(
         let ty = s(&ev, "type");
         let mine_scan = scan.is_some_and(|id_| id(&ev, "scan") == id_);
         let mine_ref = reference.is_some_and(|id_| id(&ev, "reference") == id_);
-        match ty {
+        match ty.as_str() {
             "scan_reading" if mine_scan => {
                 readings.set_position(ev["k"].as_u64().unwrap_or(0));
                 readings.set_message(format!("{} {}", s(&ev, "device"), s(&ev, "geometry")));
@@ -362,7 +414,7 @@ fn follow(
             }
             "fit_done" | "fit_failed" | "fit_cancelled" if mine_scan => {
                 let fit = id(&ev, "fit");
-                let text = match ty {
+                let text = match ty.as_str() {
                     "fit_done" => format!(
                         "fit {fit} ({}) done: mean ΔE00 {:.3} (diffuse {:.3}, specular {:.3}), \
                          cost {:.4e}, {:.0} ms",
@@ -429,6 +481,9 @@ pub fn scan(args: &ScanArgs) -> anyhow::Result<()> {
 pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
     let client = args.daemon.client()?;
     let mut query = format!("/scans?limit={}", args.limit);
+    if let Some(before) = args.before {
+        query.push_str(&format!("&before={before}"));
+    }
     if let Some(state) = &args.state {
         query.push_str(&format!("&state={}", urlencode(state)));
     }
@@ -446,19 +501,27 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{:>5}  {:<22} {:<9} {:>8}  {:<20}  reason",
-        "id", "sample", "state", "readings", "requested (UTC)"
+        "{:>5}  {:<22} {:<9} {:>8}  {:<20}  {:<4} reason",
+        "id", "sample", "state", "readings", "requested (UTC)", "sim"
     );
-    for r in rows {
+    let mut last = None;
+    for r in &rows {
         println!(
-            "{:>5}  {:<22} {:<9} {:>8}  {:<20}  {}",
-            id(&r, "id"),
-            s(&r, "sample"),
-            s(&r, "state"),
-            id(&r, "reading_count"),
+            "{:>5}  {:<22} {:<9} {:>8}  {:<20}  {:<4} {}",
+            id(r, "id"),
+            s(r, "sample"),
+            s(r, "state"),
+            id(r, "reading_count"),
             utc(r["requested_at_ms"].as_i64().unwrap_or(0)),
-            s(&r, "reason")
+            simulated_mark(&r["provenance"]),
+            s(r, "reason")
         );
+        last = Some(id(r, "id"));
+    }
+    if let Some(last) = last
+        && rows.len() as u32 == args.limit
+    {
+        eprintln!("(more may follow: `brdfd scans --before {last}`)");
     }
     Ok(())
 }
@@ -531,6 +594,20 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
         utc(scan["requested_at_ms"].as_i64().unwrap_or(0)),
         scan["reading_count"]
     );
+    let provenance = &scan["provenance"];
+    println!(
+        "measured by: MA-T12 {}; SRA {}",
+        instrument_line(&provenance["ma_t12"]),
+        instrument_line(&provenance["sra"])
+    );
+    println!(
+        "source: {}{}",
+        s(provenance, "source"),
+        provenance["source_detail"]
+            .as_str()
+            .map(|d| format!(" ({})", terminal_safe(d)))
+            .unwrap_or_default()
+    );
     let reference = &v["reference"]["reference"];
     println!(
         "reference {} ({}), measured {:.1} h before the scan{}",
@@ -587,7 +664,7 @@ pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
 pub fn abort(args: &DaemonArgs) -> anyhow::Result<()> {
     let v = args.client()?.post("/abort", None)?;
     let op = &v["aborted"];
-    match s(op, "kind") {
+    match s(op, "kind").as_str() {
         "scan" => println!(
             "scan {} aborting; its readings so far are kept",
             id(op, "scan")

@@ -8,7 +8,7 @@
 //! references and scans gets the recorded readings in turn, at the pace of real instruments.
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::Context;
@@ -100,8 +100,41 @@ pub fn simulated_banner(config: &Config) -> Option<String> {
     })
 }
 
+/// Files the daemon writes must be distinct: a recording named like the store would truncate
+/// the store at start, two recordings into one file would interleave.
+pub fn check_distinct_files(config: &Config, token: &Path) -> anyhow::Result<()> {
+    let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let store = absolute(&config.store.path);
+    let lock = absolute(&crate::store::lock::lock_path(&config.store.path));
+    let mut seen: Vec<(&str, PathBuf)> = vec![
+        ("[store] path", store.clone()),
+        (
+            "the store's write-ahead log",
+            PathBuf::from(format!("{}-wal", store.display())),
+        ),
+        ("the store's lock file", lock),
+        ("the API token file", absolute(token)),
+    ];
+    for (key, path) in [
+        ("[devices.ma_t12] record", &config.devices.ma_t12.record),
+        ("[devices.sra] record", &config.devices.sra.record),
+    ] {
+        let Some(path) = path else { continue };
+        let path = absolute(path);
+        if let Some((other, _)) = seen.iter().find(|(_, p)| *p == path) {
+            anyhow::bail!(
+                "{key} = {} is the same file as {other}: give the recording its own file name",
+                path.display()
+            );
+        }
+        seen.push((key, path));
+    }
+    Ok(())
+}
+
 async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
     let token_path = config.api.token_path(&config.store.path);
+    check_distinct_files(&config, &token_path)?;
     let (token, created) = crate::api::Token::load_or_create(&token_path)?;
     let store = Store::open(&config.store.path).await?;
     let devices = Devices::from_config(&config.devices, &mock_devices::ReplayOptions::lenient())?;

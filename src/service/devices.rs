@@ -249,6 +249,12 @@ fn recorder(
 ) -> Result<Option<Recorder>, DeviceSetupError> {
     let Some(path) = path else { return Ok(None) };
     let notes = vec![format!("recorded by brdfd {}", env!("CARGO_PKG_VERSION"))];
+    // A recording from an earlier run is moved aside, never truncated.
+    rotate_aside(path).map_err(|source| DeviceSetupError::Record {
+        instrument,
+        path: path.to_path_buf(),
+        source,
+    })?;
     let r =
         Recorder::create(path, instrument, &notes).map_err(|source| DeviceSetupError::Record {
             instrument,
@@ -257,6 +263,43 @@ fn recorder(
         })?;
     all.push(r.clone());
     Ok(Some(r))
+}
+
+/// Moves an existing file at `path` to `STEM.YYYYMMDDTHHMMSSZ.EXT` beside it (with a counter if
+/// that exists too), so that a new recording never overwrites an old one.
+pub fn rotate_aside(path: &Path) -> std::io::Result<Option<PathBuf>> {
+    if std::fs::symlink_metadata(path).is_err() {
+        return Ok(None);
+    }
+    let stamp = time::OffsetDateTime::now_utc()
+        .format(time::macros::format_description!(
+            "[year][month][day]T[hour][minute][second]Z"
+        ))
+        .map_err(std::io::Error::other)?;
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
+    for n in 0..1000 {
+        let suffix = if n == 0 {
+            String::new()
+        } else {
+            format!("-{n}")
+        };
+        let aside = path.with_file_name(format!("{stem}.{stamp}{suffix}{ext}"));
+        if std::fs::symlink_metadata(&aside).is_err() {
+            std::fs::rename(path, &aside)?;
+            tracing::info!(from = %path.display(), to = %aside.display(), "kept the previous recording");
+            return Ok(Some(aside));
+        }
+    }
+    Err(std::io::Error::other(
+        "a thousand recordings with the same timestamp",
+    ))
 }
 
 /// Starts the MA-T12 driver, with every connection the factory opens wrapped in the tap when

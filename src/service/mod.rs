@@ -245,6 +245,9 @@ struct Inner {
     fits_queued: AtomicUsize,
     fits_running: AtomicUsize,
     timings: Timings,
+    /// Each instrument's identity as it last reported it (MA-T12, SRA), copied onto every
+    /// reference set and scan as its provenance.
+    identities: Mutex<[Option<drivers::Identity>; 2]>,
 }
 
 /// The running service; clones share it.
@@ -296,6 +299,7 @@ impl Service {
             fit_tx,
             fits_queued: AtomicUsize::new(0),
             fits_running: AtomicUsize::new(0),
+            identities: Mutex::new([None, None]),
             timings: Timings::default(),
         });
         let service = Service { inner };

@@ -27,8 +27,8 @@ use crate::geometry::{self, Device, GEOMETRY_COUNT, Geometry, MA_T12_COUNT, SRA_
 use crate::processing::{self, ProcessingOptions};
 use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
 use crate::store::{
-    FitRunId, NewFit, NewReading, ReadingValues, ReferenceId, ScanDetail, ScanId, ScanState,
-    StoreError,
+    FitRunId, InstrumentProvenance, NewFit, NewReading, Provenance, ReadingValues, ReferenceId,
+    ScanDetail, ScanId, ScanState, Source, StoreError,
 };
 
 use super::events::Event;
@@ -135,6 +135,22 @@ impl Service {
         let reference = self
             .timed_store(self.inner.store.begin_reference("Munsell N9", None))
             .await?;
+        let provenance = self.provenance(Source::Measured, None);
+        if let Err(e) = self
+            .timed_store(
+                self.inner
+                    .store
+                    .set_reference_provenance(reference, &provenance),
+            )
+            .await
+        {
+            let _ = self
+                .inner
+                .store
+                .fail_reference(reference, &e.to_string())
+                .await;
+            return Err(e.into());
+        }
         let abort = match self.claim(Operation::Reference { reference }) {
             Ok(a) => a,
             Err(e) => {
@@ -173,6 +189,7 @@ impl Service {
                     .into(),
             ));
         }
+        check_name("sample name", sample)?;
         let (guard, listener) = self.task_slot().await?;
         self.check_idle()?;
         let reference = (*self
@@ -184,6 +201,14 @@ impl Service {
         let scan = self
             .timed_store(self.inner.store.request_scan(sample, reference))
             .await?;
+        let provenance = self.provenance(Source::Measured, None);
+        if let Err(e) = self
+            .timed_store(self.inner.store.set_scan_provenance(scan, &provenance))
+            .await
+        {
+            let _ = self.inner.store.fail_scan(scan, &e.to_string()).await;
+            return Err(e.into());
+        }
         let abort = match self.claim(Operation::Scan { scan }) {
             Ok(a) => a,
             Err(e) => {
@@ -597,9 +622,24 @@ impl Service {
     /// one. Returns the scan's id and its fits.
     pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
         file.validate()?;
+        check_name("sample name", &file.sample)?;
+        check_name("reference name", &file.reference.name)?;
         let store = &self.inner.store;
+        // A brdfd.scan/1 file does not say which instruments measured it.
+        let provenance = Provenance {
+            source: Source::Imported,
+            source_detail: Some("brdfd.scan/1 file".into()),
+            ..Provenance::unknown()
+        };
         let name = format!("{}{IMPORTED_SUFFIX}", file.reference.name);
         let reference = self.timed_store(store.begin_reference(&name, None)).await?;
+        if let Err(e) = self
+            .timed_store(store.set_reference_provenance(reference, &provenance))
+            .await
+        {
+            let _ = store.fail_reference(reference, &e.to_string()).await;
+            return Err(e.into());
+        }
         let readings = new_readings(&file.reference.readings);
         for r in &readings {
             if let Err(e) = self
@@ -620,6 +660,8 @@ impl Service {
             .await?;
         let scan = self
             .timed_store(store.request_scan(&file.sample, reference))
+            .await?;
+        self.timed_store(store.set_scan_provenance(scan, &provenance))
             .await?;
         self.timed_store(store.start_measuring(scan)).await?;
         let readings = new_readings(&file.readings);
@@ -714,7 +756,47 @@ impl Service {
         });
     }
 
+    /// The provenance of a reference set or scan measured now: each instrument's last reported
+    /// identity ("unknown" if it never answered) and whether it is simulated.
+    pub(crate) fn provenance(&self, source: Source, detail: Option<String>) -> Provenance {
+        let ids = self
+            .inner
+            .identities
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
+        let one = |id: &Option<drivers::Identity>, simulated: bool| {
+            let mut p = InstrumentProvenance::unknown();
+            if let Some(id) = id {
+                p.model = id.model.clone();
+                p.serial = id.serial.clone();
+                p.firmware = id.firmware.clone();
+            }
+            p.simulated = Some(simulated);
+            p
+        };
+        let sims = &self.inner.devices.simulators;
+        Provenance {
+            ma_t12: one(&ids[0], sims.ma_t12.is_some()),
+            sra: one(&ids[1], sims.sra.is_some()),
+            source,
+            source_detail: detail,
+        }
+    }
+
     async fn record_instrument(&self, instrument: Instrument, identity: &drivers::Identity) {
+        {
+            let mut ids = self
+                .inner
+                .identities
+                .lock()
+                .unwrap_or_else(|p| p.into_inner());
+            let slot = match instrument {
+                Instrument::MaT12 => 0,
+                Instrument::Sra => 1,
+            };
+            ids[slot] = Some(identity.clone());
+        }
         let text = format!("{} firmware {}", identity.model, identity.firmware);
         if let Err(e) = self
             .inner
@@ -725,6 +807,29 @@ impl Service {
             tracing::warn!(error = %e, "cannot record the instrument");
         }
     }
+}
+
+/// The longest sample or reference name accepted.
+pub const MAX_NAME_CHARS: usize = 200;
+
+/// Names end up in terminals (`brdfd scans`), file names and reports: at most
+/// [`MAX_NAME_CHARS`] characters, and no control characters (an escape sequence in a sample
+/// name would otherwise reach the operator's terminal).
+pub fn check_name(what: &str, name: &str) -> Result<(), ServiceError> {
+    let count = name.chars().count();
+    if count > MAX_NAME_CHARS {
+        return Err(ServiceError::BadRequest(format!(
+            "the {what} has {count} characters: at most {MAX_NAME_CHARS}"
+        )));
+    }
+    if let Some(c) = name.chars().find(|c| c.is_control()) {
+        return Err(ServiceError::BadRequest(format!(
+            "the {what} {:?} holds the control character U+{:04X}: names are printable text",
+            name.escape_debug().to_string(),
+            c as u32
+        )));
+    }
+    Ok(())
 }
 
 /// A scan file's readings as store readings, in table order, with empty raw frames.

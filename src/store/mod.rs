@@ -41,9 +41,10 @@ pub use error::StoreError;
 pub use ids::{FitRunId, InstrumentId, ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
 pub use lock::{LockError, StoreLock};
 pub use records::{
-    DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, Instrument, NewFit,
-    NewReading, Processed, Reading, ReadingValues, ReferenceDetail, ReferenceStatus,
-    ReferenceSummary, ScanDetail, ScanFilter, ScanState, ScanSummary,
+    DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, Instrument,
+    InstrumentProvenance, NewFit, NewReading, Processed, Provenance, Reading, ReadingValues,
+    ReferenceDetail, ReferenceStatus, ReferenceSummary, ScanDetail, ScanFilter, ScanState,
+    ScanSummary, Source,
 };
 
 use backend::Pool;
@@ -182,6 +183,88 @@ impl Store {
         self.writer.close().await;
         // Only now may another owner open it.
         self.lock.lock().unwrap_or_else(|p| p.into_inner()).take();
+    }
+}
+
+impl Store {
+    /// Records which instruments measured scan `scan` and how its readings came in.
+    pub async fn set_scan_provenance(
+        &self,
+        scan: ScanId,
+        provenance: &Provenance,
+    ) -> Result<(), StoreError> {
+        self.set_provenance("scans", ScanId::WHAT, scan.0, provenance)
+            .await
+    }
+
+    /// Records which instruments measured reference set `reference`.
+    pub async fn set_reference_provenance(
+        &self,
+        reference: ReferenceId,
+        provenance: &Provenance,
+    ) -> Result<(), StoreError> {
+        self.set_provenance("reference_sets", ReferenceId::WHAT, reference.0, provenance)
+            .await
+    }
+
+    /// How many rows `table` holds: one of the store's own tables (tests, `brdfd doctor`).
+    pub async fn count_rows(&self, table: &str) -> Result<i64, StoreError> {
+        const TABLES: [&str; 10] = [
+            "instruments",
+            "reference_sets",
+            "reference_readings",
+            "samples",
+            "scans",
+            "readings",
+            "processed",
+            "fit_runs",
+            "evaluations",
+            "evaluation_summaries",
+        ];
+        let Some(table) = TABLES.iter().find(|t| **t == table) else {
+            return Err(StoreError::NotFound {
+                what: "table",
+                id: -1,
+            });
+        };
+        Ok(sqlx::query_scalar(&format!("SELECT COUNT(*) FROM {table}"))
+            .fetch_one(&self.reader)
+            .await?)
+    }
+
+    /// `table` is always a constant of this module, never outside input.
+    async fn set_provenance(
+        &self,
+        table: &'static str,
+        what: &'static str,
+        id: i64,
+        p: &Provenance,
+    ) -> Result<(), StoreError> {
+        let flag = |s: Option<bool>| s.map(i64::from);
+        let sql = format!(
+            "UPDATE {table} SET ma_t12_model = $2, ma_t12_serial = $3, ma_t12_firmware = $4,
+                 ma_t12_simulated = $5, sra_model = $6, sra_serial = $7, sra_firmware = $8,
+                 sra_simulated = $9, source = $10, source_detail = $11
+             WHERE id = $1"
+        );
+        let done = sqlx::query(&sql)
+            .bind(id)
+            .bind(&p.ma_t12.model)
+            .bind(&p.ma_t12.serial)
+            .bind(&p.ma_t12.firmware)
+            .bind(flag(p.ma_t12.simulated))
+            .bind(&p.sra.model)
+            .bind(&p.sra.serial)
+            .bind(&p.sra.firmware)
+            .bind(flag(p.sra.simulated))
+            .bind(p.source.as_str())
+            .bind(p.source_detail.as_deref())
+            .execute(&self.writer)
+            .await?;
+        if done.rows_affected() == 0 {
+            return Err(StoreError::NotFound { what, id });
+        }
+        Ok(())
     }
 }
 

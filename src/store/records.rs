@@ -200,6 +200,8 @@ pub struct ReferenceSummary {
     pub taken_at_ms: i64,
     pub completed_at_ms: Option<i64>,
     pub reading_count: usize,
+    /// Which instruments measured it, and how its readings came in.
+    pub provenance: Provenance,
 }
 
 /// A reference set with its readings in geometry-table order.
@@ -207,6 +209,147 @@ pub struct ReferenceSummary {
 pub struct ReferenceDetail {
     pub reference: ReferenceSummary,
     pub readings: Vec<Reading>,
+}
+
+text_enum!(
+    /// How a reference set's or scan's readings entered the store (migration 0010).
+    Source {
+        /// Measured by the daemon's instruments (real or simulated: see each instrument's
+        /// `simulated`).
+        Measured = "measured",
+        /// Imported from a file (a brdfd.scan/1 file or an instrument-software export).
+        Imported = "imported",
+        /// `brdfd replay` / `brdfd demo`: recorded session files replayed through the daemon.
+        Replay = "replay",
+        /// Written before provenance was recorded.
+        Unknown = "unknown",
+    }
+);
+
+/// One instrument as it reported itself for a reference set or scan.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub struct InstrumentProvenance {
+    pub model: String,
+    pub serial: String,
+    pub firmware: String,
+    /// A simulated instrument (a replayed recording); `None` when not known (older rows).
+    pub simulated: Option<bool>,
+}
+
+impl InstrumentProvenance {
+    /// Nothing known (rows from before provenance, or an instrument that never answered).
+    pub fn unknown() -> InstrumentProvenance {
+        InstrumentProvenance {
+            model: "unknown".into(),
+            serial: "unknown".into(),
+            firmware: "unknown".into(),
+            simulated: None,
+        }
+    }
+
+    /// "MA-T12 serial 123 firmware 1.0 (simulated)", for people.
+    pub fn describe(&self) -> String {
+        let sim = match self.simulated {
+            Some(true) => " (simulated)",
+            Some(false) => "",
+            None => " (simulated or not: unknown)",
+        };
+        format!(
+            "{} serial {} firmware {}{sim}",
+            self.model, self.serial, self.firmware
+        )
+    }
+}
+
+/// Which instruments measured a reference set or scan, and how its readings came in.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub struct Provenance {
+    pub ma_t12: InstrumentProvenance,
+    pub sra: InstrumentProvenance,
+    pub source: Source,
+    /// The file imported or the sessions replayed.
+    pub source_detail: Option<String>,
+}
+
+impl Provenance {
+    pub fn unknown() -> Provenance {
+        Provenance {
+            ma_t12: InstrumentProvenance::unknown(),
+            sra: InstrumentProvenance::unknown(),
+            source: Source::Unknown,
+            source_detail: None,
+        }
+    }
+
+    /// Whether any instrument was simulated (unknown counts as not known to be real).
+    pub fn simulated(&self) -> bool {
+        self.ma_t12.simulated == Some(true) || self.sra.simulated == Some(true)
+    }
+
+    /// Whether both instruments are known to be real.
+    pub fn real(&self) -> bool {
+        self.ma_t12.simulated == Some(false) && self.sra.simulated == Some(false)
+    }
+}
+
+/// The provenance columns as a row (the same names on `reference_sets` and `scans`).
+#[derive(Debug, sqlx::FromRow)]
+pub(crate) struct ProvenanceRow {
+    pub ma_t12_model: String,
+    pub ma_t12_serial: String,
+    pub ma_t12_firmware: String,
+    pub ma_t12_simulated: Option<i64>,
+    pub sra_model: String,
+    pub sra_serial: String,
+    pub sra_firmware: String,
+    pub sra_simulated: Option<i64>,
+    pub source: String,
+    pub source_detail: Option<String>,
+}
+
+/// The provenance columns of table alias `a`, for the summaries' SELECTs.
+pub(crate) fn provenance_columns(a: &str) -> String {
+    [
+        "ma_t12_model",
+        "ma_t12_serial",
+        "ma_t12_firmware",
+        "ma_t12_simulated",
+        "sra_model",
+        "sra_serial",
+        "sra_firmware",
+        "sra_simulated",
+        "source",
+        "source_detail",
+    ]
+    .map(|c| format!("{a}.{c}"))
+    .join(", ")
+}
+
+impl ProvenanceRow {
+    pub(crate) fn into_provenance(self) -> Result<Provenance, String> {
+        let flag = |v: Option<i64>| match v {
+            None => Ok(None),
+            Some(0) => Ok(Some(false)),
+            Some(1) => Ok(Some(true)),
+            Some(x) => Err(format!("simulated is {x}, not 0 or 1")),
+        };
+        Ok(Provenance {
+            ma_t12: InstrumentProvenance {
+                model: self.ma_t12_model,
+                serial: self.ma_t12_serial,
+                firmware: self.ma_t12_firmware,
+                simulated: flag(self.ma_t12_simulated)?,
+            },
+            sra: InstrumentProvenance {
+                model: self.sra_model,
+                serial: self.sra_serial,
+                firmware: self.sra_firmware,
+                simulated: flag(self.sra_simulated)?,
+            },
+            source: self.source.parse()?,
+            source_detail: self.source_detail,
+        })
+    }
 }
 
 /// A scan without its readings.
@@ -224,6 +367,8 @@ pub struct ScanSummary {
     pub started_at_ms: Option<i64>,
     pub finished_at_ms: Option<i64>,
     pub reading_count: usize,
+    /// Which instruments measured it, and how its readings came in.
+    pub provenance: Provenance,
 }
 
 /// A scan, its readings (geometry-table order) and its reference set.

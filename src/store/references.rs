@@ -8,7 +8,8 @@ use super::backend::{self, Db};
 use super::codec::{self, ReadingRow};
 use super::ids::{InstrumentId, ReadingId, ReferenceId};
 use super::records::{
-    Instrument, ReadingValues, ReferenceDetail, ReferenceStatus, ReferenceSummary,
+    Instrument, ProvenanceRow, ReadingValues, ReferenceDetail, ReferenceStatus, ReferenceSummary,
+    provenance_columns,
 };
 use super::{Store, StoreError, now_ms};
 
@@ -32,13 +33,21 @@ struct ReferenceRow {
     taken_at_ms: i64,
     completed_at_ms: Option<i64>,
     reading_count: i64,
+    #[sqlx(flatten)]
+    provenance: ProvenanceRow,
 }
 
-const REFERENCE_SUMMARY: &str = "\
-    SELECT r.id, r.name, r.status, r.reason, r.rho_ref, r.taken_at_ms, r.completed_at_ms,
-           (SELECT COUNT(*) FROM reference_readings rr WHERE rr.reference_id = r.id)
-               AS reading_count
-    FROM reference_sets r";
+/// The reference sets' summary columns.
+static REFERENCE_SUMMARY: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
+    format!(
+        "SELECT r.id, r.name, r.status, r.reason, r.rho_ref, r.taken_at_ms, r.completed_at_ms,
+                (SELECT COUNT(*) FROM reference_readings rr WHERE rr.reference_id = r.id)
+                    AS reading_count,
+                {}
+         FROM reference_sets r",
+        provenance_columns("r")
+    )
+});
 
 impl ReferenceRow {
     fn into_summary(self) -> Result<ReferenceSummary, StoreError> {
@@ -64,6 +73,7 @@ impl ReferenceRow {
             taken_at_ms: self.taken_at_ms,
             completed_at_ms: self.completed_at_ms,
             reading_count: self.reading_count as usize,
+            provenance: self.provenance.into_provenance().map_err(corrupt)?,
         })
     }
 }
@@ -282,8 +292,9 @@ impl Store {
     /// first. Whether it is too old is the caller's call (`[scan] reference_max_age_hours`).
     pub async fn latest_reference(&self) -> Result<Option<ReferenceSummary>, StoreError> {
         let row: Option<ReferenceRow> = sqlx::query_as(&format!(
-            "{REFERENCE_SUMMARY} WHERE r.status = 'complete'
-             ORDER BY r.completed_at_ms DESC, r.id DESC LIMIT 1"
+            "{} WHERE r.status = 'complete'
+             ORDER BY r.completed_at_ms DESC, r.id DESC LIMIT 1",
+            *REFERENCE_SUMMARY
         ))
         .fetch_optional(&self.reader)
         .await?;
@@ -296,7 +307,7 @@ impl Store {
         reference: ReferenceId,
     ) -> Result<ReferenceDetail, StoreError> {
         let row: Option<ReferenceRow> =
-            sqlx::query_as(&format!("{REFERENCE_SUMMARY} WHERE r.id = $1"))
+            sqlx::query_as(&format!("{} WHERE r.id = $1", *REFERENCE_SUMMARY))
                 .bind(reference.0)
                 .fetch_optional(&self.reader)
                 .await?;

@@ -12,8 +12,8 @@ use super::backend::{self, Db};
 use super::codec::{self, ReadingRow};
 use super::ids::{ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
 use super::records::{
-    NewReading, Processed, ReadingValues, ReferenceStatus, ScanDetail, ScanFilter, ScanState,
-    ScanSummary,
+    NewReading, Processed, ProvenanceRow, ReadingValues, ReferenceStatus, ScanDetail, ScanFilter,
+    ScanState, ScanSummary, provenance_columns,
 };
 use super::references::reference_status;
 use super::{Store, StoreError, now_ms};
@@ -33,13 +33,21 @@ struct ScanRow {
     started_at_ms: Option<i64>,
     finished_at_ms: Option<i64>,
     reading_count: i64,
+    #[sqlx(flatten)]
+    provenance: ProvenanceRow,
 }
 
-const SCAN_SUMMARY: &str = "\
-    SELECT s.id, s.sample_id, sa.name AS sample, s.reference_id, s.state, s.reason,
-           s.requested_at_ms, s.started_at_ms, s.finished_at_ms,
-           (SELECT COUNT(*) FROM readings r WHERE r.scan_id = s.id) AS reading_count
-    FROM scans s JOIN samples sa ON sa.id = s.sample_id";
+/// The scans' summary columns.
+static SCAN_SUMMARY: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
+    format!(
+        "SELECT s.id, s.sample_id, sa.name AS sample, s.reference_id, s.state, s.reason,
+                s.requested_at_ms, s.started_at_ms, s.finished_at_ms,
+                (SELECT COUNT(*) FROM readings r WHERE r.scan_id = s.id) AS reading_count,
+                {}
+         FROM scans s JOIN samples sa ON sa.id = s.sample_id",
+        provenance_columns("s")
+    )
+});
 
 impl ScanRow {
     fn into_summary(self) -> Result<ScanSummary, StoreError> {
@@ -59,6 +67,13 @@ impl ScanRow {
             started_at_ms: self.started_at_ms,
             finished_at_ms: self.finished_at_ms,
             reading_count: self.reading_count as usize,
+            provenance: self.provenance.into_provenance().map_err(|detail| {
+                StoreError::Corrupt {
+                    table: "scans",
+                    id: self.id,
+                    detail,
+                }
+            })?,
         })
     }
 }
@@ -380,7 +395,7 @@ impl Store {
     /// A scan, its readings and its reference set with that set's readings, readings in
     /// geometry-table order.
     pub async fn scan_detail(&self, scan: ScanId) -> Result<ScanDetail, StoreError> {
-        let row: Option<ScanRow> = sqlx::query_as(&format!("{SCAN_SUMMARY} WHERE s.id = $1"))
+        let row: Option<ScanRow> = sqlx::query_as(&format!("{} WHERE s.id = $1", *SCAN_SUMMARY))
             .bind(scan.0)
             .fetch_optional(&self.reader)
             .await?;
@@ -413,7 +428,7 @@ impl Store {
     /// Scans matching `filter`, newest first.
     pub async fn list_scans(&self, filter: &ScanFilter) -> Result<Vec<ScanSummary>, StoreError> {
         // QueryBuilder writes each backend's placeholder, so the optional clauses stay portable.
-        let mut q = sqlx::QueryBuilder::<Db>::new(SCAN_SUMMARY);
+        let mut q = sqlx::QueryBuilder::<Db>::new(SCAN_SUMMARY.as_str());
         q.push(" WHERE 1 = 1");
         if let Some(state) = filter.state {
             q.push(" AND s.state = ").push_bind(state.as_str());
