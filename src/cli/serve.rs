@@ -181,8 +181,10 @@ async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
         tracing::info!(file = %token_path.display(), "created the API token file");
     }
     tracing::info!(addr = %api.local_addr(), store = %config.store.path.display(), "serving");
+    notify_systemd(&service, api.local_addr());
     wait_for_signal().await?;
     tracing::info!("shutting down");
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     // The API first, so that no request reaches a service that is closing its store.
     api.stop(Duration::from_secs(1)).await;
     let clean = service.shutdown().await;
@@ -191,6 +193,37 @@ async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
     }
     tracing::info!("stopped");
     Ok(())
+}
+
+/// Under systemd (`Type=notify`): READY=1 once the API answers, and, with `WatchdogSec=`, a
+/// watchdog ping every half period for as long as the runtime runs and the store answers a
+/// status query — a daemon whose store hangs is restarted. Without NOTIFY_SOCKET (not under
+/// systemd) nothing is sent.
+fn notify_systemd(service: &Service, addr: std::net::SocketAddr) {
+    use sd_notify::NotifyState;
+    let status = format!("listening on http://{addr}");
+    if let Err(e) = sd_notify::notify(&[NotifyState::Ready, NotifyState::Status(&status)]) {
+        tracing::warn!(error = %e, "cannot tell systemd that brdfd is ready");
+    }
+    let Some(period) = sd_notify::watchdog_enabled() else {
+        return;
+    };
+    let service = service.clone();
+    tokio::spawn(async move {
+        let mut tick = tokio::time::interval(period / 2);
+        loop {
+            tick.tick().await;
+            match tokio::time::timeout(period / 2, service.status()).await {
+                Ok(Ok(_)) => {
+                    let _ = sd_notify::notify(&[NotifyState::Watchdog]);
+                }
+                Ok(Err(e)) => {
+                    tracing::error!(error = %e, "store check failed: not petting the watchdog")
+                }
+                Err(_) => tracing::error!("status check hung: not petting the watchdog"),
+            }
+        }
+    });
 }
 
 /// SIGTERM (systemd's stop) or SIGINT (Ctrl-C).
