@@ -25,15 +25,19 @@ pub struct ExportArgs {
     #[command(flatten)]
     pub select: StoreSelection,
 
-    /// File to write.
+    /// File to write (refused if it exists, unless --force).
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+
+    /// Replace FILE if it exists.
+    #[arg(long)]
+    pub force: bool,
 }
 
 pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     let study = args.select.load()?;
     let text = formats::export(&study, args.format, &ExportOptions::default())?;
-    std::fs::write(&args.out, text).with_context(|| format!("writing {}", args.out.display()))?;
+    super::write_new_file(&args.out, text.as_bytes(), args.force)?;
     println!(
         "{} samples as {} in {}",
         study.samples.len(),
@@ -65,6 +69,10 @@ pub struct ImportArgs {
     /// `brdfd import` then puts them in the store.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+
+    /// Replace files that exist in DIR.
+    #[arg(long)]
+    pub force: bool,
 }
 
 fn format_of(path: &Path) -> Format {
@@ -99,12 +107,13 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     )?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    for scan in &scans {
-        let path = args
-            .out
-            .join(format!("{}.scan.json", crate::synth::slug(&scan.sample)));
-        scan.write_file(&path)
+    let stems = super::distinct_file_stems(scans.iter().map(|s| s.sample.as_str()));
+    for (scan, stem) in scans.iter().zip(stems) {
+        let path = args.out.join(format!("{stem}.scan.json"));
+        let text = scan
+            .to_json_pretty()
             .map_err(|e: ScanError| anyhow::anyhow!(e))?;
+        super::write_new_file(&path, text.as_bytes(), args.force)?;
         println!("{} → {}", scan.sample, path.display());
     }
     Ok(())

@@ -95,6 +95,53 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
+/// Writes `bytes` to a new file at `path`; an existing file is refused unless `force` (the
+/// operator asked to replace it), so an export never silently overwrites a measurement.
+pub fn write_new_file(path: &std::path::Path, bytes: &[u8], force: bool) -> anyhow::Result<()> {
+    use anyhow::Context;
+    use std::io::Write;
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true);
+    if force {
+        options.create(true).truncate(true);
+    } else {
+        options.create_new(true);
+    }
+    let mut file = options.open(path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::AlreadyExists {
+            anyhow::anyhow!(
+                "{} exists already: choose another name, or pass --force to replace it",
+                path.display()
+            )
+        } else {
+            anyhow::Error::new(e).context(format!("cannot create {}", path.display()))
+        }
+    })?;
+    file.write_all(bytes)
+        .and_then(|()| file.sync_all())
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// One file name per sample, for writing several samples into one directory: the sample's
+/// slug, with `-2`, `-3`, … where two names give the same slug ("T.Sky blue" and "T.Sky-blue"),
+/// so that no sample's file replaces another's.
+pub fn distinct_file_stems<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<String> {
+    let mut used: std::collections::HashSet<String> = Default::default();
+    names
+        .into_iter()
+        .map(|name| {
+            let base = crate::synth::slug(name);
+            let mut stem = base.clone();
+            let mut n = 1;
+            while !used.insert(stem.to_ascii_lowercase()) {
+                n += 1;
+                stem = format!("{base}-{n}");
+            }
+            stem
+        })
+        .collect()
+}
+
 /// An error chain on one line: `outer: inner: root`, with any line breaks inside a message
 /// folded, so stderr always gets exactly one line.
 pub fn one_line(err: &anyhow::Error) -> String {
@@ -120,6 +167,31 @@ pub fn usage_error_line(err: &clap::Error) -> String {
     let line = fold_lines(&message.join("\n"));
     let line = line.strip_prefix("error: ").unwrap_or(&line).to_string();
     format!("{line} (see --help)")
+}
+
+#[cfg(test)]
+mod file_tests {
+    use super::*;
+
+    #[test]
+    fn samples_whose_names_slug_alike_get_distinct_files() {
+        let stems = distinct_file_stems(["T.Sky blue", "T.Sky-blue", "t.sky blue", "Other"]);
+        let lower: std::collections::HashSet<_> = stems.iter().map(|s| s.to_lowercase()).collect();
+        assert_eq!(lower.len(), 4, "{stems:?}");
+        assert_eq!(stems[0], crate::synth::slug("T.Sky blue"));
+    }
+
+    #[test]
+    fn an_existing_file_is_replaced_only_with_force() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.json");
+        write_new_file(&path, b"first", false).unwrap();
+        let e = write_new_file(&path, b"second", false).unwrap_err();
+        assert!(e.to_string().contains("--force"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), b"first");
+        write_new_file(&path, b"third", true).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"third");
+    }
 }
 
 #[cfg(test)]

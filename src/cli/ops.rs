@@ -163,9 +163,12 @@ pub struct ExportArgs {
     /// The scan's id.
     #[arg(value_name = "SCAN")]
     pub scan: i64,
-    /// Write here instead of stdout.
+    /// Write here instead of stdout (refused if it exists, unless --force).
     #[arg(long, short, value_name = "FILE")]
     pub output: Option<PathBuf>,
+    /// Replace FILE if it exists.
+    #[arg(long)]
+    pub force: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -300,6 +303,9 @@ fn follow(
     let mut fit_bars: std::collections::HashMap<i64, ProgressBar> = Default::default();
     let mut measuring = scan.is_some() || reference.is_some();
     let mut failed: Option<String> = None;
+    // Set when what was followed has ended; an event stream that closes before is a lost
+    // daemon (restarted, killed, or the connection cut), not a success.
+    let mut finished = false;
     for ev in events {
         let ty = s(&ev, "type");
         let mine_scan = scan.is_some_and(|id_| id(&ev, "scan") == id_);
@@ -389,6 +395,7 @@ fn follow(
                 };
                 p.line(&text);
                 if fits_pending.is_empty() {
+                    finished = true;
                     break;
                 }
             }
@@ -434,6 +441,7 @@ fn follow(
                 p.line(&text);
                 fits_pending.retain(|&x| x != fit);
                 if !measuring && fits_pending.is_empty() {
+                    finished = true;
                     break;
                 }
             }
@@ -446,7 +454,15 @@ fn follow(
     }
     match failed {
         Some(reason) => bail!(reason),
-        None => Ok(()),
+        None if finished => Ok(()),
+        None => {
+            let what = match (scan, reference) {
+                (Some(scan), _) => format!("the scan goes on: `brdfd show {scan}`"),
+                (None, Some(r)) => format!("reference {r} may go on: `brdfd status`"),
+                (None, None) => "`brdfd status` says what the daemon is doing".into(),
+            };
+            bail!("lost the daemon's event stream; {what}")
+        }
     }
 }
 
@@ -720,8 +736,7 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
         .get_text(&format!("/scans/{}/export", args.scan))?;
     match &args.output {
         Some(path) => {
-            std::fs::write(path, text.as_bytes())
-                .with_context(|| format!("cannot write {}", path.display()))?;
+            super::write_new_file(path, text.as_bytes(), args.force)?;
             eprintln!("scan {} written to {}", args.scan, path.display());
         }
         None => println!("{text}"),

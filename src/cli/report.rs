@@ -37,6 +37,11 @@ pub struct StoreSelection {
     /// defaults (`brdfd.db` in the working directory).
     #[arg(long, value_name = "brdfd.toml")]
     pub config: Option<PathBuf>,
+
+    /// Allow scans measured on simulated instruments in one study with scans from real ones
+    /// (refused by default: replayed recordings must not pass for measurements).
+    #[arg(long)]
+    pub include_simulated: bool,
 }
 
 impl StoreSelection {
@@ -71,13 +76,60 @@ impl StoreSelection {
     /// Loads the selected scans and their fits from the store.
     pub fn load(&self) -> anyhow::Result<Study> {
         let path = self.db_path()?;
-        load_study(&path, &self.selection())
+        load_study_checked(&path, &self.selection(), self.include_simulated)
     }
 }
 
 /// Opens an existing store (never creates one: a typo in --db must not look like an empty
 /// study) and loads a study from it.
 pub fn load_study(path: &Path, selection: &Selection) -> anyhow::Result<Study> {
+    load_study_checked(path, selection, true)
+}
+
+/// Which of `scans` were measured on simulated instruments and which on real ones; an error
+/// naming both kinds when they are mixed and `include_simulated` is false. Scans whose
+/// provenance was never recorded count as neither.
+pub fn check_provenance_mix(
+    scans: &[crate::store::ScanSummary],
+    include_simulated: bool,
+) -> anyhow::Result<()> {
+    let simulated: Vec<i64> = scans
+        .iter()
+        .filter(|s| s.provenance.simulated())
+        .map(|s| s.id.0)
+        .collect();
+    let real: Vec<i64> = scans
+        .iter()
+        .filter(|s| s.provenance.real())
+        .map(|s| s.id.0)
+        .collect();
+    if !include_simulated && !simulated.is_empty() && !real.is_empty() {
+        bail!(
+            "the selection mixes scans from simulated instruments ({}) with scans from real ones \
+             ({}); select one kind, or pass --include-simulated to study them together",
+            list_ids(&simulated),
+            list_ids(&real)
+        );
+    }
+    Ok(())
+}
+
+fn list_ids(ids: &[i64]) -> String {
+    let shown: Vec<String> = ids.iter().take(8).map(|i| format!("scan {i}")).collect();
+    let more = ids.len().saturating_sub(8);
+    if more > 0 {
+        format!("{} and {more} more", shown.join(", "))
+    } else {
+        shown.join(", ")
+    }
+}
+
+/// [`load_study`], refusing a mix of simulated and real scans unless `include_simulated`.
+pub fn load_study_checked(
+    path: &Path,
+    selection: &Selection,
+    include_simulated: bool,
+) -> anyhow::Result<Study> {
     if !path.exists() {
         bail!(
             "no store at {}; run `brdfd demo` or the daemon first, or pass --db PATH",
@@ -93,6 +145,28 @@ pub fn load_study(path: &Path, selection: &Selection) -> anyhow::Result<Study> {
         let store = Store::open_read_only(path)
             .await
             .with_context(|| format!("opening the store {}", path.display()))?;
+        let summaries: Vec<crate::store::ScanSummary> = match selection {
+            Selection::All => {
+                store
+                    .list_scans(&crate::store::ScanFilter {
+                        state: Some(crate::store::ScanState::Complete),
+                        limit: u32::MAX,
+                        ..Default::default()
+                    })
+                    .await?
+            }
+            Selection::Scans(ids) => {
+                let mut out = Vec::new();
+                for id in ids {
+                    out.push(store.scan_detail(*id).await?.scan);
+                }
+                out
+            }
+        };
+        if let Err(e) = check_provenance_mix(&summaries, include_simulated) {
+            store.close().await;
+            return Err(e);
+        }
         let study = from_store(&store, selection)
             .await
             .with_context(|| format!("reading the study from {}", path.display()));
@@ -136,4 +210,53 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     println!("summary: {}", files.html.display());
     println!("         {}", files.markdown.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::{InstrumentProvenance, Provenance, ScanSummary, Source};
+
+    fn scan(id: i64, simulated: Option<bool>) -> ScanSummary {
+        let one = InstrumentProvenance {
+            simulated,
+            ..InstrumentProvenance::unknown()
+        };
+        ScanSummary {
+            id: ScanId(id),
+            sample_id: crate::store::SampleId(1),
+            sample: "S".into(),
+            reference_id: crate::store::ReferenceId(1),
+            state: crate::store::ScanState::Complete,
+            reason: None,
+            requested_at_ms: 0,
+            started_at_ms: None,
+            finished_at_ms: None,
+            reading_count: 14,
+            provenance: Provenance {
+                ma_t12: one.clone(),
+                sra: one,
+                source: Source::Measured,
+                source_detail: None,
+            },
+        }
+    }
+
+    #[test]
+    fn simulated_and_real_scans_are_not_mixed_unless_asked() {
+        let all_sim = [scan(1, Some(true)), scan(2, Some(true))];
+        assert!(check_provenance_mix(&all_sim, false).is_ok());
+        let unknown_and_real = [scan(1, None), scan(2, Some(false))];
+        assert!(check_provenance_mix(&unknown_and_real, false).is_ok());
+        let mixed = [
+            scan(1, Some(true)),
+            scan(2, Some(false)),
+            scan(3, Some(false)),
+        ];
+        let e = check_provenance_mix(&mixed, false).unwrap_err().to_string();
+        assert!(e.contains("simulated instruments (scan 1)"), "{e}");
+        assert!(e.contains("real ones (scan 2, scan 3)"), "{e}");
+        assert!(e.contains("--include-simulated"), "{e}");
+        assert!(check_provenance_mix(&mixed, true).is_ok());
+    }
 }
