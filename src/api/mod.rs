@@ -185,9 +185,11 @@ impl ApiOptions {
     }
 }
 
-/// Permits for `GET /events` streams; one is held for the life of each stream.
+/// Permits for `GET /events` streams (one is held for the life of each stream), and the
+/// keep-alive interval: 15 s, or a third of the idle timeout if that is shorter, so that a
+/// quiet stream is never taken for an idle connection.
 #[derive(Debug, Clone)]
-struct EventPermits(Arc<Semaphore>);
+struct EventPermits(Arc<Semaphore>, Duration);
 
 /// The API's routes on a service, with every request behind [`access::guard`]. This is the
 /// only router brdfd serves.
@@ -206,9 +208,10 @@ pub fn router(service: Service, options: &ApiOptions) -> Router {
         .route("/fits/{id}", get(show_fit))
         .route("/fits/{id}/cancel", post(cancel_fit))
         .route("/events", get(events))
-        .layer(Extension(EventPermits(Arc::new(Semaphore::new(
-            options.max_event_subscribers,
-        )))))
+        .layer(Extension(EventPermits(
+            Arc::new(Semaphore::new(options.max_event_subscribers)),
+            Duration::from_secs(15).min(options.connections.idle_timeout / 3),
+        )))
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
         .layer(axum::middleware::from_fn_with_state(access, access::guard))
         .with_state(service)
@@ -400,6 +403,7 @@ async fn events(State(s): State<Service>, Extension(permits): Extension<EventPer
                 .into(),
         );
     };
+    let keep_alive = permits.1;
     let stream = BroadcastStream::new(s.subscribe()).map(move |r| {
         // The permit lives as long as the stream: dropped with it when the client goes.
         let _held = &permit;
@@ -413,7 +417,7 @@ async fn events(State(s): State<Service>, Extension(permits): Extension<EventPer
         })
     });
     Sse::new(stream)
-        .keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
+        .keep_alive(KeepAlive::new().interval(keep_alive))
         .into_response()
 }
 

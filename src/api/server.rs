@@ -5,8 +5,7 @@
 //!   arrived whole in time closes the connection (slowloris); hyper's own timer.
 //! - **Idle timeout** (`[api] idle_timeout_ms`): no bytes in either direction for that long
 //!   closes the connection. An event stream is never idle: it sends a keep-alive comment every
-//!   15 s, so the idle timeout must be longer than that (the config allows 100 ms and up for
-//!   tests; the default is 60 s).
+//!   15 s, or every third of the idle timeout when that is shorter (default 60 s).
 //! - **Connection cap** (`[api] max_connections`): a connection over the cap gets one
 //!   `503 Service Unavailable` JSON answer and is closed, without reaching the router.
 //!
