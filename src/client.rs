@@ -2,6 +2,9 @@
 //! `brdfd reference`, `scan`, `scans`, `show`, `refit`, `abort`, `status`, `export` and
 //! `import` commands use, and a reader of the server-sent event stream for live progress.
 //!
+//! Every request carries the API token (`Authorization: Bearer …`) when the client has one;
+//! a 401 answer becomes [`ClientError::Unauthorized`], which says where the token is read from.
+//!
 //! Responses are handled as `serde_json::Value`: the CLI only formats them, and a client
 //! that does not insist on every field keeps working against a newer daemon.
 
@@ -20,6 +23,13 @@ pub enum ClientError {
     /// Nothing listens on the address.
     #[error("no brdfd daemon is listening on {addr} — start one with `brdfd serve`")]
     NotRunning { addr: SocketAddr },
+    /// The daemon wants the API token, or another one.
+    #[error("the daemon on {addr} refused the request: {message} (this command {token_source})")]
+    Unauthorized {
+        addr: SocketAddr,
+        message: String,
+        token_source: String,
+    },
     /// The daemon refused the request; its message says why and what to do.
     #[error("{message}")]
     Refused { status: u16, message: String },
@@ -39,6 +49,10 @@ impl ClientError {
 #[derive(Debug, Clone)]
 pub struct Client {
     addr: SocketAddr,
+    /// `Bearer …`, when a token is known.
+    authorization: Option<String>,
+    /// Where the token came from (or why there is none), for the 401 message.
+    token_source: String,
     agent: ureq::Agent,
     /// For the event stream: no overall timeout (it lasts as long as the scan).
     stream_agent: ureq::Agent,
@@ -59,8 +73,44 @@ impl Client {
             .into();
         Client {
             addr,
+            authorization: None,
+            token_source: "sent no token".into(),
             agent,
             stream_agent,
+        }
+    }
+
+    /// Sends `token` with every request; `source` says where it came from (for messages),
+    /// e.g. "read the token from /var/lib/brdfd/brdfd.token".
+    pub fn with_token(mut self, token: &crate::api::Token, source: impl Into<String>) -> Client {
+        self.authorization = Some(format!("Bearer {}", token.as_str()));
+        self.token_source = source.into();
+        self
+    }
+
+    /// Says why no token is sent (e.g. the token file could not be read), for the 401 message.
+    pub fn without_token(mut self, why: impl Into<String>) -> Client {
+        self.authorization = None;
+        self.token_source = why.into();
+        self
+    }
+
+    fn get_request(&self, path: &str) -> ureq::RequestBuilder<ureq::typestate::WithoutBody> {
+        let r = self.agent.get(&self.url(path));
+        match &self.authorization {
+            Some(a) => r.header("authorization", a),
+            None => r,
+        }
+    }
+
+    fn post_request(&self, path: &str) -> ureq::RequestBuilder<ureq::typestate::WithBody> {
+        let r = self
+            .agent
+            .post(&self.url(path))
+            .header("content-type", "application/json");
+        match &self.authorization {
+            Some(a) => r.header("authorization", a),
+            None => r,
         }
     }
 
@@ -108,6 +158,13 @@ impl Client {
                 .ok()
                 .and_then(|v| v.get("error").and_then(Value::as_str).map(str::to_string))
                 .unwrap_or_else(|| format!("HTTP {status}: {body}"));
+            if status == 401 {
+                return Err(ClientError::Unauthorized {
+                    addr: self.addr,
+                    message,
+                    token_source: self.token_source.clone(),
+                });
+            }
             Err(ClientError::Refused { status, message })
         }
     }
@@ -121,20 +178,20 @@ impl Client {
 
     /// `GET path` → JSON.
     pub fn get(&self, path: &str) -> Result<Value, ClientError> {
-        let text = self.finish(self.agent.get(&self.url(path)).call())?;
+        let text = self.finish(self.get_request(path).call())?;
         self.json(text)
     }
 
     /// `GET path` → text.
     pub fn get_text(&self, path: &str) -> Result<String, ClientError> {
-        self.finish(self.agent.get(&self.url(path)).call())
+        self.finish(self.get_request(path).call())
     }
 
     /// `POST path` with a JSON body (or none) → JSON.
     pub fn post(&self, path: &str, body: Option<&Value>) -> Result<Value, ClientError> {
-        let request = self.agent.post(&self.url(path));
+        let request = self.post_request(path);
         let response = match body {
-            Some(b) => request.send_json(b),
+            Some(b) => request.send(b.to_string()),
             None => request.send_empty(),
         };
         let text = self.finish(response)?;
@@ -143,11 +200,7 @@ impl Client {
 
     /// `POST path` with a text body (a scan file) → JSON.
     pub fn post_text(&self, path: &str, body: &str) -> Result<Value, ClientError> {
-        let response = self
-            .agent
-            .post(&self.url(path))
-            .header("content-type", "application/json")
-            .send(body);
+        let response = self.post_request(path).send(body);
         let text = self.finish(response)?;
         self.json(text)
     }
@@ -155,16 +208,21 @@ impl Client {
     /// Opens the event stream. Subscribe before making a request whose progress you want,
     /// so no event is missed.
     pub fn events(&self) -> Result<EventStream, ClientError> {
-        let response = self
-            .stream_agent
-            .get(&self.url("/events"))
-            .call()
-            .map_err(|e| self.transport(e))?;
+        let mut request = self.stream_agent.get(&self.url("/events"));
+        if let Some(a) = &self.authorization {
+            request = request.header("authorization", a);
+        }
+        let response = request.call().map_err(|e| self.transport(e))?;
         if !response.status().is_success() {
-            return Err(ClientError::Refused {
-                status: response.status().as_u16(),
-                message: "the daemon refused the event stream".into(),
-            });
+            let status = response.status().as_u16();
+            // The refusal's own message, through the same path as every other request.
+            return Err(self
+                .finish(Ok(response))
+                .err()
+                .unwrap_or(ClientError::Refused {
+                    status,
+                    message: "the daemon refused the event stream".into(),
+                }));
         }
         Ok(EventStream {
             lines: Box::new(BufReader::new(response.into_body().into_reader())),

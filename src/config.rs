@@ -103,8 +103,46 @@ pub struct StoreConfig {
 pub struct ApiConfig {
     /// Where the HTTP API listens. Loopback unless `allow_remote`.
     pub listen: SocketAddr,
-    /// Whether a non-loopback `listen` address is allowed (the API has no authentication).
+    /// Whether a non-loopback `listen` address is allowed (only behind a TLS reverse proxy:
+    /// the bearer token would otherwise cross the network in clear text).
     pub allow_remote: bool,
+    /// The API token's file; `None` = `brdfd.token` beside the store ([`ApiConfig::token_path`]).
+    pub token_file: Option<PathBuf>,
+    /// Host names (without port) the API answers to besides the loopback names and addresses:
+    /// what a reverse proxy or the lab's DNS name puts in `Host`. Anything else is refused, so
+    /// a DNS-rebinding page cannot reach the API under its own name.
+    pub allowed_hosts: Vec<String>,
+    /// Connections served at once; more are answered 503 and closed.
+    pub max_connections: usize,
+    /// `GET /events` streams at once; more are answered 503.
+    pub max_event_subscribers: usize,
+    /// A request's header must arrive whole within this, else the connection is closed.
+    pub header_timeout: Duration,
+    /// A connection with no traffic in either direction for this long is closed.
+    pub idle_timeout: Duration,
+}
+
+impl ApiConfig {
+    /// The token file in force: `token_file`, else `brdfd.token` in the store's directory.
+    pub fn token_path(&self, store: &Path) -> PathBuf {
+        self.token_file.clone().unwrap_or_else(|| {
+            store
+                .parent()
+                .map(|d| d.join("brdfd.token"))
+                .unwrap_or_else(|| PathBuf::from("brdfd.token"))
+        })
+    }
+}
+
+/// The one check of a listening address, for `[api] listen` and `brdfd serve --listen` alike:
+/// anything but loopback needs `allow_remote`.
+pub fn check_listen(addr: SocketAddr, allow_remote: bool) -> Result<SocketAddr, String> {
+    if !addr.ip().is_loopback() && !allow_remote {
+        return Err(format!(
+            "{addr} is reachable from other machines; listen on 127.0.0.1, or set              [api] allow_remote = true and put a TLS reverse proxy in front (README:              \"Remote access\"), since the API token must not cross the network in clear text"
+        ));
+    }
+    Ok(addr)
 }
 
 /// `[devices.*]`
@@ -240,6 +278,10 @@ impl FromStr for LogLevel {
 mod defaults {
     pub const STORE_PATH: &str = "brdfd.db";
     pub const LISTEN: &str = "127.0.0.1:7878";
+    pub const MAX_CONNECTIONS: usize = 64;
+    pub const MAX_EVENT_SUBSCRIBERS: usize = 16;
+    pub const HEADER_TIMEOUT_MS: u64 = 10_000;
+    pub const IDLE_TIMEOUT_MS: u64 = 60_000;
     /// The measuring commands' reply timeout of drivers/PROTOCOL.md §4.
     pub const TIMEOUT_MS: u64 = 10_000;
     /// drivers/PROTOCOL.md §4: 3 resends, 4 sends in all.
@@ -261,6 +303,12 @@ impl Default for Config {
             api: ApiConfig {
                 listen: defaults::LISTEN.parse().expect("default listen address"),
                 allow_remote: false,
+                token_file: None,
+                allowed_hosts: Vec::new(),
+                max_connections: defaults::MAX_CONNECTIONS,
+                max_event_subscribers: defaults::MAX_EVENT_SUBSCRIBERS,
+                header_timeout: Duration::from_millis(defaults::HEADER_TIMEOUT_MS),
+                idle_timeout: Duration::from_millis(defaults::IDLE_TIMEOUT_MS),
             },
             devices: DevicesConfig {
                 ma_t12: MaT12Config {
@@ -328,6 +376,12 @@ struct RawStore {
 struct RawApi {
     listen: S<String>,
     allow_remote: Option<bool>,
+    token_file: S<String>,
+    allowed_hosts: S<Vec<String>>,
+    max_connections: S<u64>,
+    max_event_subscribers: S<u64>,
+    header_timeout_ms: S<u64>,
+    idle_timeout_ms: S<u64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -391,6 +445,8 @@ struct RawLog {
 struct Checker<'a> {
     text: &'a str,
     origin: &'a str,
+    /// Whether `[devices.*] transport` must be set (always, for a file read by brdfd).
+    require_transport: bool,
 }
 
 impl Checker<'_> {
@@ -475,6 +531,30 @@ impl Checker<'_> {
     }
 }
 
+/// A configuration file must say which instruments it runs: replayed recordings landing in a
+/// production store unnoticed is the failure this prevents. (No file at all runs the simulated
+/// instruments, loudly: that is the try-it-out default.)
+const REQUIRED_TRANSPORT_MA_T12: &str = "must be set: \"usb\" for the instrument, or \"simulated\" \
+     to replay a recording (no instrument; every scan is then marked simulated)";
+const REQUIRED_TRANSPORT_SRA: &str = "must be set: \"serial\" for the instrument, or \"simulated\" \
+     to replay a recording (no instrument; every scan is then marked simulated)";
+
+fn bounded_count(n: u64, lo: u64, hi: u64) -> Result<usize, String> {
+    if (lo..=hi).contains(&n) {
+        Ok(n as usize)
+    } else {
+        Err(format!("{n} is out of range: {lo} to {hi}"))
+    }
+}
+
+fn api_timeout(ms: u64) -> Result<Duration, String> {
+    if (100..=3_600_000).contains(&ms) {
+        Ok(Duration::from_millis(ms))
+    } else {
+        Err(format!("{ms} is out of range: 100 to 3600000 ms"))
+    }
+}
+
 fn timeout(ms: u64) -> Result<Duration, String> {
     // Above 10 minutes a dead instrument would hold a scan for longer than any operator waits.
     if (1..=600_000).contains(&ms) {
@@ -510,7 +590,20 @@ impl Config {
     /// Parses and checks TOML text; `origin` names it in errors (the file name). Keys left out
     /// take their defaults.
     pub fn from_toml(text: &str, origin: &str) -> Result<Config, ConfigError> {
-        let c = Checker { text, origin };
+        Config::parse_text(text, origin, true)
+    }
+
+    /// [`Config::from_toml`], with `require_transport` false for tests of other sections.
+    fn parse_text(
+        text: &str,
+        origin: &str,
+        require_transport: bool,
+    ) -> Result<Config, ConfigError> {
+        let c = Checker {
+            text,
+            origin,
+            require_transport,
+        };
         let raw: RawConfig = toml::from_str(text).map_err(|e| c.syntax(e))?;
 
         let store = StoreConfig {
@@ -538,24 +631,65 @@ impl Config {
                     let addr: SocketAddr = s.parse().map_err(|_| {
                         format!("\"{s}\" is not an IP address and port, e.g. \"127.0.0.1:7878\"")
                     })?;
-                    if !addr.ip().is_loopback() && !allow_remote {
-                        return Err(format!(
-                            "{addr} is reachable from other machines and the API has no \
-                             authentication; listen on 127.0.0.1, or set api.allow_remote = true"
-                        ));
-                    }
-                    Ok(addr)
+                    check_listen(addr, allow_remote)
                 },
             )?,
             allow_remote,
+            token_file: c.path("api.token_file", &raw.api.token_file)?,
+            allowed_hosts: c.value(
+                "api.allowed_hosts",
+                &raw.api.allowed_hosts,
+                Vec::new(),
+                |hosts| {
+                    for h in &hosts {
+                        let ok = !h.is_empty()
+                            && h.len() <= 253
+                            && h.chars()
+                                .all(|c| c.is_ascii_alphanumeric() || "-._[]:".contains(c));
+                        if !ok {
+                            return Err(format!(
+                                "\"{h}\" is not a host name: letters, digits, '-', '.' (an IP \
+                             address in brackets for IPv6), without a port"
+                            ));
+                        }
+                    }
+                    Ok(hosts.into_iter().map(|h| h.to_ascii_lowercase()).collect())
+                },
+            )?,
+            max_connections: c.value(
+                "api.max_connections",
+                &raw.api.max_connections,
+                defaults::MAX_CONNECTIONS as u64,
+                |n| bounded_count(n, 1, 10_000),
+            )?,
+            max_event_subscribers: c.value(
+                "api.max_event_subscribers",
+                &raw.api.max_event_subscribers,
+                defaults::MAX_EVENT_SUBSCRIBERS as u64,
+                |n| bounded_count(n, 1, 1_000),
+            )?,
+            header_timeout: c.value(
+                "api.header_timeout_ms",
+                &raw.api.header_timeout_ms,
+                defaults::HEADER_TIMEOUT_MS,
+                |ms| api_timeout(ms),
+            )?,
+            idle_timeout: c.value(
+                "api.idle_timeout_ms",
+                &raw.api.idle_timeout_ms,
+                defaults::IDLE_TIMEOUT_MS,
+                |ms| api_timeout(ms),
+            )?,
         };
 
         let m = &raw.devices.ma_t12;
         let usb = c.value(
             "devices.ma_t12.transport",
             &m.transport,
-            "simulated".into(),
+            String::new(),
             |t| match t.as_str() {
+                "" if c.require_transport => Err(REQUIRED_TRANSPORT_MA_T12.into()),
+                "" => Ok(false),
                 "simulated" => Ok(false),
                 "usb" => Ok(true),
                 other => Err(format!(
@@ -592,8 +726,10 @@ impl Config {
         let serial = c.value(
             "devices.sra.transport",
             &s.transport,
-            "simulated".into(),
+            String::new(),
             |t| match t.as_str() {
+                "" if c.require_transport => Err(REQUIRED_TRANSPORT_SRA.into()),
+                "" => Ok(false),
                 "simulated" => Ok(false),
                 "serial" => Ok(true),
                 other => Err(format!(
@@ -731,21 +867,37 @@ impl Config {
 mod tests {
     use super::*;
 
+    /// Sections other than `[devices.*]` on their own: transports may be left out.
     fn parse(text: &str) -> Result<Config, ConfigError> {
-        Config::from_toml(text, "test.toml")
+        Config::parse_text(text, "test.toml", false)
     }
 
     #[test]
-    fn the_shipped_file_parses_to_the_defaults() {
+    fn the_shipped_file_names_real_instruments_and_otherwise_gives_the_defaults() {
         let shipped = Config::from_toml(SHIPPED, "config/brdfd.toml").unwrap();
-        assert_eq!(shipped, Config::default());
-        // The defaults run with no instrument and write a local SQLite file.
-        assert!(matches!(
+        // The shipped file is what the systemd unit installs: real instruments.
+        assert_eq!(
             shipped.devices.ma_t12.transport,
+            MaT12Transport::Usb { product_id: None }
+        );
+        assert_eq!(
+            shipped.devices.sra.transport,
+            SraTransport::Serial {
+                port: "/dev/ttyUSB0".into(),
+                baud: 9600
+            }
+        );
+        let mut expected = Config::default();
+        expected.devices.ma_t12.transport = shipped.devices.ma_t12.transport.clone();
+        expected.devices.sra.transport = shipped.devices.sra.transport.clone();
+        assert_eq!(shipped, expected);
+        // No file at all runs with no instrument (loudly) and writes a local SQLite file.
+        assert!(matches!(
+            Config::default().devices.ma_t12.transport,
             MaT12Transport::Simulated { session: None }
         ));
         assert!(matches!(
-            shipped.devices.sra.transport,
+            Config::default().devices.sra.transport,
             SraTransport::Simulated { session: None }
         ));
         assert!(shipped.store.path.is_relative());
@@ -758,10 +910,16 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 19] = [
+        const KEYS: [&str; 25] = [
             "path",
             "listen",
             "allow_remote",
+            "token_file",
+            "allowed_hosts",
+            "max_connections",
+            "max_event_subscribers",
+            "header_timeout_ms",
+            "idle_timeout_ms",
             "transport",
             "session",
             "product_id",
@@ -802,6 +960,77 @@ mod tests {
     fn no_file_and_an_empty_file_give_the_defaults() {
         assert_eq!(Config::load_or_default(None).unwrap(), Config::default());
         assert_eq!(parse("").unwrap(), Config::default());
+    }
+
+    #[test]
+    fn a_file_must_choose_its_instruments() {
+        let e = Config::from_toml("", "brdfd.toml").unwrap_err();
+        assert!(
+            e.to_string().starts_with(
+                "brdfd.toml: devices.ma_t12.transport: must be set: \"usb\" for the instrument"
+            ),
+            "{e}"
+        );
+        let e =
+            Config::from_toml("[devices.ma_t12]\ntransport = \"usb\"\n", "brdfd.toml").unwrap_err();
+        assert!(
+            e.to_string().contains("devices.sra.transport: must be set"),
+            "{e}"
+        );
+        let c = Config::from_toml(
+            "[devices.ma_t12]\ntransport = \"simulated\"\n[devices.sra]\ntransport = \"simulated\"\n",
+            "brdfd.toml",
+        )
+        .unwrap();
+        assert_eq!(c, Config::default());
+    }
+
+    #[test]
+    fn api_limits_and_hosts_are_checked() {
+        let c = parse(
+            "[api]\ntoken_file = \"/run/brdfd/token\"\nallowed_hosts = [\"Lab-PC.example\"]\n\
+             max_connections = 10\nmax_event_subscribers = 2\nheader_timeout_ms = 500\n\
+             idle_timeout_ms = 20000\n",
+        )
+        .unwrap();
+        assert_eq!(
+            c.api.token_path(Path::new("x/brdfd.db")),
+            PathBuf::from("/run/brdfd/token")
+        );
+        assert_eq!(c.api.allowed_hosts, ["lab-pc.example"]);
+        assert_eq!(
+            (c.api.max_connections, c.api.max_event_subscribers),
+            (10, 2)
+        );
+        assert_eq!(c.api.header_timeout, Duration::from_millis(500));
+        assert_eq!(c.api.idle_timeout, Duration::from_secs(20));
+        // The token file defaults to the store's directory.
+        let d = Config::default();
+        assert_eq!(
+            d.api.token_path(Path::new("/var/lib/brdfd/brdfd.db")),
+            PathBuf::from("/var/lib/brdfd/brdfd.token")
+        );
+        assert_eq!(
+            d.api.token_path(Path::new("brdfd.db")),
+            PathBuf::from("brdfd.token")
+        );
+        for bad in [
+            "allowed_hosts = [\"evil.example:80/x\"]",
+            "allowed_hosts = [\"\"]",
+            "max_connections = 0",
+            "max_event_subscribers = 100000",
+            "header_timeout_ms = 1",
+            "token_file = \"\"",
+        ] {
+            let e = parse(&format!("[api]\n{bad}\n")).unwrap_err();
+            assert!(e.to_string().starts_with("test.toml:2: api."), "{bad}: {e}");
+        }
+        assert!(
+            check_listen("0.0.0.0:1".parse().unwrap(), false)
+                .unwrap_err()
+                .contains("allow_remote")
+        );
+        assert!(check_listen("0.0.0.0:1".parse().unwrap(), true).is_ok());
     }
 
     #[test]
@@ -988,7 +1217,12 @@ mod tests {
     fn load_reads_a_file_and_names_it() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("brdfd.toml");
-        std::fs::write(&path, "[store]\npath = \"/var/lib/brdfd/brdfd.db\"\n").unwrap();
+        std::fs::write(
+            &path,
+            "[store]\npath = \"/var/lib/brdfd/brdfd.db\"\n[devices.ma_t12]\ntransport = \"usb\"\n\
+             [devices.sra]\ntransport = \"serial\"\n",
+        )
+        .unwrap();
         let c = Config::load(&path).unwrap();
         assert_eq!(c.store.path, PathBuf::from("/var/lib/brdfd/brdfd.db"));
         std::fs::write(&path, "[store]\npath = \"\"\n").unwrap();

@@ -12,7 +12,6 @@ mod common;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
-use brdfd::api::ApiServer;
 use brdfd::client::{Client, ClientError};
 use serde_json::{Value, json};
 
@@ -50,13 +49,17 @@ async fn the_api_serves_scans_refuses_a_second_scan_and_streams_events() {
     bounded(async {
         // Recorded timing (a measurement takes ~2.4 s): long enough to be refused during it.
         let d = start_builtin(mock_devices::ReplayOptions::lenient()).await;
-        let api = ApiServer::start(d.service.clone(), "127.0.0.1:0".parse().unwrap())
-            .await
-            .unwrap();
+        let (api, client, token_file) = start_api(&d.service, d.dir.path()).await;
         let addr = api.local_addr();
         assert!(addr.ip().is_loopback() && addr.port() != 0);
-        let client = Client::new(addr);
         let addr_arg = addr.to_string();
+        // Leaked so that the closure is Copy and each blocking call below can take it.
+        let token_arg: &'static str = Box::leak(token_file.display().to_string().into_boxed_str());
+        let brdfd = move |args: &[&str]| {
+            let mut all = args.to_vec();
+            all.extend(["--token-file", token_arg]);
+            run_brdfd(&all, None)
+        };
 
         let c = client.clone();
         let status = blocking(move || c.get("/status").unwrap()).await;

@@ -37,7 +37,8 @@ impl Drop for Daemon {
 fn write_config(dir: &Path) -> std::path::PathBuf {
     let config = dir.join("brdfd.toml");
     let text = format!(
-        "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\n\n[log]\nlevel = \"warn\"\n",
+        "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\n\n[log]\nlevel = \"warn\"\n\n\
+         [devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n",
         dir.join("brdfd.db").display()
     );
     std::fs::write(&config, text).unwrap();
@@ -70,7 +71,7 @@ fn spawn_daemon(config: &Path) -> Daemon {
         .unwrap_or_else(|| panic!("no address in {line:?}"));
     Daemon {
         child,
-        client: Client::new(addr),
+        client: client_of_serve(addr, config.parent().unwrap()),
     }
 }
 

@@ -2,10 +2,11 @@
 //!
 //! | method and path | does | answers |
 //! |---|---|---|
+//! | `GET /healthz` | liveness, for monitoring; needs no token | 200 `{"ok": true}` |
 //! | `GET /status` | the daemon's state | 200 [`crate::service::Status`] |
 //! | `POST /reference` | measure the white reference tile | 202 `{"reference": id}` |
 //! | `POST /scans` `{"sample": "…"}` | scan a sample | 202 `{"scan": id}` |
-//! | `GET /scans?state=&sample=&limit=` | list scans, newest first | 200 `[summary]` |
+//! | `GET /scans?state=&sample=&limit=&before=` | list scans, newest first (`limit` ≤ 500; `before=ID` pages on) | 200 `[summary]` |
 //! | `GET /scans/{id}` | a scan, its readings, reference and fits | 200 |
 //! | `GET /scans/{id}/export` | the scan as `brdfd.scan/1` | 200 |
 //! | `POST /scans/import` (a `brdfd.scan/1` body) | import a scan, fit it | 201 `{"scan", "fits"}` |
@@ -15,25 +16,40 @@
 //! | `POST /fits/{id}/cancel` | cancel a queued or running fit | 202 |
 //! | `GET /events` | server-sent events, one per [`crate::service::Event`] | `text/event-stream` |
 //!
+//! Every request but `GET /healthz` needs `Authorization: Bearer <token>`; Host, Origin and
+//! body type are checked before any route runs ([`access`]); connections, header reads, idle
+//! connections, bodies (1 MiB) and event streams are bounded ([`server`], [`MAX_BODY_BYTES`]).
+//!
 //! Every refusal is a JSON object `{"error": "…"}` whose message says what to do; the status
 //! code says which kind: 404 no such thing, 409 the instruments are busy or the state forbids
-//! it, 422 an invalid scan file, 400 a bad argument, 503 shutting down.
+//! it, 422 an invalid scan file, 400 a bad argument, 503 shutting down or at a limit; the
+//! guard adds 401 (no or wrong token), 403 (foreign origin), 413 (body over 1 MiB), 415 (body
+//! not JSON) and 421 (a host name the daemon does not answer to).
+
+pub mod access;
+pub mod server;
 
 use std::convert::Infallible;
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use axum::extract::{Path, Query, State};
+use std::sync::Arc;
+
+use axum::extract::{DefaultBodyLimit, Extension, Path, Query, State};
 use axum::http::StatusCode;
 use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::{Json, Router};
 use serde::{Deserialize, Serialize};
-use tokio::sync::oneshot;
+use tokio::sync::{Semaphore, watch};
+use tokio_stream::StreamExt;
 use tokio_stream::wrappers::BroadcastStream;
-use tokio_stream::{Stream, StreamExt};
 
+pub use access::{Access, Token, TokenError};
+pub use server::ConnectionLimits;
+
+use crate::config::ApiConfig;
 use crate::scan::Scan;
 use crate::service::{RefitRequest, Service, ServiceError};
 use crate::store::{FitDetail, FitRunId, ScanDetail, ScanFilter, ScanId, ScanState, StoreError};
@@ -117,7 +133,15 @@ pub struct ScanQuery {
     pub state: Option<String>,
     pub sample: Option<String>,
     pub limit: Option<u32>,
+    /// Only scans with a smaller id: the last id of one page gives the next.
+    pub before: Option<i64>,
 }
+
+/// The most scans one `GET /scans` returns; page on with `before`.
+pub const MAX_LIST_LIMIT: u32 = 500;
+
+/// The largest request body accepted (a scan file is about 30 KiB).
+pub const MAX_BODY_BYTES: usize = 1024 * 1024;
 
 /// `GET /scans/{id}`.
 #[derive(Debug, Serialize)]
@@ -132,9 +156,45 @@ pub struct ScanView {
     pub reference_stale: bool,
 }
 
-/// The API's routes on a service.
-pub fn router(service: Service) -> Router {
+/// Everything [`ApiServer`] needs besides the service: who may call, and the bounds.
+#[derive(Debug, Clone)]
+pub struct ApiOptions {
+    pub access: Access,
+    pub connections: ConnectionLimits,
+    /// `GET /events` streams at once.
+    pub max_event_subscribers: usize,
+}
+
+impl ApiOptions {
+    /// The defaults of `[api]` with this access.
+    pub fn new(access: Access) -> ApiOptions {
+        ApiOptions::from_config(&crate::config::Config::default().api, access)
+    }
+
+    /// `[api]`'s bounds with this access.
+    pub fn from_config(api: &ApiConfig, access: Access) -> ApiOptions {
+        ApiOptions {
+            access: access.with_allowed_hosts(api.allowed_hosts.iter().cloned()),
+            connections: ConnectionLimits {
+                max_connections: api.max_connections,
+                header_timeout: api.header_timeout,
+                idle_timeout: api.idle_timeout,
+            },
+            max_event_subscribers: api.max_event_subscribers,
+        }
+    }
+}
+
+/// Permits for `GET /events` streams; one is held for the life of each stream.
+#[derive(Debug, Clone)]
+struct EventPermits(Arc<Semaphore>);
+
+/// The API's routes on a service, with every request behind [`access::guard`]. This is the
+/// only router brdfd serves.
+pub fn router(service: Service, options: &ApiOptions) -> Router {
+    let access = Arc::new(options.access.clone());
     Router::new()
+        .route("/healthz", get(healthz))
         .route("/status", get(status))
         .route("/reference", post(reference))
         .route("/scans", post(request_scan).get(list_scans))
@@ -146,7 +206,21 @@ pub fn router(service: Service) -> Router {
         .route("/fits/{id}", get(show_fit))
         .route("/fits/{id}/cancel", post(cancel_fit))
         .route("/events", get(events))
+        .layer(Extension(EventPermits(Arc::new(Semaphore::new(
+            options.max_event_subscribers,
+        )))))
+        .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
+        .layer(axum::middleware::from_fn_with_state(access, access::guard))
         .with_state(service)
+}
+
+async fn healthz() -> impl IntoResponse {
+    Json(serde_json::json!({ "ok": true }))
+}
+
+/// A refusal that is not a [`ServiceError`]: a limit of the API itself.
+fn limit_refusal(status: StatusCode, message: String) -> Response {
+    (status, Json(ErrorBody { error: message })).into_response()
 }
 
 async fn status(State(s): State<Service>) -> ApiResult<impl IntoResponse> {
@@ -188,10 +262,18 @@ async fn list_scans(
                 "{e}: expected requested, measuring, complete, failed or aborted"
             ))
         })?;
+    let limit = q.limit.unwrap_or(ScanFilter::default().limit);
+    if limit == 0 || limit > MAX_LIST_LIMIT {
+        return Err(ApiError(ServiceError::BadRequest(format!(
+            "limit={limit} is out of range: 1 to {MAX_LIST_LIMIT}; page on with before=ID (the \
+             last id of the previous page)"
+        ))));
+    }
     let filter = ScanFilter {
         state,
         sample: q.sample,
-        limit: q.limit.unwrap_or(ScanFilter::default().limit),
+        limit,
+        before: q.before.map(ScanId),
     };
     Ok(Json(s.store().list_scans(&filter).await?))
 }
@@ -239,13 +321,34 @@ async fn export_scan(
     ))
 }
 
-async fn import_scan(State(s): State<Service>, body: String) -> ApiResult<impl IntoResponse> {
+async fn import_scan(
+    State(s): State<Service>,
+    body: Result<String, axum::extract::rejection::StringRejection>,
+) -> Result<Response, ApiError> {
+    let body = match body {
+        Ok(b) => b,
+        Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+            return Ok(limit_refusal(
+                StatusCode::PAYLOAD_TOO_LARGE,
+                format!(
+                    "the scan file is larger than {MAX_BODY_BYTES} bytes; a brdfd.scan/1 file is \
+                     about 30 KiB"
+                ),
+            ));
+        }
+        Err(e) => {
+            return Err(ApiError(ServiceError::BadRequest(format!(
+                "POST /scans/import: {e}"
+            ))));
+        }
+    };
     let file = Scan::from_json(body.as_bytes()).map_err(ServiceError::InvalidScan)?;
     let (scan, fits) = s.import_scan(&file).await?;
     Ok((
         StatusCode::CREATED,
         Json(serde_json::json!({ "scan": scan, "fits": fits })),
-    ))
+    )
+        .into_response())
 }
 
 async fn refit(
@@ -288,9 +391,19 @@ async fn cancel_fit(
     ))
 }
 
-async fn events(State(s): State<Service>) -> Sse<impl Stream<Item = Result<SseEvent, Infallible>>> {
-    let stream = BroadcastStream::new(s.subscribe()).map(|r| {
-        Ok(match r {
+async fn events(State(s): State<Service>, Extension(permits): Extension<EventPermits>) -> Response {
+    let Ok(permit) = permits.0.clone().try_acquire_owned() else {
+        return limit_refusal(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "too many event streams are open ([api] max_event_subscribers); close one (another \
+             `brdfd scan` or browser tab) or try again"
+                .into(),
+        );
+    };
+    let stream = BroadcastStream::new(s.subscribe()).map(move |r| {
+        // The permit lives as long as the stream: dropped with it when the client goes.
+        let _held = &permit;
+        Ok::<_, Infallible>(match r {
             Ok(ev) => SseEvent::default().event(ev.kind()).data(ev.to_json()),
             Err(tokio_stream::wrappers::errors::BroadcastStreamRecvError::Lagged(n)) => {
                 SseEvent::default()
@@ -299,15 +412,17 @@ async fn events(State(s): State<Service>) -> Sse<impl Stream<Item = Result<SseEv
             }
         })
     });
-    Sse::new(stream).keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
+    Sse::new(stream)
+        .keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
+        .into_response()
 }
 
 /// The HTTP server, running.
 #[derive(Debug)]
 pub struct ApiServer {
     addr: SocketAddr,
-    stop: Option<oneshot::Sender<()>>,
-    task: tokio::task::JoinHandle<std::io::Result<()>>,
+    stop: watch::Sender<bool>,
+    task: tokio::task::JoinHandle<()>,
 }
 
 /// Why the API could not start.
@@ -325,28 +440,23 @@ pub enum ApiStartError {
 }
 
 impl ApiServer {
-    /// Binds `addr` (port 0: any free port) and serves the API on it.
-    pub async fn start(service: Service, addr: SocketAddr) -> Result<ApiServer, ApiStartError> {
+    /// Binds `addr` (port 0: any free port) and serves the API on it. The caller has checked
+    /// the address ([`crate::config::check_listen`]).
+    pub async fn start(
+        service: Service,
+        addr: SocketAddr,
+        options: ApiOptions,
+    ) -> Result<ApiServer, ApiStartError> {
         let listener = tokio::net::TcpListener::bind(addr)
             .await
             .map_err(|source| ApiStartError::Bind { addr, source })?;
         let addr = listener
             .local_addr()
             .map_err(|source| ApiStartError::Bind { addr, source })?;
-        let (stop, stopped) = oneshot::channel::<()>();
-        let app = router(service);
-        let task = tokio::spawn(async move {
-            axum::serve(listener, app)
-                .with_graceful_shutdown(async {
-                    let _ = stopped.await;
-                })
-                .await
-        });
-        Ok(ApiServer {
-            addr,
-            stop: Some(stop),
-            task,
-        })
+        let (stop, stopped) = watch::channel(false);
+        let app = router(service, &options);
+        let task = tokio::spawn(server::serve(listener, app, options.connections, stopped));
+        Ok(ApiServer { addr, stop, task })
     }
 
     /// Where it listens.
@@ -357,11 +467,10 @@ impl ApiServer {
     /// Stops taking connections and waits up to `grace` for requests in flight; event
     /// streams, which never end by themselves, are cut after that.
     pub async fn stop(mut self, grace: Duration) {
-        if let Some(stop) = self.stop.take() {
-            let _ = stop.send(());
-        }
+        let _ = self.stop.send(true);
         if tokio::time::timeout(grace, &mut self.task).await.is_err() {
             self.task.abort();
+            let _ = (&mut self.task).await;
         }
     }
 }

@@ -15,21 +15,66 @@ use anyhow::{Context, bail};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::{Value, json};
 
-use crate::client::{Client, DEFAULT_ADDR};
+use crate::client::Client;
 use crate::cost::CostFunction;
 use crate::optimise::Method;
 
-/// Where the daemon is.
+/// Where the daemon is, and its API token.
 #[derive(Debug, Clone, clap::Args)]
 pub struct DaemonArgs {
-    /// The daemon's API address ([api] listen of its configuration).
-    #[arg(long, value_name = "IP:PORT", default_value = DEFAULT_ADDR)]
-    pub addr: SocketAddr,
+    /// The daemon's API address [default: [api] listen of the configuration, else
+    /// 127.0.0.1:7878].
+    #[arg(long, value_name = "IP:PORT")]
+    pub addr: Option<SocketAddr>,
+    /// The file holding the daemon's API token [default: [api] token_file of the
+    /// configuration, else brdfd.token beside its store (./brdfd.token without one)]. The
+    /// BRDFD_TOKEN environment variable, when set, is used instead of any file.
+    #[arg(long, value_name = "FILE")]
+    pub token_file: Option<PathBuf>,
+    /// The daemon's configuration file, for its address and token file.
+    #[arg(long, short, value_name = "FILE", env = "BRDFD_CONFIG")]
+    pub config: Option<PathBuf>,
 }
 
 impl DaemonArgs {
-    fn client(&self) -> Client {
-        Client::new(self.addr)
+    fn config(&self) -> anyhow::Result<crate::config::Config> {
+        Ok(crate::config::Config::load_or_default(
+            self.config.as_deref(),
+        )?)
+    }
+
+    /// The address asked for: `--addr`, else the configuration's.
+    pub fn addr(&self) -> anyhow::Result<SocketAddr> {
+        match self.addr {
+            Some(a) => Ok(a),
+            None => Ok(self.config()?.api.listen),
+        }
+    }
+
+    /// A client with the token from BRDFD_TOKEN, `--token-file` or the configuration. A token
+    /// that cannot be read is not an error yet: the daemon's 401, if it comes, says why.
+    pub fn client(&self) -> anyhow::Result<Client> {
+        let config = self.config()?;
+        let addr = self.addr.unwrap_or(config.api.listen);
+        let client = Client::new(addr);
+        if let Ok(text) = std::env::var("BRDFD_TOKEN") {
+            return match crate::api::Token::parse(&text) {
+                Some(t) => Ok(client.with_token(&t, "sent the token of BRDFD_TOKEN")),
+                None => bail!(
+                    "BRDFD_TOKEN does not hold an API token (64 hex digits); unset it to use the token file"
+                ),
+            };
+        }
+        let path = self
+            .token_file
+            .clone()
+            .unwrap_or_else(|| config.api.token_path(&config.store.path));
+        Ok(match crate::api::Token::read(&path) {
+            Ok(t) => client.with_token(&t, format!("sent the token of {}", path.display())),
+            Err(e) => client.without_token(format!(
+                "sent no token: {e}; pass --token-file, --config or BRDFD_TOKEN"
+            )),
+        })
     }
 }
 
@@ -354,7 +399,7 @@ fn follow(
 }
 
 pub fn reference(args: &ReferenceArgs) -> anyhow::Result<()> {
-    let client = args.daemon.client();
+    let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
     let v = client.post("/reference", None)?;
     let reference = id(&v, "reference");
@@ -366,7 +411,7 @@ pub fn reference(args: &ReferenceArgs) -> anyhow::Result<()> {
 }
 
 pub fn scan(args: &ScanArgs) -> anyhow::Result<()> {
-    let client = args.daemon.client();
+    let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
     let v = client.post("/scans", Some(&json!({ "sample": args.sample })))?;
     let scan = id(&v, "scan");
@@ -382,7 +427,7 @@ pub fn scan(args: &ScanArgs) -> anyhow::Result<()> {
 }
 
 pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
-    let client = args.daemon.client();
+    let client = args.daemon.client()?;
     let mut query = format!("/scans?limit={}", args.limit);
     if let Some(state) = &args.state {
         query.push_str(&format!("&state={}", urlencode(state)));
@@ -464,7 +509,7 @@ fn print_fits(detail: &Value) {
 }
 
 pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
-    let client = args.daemon.client();
+    let client = args.daemon.client()?;
     let v = client.get(&format!("/scans/{}", args.scan))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -516,7 +561,7 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
 }
 
 pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
-    let client = args.daemon.client();
+    let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
     let body = json!({
         "cost_functions": args.cost,
@@ -540,7 +585,7 @@ pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
 }
 
 pub fn abort(args: &DaemonArgs) -> anyhow::Result<()> {
-    let v = args.client().post("/abort", None)?;
+    let v = args.client()?.post("/abort", None)?;
     let op = &v["aborted"];
     match s(op, "kind") {
         "scan" => println!(
@@ -553,8 +598,8 @@ pub fn abort(args: &DaemonArgs) -> anyhow::Result<()> {
 }
 
 pub fn status(args: &DaemonArgs) -> anyhow::Result<()> {
-    let v = args.client().get("/status")?;
-    println!("brdfd {} on {}", s(&v, "version"), args.addr);
+    let v = args.client()?.get("/status")?;
+    println!("brdfd {} on {}", s(&v, "version"), args.addr()?);
     match v["busy"].as_object() {
         Some(b) => {
             let op = &b["operation"];
@@ -594,7 +639,7 @@ pub fn status(args: &DaemonArgs) -> anyhow::Result<()> {
 pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     let text = args
         .daemon
-        .client()
+        .client()?
         .get_text(&format!("/scans/{}/export", args.scan))?;
     match &args.output {
         Some(path) => {
@@ -613,7 +658,7 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     // Checked here too, so a bad file is named with its path before anything is sent.
     crate::scan::Scan::from_json(text.as_bytes())
         .with_context(|| format!("{}", args.file.display()))?;
-    let client = args.daemon.client();
+    let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
     let v = client.post_text("/scans/import", &text)?;
     let scan = id(&v, "scan");

@@ -89,7 +89,8 @@ pub fn load_study(path: &Path, selection: &Selection) -> anyhow::Result<Study> {
         .build()
         .context("starting the async runtime")?;
     rt.block_on(async {
-        let store = Store::open(path)
+        // Read-only: works beside a running daemon, never migrates or locks.
+        let store = Store::open_read_only(path)
             .await
             .with_context(|| format!("opening the store {}", path.display()))?;
         let study = from_store(&store, selection)

@@ -62,18 +62,47 @@ pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 }
 
 pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
+    let explicit_config = args.config.is_some();
     let mut config = Config::load_or_default(args.config.as_deref())?;
     if let Some(listen) = args.listen {
-        config.api.listen = listen;
+        // The same check as [api] listen: the flag must not be a way around it.
+        config.api.listen = crate::config::check_listen(listen, config.api.allow_remote)
+            .map_err(|m| anyhow::anyhow!("--listen {listen}: {m}"))?;
     }
     if let Some(db) = &args.db {
         config.store.path = db.clone();
     }
     init_logging(config.log.level, config.log.json);
-    runtime()?.block_on(serve(config))
+    runtime()?.block_on(serve(config, explicit_config))
 }
 
-async fn serve(config: Config) -> anyhow::Result<()> {
+/// The line printed at start when any instrument is simulated: replayed recordings must never
+/// be mistaken for measurements.
+pub fn simulated_banner(config: &Config) -> Option<String> {
+    use crate::config::{MaT12Transport, SraTransport};
+    let mut which = Vec::new();
+    if matches!(
+        config.devices.ma_t12.transport,
+        MaT12Transport::Simulated { .. }
+    ) {
+        which.push("MA-T12");
+    }
+    if matches!(config.devices.sra.transport, SraTransport::Simulated { .. }) {
+        which.push("SRA");
+    }
+    (!which.is_empty()).then(|| {
+        format!(
+            "*** SIMULATED INSTRUMENTS ({}): readings are replayed recordings, not measurements; \
+             every scan is stored as simulated. Set [devices.*] transport in the configuration \
+             for real instruments. ***",
+            which.join(" and ")
+        )
+    })
+}
+
+async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
+    let token_path = config.api.token_path(&config.store.path);
+    let (token, created) = crate::api::Token::load_or_create(&token_path)?;
     let store = Store::open(&config.store.path).await?;
     let devices = Devices::from_config(&config.devices, &mock_devices::ReplayOptions::lenient())?;
     let service = Service::start(
@@ -83,19 +112,47 @@ async fn serve(config: Config) -> anyhow::Result<()> {
         ServiceOptions::default(),
     )
     .await?;
-    let api = ApiServer::start(service.clone(), config.api.listen).await?;
+    let access = crate::api::Access::new(token).with_token_file(&token_path);
+    let options = crate::api::ApiOptions::from_config(&config.api, access);
+    let api = ApiServer::start(service.clone(), config.api.listen, options).await?;
+    service
+        .store()
+        .describe_owner(&format!("brdfd serve on http://{}", api.local_addr()));
     // The one line on stdout: scripts (and the end-to-end tests) read the address from it.
     println!(
-        "brdfd {} listening on http://{} (store {})",
+        "brdfd {} listening on http://{} (store {}, token {})",
         env!("CARGO_PKG_VERSION"),
         api.local_addr(),
-        config.store.path.display()
+        config.store.path.display(),
+        token_path.display()
     );
+    if let Some(banner) = simulated_banner(&config) {
+        eprintln!("{banner}");
+        tracing::warn!(
+            config = if explicit_config {
+                "file"
+            } else {
+                "built-in defaults"
+            },
+            "{banner}"
+        );
+    }
+    if !api.local_addr().ip().is_loopback() {
+        let warning = "the API listens beyond loopback over plain HTTP: put a TLS reverse proxy in \
+                       front (README: \"Remote access\") so the API token never crosses the \
+                       network in clear text";
+        eprintln!("WARNING: {warning}");
+        tracing::warn!("{warning}");
+    }
+    if created {
+        tracing::info!(file = %token_path.display(), "created the API token file");
+    }
     tracing::info!(addr = %api.local_addr(), store = %config.store.path.display(), "serving");
     wait_for_signal().await?;
     tracing::info!("shutting down");
-    let clean = service.shutdown().await;
+    // The API first, so that no request reaches a service that is closing its store.
     api.stop(Duration::from_secs(1)).await;
+    let clean = service.shutdown().await;
     if !clean {
         anyhow::bail!("some tasks did not stop within the grace period");
     }

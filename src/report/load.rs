@@ -196,6 +196,7 @@ pub async fn from_store(store: &Store, selection: &Selection) -> Result<Study, L
                     state: Some(ScanState::Complete),
                     sample: None,
                     limit: u32::MAX,
+                    before: None,
                 })
                 .await?;
             list.sort_by_key(|s| s.id.0);

@@ -578,7 +578,17 @@ impl Service {
         scan: ScanId,
         request: &RefitRequest,
     ) -> Result<Vec<FitRunId>, ServiceError> {
-        self.process_and_queue(scan, request).await
+        // A request naming a cost function many times queues it once: the list is a set.
+        let mut request = request.clone();
+        let mut seen = Vec::with_capacity(request.cost_functions.len().min(8));
+        request.cost_functions.retain(|cf| {
+            let first = !seen.contains(cf);
+            if first {
+                seen.push(*cf);
+            }
+            first
+        });
+        self.process_and_queue(scan, &request).await
     }
 
     /// Imports a `brdfd.scan/1` scan: its reference readings become a reference set (named

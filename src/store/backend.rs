@@ -74,6 +74,15 @@ pub(crate) async fn open_file(path: &Path) -> Result<Pools, sqlx::Error> {
     Ok(Pools { writer, reader })
 }
 
+/// Opens an existing database file for reading only: no file is created, nothing is written
+/// (the write-ahead log of a running daemon is read through its shared-memory index).
+pub(crate) async fn open_file_read_only(path: &Path) -> Result<Pool, sqlx::Error> {
+    SqlitePoolOptions::new()
+        .max_connections(READERS)
+        .connect_with(file_options(path).read_only(true).create_if_missing(false))
+        .await
+}
+
 /// Opens a private in-memory database (tests, dry runs). One connection serves both roles: a
 /// second connection would see a different, empty database.
 pub(crate) async fn open_memory() -> Result<Pools, sqlx::Error> {

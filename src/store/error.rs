@@ -30,6 +30,17 @@ pub enum StoreError {
     )]
     Migrate(#[from] sqlx::migrate::MigrateError),
 
+    /// Another process owns the store (see `lock.rs`).
+    #[error(transparent)]
+    Locked(#[from] super::lock::LockError),
+
+    /// A read-only open of a store whose schema is not this brdfd's.
+    #[error(
+        "the store at {path} {detail}; open it once with this version's `brdfd serve` (which \
+         migrates it), or use the brdfd that wrote it"
+    )]
+    SchemaMismatch { path: PathBuf, detail: String },
+
     /// No row with that id.
     #[error("{what} {id} does not exist in the store")]
     NotFound { what: &'static str, id: i64 },

@@ -26,17 +26,20 @@ mod codec;
 mod error;
 mod fits;
 pub mod ids;
+pub mod lock;
 pub mod records;
 mod references;
 mod scans;
 
 use std::path::Path;
+use std::sync::{Arc, Mutex};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use sqlx::Row;
 
 pub use error::StoreError;
 pub use ids::{FitRunId, InstrumentId, ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
+pub use lock::{LockError, StoreLock};
 pub use records::{
     DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, Instrument, NewFit,
     NewReading, Processed, Reading, ReadingValues, ReferenceDetail, ReferenceStatus,
@@ -56,13 +59,26 @@ pub struct Store {
     writer: Pool,
     /// Connections for reads; the same pool as `writer` for an in-memory store.
     reader: Pool,
+    /// The store's owner lock, held until [`Store::close`] (none for in-memory and read-only
+    /// stores). A std mutex: it is only touched at open, close and [`Store::describe_owner`].
+    lock: Arc<Mutex<Option<StoreLock>>>,
 }
 
 impl Store {
-    /// Opens the database file at `path`, creating it if missing, and applies any migration it
-    /// lacks. Migrations already applied are left alone (sqlx checks their checksums).
+    /// Opens the database file at `path` as its one owner: takes the store's lock (refused at
+    /// once if another process or handle holds it, naming the holder), creates the file if
+    /// missing, and applies any migration it lacks. Migrations already applied are left alone
+    /// (sqlx checks their checksums).
     pub async fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
         let path = path.as_ref();
+        let lock = StoreLock::acquire(path, "brdfd").map_err(|e| match e {
+            // A directory that is missing or not writable: the same advice as for the file.
+            LockError::Io { source, .. } => StoreError::Open {
+                path: path.to_path_buf(),
+                source: sqlx::Error::Io(source),
+            },
+            held => StoreError::Locked(held),
+        })?;
         let pools = backend::open_file(path)
             .await
             .map_err(|source| StoreError::Open {
@@ -73,7 +89,63 @@ impl Store {
         Ok(Store {
             writer: pools.writer,
             reader: pools.reader,
+            lock: Arc::new(Mutex::new(Some(lock))),
         })
+    }
+
+    /// Opens an existing database file read-only, for reports and exports while a daemon runs:
+    /// no lock, no migration, no write possible. Refused when the file's schema is not exactly
+    /// this brdfd's (older: it must be migrated by its owner first; newer: this brdfd cannot
+    /// read it).
+    pub async fn open_read_only(path: impl AsRef<Path>) -> Result<Store, StoreError> {
+        let path = path.as_ref();
+        let pool = backend::open_file_read_only(path)
+            .await
+            .map_err(|source| StoreError::Open {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        let applied: Vec<i64> = sqlx::query_scalar(
+            "SELECT version FROM _sqlx_migrations WHERE success ORDER BY version",
+        )
+        .fetch_all(&pool)
+        .await
+        .map_err(|e| StoreError::SchemaMismatch {
+            path: path.to_path_buf(),
+            detail: format!("has no brdfd schema ({e})"),
+        })?;
+        let ours: Vec<i64> = MIGRATOR.iter().map(|m| m.version).collect();
+        if applied != ours {
+            let newer = applied.iter().any(|v| !ours.contains(v));
+            let detail = if newer {
+                format!(
+                    "was written by a newer brdfd (schema steps {applied:?}, this one knows {ours:?})"
+                )
+            } else {
+                format!(
+                    "has an older schema (steps {applied:?} of {ours:?}) and a read-only open cannot migrate it"
+                )
+            };
+            return Err(StoreError::SchemaMismatch {
+                path: path.to_path_buf(),
+                detail,
+            });
+        }
+        Ok(Store {
+            writer: pool.clone(),
+            reader: pool,
+            lock: Arc::new(Mutex::new(None)),
+        })
+    }
+
+    /// Says in the lock file what owns the store (e.g. "brdfd serve on http://…"), for the
+    /// message a second owner gets.
+    pub fn describe_owner(&self, what: &str) {
+        if let Some(lock) = self.lock.lock().unwrap_or_else(|p| p.into_inner()).as_mut()
+            && let Err(e) = lock.describe(what)
+        {
+            tracing::warn!(error = %e, file = %lock.path().display(), "cannot write the store's lock file");
+        }
     }
 
     /// Opens a fresh, private in-memory store with the full schema (tests, dry runs).
@@ -88,6 +160,7 @@ impl Store {
         Ok(Store {
             writer: pools.writer,
             reader: pools.reader,
+            lock: Arc::new(Mutex::new(None)),
         })
     }
 
@@ -107,6 +180,8 @@ impl Store {
     pub async fn close(&self) {
         self.reader.close().await;
         self.writer.close().await;
+        // Only now may another owner open it.
+        self.lock.lock().unwrap_or_else(|p| p.into_inner()).take();
     }
 }
 

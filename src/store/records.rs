@@ -241,6 +241,8 @@ pub struct ScanFilter {
     pub sample: Option<String>,
     /// At most this many.
     pub limit: u32,
+    /// Only scans with a smaller id (the next page after the scan with this id).
+    pub before: Option<ScanId>,
 }
 
 impl Default for ScanFilter {
@@ -249,6 +251,7 @@ impl Default for ScanFilter {
             state: None,
             sample: None,
             limit: 100,
+            before: None,
         }
     }
 }

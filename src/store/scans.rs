@@ -421,6 +421,9 @@ impl Store {
         if let Some(sample) = &filter.sample {
             q.push(" AND sa.name = ").push_bind(sample.clone());
         }
+        if let Some(before) = filter.before {
+            q.push(" AND s.id < ").push_bind(before.0);
+        }
         q.push(" ORDER BY s.id DESC LIMIT ")
             .push_bind(i64::from(filter.limit));
         let rows: Vec<ScanRow> = q.build_query_as().fetch_all(&self.reader).await?;

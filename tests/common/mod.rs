@@ -178,13 +178,51 @@ pub fn bit_eq(a: &[f64], b: &[f64]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
+/// The API on 127.0.0.1:0 in front of `service`, with a fresh token written to
+/// `dir/brdfd.token` (mode 0600, as the daemon writes it), and a client that sends it.
+pub async fn start_api(
+    service: &Service,
+    dir: &std::path::Path,
+) -> (brdfd::api::ApiServer, brdfd::client::Client, PathBuf) {
+    use brdfd::api::{Access, ApiOptions, ApiServer, Token};
+    let token_file = dir.join("brdfd.token");
+    let (token, _) = Token::load_or_create(&token_file).expect("token file");
+    let options = ApiOptions::new(Access::new(token.clone()).with_token_file(&token_file));
+    let api = ApiServer::start(service.clone(), "127.0.0.1:0".parse().unwrap(), options)
+        .await
+        .expect("the API starts");
+    let client = brdfd::client::Client::new(api.local_addr()).with_token(&token, "test token");
+    (api, client, token_file)
+}
+
+/// A client of a `brdfd serve` child whose store is in `dir` (token file `dir/brdfd.token`).
+pub fn client_of_serve(addr: std::net::SocketAddr, dir: &std::path::Path) -> brdfd::client::Client {
+    let token =
+        brdfd::api::Token::read(&dir.join("brdfd.token")).expect("the daemon wrote its token");
+    brdfd::client::Client::new(addr).with_token(&token, "test token")
+}
+
 /// Runs the `brdfd` binary with `args` (in `cwd`, if given), killed and failed if it takes
-/// longer than [`TEST_TIMEOUT`].
+/// longer than [`TEST_TIMEOUT`]. The environment's BRDFD_TOKEN and BRDFD_CONFIG are removed,
+/// so a developer's settings cannot change a test.
 pub fn run_brdfd(args: &[&str], cwd: Option<&std::path::Path>) -> std::process::Output {
+    run_brdfd_env(args, cwd, &[])
+}
+
+/// [`run_brdfd`] with extra environment variables.
+pub fn run_brdfd_env(
+    args: &[&str],
+    cwd: Option<&std::path::Path>,
+    env: &[(&str, &str)],
+) -> std::process::Output {
     use std::io::Read;
     use std::process::{Command, Stdio};
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_brdfd"));
     cmd.args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
+    cmd.env_remove("BRDFD_TOKEN").env_remove("BRDFD_CONFIG");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
     if let Some(dir) = cwd {
         cmd.current_dir(dir);
     }

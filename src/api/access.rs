@@ -1,0 +1,551 @@
+//! Who may use the API: the bearer token, the Host and Origin checks and the JSON-only rule for
+//! POST bodies, applied to every request by one middleware ([`guard`]) in front of every route.
+//!
+//! The threats, and which check stops each:
+//! - **A web page the operator opens** (cross-site request forgery): it cannot send the token
+//!   (browsers add `Authorization` only after a CORS preflight, which brdfd never grants), a
+//!   foreign `Origin` or `Sec-Fetch-Site: cross-site` is refused with 403, and a POST whose body
+//!   is not `application/json` (all a plain HTML form can send) is refused with 415.
+//! - **DNS rebinding** (a page whose host name is re-pointed at 127.0.0.1): the browser sends
+//!   the page's own name in `Host`; only loopback names and addresses and `[api] allowed_hosts`
+//!   are answered, anything else gets 421.
+//! - **Another local user or process**: it needs the token, which lives in a file readable only
+//!   by the daemon's user (mode 0600; 0640 with the service's group under systemd).
+//!
+//! `GET /healthz` needs no token (monitoring probes); the Host check still applies to it.
+//! The token is 256 random bits as 64 hex digits, created at the first start and compared in
+//! constant time; it is never logged.
+
+use std::fs::OpenOptions;
+use std::io::Write;
+use std::net::IpAddr;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use axum::extract::{Request, State};
+use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use rand::RngCore;
+
+use super::ErrorBody;
+
+/// The API token: 64 hex digits (256 bits).
+#[derive(Clone, PartialEq, Eq)]
+pub struct Token(String);
+
+impl std::fmt::Debug for Token {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // Never in logs or panic messages.
+        f.write_str("Token(…)")
+    }
+}
+
+/// Why the token could not be loaded or created.
+#[derive(Debug, thiserror::Error)]
+pub enum TokenError {
+    #[error(
+        "cannot read the API token file {path}: {source}; run brdfd as the user that owns it, or set [api] token_file"
+    )]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(
+        "cannot create the API token file {path}: {source}; check that its directory exists and is writable by brdfd's user, or set [api] token_file"
+    )]
+    Create {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(
+        "the API token file {path} holds no token (expected at least 32 hex digits on one line); delete it and restart brdfd serve to make a new one"
+    )]
+    Malformed { path: PathBuf },
+    #[error(
+        "the API token file {path} can be read by other users (mode {mode:o}); run `chmod 600 {path}` (or 640 with brdfd's group)"
+    )]
+    TooOpen { path: PathBuf, mode: u32 },
+}
+
+impl Token {
+    /// A new random token.
+    pub fn generate() -> Token {
+        let mut bytes = [0u8; 32];
+        rand::rng().fill_bytes(&mut bytes);
+        Token(bytes.iter().map(|b| format!("{b:02x}")).collect())
+    }
+
+    /// A token from text (a file's content or `BRDFD_TOKEN`): at least 32 hex digits.
+    pub fn parse(text: &str) -> Option<Token> {
+        let t = text.trim();
+        (t.len() >= 32 && t.len() <= 256 && t.bytes().all(|b| b.is_ascii_hexdigit()))
+            .then(|| Token(t.to_string()))
+    }
+
+    /// The token as sent in `Authorization: Bearer …`.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// Reads the token file, checking that other users cannot read it.
+    pub fn read(path: &Path) -> Result<Token, TokenError> {
+        let text = std::fs::read_to_string(path).map_err(|source| TokenError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(path)
+                .map_err(|source| TokenError::Read {
+                    path: path.to_path_buf(),
+                    source,
+                })?
+                .permissions()
+                .mode()
+                & 0o777;
+            if mode & 0o007 != 0 {
+                return Err(TokenError::TooOpen {
+                    path: path.to_path_buf(),
+                    mode,
+                });
+            }
+        }
+        Token::parse(&text).ok_or_else(|| TokenError::Malformed {
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// The daemon's token: read from `path`, or created there on first start (mode 0600, or
+    /// 0640 under systemd, where the unit's group lets operators in that group read it).
+    /// Returns the token and whether it was created now.
+    pub fn load_or_create(path: &Path) -> Result<(Token, bool), TokenError> {
+        match Token::read(path) {
+            Ok(t) => return Ok((t, false)),
+            Err(TokenError::Read { source, .. })
+                if source.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
+        }
+        let token = Token::generate();
+        let mut options = OpenOptions::new();
+        options.write(true).create_new(true);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::OpenOptionsExt;
+            // systemd sets INVOCATION_ID for every unit it starts.
+            let mode = if std::env::var_os("INVOCATION_ID").is_some() {
+                0o640
+            } else {
+                0o600
+            };
+            options.mode(mode);
+        }
+        let create = |source| TokenError::Create {
+            path: path.to_path_buf(),
+            source,
+        };
+        let mut file = options.open(path).map_err(create)?;
+        writeln!(file, "{}", token.as_str()).map_err(create)?;
+        file.sync_all().map_err(create)?;
+        Ok((token, true))
+    }
+
+    /// Constant-time comparison with what a request sent.
+    fn matches(&self, sent: &[u8]) -> bool {
+        let mine = self.0.as_bytes();
+        if mine.len() != sent.len() {
+            return false;
+        }
+        mine.iter().zip(sent).fold(0u8, |acc, (a, b)| acc | (a ^ b)) == 0
+    }
+}
+
+/// What the guard lets through.
+#[derive(Debug, Clone)]
+pub struct Access {
+    token: Token,
+    /// Where the token is, for the 401 message.
+    token_file: Option<PathBuf>,
+    /// Lower-case host names (no port) answered besides the loopback ones.
+    allowed_hosts: Vec<String>,
+}
+
+impl Access {
+    pub fn new(token: Token) -> Access {
+        Access {
+            token,
+            token_file: None,
+            allowed_hosts: Vec::new(),
+        }
+    }
+
+    /// Names the token file in the 401 message.
+    pub fn with_token_file(mut self, path: impl Into<PathBuf>) -> Access {
+        self.token_file = Some(path.into());
+        self
+    }
+
+    /// Host names answered besides loopback (`[api] allowed_hosts`).
+    pub fn with_allowed_hosts(mut self, hosts: impl IntoIterator<Item = String>) -> Access {
+        self.allowed_hosts = hosts.into_iter().map(|h| h.to_ascii_lowercase()).collect();
+        self
+    }
+
+    pub fn token(&self) -> &Token {
+        &self.token
+    }
+
+    /// Whether `host` (a Host header's host part, or an Origin's) is one the API answers to.
+    fn host_allowed(&self, host: &str) -> bool {
+        let host = host.to_ascii_lowercase();
+        if host == "localhost" || host.ends_with(".localhost") {
+            return true;
+        }
+        let bare = host.trim_start_matches('[').trim_end_matches(']');
+        if let Ok(ip) = bare.parse::<IpAddr>()
+            && ip.is_loopback()
+        {
+            return true;
+        }
+        self.allowed_hosts.iter().any(|h| *h == host)
+    }
+}
+
+/// Splits `host[:port]` (with `[v6]` brackets) into the host and the port, if any.
+fn split_host_port(authority: &str) -> (&str, Option<&str>) {
+    if authority.starts_with('[') {
+        match authority.find(']') {
+            Some(end) => {
+                let rest = &authority[end + 1..];
+                (&authority[..=end], rest.strip_prefix(':'))
+            }
+            None => (authority, None),
+        }
+    } else {
+        match authority.rsplit_once(':') {
+            Some((h, p)) if !h.contains(':') => (h, Some(p)),
+            _ => (authority, None),
+        }
+    }
+}
+
+fn refuse(status: StatusCode, message: String) -> Response {
+    let mut r = (status, axum::Json(ErrorBody { error: message })).into_response();
+    if status == StatusCode::UNAUTHORIZED {
+        r.headers_mut()
+            .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+    }
+    r
+}
+
+fn header_str<'h>(headers: &'h HeaderMap, name: header::HeaderName) -> Option<&'h str> {
+    headers.get(name).and_then(|v| v.to_str().ok())
+}
+
+/// The checks, in order: Host (421), Origin and fetch metadata (403), token (401), POST body
+/// type (415). Each refusal says what to do.
+pub async fn guard(State(access): State<Arc<Access>>, request: Request, next: Next) -> Response {
+    if let Err(response) = check(
+        &access,
+        request.method(),
+        request.uri().path(),
+        request.headers(),
+    ) {
+        return response;
+    }
+    next.run(request).await
+}
+
+fn check(
+    access: &Access,
+    method: &Method,
+    path: &str,
+    headers: &HeaderMap,
+) -> Result<(), Response> {
+    let Some(host) = header_str(headers, header::HOST) else {
+        return Err(refuse(
+            StatusCode::BAD_REQUEST,
+            "the request has no Host header (HTTP/1.1 requires one)".into(),
+        ));
+    };
+    let (host_name, _) = split_host_port(host);
+    if !access.host_allowed(host_name) {
+        return Err(refuse(
+            StatusCode::MISDIRECTED_REQUEST,
+            format!(
+                "this brdfd daemon does not answer to the host name \"{}\": use 127.0.0.1 or \
+                 localhost, or add the name to [api] allowed_hosts",
+                host_name.escape_debug()
+            ),
+        ));
+    }
+    if let Some(origin) = headers.get(header::ORIGIN) {
+        let allowed = origin.to_str().ok().is_some_and(|o| {
+            let rest = o
+                .strip_prefix("http://")
+                .or_else(|| o.strip_prefix("https://"));
+            // Same origin only: the origin's host and port must be those the request was sent
+            // to (the daemon's own page), and the host one the API answers to.
+            rest.is_some_and(|authority| {
+                authority.eq_ignore_ascii_case(host)
+                    && access.host_allowed(split_host_port(authority).0)
+            })
+        });
+        if !allowed {
+            return Err(refuse(
+                StatusCode::FORBIDDEN,
+                format!(
+                    "requests from the web page at {:?} are not accepted: the brdfd API answers \
+                     only its own page and the operator commands",
+                    origin
+                ),
+            ));
+        }
+    }
+    if header_str(headers, header::HeaderName::from_static("sec-fetch-site"))
+        .is_some_and(|s| s.eq_ignore_ascii_case("cross-site"))
+    {
+        return Err(refuse(
+            StatusCode::FORBIDDEN,
+            "cross-site requests are not accepted".into(),
+        ));
+    }
+    let open = method == Method::GET && path == "/healthz";
+    if !open {
+        let sent = header_str(headers, header::AUTHORIZATION)
+            .and_then(|v| v.strip_prefix("Bearer "))
+            .map(str::trim);
+        if !sent.is_some_and(|t| access.token.matches(t.as_bytes())) {
+            let where_ = access
+                .token_file
+                .as_ref()
+                .map(|p| format!(" (the token is in {})", p.display()))
+                .unwrap_or_default();
+            let what = if sent.is_some() {
+                "the API token sent is not this daemon's"
+            } else {
+                "this request needs the API token"
+            };
+            return Err(refuse(
+                StatusCode::UNAUTHORIZED,
+                format!(
+                    "{what}: send `Authorization: Bearer <token>`{where_}; the operator \
+                     commands read it from --token-file, BRDFD_TOKEN or the configuration"
+                ),
+            ));
+        }
+    }
+    if method == Method::POST {
+        let json = header_str(headers, header::CONTENT_TYPE).is_some_and(|ct| {
+            ct.split(';')
+                .next()
+                .is_some_and(|m| m.trim().eq_ignore_ascii_case("application/json"))
+        });
+        if !json {
+            return Err(refuse(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                "POST bodies must be JSON: send `Content-Type: application/json` (an empty body \
+                 is fine where none is needed)"
+                    .into(),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// An empty body with the guard's answer, for tests of [`check`] without a server.
+#[cfg(test)]
+pub(crate) fn check_for_test(
+    access: &Access,
+    method: &Method,
+    path: &str,
+    headers: &HeaderMap,
+) -> StatusCode {
+    match check(access, method, path, headers) {
+        Ok(()) => StatusCode::OK,
+        Err(r) => r.status(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn headers(pairs: &[(&str, &str)]) -> HeaderMap {
+        let mut h = HeaderMap::new();
+        for (k, v) in pairs {
+            h.insert(
+                header::HeaderName::from_bytes(k.as_bytes()).unwrap(),
+                HeaderValue::from_str(v).unwrap(),
+            );
+        }
+        h
+    }
+
+    fn access() -> (Access, String) {
+        let t = Token::generate();
+        let s = t.as_str().to_string();
+        (
+            Access::new(t).with_allowed_hosts(["lab-pc.example".to_string()]),
+            s,
+        )
+    }
+
+    #[test]
+    fn a_token_is_256_random_bits_in_hex() {
+        let a = Token::generate();
+        let b = Token::generate();
+        assert_eq!(a.as_str().len(), 64);
+        assert!(a.as_str().bytes().all(|c| c.is_ascii_hexdigit()));
+        assert_ne!(a, b);
+        assert_eq!(format!("{a:?}"), "Token(…)");
+        assert!(Token::parse("abc").is_none());
+        assert!(Token::parse(&"g".repeat(64)).is_none());
+        assert_eq!(Token::parse(&format!("{}\n", a.as_str())), Some(a));
+    }
+
+    #[test]
+    fn the_token_file_is_created_private_and_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("brdfd.token");
+        let (t, created) = Token::load_or_create(&path).unwrap();
+        assert!(created);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode & 0o077 & !0o040, 0, "mode {mode:o}");
+        }
+        let (again, created) = Token::load_or_create(&path).unwrap();
+        assert!(!created);
+        assert_eq!(t, again);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
+            let e = Token::load_or_create(&path).unwrap_err();
+            assert!(e.to_string().contains("chmod 600"), "{e}");
+        }
+        std::fs::write(dir.path().join("bad"), "not a token").unwrap();
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(
+                dir.path().join("bad"),
+                std::fs::Permissions::from_mode(0o600),
+            )
+            .unwrap();
+        }
+        let e = Token::read(&dir.path().join("bad")).unwrap_err();
+        assert!(e.to_string().contains("delete it"), "{e}");
+    }
+
+    #[test]
+    fn every_check_refuses_with_its_status() {
+        let (a, token) = access();
+        let bearer = format!("Bearer {token}");
+        let ok = [
+            ("host", "127.0.0.1:7878"),
+            ("authorization", bearer.as_str()),
+        ];
+        let get =
+            |h: &[(&str, &str)], path: &str| check_for_test(&a, &Method::GET, path, &headers(h));
+        let post =
+            |h: &[(&str, &str)]| check_for_test(&a, &Method::POST, "/reference", &headers(h));
+        assert_eq!(get(&ok, "/scans"), StatusCode::OK);
+        for host in [
+            "localhost:1",
+            "[::1]:7878",
+            "127.0.0.2",
+            "lab-pc.example:80",
+            "LOCALHOST",
+        ] {
+            assert_eq!(
+                get(&[("host", host), ok[1]], "/scans"),
+                StatusCode::OK,
+                "{host}"
+            );
+        }
+        // Host: DNS rebinding.
+        for host in [
+            "attacker.example",
+            "attacker.example:7878",
+            "127.0.0.1.nip.io",
+            "10.0.0.1",
+        ] {
+            assert_eq!(
+                get(&[("host", host), ok[1]], "/scans"),
+                StatusCode::MISDIRECTED_REQUEST,
+                "{host}"
+            );
+        }
+        assert_eq!(get(&[ok[1]], "/scans"), StatusCode::BAD_REQUEST);
+        // Token.
+        assert_eq!(get(&[ok[0]], "/scans"), StatusCode::UNAUTHORIZED);
+        assert_eq!(
+            get(&[ok[0], ("authorization", "Bearer 00")], "/scans"),
+            StatusCode::UNAUTHORIZED
+        );
+        let mut wrong = token.clone().into_bytes();
+        wrong[63] = if wrong[63] == b'0' { b'1' } else { b'0' };
+        let wrong = format!("Bearer {}", String::from_utf8(wrong).unwrap());
+        assert_eq!(
+            get(&[ok[0], ("authorization", &wrong)], "/scans"),
+            StatusCode::UNAUTHORIZED
+        );
+        assert_eq!(get(&[ok[0]], "/healthz"), StatusCode::OK);
+        assert_eq!(
+            get(&[("host", "evil.example")], "/healthz"),
+            StatusCode::MISDIRECTED_REQUEST
+        );
+        // Origin and fetch metadata.
+        let same = [ok[0], ok[1], ("origin", "http://127.0.0.1:7878")];
+        assert_eq!(get(&same, "/scans"), StatusCode::OK);
+        for origin in [
+            "https://evil.example",
+            "null",
+            "http://127.0.0.1:9999",
+            "http://localhost:7878",
+        ] {
+            assert_eq!(
+                get(&[ok[0], ok[1], ("origin", origin)], "/scans"),
+                StatusCode::FORBIDDEN,
+                "{origin}"
+            );
+        }
+        assert_eq!(
+            get(&[ok[0], ok[1], ("sec-fetch-site", "cross-site")], "/scans"),
+            StatusCode::FORBIDDEN
+        );
+        // POST bodies.
+        assert_eq!(post(&ok), StatusCode::UNSUPPORTED_MEDIA_TYPE);
+        assert_eq!(
+            post(&[ok[0], ok[1], ("content-type", "text/plain")]),
+            StatusCode::UNSUPPORTED_MEDIA_TYPE
+        );
+        assert_eq!(
+            post(&[
+                ok[0],
+                ok[1],
+                ("content-type", "application/x-www-form-urlencoded")
+            ]),
+            StatusCode::UNSUPPORTED_MEDIA_TYPE
+        );
+        assert_eq!(
+            post(&[
+                ok[0],
+                ok[1],
+                ("content-type", "application/json; charset=utf-8")
+            ]),
+            StatusCode::OK
+        );
+        // The token is checked before the body type: no hint to a caller without it.
+        assert_eq!(
+            post(&[ok[0], ("content-type", "text/plain")]),
+            StatusCode::UNAUTHORIZED
+        );
+    }
+}
