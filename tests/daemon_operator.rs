@@ -91,7 +91,7 @@ fn probed_fit_fn() -> (FitFn, FitProbe, mpsc::Receiver<i64>) {
                 fit: job.fit,
                 scan: job.scan,
                 sample: job.sample.clone(),
-                measured: job.measured.clone(),
+                measured: job.measured,
                 request: job.request.clone(),
             };
             small.request.settings.paper = GaSettings {
