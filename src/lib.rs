@@ -49,3 +49,5 @@ pub mod spectral;
 pub mod stats;
 pub mod store;
 pub mod synth;
+#[cfg(test)]
+pub(crate) mod test_support;

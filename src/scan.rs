@@ -1137,7 +1137,7 @@ pub(crate) mod proptests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(256))]
+        #![proptest_config(crate::test_support::proptest_config())]
 
         #[test]
         fn arbitrary_bytes_are_rejected_or_valid(

@@ -165,13 +165,53 @@ fn bad_cost_fails_with_one_line() {
     assert!(err.contains("unknown cost function \"cf9\""), "{err}");
 }
 
+/// Every subcommand of `brdfd`, as `--help` lists them (README.md teaches each one).
+const SUBCOMMANDS: [&str; 18] = [
+    "fit",
+    "synth",
+    "demo",
+    "report",
+    "export-format",
+    "import-format",
+    "serve",
+    "reference",
+    "scan",
+    "scans",
+    "show",
+    "refit",
+    "abort",
+    "status",
+    "export",
+    "import",
+    "replay",
+    "record",
+];
+
 #[test]
 fn help_lists_subcommands_and_explains_fit_options() {
     let out = brdfd(&["--help"]);
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
-    for sub in ["fit", "synth", "demo"] {
-        assert!(text.contains(sub), "--help must list {sub}");
+    // The first word of every line of the "Commands:" section, compared whole (so "fit" is not
+    // found inside "refit"), in the order the README teaches them.
+    let listed: Vec<&str> = text
+        .split("Commands:\n")
+        .nth(1)
+        .expect("--help has a Commands: section")
+        .lines()
+        .take_while(|l| !l.trim().is_empty())
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert_eq!(listed, [&SUBCOMMANDS[..], &["help"]].concat(), "{text}");
+    // Each subcommand has its own --help, naming itself in its usage line.
+    for sub in SUBCOMMANDS {
+        let out = brdfd(&[sub, "--help"]);
+        assert!(out.status.success(), "brdfd {sub} --help failed");
+        let help = String::from_utf8(out.stdout).unwrap();
+        assert!(
+            help.contains(&format!("Usage: brdfd {sub}")),
+            "brdfd {sub} --help:\n{help}"
+        );
     }
     let out = brdfd(&["fit", "--help"]);
     let text = String::from_utf8(out.stdout).unwrap();

@@ -322,9 +322,10 @@ async fn a_scan_against_a_stale_reference_is_flagged_not_fitted_until_allowed() 
         let service = &d.service;
         let mut events = service.subscribe();
         measure_reference(service).await;
-        tokio::time::sleep(Duration::from_millis(60)).await;
-        let status = service.status().await.unwrap();
-        assert!(status.reference.unwrap().stale);
+        // Wait for the daemon to call the reference stale (20 ms after it), not for a guess.
+        while !service.status().await.unwrap().reference.unwrap().stale {
+            tokio::task::yield_now().await;
+        }
         let sample = mock_devices::recordings::samples()[0].sample.unwrap();
         let scan = scan_and_settle(service, sample).await;
         let detail = d.store.scan_detail(scan).await.unwrap();
@@ -374,8 +375,12 @@ async fn a_scan_against_a_stale_reference_is_flagged_not_fitted_until_allowed() 
 async fn a_running_fit_can_be_cancelled_and_a_scan_aborted_keeping_its_readings() {
     let _serial = serial();
     bounded(async {
-        // A fit computation that runs until told to stop, reporting every 2 ms.
-        let endless: FitFn = Arc::new(|job, observer| {
+        // A fit computation that runs until told to stop, reporting every 2 ms; it says when it
+        // has started, so the cancel below provably hits a running fit.
+        let (started_tx, started_rx) = std::sync::mpsc::channel::<()>();
+        let started_tx = std::sync::Mutex::new(started_tx);
+        let endless: FitFn = Arc::new(move |job, observer| {
+            let _ = started_tx.lock().unwrap().send(());
             let mut generation = 0;
             loop {
                 generation += 1;
@@ -421,13 +426,14 @@ async fn a_running_fit_can_be_cancelled_and_a_scan_aborted_keeping_its_readings(
         let scan = service.request_scan("T.Endless").await.unwrap();
         assert!(service.wait_idle(STEP_TIMEOUT).await);
         let fit = d.store.fits_for_scan(scan).await.unwrap()[0].id;
-        // Wait for it to run, then cancel it.
-        for _ in 0..500 {
-            if d.store.fit_detail(fit).await.unwrap().run.status == FitStatus::Running {
-                break;
-            }
-            tokio::time::sleep(Duration::from_millis(5)).await;
-        }
+        // Wait until it runs (the computation said so), check the store agrees, cancel it.
+        tokio::task::spawn_blocking(move || started_rx.recv_timeout(STEP_TIMEOUT).unwrap())
+            .await
+            .unwrap();
+        assert_eq!(
+            d.store.fit_detail(fit).await.unwrap().run.status,
+            FitStatus::Running
+        );
         service.cancel_fit(fit).await.unwrap();
         assert!(service.wait_settled(scan, STEP_TIMEOUT).await.unwrap());
         assert_eq!(

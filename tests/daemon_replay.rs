@@ -177,3 +177,94 @@ fn replay_of_the_embedded_recordings_is_strict_and_clean() {
     );
     assert!(out.contains("store: in memory"), "{out}");
 }
+
+/// The committed N9 and T.Freesia pink sessions copied into `dir`, the sample's SRA session
+/// with its two FETCH exchanges swapped (timestamps kept): the driver asks for sra-20 first,
+/// the recording has sra-60 first. Returns the four paths in replay order.
+fn sessions_with_swapped_fetches(dir: &Path) -> Vec<String> {
+    let rec = Path::new(env!("CARGO_MANIFEST_DIR")).join("mock-devices/recordings");
+    let mut out = Vec::new();
+    for (name, swap) in [
+        ("synthetic-n9.ma_t12.session", false),
+        ("synthetic-n9.sra.session", false),
+        ("synthetic-t-freesia-pink.ma_t12.session", false),
+        ("synthetic-t-freesia-pink.sra.session", true),
+    ] {
+        let text = std::fs::read_to_string(rec.join(name)).unwrap();
+        let text = if swap {
+            let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+            let at = |what: &str| lines.iter().position(|l| l.ends_with(what)).unwrap();
+            let (f20, f60) = (at("# FETCH sra-20"), at("# FETCH sra-60"));
+            // Each FETCH is followed by its READING.
+            assert_eq!(f60, f20 + 2, "{lines:?}");
+            assert!(lines[f20 + 1].contains("# READING sra-20"), "{lines:?}");
+            assert!(lines[f60 + 1].contains("# READING sra-60"), "{lines:?}");
+            // Keep each line's timestamp, swap what follows it.
+            let body = |l: &str| l.split_once(' ').unwrap().1.to_owned();
+            let stamp = |l: &str| l.split_once(' ').unwrap().0.to_owned();
+            let (b20, b20r) = (body(&lines[f20]), body(&lines[f20 + 1]));
+            let (b60, b60r) = (body(&lines[f60]), body(&lines[f60 + 1]));
+            lines[f20] = format!("{} {b60}", stamp(&lines[f20]));
+            lines[f20 + 1] = format!("{} {b60r}", stamp(&lines[f20 + 1]));
+            lines[f60] = format!("{} {b20}", stamp(&lines[f60]));
+            lines[f60 + 1] = format!("{} {b20r}", stamp(&lines[f60 + 1]));
+            lines.join("\n") + "\n"
+        } else {
+            text
+        };
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        out.push(path.display().to_string());
+    }
+    out
+}
+
+#[test]
+fn replay_from_the_cli_fails_on_a_mismatch_unless_lenient_and_keeps_recorded_timing() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let files = sessions_with_swapped_fetches(dir.path());
+    let mut args: Vec<&str> = vec!["replay"];
+    args.extend(files.iter().map(String::as_str));
+
+    // Strict (the default): the run fails, naming the request that did not match.
+    let strict = brdfd(&args, dir.path());
+    let (out, err) = text(&strict);
+    assert_eq!(strict.status.code(), Some(1), "{out}\n{err}");
+    assert!(
+        err.contains("(SRA): request did not match the recording: expected frame 12, FETCH sra-60"),
+        "{out}\n{err}"
+    );
+    assert!(err.contains("received FETCH sra-20"), "{err}");
+    assert!(out.contains("scan 1 \"T.Freesia pink\": failed"), "{out}");
+
+    // Lenient: the same requests are matched by kind and geometry; the scan completes and
+    // is fitted.
+    let mut lenient = args.clone();
+    lenient.push("--lenient");
+    let o = brdfd(&lenient, dir.path());
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{out}\n{err}");
+    assert!(out.contains("scan 1 \"T.Freesia pink\": complete"), "{out}");
+    assert_eq!(out.matches(": mean ΔE00").count(), 3, "{out}");
+    assert!(
+        out.contains("1 reference(s), 1 scan(s) replayed (lenient, accelerated)"),
+        "{out}"
+    );
+
+    // Realtime: the recorded pace. A lower bound only (a replay cannot be faster than its
+    // recording), so a busy machine cannot fail it: the N9 and the sample each take at least
+    // their MA-T12 session's last timestamp (2,451 ms for N9).
+    let mut realtime = lenient.clone();
+    realtime.push("--realtime");
+    let started = std::time::Instant::now();
+    let o = brdfd(&realtime, dir.path());
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{out}\n{err}");
+    assert!(out.contains("(lenient, recorded timing)"), "{out}");
+    assert!(
+        started.elapsed() >= std::time::Duration::from_millis(2 * 2_000),
+        "{:?}",
+        started.elapsed()
+    );
+}

@@ -130,6 +130,145 @@ fn brdfd(args: &[&str]) -> std::process::Output {
     out
 }
 
+/// The text of every `<text>` element of an SVG figure, trimmed, with XML entities decoded.
+fn svg_texts(path: &Path) -> Vec<String> {
+    let svg = std::fs::read_to_string(path).unwrap();
+    svg.split("<text")
+        .skip(1)
+        .map(|t| {
+            let body = &t[t.find('>').expect("a <text> tag closes") + 1..];
+            let body = &body[..body.find("</text>").expect("a <text> element ends")];
+            body.trim()
+                .replace("&lt;", "<")
+                .replace("&gt;", ">")
+                .replace("&quot;", "\"")
+                .replace("&#39;", "'")
+                .replace("&amp;", "&")
+        })
+        .collect()
+}
+
+/// The numeric labels (axis ticks) among a figure's texts, and their spacing.
+fn ticks(texts: &[String]) -> (Vec<f64>, f64) {
+    let t: Vec<f64> = texts.iter().filter_map(|s| s.parse().ok()).collect();
+    assert!(t.len() >= 3, "too few tick labels in {texts:?}");
+    let step = t[1] - t[0];
+    for w in t.windows(2) {
+        assert!(
+            (w[1] - w[0] - step).abs() < 1e-9 * step.abs().max(1.0),
+            "{t:?}"
+        );
+    }
+    (t, step)
+}
+
+/// Asserts that `value` lies on the axis the tick labels `t` (spacing `step`) describe: no
+/// more than one tick spacing outside the first and last label.
+fn on_axis(what: &str, value: f64, t: &[f64], step: f64) {
+    let (lo, hi) = (t[0].min(t[t.len() - 1]), t[0].max(t[t.len() - 1]));
+    assert!(
+        value >= lo - step.abs() && value <= hi + step.abs(),
+        "{what}: {value} is off the axis {t:?}"
+    );
+}
+
+/// The figures carry what they claim: titles, axis labels, every sample and geometry name, and
+/// axis ranges that hold the values plotted (computed here from the scans and the analysis).
+fn check_figure_text(dir: &Path, scans: &[Scan], a: &Analysis) {
+    let fig = |stem: &str| svg_texts(&dir.join(format!("{stem}.svg")));
+    let has = |texts: &[String], want: &str, stem: &str| {
+        assert!(
+            texts.iter().any(|t| t == want),
+            "{stem}.svg has no text {want:?}: {texts:?}"
+        );
+    };
+    let samples: Vec<&str> = scans.iter().map(|s| s.sample.as_str()).collect();
+
+    let f4 = fig("fig04-measured-swatches");
+    assert!(
+        f4[0].starts_with("Fig. 4  Measured colour per geometry"),
+        "{f4:?}"
+    );
+    for g in &GEOMETRIES {
+        has(&f4, g.name, "fig04");
+    }
+    for s in &samples {
+        has(&f4, s, "fig04");
+    }
+
+    // Fig. 5: L* of the MA-T12 readings. The values are recomputed from the readings
+    // (reflectance factors, D65/2°); the figure's axis must hold them.
+    let f5 = fig("fig05-lightness-diffuse");
+    assert!(
+        f5[0].starts_with("Fig. 5  Measured lightness L* of the diffuse readings"),
+        "{f5:?}"
+    );
+    has(&f5, "L* (CIELAB, D65, 2°)", "fig05");
+    has(
+        &f5,
+        "geometry (device name; detector° as aspecular°)",
+        "fig05",
+    );
+    for g in GEOMETRIES.iter().filter(|g| g.device == Device::MaT12) {
+        has(&f5, g.name, "fig05");
+    }
+    for s in &samples {
+        has(&f5, s, "fig05");
+    }
+    let (t, step) = ticks(&f5);
+    for scan in scans {
+        let m = brdfd::processing::process(scan, &Default::default()).unwrap();
+        for g in GEOMETRIES.iter().filter(|g| g.device == Device::MaT12) {
+            let r = brdfd::colour::brdf_to_reflectance(&m.values[g.index]);
+            let l = brdfd::colour::reflectance_to_lab(&r).l;
+            on_axis(&format!("fig05 {} {}", scan.sample, g.name), l, &t, step);
+        }
+    }
+
+    for cf in CostFunction::ALL {
+        let f7 = fig(&format!("fig07-swatches-{cf}"));
+        assert!(
+            f7[0].contains(&format!("cost function {cf}, method separable")),
+            "{f7:?}"
+        );
+        for s in &samples {
+            has(&f7, s, "fig07");
+        }
+    }
+
+    let f8 = fig("fig08-spectra-t-freesia-pink");
+    assert!(f8[0].ends_with("sample \"T.Freesia pink\""), "{f8:?}");
+    has(&f8, "wavelength (nm)", "fig08");
+    has(&f8, "reflectance factor", "fig08");
+    for g in GEOMETRIES.iter().filter(|g| g.device == Device::MaT12) {
+        has(&f8, &format!("{} (X-Rite MA-T12)", g.name), "fig08");
+    }
+    for nm in ["400", "500", "600", "700"] {
+        has(&f8, nm, "fig08");
+    }
+
+    // Fig. 11 and 12: ΔE00 per cost function; the axis must hold every plotted mean.
+    let f11 = fig("fig11-delta-e-boxplots");
+    has(&f11, "ΔE00 (CIEDE2000)", "fig11");
+    let f12 = fig("fig12-mean-delta-e");
+    assert!(
+        f12[0].starts_with("Fig. 12  Mean ΔE00 per cost function, 95 % CI (n = 2 samples)"),
+        "{f12:?}"
+    );
+    has(&f12, "mean ΔE00 over samples", "fig12");
+    has(&f12, "cost function (method)", "fig12");
+    for label in ["all 14 geometries", "diffuse (MA-T12)", "specular (SRA)"] {
+        has(&f12, label, "fig12");
+    }
+    let (t, step) = ticks(&f12);
+    for c in &a.per_cost {
+        has(&f12, &format!("{} (separable)", c.cost), "fig12");
+        for m in [&c.all, &c.diffuse, &c.specular].into_iter().flatten() {
+            on_axis(&format!("fig12 {} mean", c.cost), m.mean, &t, step);
+        }
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 1)]
 async fn stored_scans_and_fits_make_a_report_and_exports() {
     let dir = tempfile::tempdir().unwrap();
@@ -209,6 +348,7 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
             );
         }
     }
+    check_figure_text(&out_dir, &scans, &a);
     let md = std::fs::read_to_string(out_dir.join("summary.md")).unwrap();
     assert!(
         md.contains("- T.Manzana green: m2 fit failed: optimiser diverged"),

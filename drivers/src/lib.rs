@@ -24,6 +24,8 @@ pub mod protocol;
 pub mod session;
 pub mod sra;
 pub mod tap;
+#[cfg(test)]
+pub(crate) mod test_support;
 pub mod transport;
 
 pub use driver::{DriverConfig, DriverError, DriverHandle, Event, spawn_mat12, spawn_sra};

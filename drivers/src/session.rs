@@ -733,7 +733,7 @@ mod proptests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(256))]
+        #![proptest_config(crate::test_support::config())]
 
         #[test]
         fn arbitrary_text_is_rejected_or_read(text in any::<String>()) {

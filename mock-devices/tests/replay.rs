@@ -80,7 +80,8 @@ async fn recorded_timing_is_kept_and_a_speed_factor_scales_it() {
         took >= Duration::from_millis(recorded_ms),
         "{took:?} < {recorded_ms} ms"
     );
-    assert!(took < Duration::from_millis(recorded_ms + 1000), "{took:?}");
+    // No upper bound: how much longer it takes depends on the machine's load. The delays the
+    // engine computes are checked exactly, without a clock, in `engine.rs`'s unit tests.
     rig.finish().await;
 
     // MA-T12 eight times faster: the 2.4 s measurement takes 0.3 s.
@@ -99,11 +100,9 @@ async fn recorded_timing_is_kept_and_a_speed_factor_scales_it() {
     let took = start.elapsed();
     println!("MA-T12 N9 at 8x: {took:?}");
     assert_bit_eq(&got, &want, "N9 on the MA-T12 at 8x");
+    // A lower bound only (the scaled delays are waited); the scaling itself is checked
+    // without a clock in `engine.rs`'s unit tests.
     assert!(took >= Duration::from_millis(2400 / 8), "{took:?}");
-    assert!(
-        took < Duration::from_millis(2400),
-        "{took:?}: not faster than recorded"
-    );
     rig.finish().await;
 }
 
@@ -293,8 +292,8 @@ async fn replaying_all_recordings_through_both_drivers_is_fast() {
     assert!(mat12.report().mismatches.is_empty());
     assert!(sra.report().mismatches.is_empty());
     assert_eq!((mat12.report().remaining, sra.report().remaining), (0, 0));
-    // A loose bound for a loaded debug build; the target (< 1 s) is checked by the bench.
-    assert!(took < Duration::from_secs(10), "{took:?}");
+    // No wall-clock bound here (it would depend on the machine's load); the speed is measured
+    // by `cargo bench -p brdfd-mock-devices --bench replay`.
 }
 
 #[test]

@@ -301,7 +301,9 @@ fn follow(
         readings.finish_and_clear();
     }
     let mut fit_bars: std::collections::HashMap<i64, ProgressBar> = Default::default();
-    let mut measuring = scan.is_some() || reference.is_some();
+    // Fits named up front mean a refit or an import: nothing is measured, and following ends
+    // when they have. Otherwise a reference or scan is being measured.
+    let mut measuring = reference.is_some() || (scan.is_some() && fits_pending.is_empty());
     let mut failed: Option<String> = None;
     // Set when what was followed has ended; an event stream that closes before is a lost
     // daemon (restarted, killed, or the connection cut), not a success.
@@ -670,7 +672,7 @@ pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
         .filter_map(Value::as_i64)
         .collect();
     println!("scan {}: fits {fits:?} queued", args.scan);
-    if let Some(events) = events {
+    if let Some(events) = events.filter(|_| !fits.is_empty()) {
         follow(&client, events, None, Some(args.scan), fits)?;
         print_fits(&client.get(&format!("/scans/{}", args.scan))?);
     }

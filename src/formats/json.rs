@@ -295,7 +295,7 @@ mod proptests {
     ];
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(256))]
+        #![proptest_config(crate::test_support::proptest_config())]
 
         #[test]
         fn arbitrary_text_is_rejected_or_valid(text in any::<String>()) {

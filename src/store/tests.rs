@@ -761,6 +761,23 @@ async fn concurrent_device_tasks_write_through_one_writer() {
     a.await.unwrap();
     b.await.unwrap();
     store.complete_scan(scan).await.unwrap();
+    // Nothing lost or doubled by the interleaving: all 14, each with its own values and frame.
+    let d = store.scan_detail(scan).await.unwrap();
+    assert_eq!(d.scan.state, ScanState::Complete);
+    assert_eq!(d.scan.reading_count, 14);
+    assert_eq!(d.readings.len(), 14);
+    let mut names: Vec<&str> = d.readings.iter().map(|r| r.geometry.name).collect();
+    names.sort_unstable();
+    let mut want: Vec<&str> = GEOMETRIES.iter().map(|g| g.name).collect();
+    want.sort_unstable();
+    assert_eq!(names, want);
+    for r in &d.readings {
+        assert_eq!(
+            r.values,
+            values_for(r.geometry, &mut ChaCha8Rng::seed_from_u64(1))
+        );
+        assert_eq!(r.raw_frame, frame(r.geometry));
+    }
 }
 
 /// `_sqlx_migrations` as (version, checksum, installed_on), in order.

@@ -706,7 +706,209 @@ mod tests {
         out
     }
 
+    /// Builds a frame with the independent bit-by-bit CRC, so the bytes pass the checksum
+    /// and reach the payload parser.
+    fn framed(op: u8, payload: &[u8]) -> Vec<u8> {
+        let mut out = MAGIC.to_vec();
+        out.push(op);
+        out.extend_from_slice(&(payload.len() as u16).to_le_bytes());
+        out.extend_from_slice(payload);
+        let crc = crate::test_support::crc16_bitwise(&out);
+        out.extend_from_slice(&crc.to_le_bytes());
+        out
+    }
+
+    /// What a correct parser must make of a reading payload, read straight from PROTOCOL.md's
+    /// layout (code 1-12, then 31 little-endian binary64, all finite): `Some` iff it is valid.
+    fn reading_oracle(payload: &[u8]) -> Option<(u8, Vec<u64>)> {
+        if payload.len() != 1 + 8 * 31 || !(1..=12).contains(&payload[0]) {
+            return None;
+        }
+        let bits: Vec<u64> = payload[1..]
+            .chunks(8)
+            .map(|c| u64::from_le_bytes(c.try_into().unwrap()))
+            .collect();
+        bits.iter()
+            .all(|b| f64::from_bits(*b).is_finite())
+            .then_some((payload[0], bits))
+    }
+
+    /// The property every correctly checksummed frame must satisfy, in both directions: the
+    /// parser never panics, consumes exactly the frame, and whatever it accepts re-encodes to
+    /// the same bytes (the encoding is canonical); a reading is accepted exactly when the
+    /// oracle says it is valid, with the values bit for bit.
+    fn check_framed(op: u8, payload: &[u8]) -> Result<(), TestCaseError> {
+        let bytes = framed(op, payload);
+        let mut buf = BytesMut::from(&bytes[..]);
+        let got = Mat12Codec::decode_response(&mut buf);
+        prop_assert!(
+            buf.is_empty(),
+            "a checksummed frame must be consumed whole: {got:?}"
+        );
+        if op == OP_FETCH | REPLY_BIT || op == OP_MEASURE_ONE | REPLY_BIT {
+            let oracle = reading_oracle(payload);
+            match (&got, &oracle) {
+                (Ok(Some(Response::Fetched(r) | Response::MeasuredOne(r))), Some((code, bits))) => {
+                    prop_assert_eq!(geometry_code(r.geometry), Some(*code));
+                    let ReadingValue::Reflectance(v) = r.value else {
+                        return Err(TestCaseError::fail("MA-T12 reading is not a spectrum"));
+                    };
+                    let got_bits: Vec<u64> = v.iter().map(|x| x.to_bits()).collect();
+                    prop_assert_eq!(&got_bits, bits);
+                }
+                (Err(_), None) => {}
+                _ => prop_assert!(false, "op 0x{op:02X}: parser {got:?}, oracle {oracle:?}"),
+            }
+        }
+        if let Ok(Some(resp)) = &got {
+            prop_assert_eq!(Mat12Codec::encode_response(resp).unwrap(), bytes.clone());
+        }
+        let mut buf = BytesMut::from(&bytes[..]);
+        let req = Mat12Codec::decode_request(&mut buf);
+        prop_assert!(
+            buf.is_empty(),
+            "a checksummed frame must be consumed whole: {req:?}"
+        );
+        if let Ok(Some(req)) = &req {
+            prop_assert_eq!(Mat12Codec::encode_request(req).unwrap(), bytes);
+        }
+        Ok(())
+    }
+
+    /// Every golden frame of PROTOCOL.md, as (opcode, payload).
+    fn golden_frames() -> Vec<(u8, Vec<u8>)> {
+        [
+            "IDENTIFY",
+            "STATUS",
+            "CALIBRATE",
+            "MEASURE-ALL",
+            "FETCH 15as-45",
+            "MEASURE-ONE 45as110",
+            "ABORT",
+            "IDENTITY",
+            "STATUS ready 87%",
+            "CALIBRATED",
+            "MEASURED 12",
+            "READING 15as-45",
+            "ABORTED",
+            "ERROR MEASURE-ALL NOT-CALIBRATED",
+        ]
+        .iter()
+        .map(|label| {
+            let g = golden(&format!("mat12 {label}"));
+            (g[2], g[HEADER_LEN..g.len() - CRC_LEN].to_vec())
+        })
+        .collect()
+    }
+
+    /// One edit of a golden frame's opcode or payload; the CRC is recomputed afterwards.
+    #[derive(Debug, Clone)]
+    enum Edit {
+        Set(usize, u8),
+        Flip(usize, u8),
+        Insert(usize, u8),
+        Remove(usize),
+        Truncate(usize),
+        /// Overwrite 8 bytes with a binary64 (NaN, infinities, subnormals, -0.0 included).
+        Float(usize, u64),
+        Opcode(u8),
+    }
+
+    fn edit() -> impl Strategy<Value = Edit> {
+        let special = prop_oneof![
+            Just(f64::NAN.to_bits()),
+            Just(f64::INFINITY.to_bits()),
+            Just(f64::NEG_INFINITY.to_bits()),
+            Just((-0.0f64).to_bits()),
+            Just(1u64),
+            Just(0x7FF0_0000_0000_0001u64),
+            any::<u64>(),
+        ];
+        prop_oneof![
+            (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Set(i, b)),
+            (any::<usize>(), 0u8..8).prop_map(|(i, b)| Edit::Flip(i, b)),
+            (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Insert(i, b)),
+            any::<usize>().prop_map(Edit::Remove),
+            any::<usize>().prop_map(Edit::Truncate),
+            (any::<usize>(), special).prop_map(|(i, b)| Edit::Float(i, b)),
+            prop_oneof![any::<u8>(), (1u8..=7).prop_map(|o| o | REPLY_BIT)].prop_map(Edit::Opcode),
+        ]
+    }
+
+    fn apply_edits(mut op: u8, mut p: Vec<u8>, edits: &[Edit]) -> (u8, Vec<u8>) {
+        for e in edits {
+            let at = |i: usize, n: usize| if n == 0 { 0 } else { i % n };
+            match *e {
+                Edit::Set(i, b) if !p.is_empty() => {
+                    let i = at(i, p.len());
+                    p[i] = b;
+                }
+                Edit::Flip(i, b) if !p.is_empty() => {
+                    let i = at(i, p.len());
+                    p[i] ^= 1 << b;
+                }
+                Edit::Insert(i, b) => p.insert(at(i, p.len() + 1), b),
+                Edit::Remove(i) if !p.is_empty() => {
+                    p.remove(at(i, p.len()));
+                }
+                Edit::Truncate(i) => p.truncate(at(i, p.len() + 1)),
+                // Aligned on a band when the payload is a reading's, so values are hit whole.
+                Edit::Float(i, bits) if p.len() >= 9 => {
+                    let start = 1 + 8 * at(i, (p.len() - 1) / 8);
+                    p[start..start + 8].copy_from_slice(&bits.to_le_bytes());
+                }
+                Edit::Opcode(o) => op = o,
+                _ => {}
+            }
+        }
+        (op, p)
+    }
+
     proptest! {
+        #![proptest_config(crate::test_support::config())]
+
+        #[test]
+        fn random_payloads_past_the_crc_parse_exactly_or_are_refused(
+            op in prop_oneof![
+                3 => (1u8..=7).prop_map(|o| o | REPLY_BIT),
+                1 => 1u8..=7,
+                1 => Just(OP_ERROR),
+                1 => any::<u8>(),
+            ],
+            payload in prop_oneof![
+                proptest::collection::vec(any::<u8>(), 0..=8),
+                proptest::collection::vec(any::<u8>(), 0..=MAX_PAYLOAD),
+                // A reading's length with a plausible code: the value parser is reached.
+                (0u8..=14, proptest::collection::vec(any::<u8>(), 8 * BANDS))
+                    .prop_map(|(c, rest)| { let mut p = vec![c]; p.extend(rest); p }),
+            ],
+        ) {
+            check_framed(op, &payload)?;
+        }
+
+        #[test]
+        fn golden_frames_mutated_past_the_crc_parse_exactly_or_are_refused(
+            which in 0usize..14,
+            edits in proptest::collection::vec(edit(), 1..6),
+        ) {
+            let (op, payload) = golden_frames().swap_remove(which);
+            let (op, payload) = apply_edits(op, payload, &edits);
+            check_framed(op, &payload)?;
+        }
+    }
+
+    #[test]
+    fn every_golden_frame_passes_the_fuzz_property_unchanged() {
+        // The property must accept what PROTOCOL.md says is valid, or it checks nothing.
+        for (op, payload) in golden_frames() {
+            assert_eq!(framed(op, &payload), frame(op, &payload));
+            check_framed(op, &payload).unwrap();
+        }
+    }
+
+    proptest! {
+        #![proptest_config(crate::test_support::config())]
+
         #[test]
         fn arbitrary_bytes_never_panic_nor_yield_a_reading(
             bytes in proptest::collection::vec(any::<u8>(), 0..2048)

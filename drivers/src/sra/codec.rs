@@ -231,10 +231,10 @@ fn small_number(field: &str, s: &str) -> Result<u8, FrameError> {
 }
 
 /// `-?digits(.digits)?(e-?digits)?`: the only decimal forms the codec writes; this keeps `inf`,
-/// `NaN`, `+1` and hex floats off the wire.
+/// `NaN`, `+1`, hex floats and an upper-case `E` (PROTOCOL.md §3 lists only `e`) off the wire.
 fn decimal_grammar(s: &str) -> bool {
     let s = s.strip_prefix('-').unwrap_or(s);
-    let (mantissa, exp) = match s.split_once(['e', 'E']) {
+    let (mantissa, exp) = match s.split_once('e') {
         Some((m, e)) => (m, Some(e.strip_prefix('-').unwrap_or(e))),
         None => (s, None),
     };
@@ -491,6 +491,7 @@ mod tests {
     use crate::protocol::golden;
     use bytes::BytesMut;
     use proptest::prelude::*;
+    use proptest::sample::select;
 
     fn intensity(geometry: &'static str, v: f64) -> Reading {
         Reading {
@@ -726,7 +727,233 @@ mod tests {
         out
     }
 
+    /// `<start><body>*XXXX\r\n` with the checksum from the independent bit-by-bit CRC, so the
+    /// line passes the checksum and reaches the field parsers.
+    fn framed(start: u8, body: &[u8]) -> Vec<u8> {
+        let mut out = vec![start];
+        out.extend_from_slice(body);
+        let crc = crate::test_support::crc16_bitwise(&out);
+        out.extend_from_slice(format!("*{crc:04X}\r\n").as_bytes());
+        out
+    }
+
+    /// PROTOCOL.md §3's intensity grammar, `-?digits(.digits)?(e-?digits)?`, as a regular
+    /// expression: the oracle the value parser is checked against.
+    fn intensity_grammar() -> regex::Regex {
+        regex::Regex::new(r"^-?[0-9]+(\.[0-9]+)?(e-?[0-9]+)?$").unwrap()
+    }
+
+    /// The property every checksummed line must satisfy: no panic; a line whose body is all
+    /// body characters is consumed whole; a READING is accepted exactly when PROTOCOL.md says
+    /// it is valid (code 20 or 60, the decimal grammar, a finite value) with the correctly
+    /// rounded value; whatever is accepted re-encodes to bytes that decode to the same thing.
+    fn check_framed(start: u8, body: &[u8], grammar: &regex::Regex) -> Result<(), TestCaseError> {
+        let bytes = framed(start, body);
+        let clean = body.iter().all(|b| body_char(*b));
+        let mut buf = BytesMut::from(&bytes[..]);
+        let got = SraCodec::decode_response(&mut buf);
+        if clean {
+            prop_assert!(
+                buf.is_empty(),
+                "a checksummed line must be consumed whole: {got:?}"
+            );
+        }
+        let text = String::from_utf8_lossy(body);
+        let fields: Vec<&str> = text.split(',').collect();
+        if start == REPLY_START && clean && matches!(fields[0], "RD" | "M1") {
+            let oracle = (bytes.len() <= MAX_LINE
+                && fields.len() == 3
+                && matches!(fields[1], "20" | "60")
+                && grammar.is_match(fields[2]))
+            .then(|| fields[2].parse::<f64>().unwrap())
+            .filter(|v| v.is_finite());
+            match (&got, oracle) {
+                (Ok(Some(Response::Fetched(r) | Response::MeasuredOne(r))), Some(v)) => {
+                    prop_assert_eq!(geometry_code(r.geometry), Some(fields[1]));
+                    let ReadingValue::Intensity(x) = r.value else {
+                        return Err(TestCaseError::fail("SRA reading is not an intensity"));
+                    };
+                    prop_assert_eq!(x.to_bits(), v.to_bits());
+                }
+                (Err(_), None) => {}
+                _ => prop_assert!(false, "{text:?}: parser {got:?}, oracle {oracle:?}"),
+            }
+        }
+        if let Ok(Some(resp)) = &got {
+            let again = SraCodec::encode_response(resp).unwrap();
+            let back = SraCodec::decode_response(&mut BytesMut::from(&again[..]));
+            prop_assert!(
+                matches!(&back, Ok(Some(b)) if b == resp),
+                "{resp:?} came back as {back:?}"
+            );
+            if let (
+                Response::Fetched(a) | Response::MeasuredOne(a),
+                Ok(Some(Response::Fetched(b) | Response::MeasuredOne(b))),
+            ) = (resp, &back)
+            {
+                prop_assert!(a.bit_eq(b));
+            }
+        }
+        let mut buf = BytesMut::from(&bytes[..]);
+        let req = SraCodec::decode_request(&mut buf);
+        if clean {
+            prop_assert!(
+                buf.is_empty(),
+                "a checksummed line must be consumed whole: {req:?}"
+            );
+        }
+        if let Ok(Some(req)) = &req {
+            let again = SraCodec::encode_request(req).unwrap();
+            prop_assert_eq!(
+                SraCodec::decode_request(&mut BytesMut::from(&again[..])),
+                Ok(Some(*req))
+            );
+        }
+        Ok(())
+    }
+
+    /// Fields as the fuzz writes them: the protocol's words and codes, decimal-looking text
+    /// (the value parser's ground), and any printable ASCII.
+    fn field() -> impl Strategy<Value = String> {
+        prop_oneof![
+            3 => select(vec![
+                "ID", "ST", "CAL", "MA", "RD", "M1", "AB", "ER", "READY", "BUSY", "NOCAL",
+                "20", "60", "0", "2", "100", "101", "CRC", "UNKNOWN", "NODATA", "BADGEOM",
+                "FAULT", "ABORTED",
+            ]).prop_map(str::to_owned),
+            3 => "[-+0-9.eE]{0,24}",
+            1 => "-?[0-9]{1,110}(\\.[0-9]{1,30})?(e-?[0-9]{1,4})?",
+            1 => "[ -~]{0,12}",
+        ]
+    }
+
+    /// Every golden reply and request line of PROTOCOL.md, as (start, body).
+    fn golden_lines() -> Vec<(u8, Vec<u8>)> {
+        [
+            "IDENTIFY",
+            "STATUS",
+            "CALIBRATE",
+            "MEASURE-ALL",
+            "FETCH sra-20",
+            "MEASURE-ONE sra-60",
+            "ABORT",
+            "IDENTITY",
+            "STATUS ready 64%",
+            "CALIBRATED",
+            "MEASURED 2",
+            "READING sra-20",
+            "READING sra-60",
+            "READING (measure-one) sra-60",
+            "ABORTED",
+            "ERROR FETCH NO-MEASUREMENT sra-20",
+        ]
+        .iter()
+        .map(|label| {
+            let g = golden(&format!("sra {label}"));
+            (g[0], g[1..g.len() - 7].to_vec())
+        })
+        .collect()
+    }
+
+    /// One edit of a golden line's body (the checksum is recomputed afterwards): a byte set,
+    /// inserted or removed, a cut, or one comma-separated field replaced.
+    #[derive(Debug, Clone)]
+    enum Edit {
+        Set(usize, u8),
+        Insert(usize, u8),
+        Remove(usize),
+        Truncate(usize),
+        Field(usize, String),
+    }
+
+    fn edit() -> impl Strategy<Value = Edit> {
+        let byte = prop_oneof![
+            4 => select(b"-+.0123456789eE,".to_vec()),
+            2 => 0x20u8..=0x7E,
+            1 => any::<u8>(),
+        ];
+        prop_oneof![
+            (any::<usize>(), byte.clone()).prop_map(|(i, b)| Edit::Set(i, b)),
+            (any::<usize>(), byte).prop_map(|(i, b)| Edit::Insert(i, b)),
+            any::<usize>().prop_map(Edit::Remove),
+            any::<usize>().prop_map(Edit::Truncate),
+            (any::<usize>(), field()).prop_map(|(i, f)| Edit::Field(i, f)),
+        ]
+    }
+
+    fn apply_edits(mut body: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
+        let at = |i: usize, n: usize| if n == 0 { 0 } else { i % n };
+        for e in edits {
+            match e {
+                Edit::Set(i, b) if !body.is_empty() => {
+                    let i = at(*i, body.len());
+                    body[i] = *b;
+                }
+                Edit::Insert(i, b) => body.insert(at(*i, body.len() + 1), *b),
+                Edit::Remove(i) if !body.is_empty() => {
+                    body.remove(at(*i, body.len()));
+                }
+                Edit::Truncate(i) => body.truncate(at(*i, body.len() + 1)),
+                Edit::Field(i, f) => {
+                    let text = String::from_utf8_lossy(&body).into_owned();
+                    let mut fields: Vec<&str> = text.split(',').collect();
+                    let i = at(*i, fields.len());
+                    fields[i] = f;
+                    body = fields.join(",").into_bytes();
+                }
+                _ => {}
+            }
+        }
+        body
+    }
+
     proptest! {
+        #![proptest_config(crate::test_support::config())]
+
+        #[test]
+        fn random_lines_past_the_crc_parse_exactly_or_are_refused(
+            start in prop_oneof![Just(REPLY_START), Just(REQUEST_START)],
+            fields in proptest::collection::vec(field(), 1..6),
+        ) {
+            check_framed(start, fields.join(",").as_bytes(), &intensity_grammar())?;
+        }
+
+        #[test]
+        fn golden_lines_mutated_past_the_crc_parse_exactly_or_are_refused(
+            which in 0usize..16,
+            edits in proptest::collection::vec(edit(), 1..5),
+        ) {
+            let (start, body) = golden_lines().swap_remove(which);
+            check_framed(start, &apply_edits(body, &edits), &intensity_grammar())?;
+        }
+    }
+
+    #[test]
+    fn every_golden_line_passes_the_fuzz_property_unchanged() {
+        // The property must accept what PROTOCOL.md says is valid, or it checks nothing.
+        let grammar = intensity_grammar();
+        for (start, body) in golden_lines() {
+            assert_eq!(
+                framed(start, &body),
+                line(start, std::str::from_utf8(&body).unwrap())
+            );
+            check_framed(start, &body, &grammar).unwrap();
+        }
+        // And it must refuse what PROTOCOL.md calls malformed.
+        for bad in ["inf", "NaN", "+1", ".5", "1.", "1E5", "0x1p3", "1e400"] {
+            assert!(
+                SraCodec::decode_response(&mut BytesMut::from(
+                    &framed(REPLY_START, format!("RD,20,{bad}").as_bytes())[..]
+                ))
+                .is_err(),
+                "{bad}"
+            );
+        }
+    }
+
+    proptest! {
+        #![proptest_config(crate::test_support::config())]
+
         #[test]
         fn arbitrary_bytes_never_panic_nor_yield_a_reading(
             bytes in proptest::collection::vec(any::<u8>(), 0..2048)

@@ -1,0 +1,205 @@
+//! README: "SIGTERM … stops the fits at their next generation (they run again at the next
+//! start)", and the daemon runs "until SIGTERM or SIGINT". `brdfd serve` as a child process
+//! (simulated instruments, the store and its token in a temporary directory, the API on a free
+//! loopback port) runs a long fit — the paper GA at its default 98,100 evaluations, seconds in a
+//! debug build — and gets SIGTERM (then, in a second run, SIGINT) while that fit is provably
+//! running (the daemon reported a generation of it). The daemon exits 0 and leaves the fit
+//! `running` in the store, unfinished; the next start queues it again and it finishes, with the
+//! same seed and method.
+//!
+//! No sleeps for synchronisation: every wait is for a state the daemon reports (its printed address, a fit's
+//! status, an event), bounded by `STEP_TIMEOUT`.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::net::SocketAddr;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::Instant;
+
+use brdfd::client::Client;
+use brdfd::store::{FitRunId, FitStatus, Store};
+use serde_json::{Value, json};
+
+use common::*;
+
+/// A running `brdfd serve`.
+struct Daemon {
+    child: Child,
+    client: Client,
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        // A test that failed half-way must not leave a daemon behind.
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn write_config(dir: &Path) -> std::path::PathBuf {
+    let config = dir.join("brdfd.toml");
+    let text = format!(
+        "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\n\n[log]\nlevel = \"warn\"\n\n\
+         [devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n",
+        dir.join("brdfd.db").display()
+    );
+    std::fs::write(&config, text).unwrap();
+    config
+}
+
+fn spawn_daemon(config: &Path) -> Daemon {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_brdfd"))
+        .args(["serve", "--config"])
+        .arg(config)
+        .env_remove("BRDFD_TOKEN")
+        .env_remove("BRDFD_CONFIG")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("brdfd serve starts");
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        let _ = BufReader::new(stdout).read_line(&mut line);
+        let _ = tx.send(line);
+    });
+    let line = rx
+        .recv_timeout(STEP_TIMEOUT)
+        .expect("the daemon prints where it listens");
+    let addr: SocketAddr = line
+        .split("http://")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|a| a.parse().ok())
+        .unwrap_or_else(|| panic!("no address in {line:?}"));
+    Daemon {
+        child,
+        client: client_of_serve(addr, config.parent().unwrap()),
+    }
+}
+
+/// Polls the daemon until `done`, failing after `STEP_TIMEOUT`.
+fn wait_until(what: &str, mut done: impl FnMut() -> bool) {
+    let deadline = Instant::now() + STEP_TIMEOUT;
+    while !done() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        // A polling interval, not a synchronisation: the state is checked again after it.
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}
+
+fn fit_status(client: &Client, fit: i64) -> String {
+    let v: Value = client.get(&format!("/fits/{fit}")).unwrap();
+    v["run"]["status"].as_str().unwrap().to_owned()
+}
+
+/// Reference, one scan (fitted), then a refit with the paper GA at its default size; returns
+/// the scan and the long fit once a `fit_progress` event has shown it running.
+fn start_a_long_fit(client: &Client) -> (i64, i64) {
+    client.post("/reference", None).unwrap();
+    wait_until("the reference", || {
+        client.get("/status").unwrap()["busy"].is_null()
+    });
+    let v = client
+        .post("/scans", Some(&json!({ "sample": "T.Shutdown" })))
+        .unwrap();
+    let scan = v["scan"].as_i64().unwrap();
+    wait_until("the scan and its fits", || {
+        let d: Value = client.get(&format!("/scans/{scan}")).unwrap();
+        d["scan"]["state"] == "complete"
+            && d["fits"]
+                .as_array()
+                .is_some_and(|f| f.len() == 3 && f.iter().all(|f| f["run"]["status"] == "done"))
+    });
+    let events = client.events().unwrap();
+    let v = client
+        .post(
+            &format!("/scans/{scan}/refit"),
+            Some(&json!({"cost_functions": ["m2"], "method": "paper", "seed": 5})),
+        )
+        .unwrap();
+    let fit = v["fits"][0].as_i64().unwrap();
+    for ev in events {
+        if ev["type"] == "fit_progress" && ev["fit"] == fit {
+            break;
+        }
+        assert!(
+            !(ev["fit"] == fit
+                && ev["type"]
+                    .as_str()
+                    .is_some_and(|t| t != "fit_started" && t != "fit_queued")),
+            "the long fit ended before the signal: {ev}"
+        );
+    }
+    assert_eq!(fit_status(client, fit), "running");
+    (scan, fit)
+}
+
+fn signal_stops_a_long_fit_which_runs_again_at_the_next_start(signal: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_config(dir.path());
+    let db = dir.path().join("brdfd.db");
+    let mut d = spawn_daemon(&config);
+    let (_scan, fit) = start_a_long_fit(&d.client);
+
+    let pid = d.child.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args([&format!("-{signal}"), &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let status = d.child.wait().unwrap();
+    assert!(
+        status.success(),
+        "{signal}: a graceful stop exits 0: {status}"
+    );
+
+    // Stopped, not finished and not failed: left `running` for the next start.
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let store = Store::open(&db).await.unwrap();
+        let f = store.fit_detail(FitRunId(fit)).await.unwrap();
+        assert_eq!(f.run.status, FitStatus::Running, "{signal}: {:?}", f.run);
+        assert!(
+            f.run.result.is_none() && f.run.error.is_none(),
+            "{:?}",
+            f.run
+        );
+        store.close().await;
+    });
+
+    // The next start queues it again, and it finishes with the same method and seed.
+    let d = spawn_daemon(&config);
+    wait_until("the interrupted fit to finish", || {
+        fit_status(&d.client, fit) == "done"
+    });
+    let v: Value = d.client.get(&format!("/fits/{fit}")).unwrap();
+    assert_eq!(v["run"]["method"], "paper", "{v}");
+    assert_eq!(v["run"]["seed"], 5, "{v}");
+    assert!(
+        v["run"]["result"]["evaluations"].as_u64().unwrap() > 2_320,
+        "{v}"
+    );
+    drop(d);
+}
+
+#[test]
+fn sigterm_stops_a_long_fit_which_runs_again_at_the_next_start() {
+    let _serial = serial();
+    signal_stops_a_long_fit_which_runs_again_at_the_next_start("TERM");
+}
+
+#[test]
+fn sigint_stops_a_long_fit_which_runs_again_at_the_next_start() {
+    let _serial = serial();
+    signal_stops_a_long_fit_which_runs_again_at_the_next_start("INT");
+}
