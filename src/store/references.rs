@@ -23,7 +23,7 @@ struct InstrumentRow {
 }
 
 #[derive(sqlx::FromRow)]
-struct ReferenceRow {
+pub(super) struct ReferenceRow {
     id: i64,
     name: String,
     status: String,
@@ -41,7 +41,7 @@ const REFERENCE_SUMMARY: &str = "\
     FROM reference_sets r";
 
 impl ReferenceRow {
-    fn into_summary(self) -> Result<ReferenceSummary, StoreError> {
+    pub(super) fn into_summary(self) -> Result<ReferenceSummary, StoreError> {
         let corrupt = |detail: String| StoreError::Corrupt {
             table: "reference_sets",
             id: self.id,
