@@ -6,7 +6,8 @@
 //!   Before migrating, the highest version already applied is compared with the highest this
 //!   brdfd knows: a database migrated by a newer brdfd is refused, never half-understood.
 //! - A station id is claimed by the first store that registers it (its `sync_identity.uid`);
-//!   another store under the same id is refused, so two benches never mix their rows.
+//!   another store under the same id is refused, so two benches never mix their rows; and a
+//!   store registered under one id is refused under another, which would count it twice.
 //! - Two connections per station at most: forwarding is one transaction at a time, and a lab's
 //!   server must hold every station's pool (ARCHITECTURE.md: pooling at 100 stations).
 
@@ -126,6 +127,21 @@ impl Central {
     /// Registers `station` for the store `uid` (first come, first served) and returns its
     /// cursor; refuses a station id another store holds.
     pub async fn register(&self, station: &str, uid: &str) -> Result<StationRow, SyncError> {
+        // One store, one id: the same store under a second id would count its scans twice.
+        let other: Option<String> = sqlx::query_scalar(
+            "SELECT station FROM stations WHERE store_uid = $1 AND station <> $2 LIMIT 1",
+        )
+        .bind(uid)
+        .bind(station)
+        .fetch_optional(&self.pool)
+        .await
+        .map_err(|e| self.error(e))?;
+        if let Some(existing) = other {
+            return Err(SyncError::StoreHasOtherId {
+                station: station.to_string(),
+                existing,
+            });
+        }
         sqlx::query(
             "INSERT INTO stations (station, store_uid, host, brdfd_version) VALUES ($1, $2, $3, $4)
              ON CONFLICT (station) DO NOTHING",

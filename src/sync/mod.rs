@@ -70,6 +70,14 @@ pub enum SyncError {
         host: String,
     },
 
+    /// This store already forwards under another station id.
+    #[error(
+        "this store already forwards as station \"{existing}\"; under \"{station}\" too its \
+         scans would be counted twice; keep [station] id = \"{existing}\" (or --station \
+         {existing})"
+    )]
+    StoreHasOtherId { station: String, existing: String },
+
     /// The central cursor is past everything this store ever queued: the file is an older
     /// copy (a backup restored) of the store that forwarded under this station id.
     #[error(
