@@ -342,7 +342,9 @@ impl Service {
             let mut on_batch = |r: &crate::sync::BatchReport| {
                 tracing::debug!("forwarded: {r}");
             };
-            forwarder.run(async move { stop.recv().await }, &mut on_batch).await;
+            forwarder
+                .run(async move { stop.recv().await }, &mut on_batch)
+                .await;
         });
         Ok(())
     }
