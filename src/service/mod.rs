@@ -329,6 +329,11 @@ impl Service {
         &self,
         options: crate::sync::ForwarderOptions,
     ) -> Result<(), ServiceError> {
+        tracing::info!(
+            station = %options.station,
+            central = %crate::sync::redact(&options.url),
+            "forwarding the store to the central database"
+        );
         let forwarder = crate::sync::Forwarder::for_store(&self.inner.store, options)
             .await
             .map_err(|e| crate::store::StoreError::from(sqlx::Error::Protocol(e.to_string())))?;

@@ -134,6 +134,9 @@ pub struct Forwarder {
     central: Option<Central>,
     /// The central cursor, when known to be current.
     cursor: Option<i64>,
+    /// The last cursor the central database acknowledged (kept across errors, for the
+    /// backlog).
+    acknowledged: i64,
     status: Arc<Mutex<SyncStatus>>,
 }
 
@@ -189,6 +192,7 @@ impl Forwarder {
             uid,
             central: None,
             cursor: None,
+            acknowledged: 0,
             status: Arc::new(Mutex::new(status)),
         }
     }
@@ -247,7 +251,7 @@ impl Forwarder {
     /// Counts the entries after the last acknowledged cursor (all of them before the first
     /// contact) into the status.
     async fn refresh_backlog(&self) {
-        let after = self.cursor.unwrap_or(0);
+        let after = self.cursor.unwrap_or(self.acknowledged);
         if let Ok(n) =
             sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM sync_outbox WHERE seq > $1")
                 .bind(after)
@@ -272,6 +276,7 @@ impl Forwarder {
             self.cursor = Some(central.cursor(&self.options.station).await?);
         }
         let cursor = self.cursor.expect("read above");
+        self.acknowledged = cursor;
         let highest = self.highest_seq().await?;
         if cursor > highest {
             return Err(SyncError::StoreBehind {
@@ -373,6 +378,7 @@ impl Forwarder {
         tx.commit().await.map_err(|e| central.error(e))?;
         let now = crate::store::now_ms();
         self.cursor = Some(new_cursor);
+        self.acknowledged = new_cursor;
         if let Some(writer) = &self.pruner {
             // Losing this delete costs nothing but space: the entries are below the cursor.
             if let Err(e) = sqlx::query("DELETE FROM sync_outbox WHERE seq <= $1")
