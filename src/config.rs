@@ -88,6 +88,25 @@ pub struct Config {
     pub scan: ScanConfig,
     pub fit: FitConfig,
     pub log: LogConfig,
+    pub station: StationConfig,
+    pub sync: SyncConfig,
+}
+
+/// `[station]`
+#[derive(Debug, Clone, PartialEq)]
+pub struct StationConfig {
+    /// This station's id in the lab's central database, on every row it forwards; default: the
+    /// host name.
+    pub id: String,
+}
+
+/// `[sync]`
+#[derive(Debug, Clone, PartialEq)]
+pub struct SyncConfig {
+    /// The lab's central PostgreSQL database; `None`: nothing is forwarded.
+    pub url: Option<String>,
+    /// Outbox entries forwarded per PostgreSQL transaction.
+    pub batch: usize,
 }
 
 /// `[store]`
@@ -292,6 +311,7 @@ mod defaults {
     pub const REFERENCE_MAX_AGE_HOURS: f64 = 24.0;
     pub const SEED: u64 = 1;
     pub const LEVEL: &str = "info";
+    pub const SYNC_BATCH: u64 = 500;
 }
 
 impl Default for Config {
@@ -340,6 +360,13 @@ impl Default for Config {
                 json: false,
                 level: LogLevel::Info,
             },
+            station: StationConfig {
+                id: crate::sync::default_station_id(),
+            },
+            sync: SyncConfig {
+                url: None,
+                batch: defaults::SYNC_BATCH as usize,
+            },
         }
     }
 }
@@ -363,6 +390,23 @@ struct RawConfig {
     fit: RawFit,
     #[serde(default)]
     log: RawLog,
+    #[serde(default)]
+    station: RawStation,
+    #[serde(default)]
+    sync: RawSync,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStation {
+    id: S<String>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSync {
+    url: S<String>,
+    batch: S<u64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -570,6 +614,37 @@ fn retries(n: u32) -> Result<u32, String> {
     } else {
         Err(format!("{n} is out of range: 0 to 10 resends"))
     }
+}
+
+/// A station id: 1 to 64 letters, digits, '.', '_' or '-' (it names the station in the central
+/// database, in reports and on the command line, so nothing that needs quoting).
+fn station_id(id: String) -> Result<String, String> {
+    let ok = !id.is_empty()
+        && id.len() <= 64
+        && id
+            .chars()
+            .all(|ch| ch.is_ascii_alphanumeric() || matches!(ch, '.' | '_' | '-'));
+    if ok {
+        Ok(id)
+    } else {
+        Err(format!(
+            "\"{id}\" is not a station id: 1 to 64 letters, digits, '.', '_' or '-'"
+        ))
+    }
+}
+
+/// The central database URL: postgres:// or postgresql://, parsed as sqlx parses it.
+fn sync_url(url: &str) -> Result<String, String> {
+    use std::str::FromStr;
+    let shown = crate::sync::redact(url);
+    if !crate::sync::is_postgres_url(url) {
+        return Err(format!(
+            "\"{shown}\" is not a PostgreSQL URL: write postgres://USER[:PASSWORD]@HOST[:PORT]/DATABASE"
+        ));
+    }
+    sqlx::postgres::PgConnectOptions::from_str(url)
+        .map(|_| url.to_string())
+        .map_err(|e| format!("\"{shown}\" is not a valid PostgreSQL URL: {e}"))
 }
 
 impl Config {
@@ -852,6 +927,30 @@ impl Config {
             })?,
         };
 
+        let station = StationConfig {
+            id: c.value(
+                "station.id",
+                &raw.station.id,
+                crate::sync::default_station_id(),
+                station_id,
+            )?,
+        };
+        let sync = SyncConfig {
+            url: match &raw.sync.url {
+                None => None,
+                Some(v) => Some(sync_url(v.get_ref()).map_err(|m| c.invalid("sync.url", v, m))?),
+            },
+            batch: c.value("sync.batch", &raw.sync.batch, defaults::SYNC_BATCH, |n| {
+                if (1..=10_000).contains(&n) {
+                    Ok(n as usize)
+                } else {
+                    Err(format!(
+                        "{n} is out of range: 1 to 10000 rows per transaction"
+                    ))
+                }
+            })?,
+        };
+
         Ok(Config {
             store,
             api,
@@ -859,6 +958,8 @@ impl Config {
             scan,
             fit,
             log,
+            station,
+            sync,
         })
     }
 }
@@ -953,6 +1054,36 @@ mod tests {
                     i + 1
                 );
             }
+        }
+    }
+
+    #[test]
+    fn station_and_sync_settings() {
+        let c = parse("[station]\nid = \"bench-2\"\n[sync]\nurl = \"postgres://lab@db/brdfd\"\n")
+            .unwrap();
+        assert_eq!(c.station.id, "bench-2");
+        assert_eq!(c.sync.url.as_deref(), Some("postgres://lab@db/brdfd"));
+        assert_eq!(c.sync.batch, 500);
+        let e = parse("[station]\nid = \"bench 2\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("station.id") && e.contains("test.toml:2:"),
+            "{e}"
+        );
+        let e = parse("[sync]\nurl = \"mysql://u:pw@h/db\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sync.url") && !e.contains("pw"), "{e}");
+        let e = parse("[sync]\nbatch = 0\n").unwrap_err().to_string();
+        assert!(e.contains("sync.batch"), "{e}");
+        for key in ["id = ", "url = ", "batch = "] {
+            assert!(
+                SHIPPED
+                    .lines()
+                    .any(|l| l.trim_start_matches("# ").starts_with(key)),
+                "config/brdfd.toml does not show `{key}`"
+            );
         }
     }
 

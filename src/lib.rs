@@ -29,6 +29,7 @@
 //!   as it arrives), fit worker (blocking threads behind a semaphore), events, shutdown.
 //! - [`api`]: the local HTTP API (axum) and its server-sent event stream.
 //! - [`client`]: the operator commands' side of the HTTP API (`brdfd scan`, `scans`, …).
+//! - [`sync`]: forwarding the store to the lab's central PostgreSQL database (several stations).
 pub mod api;
 pub mod cli;
 pub mod client;
@@ -48,6 +49,7 @@ pub mod service;
 pub mod spectral;
 pub mod stats;
 pub mod store;
+pub mod sync;
 pub mod synth;
 #[cfg(test)]
 pub(crate) mod test_support;

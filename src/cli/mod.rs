@@ -14,6 +14,7 @@ pub mod record;
 pub mod replay;
 pub mod report;
 pub mod serve;
+pub mod sync;
 pub mod synth;
 
 /// brdfd: spectral BRDF from two handheld instruments (X-Rite MA-T12 + Canon RA-532H).
@@ -69,6 +70,9 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Measure once and record every frame to and from both instruments into session files.
     Record(record::RecordArgs),
+    /// Forward a station's store to the lab's central PostgreSQL database (what `[sync] url`
+    /// makes the daemon do continuously), e.g. from a stopped station.
+    Sync(sync::SyncArgs),
 }
 
 /// Runs one parsed command line.
@@ -92,6 +96,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Import(args) => ops::import(&args),
         Command::Replay(args) => replay::run(&args),
         Command::Record(args) => record::run(&args),
+        Command::Sync(args) => sync::run(&args),
     }
 }
 

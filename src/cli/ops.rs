@@ -728,6 +728,19 @@ pub fn status(args: &DaemonArgs) -> anyhow::Result<()> {
         "fits: {} queued, {} running; instruments simulated: MA-T12 {}, SRA {}",
         v["fits_queued"], v["fits_running"], v["simulated"]["ma_t12"], v["simulated"]["sra"]
     );
+    if let Some(sync) = v["sync"].as_object() {
+        println!(
+            "forwarding as station {} to {}: {} rows waiting, {} forwarded since start{}",
+            sync["station"].as_str().unwrap_or("?"),
+            sync["central"].as_str().unwrap_or("?"),
+            sync["backlog"],
+            sync["rows_forwarded"],
+            match sync["last_error"].as_str() {
+                Some(e) => format!("; last error: {e}"),
+                None => String::new(),
+            }
+        );
+    }
     Ok(())
 }
 

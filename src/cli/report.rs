@@ -1,6 +1,7 @@
 //! `brdfd report`: the study report (SCIENCE.md §9) of stored scans — figures 4–12 as PNG and
 //! SVG, and the summary in HTML and Markdown — written into one directory, with progress on
-//! stderr. Reads the store directly (no daemon needed).
+//! stderr. Reads the store directly (no daemon needed): a station's SQLite file, or the lab's
+//! central PostgreSQL database (`--db postgres://…`, `--station`).
 
 use std::path::{Path, PathBuf};
 
@@ -8,8 +9,9 @@ use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::config::Config;
-use crate::report::load::{Selection, from_store};
+use crate::report::load::{Selection, from_central, from_store};
 use crate::report::{Study, write_report};
+use crate::store::central::CentralSelection;
 use crate::store::{ScanId, Store};
 
 /// Where `brdfd demo` writes its store by default (its `--dir`, then `brdfd.db`).
@@ -27,11 +29,19 @@ pub struct StoreSelection {
     #[arg(value_name = "SCAN")]
     pub scans: Vec<i64>,
 
-    /// The SQLite store to read; default: the `[store] path` of the configuration
+    /// The store to read: a station's SQLite file, or the lab's central PostgreSQL database
+    /// as `postgres://USER[:PASSWORD]@HOST[:PORT]/DATABASE` (every station's scans, filled by
+    /// `brdfd sync` or `[sync] url`). Default: the `[store] path` of the configuration
     /// (`brdfd.db`), or, when that file does not exist, the store `brdfd demo` writes
     /// (`brdfd-demo/brdfd.db`).
-    #[arg(long, value_name = "PATH")]
+    #[arg(long, value_name = "PATH|URL")]
     pub db: Option<PathBuf>,
+
+    /// With a postgres:// --db: only this station's scans (its `[station] id`); scan ids are
+    /// then that station's. Without it every station's scans are read, and each sample is
+    /// named with its station ("T.Sky blue [bench-2]").
+    #[arg(long, value_name = "ID")]
+    pub station: Option<String>,
 
     /// Configuration file whose store to read when --db is not given; default: the built-in
     /// defaults (`brdfd.db` in the working directory).
@@ -73,11 +83,82 @@ impl StoreSelection {
         }
     }
 
+    /// The central database URL, when --db is one.
+    fn central_url(&self) -> Option<&str> {
+        self.db
+            .as_deref()
+            .and_then(|p| p.to_str())
+            .filter(|s| crate::sync::is_postgres_url(s))
+    }
+
     /// Loads the selected scans and their fits from the store.
     pub fn load(&self) -> anyhow::Result<Study> {
+        if let Some(url) = self.central_url() {
+            return load_central_study(url, self.station.as_deref(), &self.selection());
+        }
+        if self.station.is_some() {
+            bail!("--station only applies to a central database (--db postgres://…)");
+        }
         let path = self.db_path()?;
         load_study_checked(&path, &self.selection(), self.include_simulated)
     }
+}
+
+/// Loads a study from the lab's central database: one station's scans or every station's.
+/// Scan ids are a station's own, so they need --station when several stations forward there.
+pub fn load_central_study(
+    url: &str,
+    station: Option<&str>,
+    selection: &Selection,
+) -> anyhow::Result<Study> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    rt.block_on(async {
+        let central = crate::sync::Central::connect(url).await?;
+        let stations = central.stations().await?;
+        let result = async {
+            if let Some(s) = station
+                && !stations.iter().any(|x| x == s)
+            {
+                bail!(
+                    "no station \"{s}\" in the central database {}; it holds {}",
+                    central.url(),
+                    if stations.is_empty() {
+                        "no station yet".to_string()
+                    } else {
+                        stations.join(", ")
+                    }
+                );
+            }
+            let scans = match selection {
+                Selection::All => None,
+                Selection::Scans(ids) => {
+                    if station.is_none() && stations.len() > 1 {
+                        bail!(
+                            "scan ids are per station and {} stations forward to {}; say \
+                             which with --station ({})",
+                            stations.len(),
+                            central.url(),
+                            stations.join(", ")
+                        );
+                    }
+                    Some(ids.iter().map(|i| i.0).collect())
+                }
+            };
+            let selection = CentralSelection {
+                station: station.map(str::to_string),
+                scans,
+            };
+            from_central(central.pool(), &selection)
+                .await
+                .with_context(|| format!("reading the study from {}", central.url()))
+        }
+        .await;
+        central.close().await;
+        result
+    })
 }
 
 /// Opens an existing store (never creates one: a typo in --db must not look like an empty

@@ -1,4 +1,5 @@
-//! Builds a [`Study`] from the store, through its public verbs only: per complete scan its
+//! Builds a [`Study`] from a station's store, through its public verbs only, or from the lab's
+//! central PostgreSQL database through [`crate::store::central`] (one loader, two sources): per complete scan its
 //! readings and reference (→ [`Scan`]), its processed BRDF, and per cost function the latest
 //! finished fit run (else the latest run, failed or unfinished, to say why there is none).
 //!
@@ -16,8 +17,10 @@ use crate::model::{FresnelCosine, Params};
 use crate::processing::{self, ProcessingOptions};
 use crate::scan::{DeviceReadings, Reference, Scan};
 use crate::spectral::BANDS;
+use crate::store::central::{self, CentralSelection};
 use crate::store::{
-    FitRun, FitStatus, Reading, ReadingValues, ScanFilter, ScanId, ScanState, Store, StoreError,
+    FitRun, FitStatus, Processed, Reading, ReadingValues, ScanDetail, ScanFilter, ScanId,
+    ScanState, Store, StoreError,
 };
 
 use super::study::{DoneFit, FitState, FitStudy, SampleStudy, Study};
@@ -113,9 +116,14 @@ fn fit_state(
     })
 }
 
-/// One scan as a study sample.
-async fn sample(store: &Store, id: ScanId) -> Result<SampleStudy, LoadError> {
-    let detail = store.scan_detail(id).await?;
+/// One scan as a study sample, from its stored detail, processed versions and fit runs
+/// (the same whichever database they were read from).
+fn assemble(
+    id: ScanId,
+    detail: ScanDetail,
+    processed: Vec<Processed>,
+    runs: Vec<FitRun>,
+) -> Result<SampleStudy, LoadError> {
     if detail.scan.state != ScanState::Complete {
         return Err(LoadError::NotComplete {
             scan: id,
@@ -130,8 +138,6 @@ async fn sample(store: &Store, id: ScanId) -> Result<SampleStudy, LoadError> {
         },
         readings: readings_of(id, &detail.readings, "sample")?,
     };
-    let processed = store.processed_for_scan(id).await?;
-    let runs = store.fits_for_scan(id).await?;
     // The processed version most fits were made from; else the first; else process now.
     let mut uses: HashMap<i64, usize> = HashMap::new();
     for r in &runs {
@@ -186,6 +192,14 @@ async fn sample(store: &Store, id: ScanId) -> Result<SampleStudy, LoadError> {
     })
 }
 
+/// One scan of a station's store as a study sample.
+async fn sample(store: &Store, id: ScanId) -> Result<SampleStudy, LoadError> {
+    let detail = store.scan_detail(id).await?;
+    let processed = store.processed_for_scan(id).await?;
+    let runs = store.fits_for_scan(id).await?;
+    assemble(id, detail, processed, runs)
+}
+
 /// The study of the selected scans.
 pub async fn from_store(store: &Store, selection: &Selection) -> Result<Study, LoadError> {
     let ids: Vec<ScanId> = match selection {
@@ -207,17 +221,48 @@ pub async fn from_store(store: &Store, selection: &Selection) -> Result<Study, L
     for id in ids {
         samples.push(sample(store, id).await?);
     }
-    // A sample scanned more than once: tell the scans apart by id.
+    disambiguate(&mut samples);
+    Ok(Study { samples })
+}
+
+/// The study of the selected scans of the lab's central database (`brdfd report --db
+/// postgres://…`), built by the same [`assemble`] as [`from_store`]: for one station's scans
+/// the study, its figures and its statistics are those of that station's own store. Across
+/// stations each sample's name carries its station, `T.Sky blue [bench-2]`, so figures and
+/// exports say where every sample was measured.
+pub async fn from_central(
+    pool: &sqlx::PgPool,
+    selection: &CentralSelection,
+) -> Result<Study, LoadError> {
+    let scans = central::load_scans(pool, selection).await?;
+    let stations: std::collections::BTreeSet<&str> =
+        scans.iter().map(|s| s.station.as_str()).collect();
+    let several = stations.len() > 1;
+    let mut samples = Vec::with_capacity(scans.len());
+    for s in scans {
+        let id = s.detail.scan.id;
+        let station = s.station.clone();
+        let mut sample = assemble(id, s.detail, s.processed, s.fits)?;
+        if several {
+            sample.name = format!("{} [{station}]", sample.name);
+        }
+        samples.push(sample);
+    }
+    disambiguate(&mut samples);
+    Ok(Study { samples })
+}
+
+/// A sample scanned more than once: tell the scans apart by id.
+fn disambiguate(samples: &mut [SampleStudy]) {
     let mut count: HashMap<String, usize> = HashMap::new();
-    for s in &samples {
+    for s in samples.iter() {
         *count.entry(s.name.clone()).or_default() += 1;
     }
-    for s in &mut samples {
+    for s in samples.iter_mut() {
         if count[&s.name] > 1
             && let Some(id) = s.scan_id
         {
             s.name = format!("{} (scan {id})", s.name);
         }
     }
-    Ok(Study { samples })
 }

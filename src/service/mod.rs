@@ -65,6 +65,8 @@ pub struct ServiceSettings {
     pub specular: SpecularStrategy,
     /// How long shutdown waits for the scan in progress and the fits to stop.
     pub shutdown_grace: Duration,
+    /// Forwarding to the lab's central database (`[station]`, `[sync]`); `None`: none.
+    pub sync: Option<crate::sync::ForwarderOptions>,
 }
 
 impl ServiceSettings {
@@ -77,6 +79,11 @@ impl ServiceSettings {
             max_concurrent_fits: config.fit.max_concurrent_fits.get(),
             specular: config.fit.specular,
             shutdown_grace: Duration::from_secs(10),
+            sync: config.sync.url.as_ref().map(|url| {
+                let mut o = crate::sync::ForwarderOptions::new(config.station.id.clone(), url);
+                o.batch = config.sync.batch;
+                o
+            }),
         }
     }
 
@@ -186,6 +193,8 @@ pub struct Status {
     /// Whether each instrument is simulated.
     pub simulated: SimulatedStatus,
     pub timings: TimingSplit,
+    /// Forwarding to the central database (backlog, last error), when configured.
+    pub sync: Option<crate::sync::SyncStatus>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -248,6 +257,8 @@ struct Inner {
     /// Each instrument's identity as it last reported it (MA-T12, SRA), copied onto every
     /// reference set and scan as its provenance.
     identities: Mutex<[Option<drivers::Identity>; 2]>,
+    /// The forwarder's status, once it started.
+    sync_status: std::sync::OnceLock<Arc<Mutex<crate::sync::SyncStatus>>>,
 }
 
 /// The running service; clones share it.
@@ -301,6 +312,7 @@ impl Service {
             fits_running: AtomicUsize::new(0),
             identities: Mutex::new([None, None]),
             timings: Timings::default(),
+            sync_status: std::sync::OnceLock::new(),
         });
         let service = Service { inner };
         service.start_fit_worker(fit_rx).await;
@@ -308,7 +320,42 @@ impl Service {
         for fit in service.inner.store.queued_fits().await? {
             service.submit_fit(fit.id);
         }
+        if let Some(options) = service.inner.settings.sync.clone() {
+            service.start_forwarder(options).await?;
+        }
         Ok(service)
+    }
+
+    /// Starts forwarding the store to the central database (src/sync/) as a task that stops
+    /// with the service. It only reads what the store committed, so acquisition never waits on
+    /// it; an unreachable server is retried with back-off and shown in `status`.
+    async fn start_forwarder(
+        &self,
+        options: crate::sync::ForwarderOptions,
+    ) -> Result<(), ServiceError> {
+        tracing::info!(
+            station = %options.station,
+            central = %crate::sync::redact(&options.url),
+            "forwarding the store to the central database"
+        );
+        let forwarder = crate::sync::Forwarder::for_store(&self.inner.store, options)
+            .await
+            .map_err(|e| crate::store::StoreError::from(sqlx::Error::Protocol(e.to_string())))?;
+        let _ = self.inner.sync_status.set(forwarder.status());
+        let (mut stop, guard) = {
+            let c = self.inner.coordinator.lock().await;
+            (c.listener(), c.guard())
+        };
+        tokio::spawn(async move {
+            let _guard = guard;
+            let mut on_batch = |r: &crate::sync::BatchReport| {
+                tracing::debug!("forwarded: {r}");
+            };
+            forwarder
+                .run(async move { stop.recv().await }, &mut on_batch)
+                .await;
+        });
+        Ok(())
     }
 
     /// The store the service writes to.
@@ -444,6 +491,11 @@ impl Service {
                 sra: self.inner.devices.simulators.sra.is_some(),
             },
             timings: self.timings(),
+            sync: self
+                .inner
+                .sync_status
+                .get()
+                .map(|s| s.lock().unwrap_or_else(|p| p.into_inner()).clone()),
         })
     }
 

@@ -15,7 +15,7 @@ use super::records::{
 use super::{Store, StoreError, now_ms};
 
 #[derive(sqlx::FromRow)]
-struct FitRow {
+pub(super) struct FitRow {
     id: i64,
     scan_id: i64,
     processed_id: i64,
@@ -45,7 +45,7 @@ const FIT_RUN: &str = "\
     FROM fit_runs f JOIN processed p ON p.id = f.processed_id";
 
 impl FitRow {
-    fn into_run(self) -> Result<FitRun, StoreError> {
+    pub(super) fn into_run(self) -> Result<FitRun, StoreError> {
         let id = self.id;
         let corrupt = |detail: String| StoreError::Corrupt {
             table: "fit_runs",

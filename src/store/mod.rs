@@ -6,6 +6,8 @@
 //!   scans) and `fits.rs` (fit runs and evaluations).
 //! - [`ids`] holds the row-id newtypes, [`records`] what goes in and comes out, [`StoreError`]
 //!   every failure. `backend.rs` holds every SQLite-specific bit (pragmas, pools, upserts).
+//! - [`central`] reads the lab's central PostgreSQL database (see `src/sync/`) back into
+//!   these same records, for reports across stations.
 //! - The schema lives in `migrations/` (one commented step per file), embedded in the binary
 //!   and applied by [`Store::open`].
 //!
@@ -22,6 +24,7 @@
 //!   separate pool, which WAL lets run alongside the writer.
 
 mod backend;
+pub mod central;
 mod codec;
 mod error;
 mod fits;
@@ -174,6 +177,12 @@ impl Store {
         rows.iter()
             .map(|r| r.try_get::<String, _>(0).map_err(StoreError::from))
             .collect()
+    }
+
+    /// The writer and reader pools, for the sync forwarder (`src/sync/`), which reads the
+    /// outbox and the rows it names and prunes acknowledged entries.
+    pub(crate) fn sync_pools(&self) -> (&Pool, &Pool) {
+        (&self.writer, &self.reader)
     }
 
     /// Closes every connection, waiting for queries under way. Call at shutdown: the last

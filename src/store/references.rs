@@ -24,7 +24,7 @@ struct InstrumentRow {
 }
 
 #[derive(sqlx::FromRow)]
-struct ReferenceRow {
+pub(super) struct ReferenceRow {
     id: i64,
     name: String,
     status: String,
@@ -50,7 +50,7 @@ static REFERENCE_SUMMARY: std::sync::LazyLock<String> = std::sync::LazyLock::new
 });
 
 impl ReferenceRow {
-    fn into_summary(self) -> Result<ReferenceSummary, StoreError> {
+    pub(super) fn into_summary(self) -> Result<ReferenceSummary, StoreError> {
         let corrupt = |detail: String| StoreError::Corrupt {
             table: "reference_sets",
             id: self.id,

@@ -22,7 +22,7 @@ use super::{Store, StoreError, now_ms};
 pub const INTERRUPTED_REASON: &str = "daemon stopped during the scan";
 
 #[derive(sqlx::FromRow)]
-struct ScanRow {
+pub(super) struct ScanRow {
     id: i64,
     sample_id: i64,
     sample: String,
@@ -50,7 +50,7 @@ static SCAN_SUMMARY: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
 });
 
 impl ScanRow {
-    fn into_summary(self) -> Result<ScanSummary, StoreError> {
+    pub(super) fn into_summary(self) -> Result<ScanSummary, StoreError> {
         let state = self.state.parse().map_err(|detail| StoreError::Corrupt {
             table: "scans",
             id: self.id,
@@ -79,7 +79,7 @@ impl ScanRow {
 }
 
 #[derive(sqlx::FromRow)]
-struct ProcessedRow {
+pub(super) struct ProcessedRow {
     id: i64,
     scan_id: i64,
     specular: String,
@@ -88,7 +88,7 @@ struct ProcessedRow {
 }
 
 impl ProcessedRow {
-    fn into_processed(self) -> Result<Processed, StoreError> {
+    pub(super) fn into_processed(self) -> Result<Processed, StoreError> {
         let corrupt = |detail: String| StoreError::Corrupt {
             table: "processed",
             id: self.id,

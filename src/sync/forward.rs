@@ -1,0 +1,595 @@
+//! The forwarder: a station's outbox → the central database, one batch per transaction.
+//!
+//! One step: read up to `batch` outbox entries after the cursor and the rows they name, in one
+//! SQLite read transaction (a consistent snapshot: the rows are at least as new as the
+//! entries); upsert the rows table by table, parents first, and compare-and-set the station's
+//! cursor, in one PostgreSQL transaction. A row named several times in a batch is sent once,
+//! as it is now. After any error the cursor is read back from the central database (a COMMIT
+//! whose acknowledgement was lost may or may not have happened), then the step is retried with
+//! back-off (1 s doubling to 30 s); acquisition never waits on any of it.
+//!
+//! The daemon's forwarder also deletes the entries the central database has acknowledged
+//! (`sync_outbox.seq <= cursor`), through the store's single writer; `brdfd sync --db FILE`
+//! opens the file read-only and leaves it as it is.
+
+use std::collections::HashSet;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use serde::Serialize;
+use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
+use sqlx::{QueryBuilder, Row, SqlitePool};
+
+use super::central::{Central, one_line};
+use super::tables::{Kind, TABLES, Table, tables_for};
+use super::{SyncError, redact};
+use crate::store::Store;
+
+/// How a forwarder runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ForwarderOptions {
+    /// This station's id, recorded on every row it forwards.
+    pub station: String,
+    /// The central database, `postgres://…`.
+    pub url: String,
+    /// Outbox entries per batch (one PostgreSQL transaction).
+    pub batch: usize,
+    /// How often an idle forwarder looks for new entries.
+    pub poll: Duration,
+    /// Longest wait between retries after an error.
+    pub max_backoff: Duration,
+}
+
+impl ForwarderOptions {
+    pub fn new(station: impl Into<String>, url: impl Into<String>) -> ForwarderOptions {
+        ForwarderOptions {
+            station: station.into(),
+            url: url.into(),
+            batch: 500,
+            poll: Duration::from_millis(100),
+            max_backoff: Duration::from_secs(30),
+        }
+    }
+}
+
+/// What `brdfd status` shows of forwarding.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SyncStatus {
+    pub station: String,
+    /// The central database, password removed.
+    pub central: String,
+    /// Whether the last attempt reached the central database.
+    pub connected: bool,
+    /// Outbox entries not yet acknowledged by the central database.
+    pub backlog: i64,
+    /// The last outbox entry the central database acknowledged.
+    pub cursor: Option<i64>,
+    /// Rows forwarded since start-up.
+    pub rows_forwarded: u64,
+    pub last_forwarded_ms: Option<i64>,
+    /// The last failure, until the next success.
+    pub last_error: Option<String>,
+    pub last_error_ms: Option<i64>,
+}
+
+/// What one batch did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BatchReport {
+    /// Outbox entries covered.
+    pub entries: usize,
+    /// Rows upserted, per table (tables with none left out), in upsert order.
+    pub rows: Vec<(&'static str, usize)>,
+    /// The cursor after the batch.
+    pub cursor: i64,
+    /// Per entry, ms from its local commit to the central commit of its batch.
+    pub lags_ms: Vec<i64>,
+}
+
+impl BatchReport {
+    pub fn total_rows(&self) -> usize {
+        self.rows.iter().map(|(_, n)| n).sum()
+    }
+}
+
+impl std::fmt::Display for BatchReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let parts: Vec<String> = self.rows.iter().map(|(t, n)| format!("{n} {t}")).collect();
+        write!(
+            f,
+            "sent {} rows ({}) for {} outbox entries; cursor {}",
+            self.total_rows(),
+            parts.join(", "),
+            self.entries,
+            self.cursor
+        )
+    }
+}
+
+/// A column value on its way from SQLite to PostgreSQL.
+#[derive(Debug, Clone, PartialEq)]
+enum Value {
+    Int(Option<i64>),
+    Text(Option<String>),
+    Blob(Option<Vec<u8>>),
+    Real(Option<f64>),
+}
+
+struct Entry {
+    seq: i64,
+    table_name: String,
+    row_id: i64,
+    at_ms: i64,
+}
+
+/// Forwards one station's store.
+pub struct Forwarder {
+    options: ForwarderOptions,
+    /// Read connections on the station's store.
+    source: SqlitePool,
+    /// The store's writer, to prune acknowledged entries (the daemon only).
+    pruner: Option<SqlitePool>,
+    /// The store's `sync_identity.uid`.
+    uid: String,
+    central: Option<Central>,
+    /// The central cursor, when known to be current.
+    cursor: Option<i64>,
+    /// The last cursor the central database acknowledged (kept across errors, for the
+    /// backlog).
+    acknowledged: i64,
+    status: Arc<Mutex<SyncStatus>>,
+}
+
+impl std::fmt::Debug for Forwarder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Forwarder")
+            .field("station", &self.options.station)
+            .field("central", &redact(&self.options.url))
+            .finish_non_exhaustive()
+    }
+}
+
+async fn store_uid(pool: &SqlitePool, path: &str) -> Result<String, SyncError> {
+    let has: i64 = sqlx::query_scalar(
+        "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'sync_outbox'",
+    )
+    .fetch_one(pool)
+    .await
+    .map_err(SyncError::Local)?;
+    if has == 0 {
+        return Err(SyncError::NoOutbox {
+            path: path.to_string(),
+        });
+    }
+    sqlx::query_scalar("SELECT uid FROM sync_identity")
+        .fetch_one(pool)
+        .await
+        .map_err(SyncError::Local)
+}
+
+impl Forwarder {
+    fn new(
+        options: ForwarderOptions,
+        source: SqlitePool,
+        pruner: Option<SqlitePool>,
+        uid: String,
+    ) -> Forwarder {
+        let status = SyncStatus {
+            station: options.station.clone(),
+            central: redact(&options.url),
+            connected: false,
+            backlog: 0,
+            cursor: None,
+            rows_forwarded: 0,
+            last_forwarded_ms: None,
+            last_error: None,
+            last_error_ms: None,
+        };
+        Forwarder {
+            options,
+            source,
+            pruner,
+            uid,
+            central: None,
+            cursor: None,
+            acknowledged: 0,
+            status: Arc::new(Mutex::new(status)),
+        }
+    }
+
+    /// The daemon's forwarder for its open store: reads through the store's readers, prunes
+    /// through its writer.
+    pub async fn for_store(
+        store: &Store,
+        options: ForwarderOptions,
+    ) -> Result<Forwarder, SyncError> {
+        let (writer, reader) = store.sync_pools();
+        let uid = store_uid(reader, "(the daemon's store)").await?;
+        let f = Forwarder::new(options, reader.clone(), Some(writer.clone()), uid);
+        f.refresh_backlog().await;
+        Ok(f)
+    }
+
+    /// A forwarder for a stopped station's store file, opened read-only.
+    pub async fn for_file(path: &Path, options: ForwarderOptions) -> Result<Forwarder, SyncError> {
+        if !path.exists() {
+            return Err(SyncError::Local(sqlx::Error::Configuration(
+                format!("no store at {}", path.display()).into(),
+            )));
+        }
+        let pool = SqlitePoolOptions::new()
+            .max_connections(1)
+            .connect_with(
+                SqliteConnectOptions::new()
+                    .filename(path)
+                    .read_only(true)
+                    .busy_timeout(Duration::from_secs(5)),
+            )
+            .await
+            .map_err(SyncError::Local)?;
+        let uid = store_uid(&pool, &path.display().to_string()).await?;
+        let f = Forwarder::new(options, pool, None, uid);
+        f.refresh_backlog().await;
+        Ok(f)
+    }
+
+    /// The status, shared: it changes as the forwarder runs.
+    pub fn status(&self) -> Arc<Mutex<SyncStatus>> {
+        self.status.clone()
+    }
+
+    /// The central database, once connected.
+    pub fn central(&self) -> Option<&Central> {
+        self.central.as_ref()
+    }
+
+    fn set_status(&self, f: impl FnOnce(&mut SyncStatus)) {
+        let mut s = self.status.lock().unwrap_or_else(|p| p.into_inner());
+        f(&mut s);
+    }
+
+    /// Counts the entries after the last acknowledged cursor (all of them before the first
+    /// contact) into the status.
+    async fn refresh_backlog(&self) {
+        let after = self.cursor.unwrap_or(self.acknowledged);
+        if let Ok(n) =
+            sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM sync_outbox WHERE seq > $1")
+                .bind(after)
+                .fetch_one(&self.source)
+                .await
+        {
+            self.set_status(|s| s.backlog = n);
+        }
+    }
+
+    /// Connects (once), migrates the central schema and registers the station; reads the
+    /// cursor back when it is not known to be current.
+    async fn ensure_ready(&mut self) -> Result<(), SyncError> {
+        if self.central.is_none() {
+            let central = Central::connect_and_migrate(&self.options.url).await?;
+            let row = central.register(&self.options.station, &self.uid).await?;
+            self.cursor = Some(row.cursor);
+            self.central = Some(central);
+        }
+        if self.cursor.is_none() {
+            let central = self.central.as_ref().expect("connected above");
+            self.cursor = Some(central.cursor(&self.options.station).await?);
+        }
+        let cursor = self.cursor.expect("read above");
+        self.acknowledged = cursor;
+        let highest = self.highest_seq().await?;
+        if cursor > highest {
+            return Err(SyncError::StoreBehind {
+                station: self.options.station.clone(),
+                cursor,
+                local: highest,
+            });
+        }
+        Ok(())
+    }
+
+    /// The highest outbox number this store ever gave out (pruned entries included).
+    async fn highest_seq(&self) -> Result<i64, SyncError> {
+        let from_sequence: Option<i64> =
+            sqlx::query_scalar("SELECT seq FROM sqlite_sequence WHERE name = 'sync_outbox'")
+                .fetch_optional(&self.source)
+                .await
+                .map_err(SyncError::Local)?;
+        let from_table: Option<i64> = sqlx::query_scalar("SELECT MAX(seq) FROM sync_outbox")
+            .fetch_one(&self.source)
+            .await
+            .map_err(SyncError::Local)?;
+        Ok(from_sequence.unwrap_or(0).max(from_table.unwrap_or(0)))
+    }
+
+    /// Forwards one batch; `None` when the outbox holds nothing after the cursor.
+    pub async fn step(&mut self) -> Result<Option<BatchReport>, SyncError> {
+        let result = self.try_step().await;
+        match &result {
+            Ok(report) => {
+                let rows = report.as_ref().map(|r| r.total_rows() as u64).unwrap_or(0);
+                let cursor = self.cursor;
+                self.set_status(|s| {
+                    s.connected = true;
+                    s.cursor = cursor;
+                    s.last_error = None;
+                    s.last_error_ms = None;
+                    if rows > 0 {
+                        s.rows_forwarded += rows;
+                        s.last_forwarded_ms = Some(crate::store::now_ms());
+                    }
+                });
+            }
+            Err(e) => {
+                // The COMMIT may or may not have happened: read the cursor back next time.
+                self.cursor = None;
+                if !e.is_transient() {
+                    // A person must act (taken id, newer schema): connect afresh next time.
+                    self.central = None;
+                }
+                let message = e.to_string();
+                self.set_status(|s| {
+                    s.connected = false;
+                    s.last_error = Some(message);
+                    s.last_error_ms = Some(crate::store::now_ms());
+                });
+            }
+        }
+        self.refresh_backlog().await;
+        result
+    }
+
+    async fn try_step(&mut self) -> Result<Option<BatchReport>, SyncError> {
+        self.ensure_ready().await?;
+        let cursor = self.cursor.expect("ensure_ready sets it");
+        let (entries, rows) = self.read_batch(cursor).await?;
+        let Some(last) = entries.last() else {
+            return Ok(None);
+        };
+        let new_cursor = last.seq;
+        let central = self.central.as_ref().expect("ensure_ready connects");
+        let mut tx = central.pool.begin().await.map_err(|e| central.error(e))?;
+        let mut counts = Vec::new();
+        for (table, table_rows) in &rows {
+            if table_rows.is_empty() {
+                continue;
+            }
+            upsert(&mut tx, &self.options.station, table, table_rows)
+                .await
+                .map_err(|e| central.error(e))?;
+            counts.push((table.name, table_rows.len()));
+        }
+        let moved = sqlx::query(
+            "UPDATE stations SET cursor = $1, last_synced_at = now()
+             WHERE station = $2 AND cursor = $3",
+        )
+        .bind(new_cursor)
+        .bind(&self.options.station)
+        .bind(cursor)
+        .execute(&mut *tx)
+        .await
+        .map_err(|e| central.error(e))?;
+        if moved.rows_affected() != 1 {
+            return Err(SyncError::CursorMoved {
+                station: self.options.station.clone(),
+                expected: cursor,
+            });
+        }
+        tx.commit().await.map_err(|e| central.error(e))?;
+        let now = crate::store::now_ms();
+        self.cursor = Some(new_cursor);
+        self.acknowledged = new_cursor;
+        if let Some(writer) = &self.pruner {
+            // Losing this delete costs nothing but space: the entries are below the cursor.
+            if let Err(e) = sqlx::query("DELETE FROM sync_outbox WHERE seq <= $1")
+                .bind(new_cursor)
+                .execute(writer)
+                .await
+            {
+                tracing::debug!(error = %e, "pruning the sync outbox");
+            }
+        }
+        Ok(Some(BatchReport {
+            entries: entries.len(),
+            rows: counts,
+            cursor: new_cursor,
+            lags_ms: entries.iter().map(|e| now - e.at_ms).collect(),
+        }))
+    }
+
+    /// The entries after `cursor` and the rows they name, from one snapshot of the store.
+    async fn read_batch(
+        &self,
+        cursor: i64,
+    ) -> Result<(Vec<Entry>, Vec<(&'static Table, Vec<Vec<Value>>)>), SyncError> {
+        let mut tx = self.source.begin().await.map_err(SyncError::Local)?;
+        let entries: Vec<Entry> = sqlx::query(
+            "SELECT seq, table_name, row_id, at_ms FROM sync_outbox
+             WHERE seq > $1 ORDER BY seq LIMIT $2",
+        )
+        .bind(cursor)
+        .bind(self.options.batch as i64)
+        .fetch_all(&mut *tx)
+        .await
+        .map_err(SyncError::Local)?
+        .into_iter()
+        .map(|r| Entry {
+            seq: r.get(0),
+            table_name: r.get(1),
+            row_id: r.get(2),
+            at_ms: r.get(3),
+        })
+        .collect();
+        let mut out = Vec::new();
+        for table in &TABLES {
+            let mut seen = HashSet::new();
+            let ids: Vec<i64> = entries
+                .iter()
+                .filter(|e| {
+                    tables_for(&e.table_name)
+                        .iter()
+                        .any(|t| t.name == table.name)
+                })
+                .map(|e| e.row_id)
+                .filter(|id| seen.insert(*id))
+                .collect();
+            let mut rows = Vec::new();
+            // 500 placeholders per statement: well inside every SQLite's limit.
+            for chunk in ids.chunks(500) {
+                let mut q = QueryBuilder::<sqlx::Sqlite>::new("SELECT ");
+                let names: Vec<&str> = table.columns.iter().map(|(n, _)| *n).collect();
+                q.push(names.join(", "));
+                q.push(format!(
+                    " FROM {} WHERE {} IN (",
+                    table.name, table.selected_by
+                ));
+                let mut list = q.separated(", ");
+                for id in chunk {
+                    list.push_bind(*id);
+                }
+                q.push(")");
+                for row in q
+                    .build()
+                    .fetch_all(&mut *tx)
+                    .await
+                    .map_err(SyncError::Local)?
+                {
+                    rows.push(decode_row(table, &row).map_err(SyncError::Local)?);
+                }
+            }
+            out.push((table, rows));
+        }
+        tx.commit().await.map_err(SyncError::Local)?;
+        Ok((entries, out))
+    }
+
+    /// Forwards batches until the outbox is empty after the cursor; `on_batch` sees each.
+    pub async fn drain(
+        &mut self,
+        on_batch: &mut dyn FnMut(&BatchReport),
+    ) -> Result<u64, SyncError> {
+        let mut rows = 0;
+        while let Some(report) = self.step().await? {
+            rows += report.total_rows() as u64;
+            on_batch(&report);
+        }
+        Ok(rows)
+    }
+
+    /// Forwards for ever: a batch as soon as there is one, a look every `poll` when idle, and
+    /// after an error a retry with back-off, until `stop` resolves. Errors are logged once
+    /// each (a new message, not every retry) and kept in the status.
+    pub async fn run(
+        mut self,
+        stop: impl std::future::Future<Output = ()>,
+        on_batch: &mut (dyn FnMut(&BatchReport) + Send),
+    ) {
+        tokio::pin!(stop);
+        let mut backoff = Duration::from_secs(1);
+        let mut last_logged: Option<String> = None;
+        loop {
+            let result = tokio::select! {
+                _ = &mut stop => break,
+                r = self.step() => r,
+            };
+            let wait = match result {
+                Ok(Some(report)) => {
+                    backoff = Duration::from_secs(1);
+                    if last_logged.take().is_some() {
+                        tracing::info!(central = %redact(&self.options.url), "forwarding again");
+                    }
+                    on_batch(&report);
+                    continue;
+                }
+                Ok(None) => {
+                    backoff = Duration::from_secs(1);
+                    self.options.poll
+                }
+                Err(e) => {
+                    let message = e.to_string();
+                    if last_logged.as_deref() != Some(message.as_str()) {
+                        tracing::warn!("forwarding to the central database: {message}");
+                        last_logged = Some(message);
+                    }
+                    let wait = backoff;
+                    backoff = (backoff * 2).min(self.options.max_backoff);
+                    wait
+                }
+            };
+            tokio::select! {
+                _ = &mut stop => break,
+                _ = tokio::time::sleep(wait) => {}
+            }
+        }
+        if let Some(c) = &self.central {
+            c.close().await;
+        }
+    }
+}
+
+fn decode_row(table: &Table, row: &sqlx::sqlite::SqliteRow) -> Result<Vec<Value>, sqlx::Error> {
+    table
+        .columns
+        .iter()
+        .enumerate()
+        .map(|(i, (_, kind))| {
+            // Unchecked: SQLite's storage class follows the value, not the column (a REAL
+            // column may hold an integer); the value is converted as SQLite converts it.
+            Ok(match kind {
+                Kind::Int => Value::Int(row.try_get_unchecked(i)?),
+                Kind::Text => Value::Text(row.try_get_unchecked(i)?),
+                Kind::Blob => Value::Blob(row.try_get_unchecked(i)?),
+                Kind::Real => Value::Real(row.try_get_unchecked(i)?),
+            })
+        })
+        .collect()
+}
+
+/// PostgreSQL takes at most 65,535 bind parameters per statement.
+const MAX_PARAMS: usize = 60_000;
+
+async fn upsert(
+    tx: &mut sqlx::PgConnection,
+    station: &str,
+    table: &Table,
+    rows: &[Vec<Value>],
+) -> Result<(), sqlx::Error> {
+    let per_row = table.columns.len() + 1;
+    let names: Vec<&str> = table.columns.iter().map(|(n, _)| *n).collect();
+    let updates: Vec<String> = table
+        .columns
+        .iter()
+        .filter(|(n, _)| !table.key.contains(n))
+        .map(|(n, _)| format!("{n} = EXCLUDED.{n}"))
+        .collect();
+    for chunk in rows.chunks(MAX_PARAMS / per_row) {
+        let mut q = QueryBuilder::<sqlx::Postgres>::new(format!(
+            "INSERT INTO {} (station, {}) ",
+            table.name,
+            names.join(", ")
+        ));
+        q.push_values(chunk, |mut b, row| {
+            b.push_bind(station.to_string());
+            for v in row {
+                match v {
+                    Value::Int(x) => b.push_bind(*x),
+                    Value::Text(x) => b.push_bind(x.clone()),
+                    Value::Blob(x) => b.push_bind(x.clone()),
+                    Value::Real(x) => b.push_bind(*x),
+                };
+            }
+        });
+        q.push(format!(
+            " ON CONFLICT (station, {}) DO UPDATE SET {}",
+            table.key.join(", "),
+            updates.join(", ")
+        ));
+        q.build().execute(&mut *tx).await?;
+    }
+    Ok(())
+}
+
+/// One line for a failure, for the CLI.
+pub fn describe(e: &SyncError) -> String {
+    one_line(e)
+}

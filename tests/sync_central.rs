@@ -1,0 +1,636 @@
+//! Several stations, one lab, against a real PostgreSQL (tests/common/pg.rs): stations on the
+//! replayed recordings forward their stores to a central database while they measure, and the
+//! central database ends up holding exactly the union of their stores — row for row, column
+//! for column, and as the same exports and the same report — after three stations forwarding at
+//! once, after the server was killed (`pg_ctl stop -m immediate`) mid-forward and restarted,
+//! and after a station was restarted mid-forward. A second store under a taken station id and
+//! a central schema newer than this brdfd are refused; a bad URL or a wrong password is one
+//! clear line while the station goes on measuring.
+
+mod common;
+#[path = "common/pg.rs"]
+mod pg;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Duration;
+
+use brdfd::formats::{ExportOptions, Format};
+use brdfd::report::load::{Selection, from_central, from_store};
+use brdfd::service::{Devices, ServiceOptions, ServiceSettings};
+use brdfd::store::Store;
+use brdfd::store::central::CentralSelection;
+use brdfd::sync::tables::{Kind, TABLES};
+use brdfd::sync::{Central, Forwarder, ForwarderOptions, SyncError};
+use drivers::Instrument;
+use sqlx::Row;
+
+use common::*;
+use pg::{Cluster, TestDb, wait_for};
+
+/// Forwarding settings for tests: small batches, quick polls and retries.
+fn forwarding(station: &str, url: &str, batch: usize) -> ForwarderOptions {
+    ForwarderOptions {
+        batch,
+        poll: Duration::from_millis(20),
+        max_backoff: Duration::from_millis(300),
+        ..ForwarderOptions::new(station, url)
+    }
+}
+
+/// A station: the daemon in-process on the replayed recordings, forwarding as `station`.
+async fn station(station: &str, url: &str, batch: usize) -> TestDaemon {
+    let devices = Devices::simulated(
+        playlist(Instrument::MaT12),
+        playlist(Instrument::Sra),
+        &strict_fast(),
+        [None, None],
+    )
+    .expect("simulated instruments");
+    let settings = ServiceSettings {
+        sync: Some(forwarding(station, url, batch)),
+        ..settings()
+    };
+    start(devices, settings, ServiceOptions::default()).await
+}
+
+/// The first `n` samples of the recordings.
+fn samples(n: usize) -> Vec<&'static str> {
+    mock_devices::recordings::samples()
+        .iter()
+        .take(n)
+        .map(|s| s.sample.unwrap())
+        .collect()
+}
+
+/// The reference, then `n` samples, each settled (fits done).
+async fn measure(d: &TestDaemon, n: usize) {
+    measure_reference(&d.service).await;
+    for s in samples(n) {
+        scan_and_settle(&d.service, s).await;
+    }
+}
+
+/// The highest outbox entry the store at `db` ever queued, read afresh from the file.
+async fn highest_seq(db: &Path) -> i64 {
+    let pool = sqlx::SqlitePool::connect_with(
+        sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(db)
+            .read_only(true),
+    )
+    .await
+    .unwrap();
+    let seq: Option<i64> =
+        sqlx::query_scalar("SELECT seq FROM sqlite_sequence WHERE name = 'sync_outbox'")
+            .fetch_optional(&pool)
+            .await
+            .unwrap();
+    pool.close().await;
+    seq.unwrap_or(0)
+}
+
+/// Waits until the central database acknowledged everything the store at `db` has queued
+/// (the status alone may predate the last commit).
+async fn drained_service(service: &brdfd::service::Service, db: &Path) {
+    wait_for(
+        "the central cursor to reach the store's last entry",
+        STEP_TIMEOUT,
+        || async {
+            let s = service.status().await.unwrap().sync.expect("forwarding");
+            s.cursor == Some(highest_seq(db).await) && s.last_error.is_none()
+        },
+    )
+    .await;
+}
+
+async fn drained(d: &TestDaemon) {
+    drained_service(&d.service, &d.db).await;
+}
+
+/// One column's value in a comparable form: integers and text as they are, f64 by its bits,
+/// bytes in hex.
+fn cell_sqlite(row: &sqlx::sqlite::SqliteRow, i: usize, kind: Kind) -> String {
+    match kind {
+        Kind::Int => format!("{:?}", row.try_get_unchecked::<Option<i64>, _>(i).unwrap()),
+        Kind::Text => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<String>, _>(i).unwrap()
+        ),
+        Kind::Real => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<f64>, _>(i)
+                .unwrap()
+                .map(f64::to_bits)
+        ),
+        Kind::Blob => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<Vec<u8>>, _>(i).unwrap()
+        ),
+    }
+}
+
+fn cell_pg(row: &sqlx::postgres::PgRow, i: usize, kind: Kind) -> String {
+    match kind {
+        Kind::Int => format!("{:?}", row.get::<Option<i64>, _>(i)),
+        Kind::Text => format!("{:?}", row.get::<Option<String>, _>(i)),
+        Kind::Real => format!("{:?}", row.get::<Option<f64>, _>(i).map(f64::to_bits)),
+        Kind::Blob => format!("{:?}", row.get::<Option<Vec<u8>>, _>(i)),
+    }
+}
+
+type Tables = BTreeMap<&'static str, Vec<Vec<String>>>;
+
+/// Every forwarded table of a station's store file, every forwarded column, in key order.
+async fn local_tables(db: &Path) -> Tables {
+    let pool = sqlx::SqlitePool::connect_with(
+        sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(db)
+            .read_only(true),
+    )
+    .await
+    .unwrap();
+    let mut out = Tables::new();
+    for t in &TABLES {
+        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
+        let sql = format!(
+            "SELECT {} FROM {} ORDER BY {}",
+            cols.join(", "),
+            t.name,
+            t.key.join(", ")
+        );
+        let rows = sqlx::query(&sql).fetch_all(&pool).await.unwrap();
+        out.insert(
+            t.name,
+            rows.iter()
+                .map(|r| {
+                    t.columns
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (_, k))| cell_sqlite(r, i, *k))
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+    pool.close().await;
+    out
+}
+
+/// The same, of one station in the central database.
+async fn central_tables(url: &str, station: &str) -> Tables {
+    let pool = sqlx::PgPool::connect(url).await.unwrap();
+    let mut out = Tables::new();
+    for t in &TABLES {
+        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
+        let sql = format!(
+            "SELECT {} FROM {} WHERE station = $1 ORDER BY {}",
+            cols.join(", "),
+            t.name,
+            t.key.join(", ")
+        );
+        let rows = sqlx::query(&sql)
+            .bind(station)
+            .fetch_all(&pool)
+            .await
+            .unwrap();
+        out.insert(
+            t.name,
+            rows.iter()
+                .map(|r| {
+                    t.columns
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (_, k))| cell_pg(r, i, *k))
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+    pool.close().await;
+    out
+}
+
+/// Rows per station in the central database, per table.
+async fn central_station_counts(url: &str) -> BTreeMap<(String, &'static str), i64> {
+    let pool = sqlx::PgPool::connect(url).await.unwrap();
+    let mut out = BTreeMap::new();
+    for t in &TABLES {
+        let rows = sqlx::query(&format!(
+            "SELECT station, COUNT(*) FROM {} GROUP BY station",
+            t.name
+        ))
+        .fetch_all(&pool)
+        .await
+        .unwrap();
+        for r in rows {
+            out.insert((r.get::<String, _>(0), t.name), r.get::<i64, _>(1));
+        }
+    }
+    pool.close().await;
+    out
+}
+
+/// The station's store and the central database hold the same rows for it, and export the
+/// same study (JSON: every reading, fit and ΔE00).
+async fn assert_same(db: &Path, url: &str, station: &str) {
+    let local = local_tables(db).await;
+    let central = central_tables(url, station).await;
+    for t in &TABLES {
+        assert!(
+            !local[t.name].is_empty() || t.name == "instruments",
+            "{}: the station stored rows",
+            t.name
+        );
+        assert_eq!(
+            local[t.name].len(),
+            central[t.name].len(),
+            "{station}: {} row count, station vs central",
+            t.name
+        );
+        assert_eq!(
+            local[t.name], central[t.name],
+            "{station}: {} contents, station vs central",
+            t.name
+        );
+    }
+    let store = Store::open(db).await.unwrap();
+    let local_study = from_store(&store, &Selection::All).await.unwrap();
+    let c = Central::connect(url).await.unwrap();
+    let central_study = from_central(
+        c.pool(),
+        &CentralSelection {
+            station: Some(station.to_string()),
+            scans: None,
+        },
+    )
+    .await
+    .unwrap();
+    c.close().await;
+    let opts = ExportOptions::default();
+    assert_eq!(
+        brdfd::formats::export(&local_study, Format::Json, &opts).unwrap(),
+        brdfd::formats::export(&central_study, Format::Json, &opts).unwrap(),
+        "{station}: the JSON export of the station's store and of the central database"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn three_stations_forwarding_at_once_make_the_union_of_their_stores() {
+    let _serial = serial();
+    let db = TestDb::create("union");
+    bounded(async {
+        let names = ["bench-1", "bench-2", "bench-3"];
+        let mut stations = Vec::new();
+        for n in names {
+            stations.push(station(n, &db.url, 40).await);
+        }
+        // All three measure at the same time while forwarding.
+        let work: Vec<_> = stations
+            .iter()
+            .enumerate()
+            .map(|(i, d)| measure(d, 1 + i))
+            .collect();
+        futures_join_all(work).await;
+        for d in &stations {
+            drained(d).await;
+        }
+        for (d, n) in stations.iter().zip(names) {
+            d.service.stop_keeping_store().await;
+            assert_same(&d.db, &db.url, n).await;
+        }
+        // Nothing else arrived: the central rows are exactly the three stores' rows.
+        let counts = central_station_counts(&db.url).await;
+        let mut expected = BTreeMap::new();
+        for (d, n) in stations.iter().zip(names) {
+            for (t, rows) in local_tables(&d.db).await {
+                if !rows.is_empty() {
+                    expected.insert((n.to_string(), t), rows.len() as i64);
+                }
+            }
+        }
+        assert_eq!(counts, expected, "central rows per station and table");
+
+        // Across stations the report names each sample with its station.
+        let c = Central::connect(&db.url).await.unwrap();
+        let all = from_central(c.pool(), &CentralSelection::default())
+            .await
+            .unwrap();
+        assert_eq!(all.samples.len(), 1 + 2 + 3);
+        assert!(
+            all.samples.iter().any(|s| s.name.ends_with("[bench-3]")),
+            "{:?}",
+            all.samples.iter().map(|s| &s.name).collect::<Vec<_>>()
+        );
+        c.close().await;
+        for d in &stations {
+            d.store.close().await;
+        }
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_station_report_from_the_central_database_is_the_report_of_its_store() {
+    let _serial = serial();
+    let db = TestDb::create("report");
+    let d = bounded(async {
+        let d = station("bench-p", &db.url, 100).await;
+        measure(&d, 2).await;
+        drained(&d).await;
+        d.service.stop_keeping_store().await;
+        d
+    })
+    .await;
+    // Drawing the figures in a debug build takes a while on a loaded machine: outside the
+    // bound of the daemon part.
+    let out = tempfile::tempdir().unwrap();
+    let store = Store::open(&d.db).await.unwrap();
+    let local = from_store(&store, &Selection::All).await.unwrap();
+    let c = Central::connect(&db.url).await.unwrap();
+    let central = from_central(
+        c.pool(),
+        &CentralSelection {
+            station: Some("bench-p".into()),
+            scans: None,
+        },
+    )
+    .await
+    .unwrap();
+    c.close().await;
+    assert_eq!(local.samples.len(), 2);
+    // Every figure (PNG, SVG) and the summary pages, byte for byte.
+    let (a, b) = (out.path().join("station"), out.path().join("central"));
+    let fa = brdfd::report::write_report(&local, &a, &mut |_, _, _| {}).unwrap();
+    let fb = brdfd::report::write_report(&central, &b, &mut |_, _, _| {}).unwrap();
+    assert_eq!(fa.figures.len(), fb.figures.len());
+    let mut compared = 0;
+    for entry in std::fs::read_dir(&a).unwrap() {
+        let name = entry.unwrap().file_name();
+        assert_eq!(
+            std::fs::read(a.join(&name)).unwrap(),
+            std::fs::read(b.join(&name)).unwrap(),
+            "report file {name:?}: station vs central"
+        );
+        compared += 1;
+    }
+    assert!(compared > 10, "{compared} report files");
+    store.close().await;
+    d.store.close().await;
+}
+
+/// Joins futures without a dependency: polls them all on this task.
+async fn futures_join_all<F: std::future::Future<Output = ()>>(futs: Vec<F>) {
+    let mut futs: Vec<_> = futs.into_iter().map(Box::pin).collect();
+    let mut done = vec![false; futs.len()];
+    std::future::poll_fn(|cx| {
+        for (f, d) in futs.iter_mut().zip(done.iter_mut()) {
+            if !*d && f.as_mut().poll(cx).is_ready() {
+                *d = true;
+            }
+        }
+        if done.iter().all(|d| *d) {
+            std::task::Poll::Ready(())
+        } else {
+            std::task::Poll::Pending
+        }
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_server_killed_mid_forward_and_restarted_loses_and_doubles_nothing() {
+    let _serial = serial();
+    let cluster = Cluster::start();
+    let db = TestDb::create_on(&cluster.admin_url(), "outage");
+    bounded(async {
+        // Batches of 3 entries: the first scan alone is dozens of transactions.
+        let d = station("bench-o", &db.url, 3).await;
+        measure_reference(&d.service).await;
+        let first = samples(3);
+        let scan = d.service.request_scan(first[0]).await.unwrap();
+        wait_for("some rows forwarded", STEP_TIMEOUT, || async {
+            d.service
+                .status()
+                .await
+                .unwrap()
+                .sync
+                .unwrap()
+                .rows_forwarded
+                > 0
+        })
+        .await;
+        cluster.stop_immediate();
+        // The station goes on measuring with the server gone.
+        assert!(d.service.wait_settled(scan, STEP_TIMEOUT).await.unwrap());
+        scan_and_settle(&d.service, first[1]).await;
+        wait_for("the outage in the status", STEP_TIMEOUT, || async {
+            let s = d.service.status().await.unwrap().sync.unwrap();
+            s.last_error.is_some() && !s.connected && s.backlog > 0
+        })
+        .await;
+        let s = d.service.status().await.unwrap().sync.unwrap();
+        let e = s.last_error.unwrap();
+        assert!(!e.contains('\n') && e.contains("central database"), "{e}");
+
+        cluster.restart();
+        scan_and_settle(&d.service, first[2]).await;
+        drained(&d).await;
+        d.service.stop_keeping_store().await;
+        assert_same(&d.db, &db.url, "bench-o").await;
+        d.store.close().await;
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_station_restarted_mid_forward_loses_and_doubles_nothing() {
+    let _serial = serial();
+    let db = TestDb::create("restart");
+    bounded(async {
+        // The first life: the station measures its reference with a slow forwarder (one
+        // outbox entry per transaction) and is stopped as soon as the first rows arrived,
+        // with the rest of the reference's 15 entries still to send; stopping drops the
+        // forwarder's transaction under way.
+        let d = station("bench-r", &db.url, 1).await;
+        measure_reference(&d.service).await;
+        wait_for("the first rows forwarded", STEP_TIMEOUT, || async {
+            d.service
+                .status()
+                .await
+                .unwrap()
+                .sync
+                .unwrap()
+                .rows_forwarded
+                > 0
+        })
+        .await;
+        d.service.stop_keeping_store().await;
+        let before = d.service.status().await.unwrap().sync.unwrap();
+        assert!(before.backlog > 0, "stopped mid-forward: {before:?}");
+        d.store.close().await;
+
+        // The second life, on the same store: forwarding resumes from the central cursor.
+        let store = Store::open(&d.db).await.unwrap();
+        let devices = Devices::simulated(
+            playlist(Instrument::MaT12),
+            playlist(Instrument::Sra),
+            &strict_fast(),
+            [None, None],
+        )
+        .unwrap();
+        let settings = ServiceSettings {
+            sync: Some(forwarding("bench-r", &db.url, 50)),
+            ..settings()
+        };
+        let service = brdfd::service::Service::start(
+            store.clone(),
+            devices,
+            settings,
+            ServiceOptions::default(),
+        )
+        .await
+        .unwrap();
+        measure_reference(&service).await;
+        scan_and_settle(&service, samples(1)[0]).await;
+        drained_service(&service, &d.db).await;
+        service.stop_keeping_store().await;
+        assert_same(&d.db, &db.url, "bench-r").await;
+        store.close().await;
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_taken_station_id_and_a_newer_central_schema_are_refused() {
+    let db = TestDb::create("refuse");
+    bounded(async {
+        let a = Store::open_in_memory().await.unwrap();
+        let b = Store::open_in_memory().await.unwrap();
+        let mut fa = Forwarder::for_store(&a, forwarding("bench-x", &db.url, 10))
+            .await
+            .unwrap();
+        assert!(
+            fa.step().await.unwrap().is_none(),
+            "an empty store sends nothing"
+        );
+        // Another store under the same id.
+        let mut fb = Forwarder::for_store(&b, forwarding("bench-x", &db.url, 10))
+            .await
+            .unwrap();
+        let e = fb.step().await.unwrap_err();
+        assert!(matches!(e, SyncError::StationTaken { .. }), "{e}");
+        let text = e.to_string();
+        assert!(
+            text.contains("bench-x") && text.contains("[station] id"),
+            "{text}"
+        );
+        // The same store under a second id.
+        let mut fa2 = Forwarder::for_store(&a, forwarding("bench-y", &db.url, 10))
+            .await
+            .unwrap();
+        let e = fa2.step().await.unwrap_err();
+        assert!(matches!(e, SyncError::StoreHasOtherId { .. }), "{e}");
+
+        // A newer brdfd migrated the central database.
+        let pool = sqlx::PgPool::connect(&db.url).await.unwrap();
+        sqlx::query(
+            "INSERT INTO _sqlx_migrations (version, description, success, checksum,
+                                           execution_time)
+             VALUES (9999, 'from the future', true, '\\x00', 0)",
+        )
+        .execute(&pool)
+        .await
+        .unwrap();
+        pool.close().await;
+        let e = Central::connect_and_migrate(&db.url).await.unwrap_err();
+        assert!(
+            matches!(e, SyncError::NewerSchema { found: 9999, .. }),
+            "{e}"
+        );
+        assert!(e.to_string().contains("upgrade brdfd"), "{e}");
+        let mut fa3 = Forwarder::for_store(&a, forwarding("bench-x", &db.url, 10))
+            .await
+            .unwrap();
+        assert!(matches!(
+            fa3.step().await.unwrap_err(),
+            SyncError::NewerSchema { .. }
+        ));
+        // The command line says it in one line and fails.
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("brdfd.db");
+        Store::open(&file).await.unwrap().close().await;
+        let out = run_brdfd(
+            &[
+                "sync",
+                "--db",
+                file.to_str().unwrap(),
+                "--to",
+                &db.url,
+                "--station",
+                "bench-z",
+                "--once",
+            ],
+            None,
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains("newer than this brdfd"), "{err}");
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bad_url_or_a_wrong_password_is_one_line_and_the_station_keeps_measuring() {
+    let _serial = serial();
+    let cluster = Cluster::start();
+    bounded(async {
+        let wrong = format!(
+            "postgres://postgres:not-the-password@127.0.0.1:{}/postgres",
+            cluster.port
+        );
+        let d = station("bench-w", &wrong, 50).await;
+        measure_reference(&d.service).await;
+        let scan = scan_and_settle(&d.service, samples(1)[0]).await;
+        let detail = d.store.scan_detail(scan).await.unwrap();
+        assert_eq!(detail.scan.state, brdfd::store::ScanState::Complete);
+        let s = d.service.status().await.unwrap().sync.unwrap();
+        let e = s.last_error.expect("the refusal is in the status");
+        assert!(e.contains("password authentication failed"), "{e}");
+        assert!(
+            !e.contains("not-the-password"),
+            "the password is not shown: {e}"
+        );
+        assert!(s.backlog > 0);
+        d.service.stop_keeping_store().await;
+
+        // brdfd sync: one line on stderr, non-zero exit, for a wrong password, a refused
+        // connection and a URL that is not one.
+        for (url, says) in [
+            (wrong.as_str(), "password authentication failed"),
+            ("postgres://postgres@127.0.0.1:1/x", "cannot connect"),
+            ("postgres://postgres@127.0.0.1:notaport/x", "not valid"),
+        ] {
+            let out = run_brdfd(
+                &[
+                    "sync",
+                    "--db",
+                    d.db.to_str().unwrap(),
+                    "--to",
+                    url,
+                    "--station",
+                    "bench-w",
+                    "--once",
+                ],
+                None,
+            );
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(!out.status.success(), "{url}");
+            assert_eq!(err.trim().lines().count(), 1, "{url}: {err}");
+            assert!(err.contains(says), "{url}: {err}");
+            assert!(!err.contains("not-the-password"), "{err}");
+        }
+        d.store.close().await;
+    })
+    .await;
+}
