@@ -12,8 +12,9 @@ use serde::de::{self, Deserializer, MapAccess, Visitor};
 use serde::ser::Serializer;
 use serde::{Deserialize, Serialize};
 
+use crate::colour::Colorimetry;
 use crate::cost::CostFunction;
-use crate::evaluation::{Evaluation, evaluate};
+use crate::evaluation::{Evaluation, evaluate_with};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
 use crate::model::{self, FresnelCosine, SpecularGeometry};
 use crate::optimise::{self, FitError, FitOutcome, Progress, Settings};
@@ -28,6 +29,9 @@ pub struct FitRequest {
     pub processing: ProcessingOptions,
     /// Optimiser settings: method, cost function, bounds, Fresnel cosine, seed, …
     pub settings: Settings,
+    /// How the evaluation turns spectra into L*a*b* (observer, weighting); the paper's by default.
+    #[serde(default)]
+    pub colorimetry: Colorimetry,
 }
 
 /// One finished fit of one scan.
@@ -98,7 +102,7 @@ pub fn fit_measured(
         request.settings.fresnel,
         &SpecularGeometry::all(),
     );
-    let evaluation = evaluate(&measured.values, &estimated);
+    let evaluation = evaluate_with(&measured.values, &estimated, request.colorimetry);
     Ok(FitReport {
         sample: sample.to_string(),
         request: request.clone(),
@@ -134,6 +138,7 @@ impl FitReport {
             delta_e00_specular_mean: self.evaluation.specular.mean,
             specular_strategy: self.request.processing.specular,
             fresnel: self.request.settings.fresnel,
+            colorimetry: self.request.colorimetry,
         }
     }
 }
@@ -145,7 +150,7 @@ impl Serialize for FitReport {
 }
 
 /// The JSON object `brdfd fit --json` prints (ARCHITECTURE.md contract 3). The first eleven
-/// keys are the contract; the last four are additions that make a fit self-describing.
+/// keys are the contract; the rest are additions that make a fit self-describing.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitDocument {
     pub sample: String,
@@ -173,6 +178,10 @@ pub struct FitDocument {
     pub specular_strategy: SpecularStrategy,
     /// Which cosine the model's Fresnel term used.
     pub fresnel: FresnelCosine,
+    /// The colorimetry the ΔE00 values were computed with (`{"observer": "2", "weighting":
+    /// "summation"}` unless configured otherwise).
+    #[serde(default)]
+    pub colorimetry: Colorimetry,
 }
 
 /// The fitted parameters as the contract writes them.
@@ -239,6 +248,7 @@ mod tests {
                 seed: 3,
                 ..Settings::default()
             },
+            colorimetry: Colorimetry::default(),
         }
     }
 
@@ -265,6 +275,7 @@ mod tests {
             "delta_e00_specular_mean",
             "specular_strategy",
             "fresnel",
+            "colorimetry",
         ];
         let mut got = keys.clone();
         got.sort();

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
+use crate::colour::{Colorimetry, Observer, Weighting};
 use crate::cost::CostFunction;
 use crate::fit::{FitReport, FitRequest, fit_scan};
 use crate::geometry::GEOMETRIES;
@@ -47,6 +48,17 @@ pub struct FitArgs {
     #[arg(long, value_name = "incidence|light-half", default_value = "incidence", value_parser = parse_fresnel)]
     pub fresnel: FresnelCosine,
 
+    /// Standard observer for L*a*b* and ΔE00: `2` (CIE 1931, the paper's) or `10` (CIE 1964,
+    /// what instrument software often uses). Illuminant is always D65.
+    #[arg(long, value_name = "2|10", default_value_t = Observer::default())]
+    pub observer: Observer,
+
+    /// How the 31 bands are weighted into XYZ: `summation` (CIE 15 at the band centres, the
+    /// paper's) or `astm-e308` (ASTM E308 / E2022 weighting factors, as instrument software
+    /// computes L*a*b* from 10 nm data).
+    #[arg(long, value_name = "summation|astm-e308", default_value_t = Weighting::default())]
+    pub weighting: Weighting,
+
     /// Print one JSON object on stdout (sample, cost_function, method, seed, params, cost,
     /// evaluations, generations, wall_ms, delta_e00 per geometry, delta_e00_mean, …) instead
     /// of a table.
@@ -79,6 +91,10 @@ impl FitArgs {
                 seed: self.seed,
                 fresnel: self.fresnel,
                 ..Settings::default()
+            },
+            colorimetry: Colorimetry {
+                observer: self.observer,
+                weighting: self.weighting,
             },
         }
     }
@@ -132,7 +148,7 @@ pub fn table(r: &FitReport) -> String {
             .collect();
         let _ = writeln!(t, "  {}", cells.join("  "));
     }
-    let _ = writeln!(t, "ΔE00 per geometry");
+    let _ = writeln!(t, "ΔE00 per geometry ({})", r.request.colorimetry);
     for (geo, de) in GEOMETRIES.iter().zip(e.per_geometry) {
         let _ = writeln!(t, "  {:<8} {:>4}  {de:8.4}", geo.name, geo.device.key());
     }

@@ -295,6 +295,7 @@ impl Service {
                 reference_reflectance: scan_detail.reference.reference.rho_ref,
             },
             settings,
+            colorimetry: self.inner.settings.colorimetry,
         };
         Ok(Some((
             FitJob {

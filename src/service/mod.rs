@@ -65,6 +65,10 @@ pub struct ServiceSettings {
     pub specular: SpecularStrategy,
     /// How long shutdown waits for the scan in progress and the fits to stop.
     pub shutdown_grace: Duration,
+    /// How every evaluation turns spectra into L*a*b*.
+    pub colorimetry: crate::colour::Colorimetry,
+    /// Bootstrap resamples per fit (0: no intervals).
+    pub bootstrap: u32,
 }
 
 impl ServiceSettings {
@@ -77,6 +81,8 @@ impl ServiceSettings {
             max_concurrent_fits: config.fit.max_concurrent_fits.get(),
             specular: config.fit.specular,
             shutdown_grace: Duration::from_secs(10),
+            colorimetry: config.colour,
+            bootstrap: config.fit.bootstrap,
         }
     }
 
