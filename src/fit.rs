@@ -21,6 +21,7 @@ use crate::optimise::{self, FitError, FitOutcome, Progress, Settings};
 use crate::processing::{self, MeasuredBrdf, ProcessingError, ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
+use crate::uncertainty::{BootstrapOptions, Uncertainty, UncertaintyError, bootstrap};
 
 /// Everything that decides a fit besides the scan itself.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -49,6 +50,8 @@ pub struct FitReport {
     pub outcome: FitOutcome,
     /// ΔE00 between measured and estimated colour.
     pub evaluation: Evaluation,
+    /// The bootstrap intervals, when asked for ([`FitReport::with_uncertainty`]).
+    pub uncertainty: Option<Uncertainty>,
 }
 
 /// Why a scan could not be fitted.
@@ -110,10 +113,29 @@ pub fn fit_measured(
         estimated,
         outcome,
         evaluation,
+        uncertainty: None,
     })
 }
 
 impl FitReport {
+    /// Adds the bootstrap intervals of this fit (SCIENCE.md §10), computed from its measured
+    /// BRDF, settings, colorimetry and parameters; `cancel` stops it between refits.
+    pub fn with_uncertainty(
+        mut self,
+        opts: &BootstrapOptions,
+        cancel: &std::sync::atomic::AtomicBool,
+    ) -> Result<FitReport, UncertaintyError> {
+        self.uncertainty = Some(bootstrap(
+            &self.measured,
+            &self.request.settings,
+            self.request.colorimetry,
+            &self.outcome.params,
+            opts,
+            cancel,
+        )?);
+        Ok(self)
+    }
+
     /// The contract-3 document.
     pub fn document(&self) -> FitDocument {
         let p = &self.outcome.params;
@@ -139,6 +161,7 @@ impl FitReport {
             specular_strategy: self.request.processing.specular,
             fresnel: self.request.settings.fresnel,
             colorimetry: self.request.colorimetry,
+            uncertainty: self.uncertainty.clone(),
         }
     }
 }
@@ -182,6 +205,9 @@ pub struct FitDocument {
     /// "summation"}` unless configured otherwise).
     #[serde(default)]
     pub colorimetry: Colorimetry,
+    /// The bootstrap intervals (`brdfd fit --bootstrap N`); absent without them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<Uncertainty>,
 }
 
 /// The fitted parameters as the contract writes them.

@@ -41,7 +41,7 @@ use std::str::FromStr;
 
 use crate::cost::CostFunction;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, MA_T12_COUNT};
-use crate::report::study::Study;
+use crate::report::study::{DoneFit, Study};
 use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
 use crate::spectral::{BANDS, Spectrum};
 
@@ -237,14 +237,21 @@ pub enum DataKind {
     Measured,
     /// The fitted model's reflectance factor `π·f`.
     Estimated,
+    /// Lower end of the estimate's 95 % band: `π·(kd_lo(λ) + s_g)`, the bootstrap interval of
+    /// kd plus the point fit's specular term (SCIENCE.md §10). Only for fits with intervals.
+    EstimatedLow,
+    /// Upper end, `π·(kd_hi(λ) + s_g)`.
+    EstimatedHigh,
 }
 
 impl DataKind {
-    pub const ALL: [DataKind; 4] = [
+    pub const ALL: [DataKind; 6] = [
         DataKind::Reading,
         DataKind::Reference,
         DataKind::Measured,
         DataKind::Estimated,
+        DataKind::EstimatedLow,
+        DataKind::EstimatedHigh,
     ];
 
     pub const fn name(self) -> &'static str {
@@ -253,6 +260,8 @@ impl DataKind {
             DataKind::Reference => "reference",
             DataKind::Measured => "measured",
             DataKind::Estimated => "estimated",
+            DataKind::EstimatedLow => "estimated_lo",
+            DataKind::EstimatedHigh => "estimated_hi",
         }
     }
 }
@@ -264,7 +273,10 @@ impl FromStr for DataKind {
             .into_iter()
             .find(|k| k.name() == s)
             .ok_or_else(|| {
-                format!("unknown data kind \"{s}\"; valid: reading, reference, measured, estimated")
+                format!(
+                    "unknown data kind \"{s}\"; valid: reading, reference, measured, estimated, \
+                     estimated_lo, estimated_hi"
+                )
             })
     }
 }
@@ -325,10 +337,42 @@ pub fn rows(study: &Study) -> Vec<SpectralRow> {
                     Some((f.cost, f.method.as_str())),
                     d.estimated.map(|f| reflectance(&f)),
                 );
+                if let Some([lo, hi]) = estimate_band(d) {
+                    push(
+                        DataKind::EstimatedLow,
+                        Some((f.cost, f.method.as_str())),
+                        lo,
+                    );
+                    push(
+                        DataKind::EstimatedHigh,
+                        Some((f.cost, f.method.as_str())),
+                        hi,
+                    );
+                }
             }
         }
     }
     out
+}
+
+/// The 95 % band of a fit's estimated reflectance factor at each geometry, from its bootstrap
+/// interval of kd and its point specular term: `π·(kd_lo + s_g)`, `π·(kd_hi + s_g)`.
+/// `None` without intervals.
+pub fn estimate_band(d: &DoneFit) -> Option<[[Spectrum; GEOMETRY_COUNT]; 2]> {
+    let u = d.uncertainty.as_ref()?;
+    if u.kd.len() != BANDS {
+        return None;
+    }
+    // The point estimate minus kd is the specular term, the same in every band.
+    let band = |end: usize| -> [Spectrum; GEOMETRY_COUNT] {
+        std::array::from_fn(|g| {
+            std::array::from_fn(|b| {
+                let s = d.estimated[g][b] - d.params.kd[b];
+                std::f64::consts::PI * (u.kd[b][end] + s)
+            })
+        })
+    };
+    Some([band(0), band(1)])
 }
 
 /// A device reading as a spectrum: the MA-T12's 31 bands, or the SRA's intensity in every band.

@@ -25,6 +25,7 @@ use crate::fit::{FitReport, FitRequest, FitScanError, fit_measured};
 use crate::optimise::{FitError, Progress, Settings};
 use crate::processing::{MeasuredBrdf, ProcessingOptions};
 use crate::store::{FitResult, FitRunId, FitStatus, ScanId};
+use crate::uncertainty::{BootstrapOptions, UncertaintyError, bootstrap};
 
 use super::events::Event;
 use super::{Service, ServiceError, Timings};
@@ -204,9 +205,9 @@ impl Service {
         let cancel_flag = cancel.clone();
         let started = Instant::now();
         let joined = tokio::task::spawn_blocking(move || {
-            // Held for as long as the computation runs, released when this closure returns or
-            // unwinds.
-            let _permit = permit;
+            // Held for as long as the computation runs, then handed back for the bootstrap;
+            // released if this closure unwinds.
+            let permit = permit;
             let mut observer = |p: &Progress| {
                 events.send(Event::FitProgress {
                     fit,
@@ -221,9 +222,14 @@ impl Service {
                     ControlFlow::Continue(())
                 }
             };
-            catch_unwind(AssertUnwindSafe(|| fit_fn(&job, &mut observer)))
+            let r = catch_unwind(AssertUnwindSafe(|| fit_fn(&job, &mut observer)));
+            (permit, r)
         })
         .await;
+        let (permit, joined) = match joined {
+            Ok((permit, r)) => (Some(permit), Ok(r)),
+            Err(e) => (None, Err(e)),
+        };
         Timings::add(&self.inner.timings.fit_ns, started.elapsed());
         self.inner.fits_running.fetch_sub(1, Ordering::Relaxed);
 
@@ -247,8 +253,67 @@ impl Service {
             )),
             Err(join) => Ended::Failed(format!("the fit's thread ended abnormally: {join}")),
         };
-        self.record_fit_end(fit, scan, cost, ended).await;
+        let stored = self.record_fit_end(fit, scan, cost, ended).await;
         self.forget(fit);
+        if let (Some(report), Some(permit)) = (stored, permit) {
+            self.bootstrap_fit(fit, *report, permit).await;
+        }
+    }
+
+    /// After a fit is stored: its bootstrap intervals (`[fit] bootstrap` resamples, SCIENCE.md
+    /// §10) on one blocking thread under the same permit, then stored with the fit. Shutdown
+    /// stops it between refits; a fit left without intervals shows none.
+    async fn bootstrap_fit(
+        &self,
+        fit: FitRunId,
+        report: FitReport,
+        permit: tokio::sync::OwnedSemaphorePermit,
+    ) {
+        let resamples = self.inner.settings.bootstrap;
+        if resamples == 0 {
+            return;
+        }
+        let stopping = self.inner.stopping.clone();
+        let opts = BootstrapOptions {
+            resamples,
+            seed: report.outcome.seed,
+            threads: 1,
+            noise: None,
+        };
+        let joined = tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            catch_unwind(AssertUnwindSafe(|| {
+                bootstrap(
+                    &report.measured,
+                    &report.request.settings,
+                    report.request.colorimetry,
+                    &report.outcome.params,
+                    &opts,
+                    &stopping,
+                )
+            }))
+        })
+        .await;
+        match joined {
+            Ok(Ok(Ok(u))) => {
+                if let Err(e) = self
+                    .timed_store(self.inner.store.set_fit_uncertainty(fit, &u))
+                    .await
+                {
+                    tracing::warn!(error = %e, %fit, "cannot store the fit's uncertainty");
+                }
+            }
+            Ok(Ok(Err(UncertaintyError::Cancelled))) => {
+                tracing::info!(%fit, "bootstrap interrupted by shutdown; the fit has no intervals");
+            }
+            Ok(Ok(Err(e))) => tracing::warn!(error = %e, %fit, "no intervals for the fit"),
+            Ok(Err(payload)) => tracing::error!(
+                %fit,
+                "the bootstrap panicked ({}); this is a bug in brdfd",
+                panic_message(payload.as_ref())
+            ),
+            Err(e) => tracing::error!(error = %e, %fit, "the bootstrap's thread ended abnormally"),
+        }
     }
 
     fn forget(&self, fit: FitRunId) {
@@ -309,7 +374,14 @@ impl Service {
         )))
     }
 
-    async fn record_fit_end(&self, fit: FitRunId, scan: ScanId, cost: CostFunction, ended: Ended) {
+    /// Stores how a fit ended; the report when it was stored as done.
+    async fn record_fit_end(
+        &self,
+        fit: FitRunId,
+        scan: ScanId,
+        cost: CostFunction,
+        ended: Ended,
+    ) -> Option<Box<FitReport>> {
         let store = &self.inner.store;
         match ended {
             Ended::Done(report) => {
@@ -324,19 +396,27 @@ impl Service {
                 };
                 let e = &report.evaluation;
                 match self
-                    .timed_store(store.finish_fit(fit, &result, &e.per_geometry))
+                    .timed_store(store.finish_fit_with(
+                        fit,
+                        &result,
+                        &e.per_geometry,
+                        report.request.colorimetry,
+                    ))
                     .await
                 {
-                    Ok(()) => self.inner.events.send(Event::FitDone {
-                        fit,
-                        scan,
-                        cost_function: cost,
-                        cost: outcome.cost,
-                        delta_e00_mean: e.all.mean,
-                        delta_e00_diffuse_mean: e.diffuse.mean,
-                        delta_e00_specular_mean: e.specular.mean,
-                        wall_ms: outcome.wall_ms,
-                    }),
+                    Ok(()) => {
+                        self.inner.events.send(Event::FitDone {
+                            fit,
+                            scan,
+                            cost_function: cost,
+                            cost: outcome.cost,
+                            delta_e00_mean: e.all.mean,
+                            delta_e00_diffuse_mean: e.diffuse.mean,
+                            delta_e00_specular_mean: e.specular.mean,
+                            wall_ms: outcome.wall_ms,
+                        });
+                        return Some(report);
+                    }
                     Err(err) => {
                         let error = format!("cannot store the result: {err}");
                         let _ = self.timed_store(store.fail_fit(fit, &error)).await;
@@ -362,5 +442,6 @@ impl Service {
                 tracing::info!(%fit, "fit interrupted by shutdown; it runs again at the next start");
             }
         }
+        None
     }
 }
