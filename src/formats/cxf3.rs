@@ -531,7 +531,7 @@ pub(crate) fn observations(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::super::tests::{fixed, study};
     use super::super::{Format, ImportOptions, import};
     use super::*;

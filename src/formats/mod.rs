@@ -751,6 +751,68 @@ pub(crate) mod tests {
         assert_eq!(m.values, reflectance(&s.measured.values[9]));
     }
 
+    /// The test study with made-up intervals on its first fit: kd ± 10 %.
+    fn study_with_intervals() -> Study {
+        let mut study = study();
+        let crate::report::study::FitState::Done(d) = &mut study.samples[0].fits[0].state else {
+            panic!("the first fit is done");
+        };
+        let p = d.params;
+        d.uncertainty = Some(crate::uncertainty::Uncertainty {
+            method: crate::uncertainty::METHOD.into(),
+            resamples: 200,
+            noise: 0.014,
+            seed: 1,
+            ks: [p.ks * 0.8, p.ks * 1.2],
+            alpha: [p.alpha * 0.8, p.alpha * 1.2],
+            ior: [p.ior * 0.9, p.ior * 1.1],
+            kd: p.kd.iter().map(|k| [k * 0.9, k * 1.1]).collect(),
+            delta_e00_mean: [0.1, 0.2],
+            delta_e00_diffuse_mean: [0.1, 0.2],
+            delta_e00_specular_mean: [1.0, 2.0],
+        });
+        study
+    }
+
+    #[test]
+    fn intervals_travel_in_every_format_and_imports_skip_them() {
+        let with = study_with_intervals();
+        let r = rows(&with);
+        let at = |kind: DataKind| {
+            r.iter()
+                .find(|x| x.kind == kind && x.geometry.name == "15as15")
+                .unwrap()
+                .values
+        };
+        let (lo, est, hi) = (
+            at(DataKind::EstimatedLow),
+            at(DataKind::Estimated),
+            at(DataKind::EstimatedHigh),
+        );
+        let d = with.samples[0].fits[0].done().unwrap();
+        let s = d.estimated[3][0] - d.params.kd[0];
+        assert!((lo[0] - std::f64::consts::PI * (0.9 * d.params.kd[0] + s)).abs() < 1e-12);
+        assert!((0..BANDS).all(|b| lo[b] < est[b] && est[b] < hi[b]));
+        assert_eq!(r.len(), rows(&study()).len() + 2 * 14);
+        let want: Vec<Scan> = with.samples.iter().map(|s| s.scan.clone()).collect();
+        for format in Format::ALL {
+            let text = export(&with, format, &fixed()).unwrap();
+            if format == Format::Json {
+                assert!(text.contains("\"uncertainty\"") && text.contains("\"colorimetry\""));
+            } else if format == Format::Cxf3 {
+                assert!(text.contains("EstimatedLow"));
+                cxf3::tests::validate_with_xmllint(&text);
+            } else {
+                assert!(
+                    text.contains("estimated_lo") || text.contains("EstimatedLow"),
+                    "{format}"
+                );
+            }
+            let got = import(format, "x", &text, None, &ImportOptions::default()).unwrap();
+            assert_eq!(got.len(), want.len(), "{format}");
+        }
+    }
+
     #[test]
     fn every_format_round_trips_the_scans_bit_for_bit() {
         let study = study();

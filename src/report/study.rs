@@ -9,9 +9,9 @@
 
 use crate::colour::Colorimetry;
 use crate::cost::CostFunction;
-use crate::evaluation::{Evaluation, evaluate_with};
 #[cfg(test)]
 use crate::evaluation::evaluate;
+use crate::evaluation::{Evaluation, evaluate_with};
 use crate::fit::FitReport;
 use crate::geometry::GEOMETRY_COUNT;
 use crate::model::{self, FresnelCosine, Params, SpecularGeometry};

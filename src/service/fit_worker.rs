@@ -205,9 +205,9 @@ impl Service {
         let cancel_flag = cancel.clone();
         let started = Instant::now();
         let joined = tokio::task::spawn_blocking(move || {
-            // Held for as long as the computation runs, then handed back for the bootstrap;
-            // released if this closure unwinds.
-            let permit = permit;
+            // Held for as long as the computation runs, released when this closure returns or
+            // unwinds.
+            let _permit = permit;
             let mut observer = |p: &Progress| {
                 events.send(Event::FitProgress {
                     fit,
@@ -222,14 +222,9 @@ impl Service {
                     ControlFlow::Continue(())
                 }
             };
-            let r = catch_unwind(AssertUnwindSafe(|| fit_fn(&job, &mut observer)));
-            (permit, r)
+            catch_unwind(AssertUnwindSafe(|| fit_fn(&job, &mut observer)))
         })
         .await;
-        let (permit, joined) = match joined {
-            Ok((permit, r)) => (Some(permit), Ok(r)),
-            Err(e) => (None, Err(e)),
-        };
         Timings::add(&self.inner.timings.fit_ns, started.elapsed());
         self.inner.fits_running.fetch_sub(1, Ordering::Relaxed);
 
@@ -255,24 +250,23 @@ impl Service {
         };
         let stored = self.record_fit_end(fit, scan, cost, ended).await;
         self.forget(fit);
-        if let (Some(report), Some(permit)) = (stored, permit) {
-            self.bootstrap_fit(fit, *report, permit).await;
+        if let Some(report) = stored {
+            self.bootstrap_fit(fit, *report).await;
         }
     }
 
     /// After a fit is stored: its bootstrap intervals (`[fit] bootstrap` resamples, SCIENCE.md
-    /// §10) on one blocking thread under the same permit, then stored with the fit. Shutdown
-    /// stops it between refits; a fit left without intervals shows none.
-    async fn bootstrap_fit(
-        &self,
-        fit: FitRunId,
-        report: FitReport,
-        permit: tokio::sync::OwnedSemaphorePermit,
-    ) {
+    /// §10) on one blocking thread, one bootstrap at a time and without a fit permit (so the
+    /// next scans' point estimates are not held up), then stored with the fit. Shutdown stops
+    /// it between refits; a fit left without intervals shows none.
+    async fn bootstrap_fit(&self, fit: FitRunId, report: FitReport) {
         let resamples = self.inner.settings.bootstrap;
-        if resamples == 0 {
+        if resamples == 0 || self.inner.stopping.load(Ordering::Relaxed) {
             return;
         }
+        let Ok(permit) = self.inner.bootstrap_slot.clone().acquire_owned().await else {
+            return;
+        };
         let stopping = self.inner.stopping.clone();
         let opts = BootstrapOptions {
             resamples,

@@ -250,6 +250,9 @@ struct Inner {
     fit_tx: tokio::sync::mpsc::UnboundedSender<FitRunId>,
     fits_queued: AtomicUsize,
     fits_running: AtomicUsize,
+    /// One bootstrap at a time, apart from the fits' permits: a bootstrap never holds up the
+    /// point estimate of a later fit (SCIENCE.md §10).
+    bootstrap_slot: Arc<tokio::sync::Semaphore>,
     timings: Timings,
 }
 
@@ -302,6 +305,7 @@ impl Service {
             fit_tx,
             fits_queued: AtomicUsize::new(0),
             fits_running: AtomicUsize::new(0),
+            bootstrap_slot: Arc::new(tokio::sync::Semaphore::new(1)),
             timings: Timings::default(),
         });
         let service = Service { inner };
