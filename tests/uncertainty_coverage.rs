@@ -5,8 +5,10 @@
 //!
 //! Checks, per lobe parameter: the 95 % intervals contain the truth in at least 80 % of the
 //! trials (a 95 % interval misses that often with probability below 0.001 at n = 40), and they
-//! are as wide as the estimates actually scatter: the mean relative width is within a factor
-//! 2.5 of 3.92 × the RMS relative error of the point estimates over the trials.
+//! are about as wide as the estimates actually scatter: the median relative width is within a
+//! factor 2.5 of 5.81 × the median absolute relative error of the point estimates (for normal
+//! errors, 3.92 σ = 5.81 × the median of |error|; medians, because a few fits land far off —
+//! the heavy tail SCIENCE.md §10 discusses).
 
 use std::sync::atomic::AtomicBool;
 
@@ -22,8 +24,8 @@ fn cf1_intervals_cover_the_truth_and_match_the_scatter() {
     let never = AtomicBool::new(false);
     let trials = 40u64;
     let mut hits = [0u32; 3];
-    let mut widths = [0.0f64; 3];
-    let mut sq_errors = [0.0f64; 3];
+    let mut widths: [Vec<f64>; 3] = Default::default();
+    let mut errors: [Vec<f64>; 3] = Default::default();
     for t in 0..trials {
         let truth = &samples[(t % 8) as usize];
         let scan = synth_scan(
@@ -68,17 +70,21 @@ fn cf1_intervals_cover_the_truth_and_match_the_scatter() {
         .enumerate()
         {
             hits[k] += u32::from(u.contains(name, value));
-            widths[k] += (iv[1] - iv[0]) / value;
-            sq_errors[k] += ((estimate - value) / value).powi(2);
+            widths[k].push((iv[1] - iv[0]) / value);
+            errors[k].push(((estimate - value) / value).abs());
         }
     }
     let n = trials as f64;
+    let median = |xs: &mut Vec<f64>| {
+        xs.sort_by(f64::total_cmp);
+        0.5 * (xs[xs.len() / 2 - 1] + xs[xs.len() / 2])
+    };
     for (k, name) in ["ks", "alpha", "ior"].into_iter().enumerate() {
         let coverage = f64::from(hits[k]) / n;
-        let width = widths[k] / n;
-        let scatter = 3.92 * (sq_errors[k] / n).sqrt();
+        let width = median(&mut widths[k]);
+        let scatter = 5.81 * median(&mut errors[k]);
         eprintln!(
-            "cf1 {name}: coverage {:.1} %, mean relative width {width:.4}, 3.92 × RMS error {scatter:.4}",
+            "cf1 {name}: coverage {:.1} %, median relative width {width:.4}, 5.81 × median |error| {scatter:.4}",
             100.0 * coverage
         );
         assert!(
