@@ -7,6 +7,9 @@
 //!   (2 988 evaluations: 848 cf1, 987 L1, 1 153 cf2), m2 8.0 ms.
 //! - `fit_paper/cf2`: the paper GA with its default settings on the same scan (fewer samples:
 //!   it is slow, which is part of the point).
+//! - `bootstrap/all_costs_200`: the bootstrap intervals (SCIENCE.md §10) of the three fits of the
+//!   same scan, 200 resamples each, on 2 threads — the figure the issue sets at ≤ 2 s wall.
+//!   `bootstrap/<cost>_200`: one cost function's, on one thread.
 //! - `cost_eval/<cost>`: one model evaluation (14 specular terms, 434 values) plus one cost,
 //!   through the public API — the price of one GA individual.
 //!
@@ -14,10 +17,13 @@
 
 use std::hint::black_box;
 
+use brdfd::colour::Colorimetry;
 use brdfd::cost::{CostFunction, cost};
 use brdfd::model::{FresnelCosine, SpecularGeometry, evaluate};
 use brdfd::optimise::{Method, Settings, fit, synthetic};
+use brdfd::uncertainty::{BootstrapOptions, bootstrap};
 use criterion::{Criterion, criterion_group, criterion_main};
+use std::sync::atomic::AtomicBool;
 
 fn scan() -> (brdfd::processing::MeasuredBrdf, brdfd::model::Params) {
     // "orange" with ks 0.3, α 0.25, μ 1.6.
@@ -63,6 +69,46 @@ fn benches(c: &mut Criterion) {
         out.evaluations, out.generations, out.cost
     );
     group.bench_function("cf2", |b| b.iter(|| fit(black_box(&m), &settings).unwrap()));
+    group.finish();
+
+    let mut group = c.benchmark_group("bootstrap");
+    group.sample_size(10);
+    let never = AtomicBool::new(false);
+    let points: Vec<(Settings, brdfd::model::Params)> = CostFunction::ALL
+        .iter()
+        .map(|&cf| {
+            let settings = Settings {
+                cost: cf,
+                ..Settings::default()
+            };
+            let p = fit(&m, &settings).expect("fit").params;
+            (settings, p)
+        })
+        .collect();
+    let run = |(settings, p): &(Settings, brdfd::model::Params), threads| {
+        let opts = BootstrapOptions {
+            resamples: 200,
+            threads,
+            ..BootstrapOptions::default()
+        };
+        bootstrap(
+            black_box(&m),
+            settings,
+            Colorimetry::default(),
+            p,
+            &opts,
+            &never,
+        )
+        .unwrap()
+    };
+    for point in &points {
+        group.bench_function(format!("{}_200", point.0.cost), |b| {
+            b.iter(|| run(point, 1))
+        });
+    }
+    group.bench_function("all_costs_200", |b| {
+        b.iter(|| points.iter().map(|p| run(p, 2)).collect::<Vec<_>>())
+    });
     group.finish();
 
     let geos = SpecularGeometry::all();

@@ -87,6 +87,8 @@ pub struct Config {
     pub devices: DevicesConfig,
     pub scan: ScanConfig,
     pub fit: FitConfig,
+    /// `[colour]`: observer and weighting of every L*a*b* and ΔE00 (SCIENCE.md §7.1).
+    pub colour: crate::colour::Colorimetry,
     pub log: LogConfig,
     pub station: StationConfig,
     pub sync: SyncConfig,
@@ -233,6 +235,9 @@ pub struct FitConfig {
     pub max_concurrent_fits: NonZeroUsize,
     /// How SRA readings become spectra (SCIENCE.md §3).
     pub specular: SpecularStrategy,
+    /// Bootstrap resamples per fit for the parameter intervals (SCIENCE.md §10); 0 turns the
+    /// intervals off.
+    pub bootstrap: u32,
 }
 
 /// `[log]`
@@ -310,6 +315,7 @@ mod defaults {
     pub const SRA_BAUD: u32 = 9600;
     pub const REFERENCE_MAX_AGE_HOURS: f64 = 24.0;
     pub const SEED: u64 = 1;
+    pub const BOOTSTRAP: u32 = 200;
     pub const LEVEL: &str = "info";
     pub const SYNC_BATCH: u64 = 500;
 }
@@ -355,7 +361,9 @@ impl Default for Config {
                 seed: defaults::SEED,
                 max_concurrent_fits: NonZeroUsize::MIN,
                 specular: SpecularStrategy::default(),
+                bootstrap: defaults::BOOTSTRAP,
             },
+            colour: crate::colour::Colorimetry::default(),
             log: LogConfig {
                 json: false,
                 level: LogLevel::Info,
@@ -388,6 +396,8 @@ struct RawConfig {
     scan: RawScan,
     #[serde(default)]
     fit: RawFit,
+    #[serde(default)]
+    colour: RawColour,
     #[serde(default)]
     log: RawLog,
     #[serde(default)]
@@ -474,6 +484,14 @@ struct RawFit {
     seed: S<u64>,
     max_concurrent_fits: S<u64>,
     specular: S<String>,
+    bootstrap: S<u32>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawColour {
+    observer: S<String>,
+    weighting: S<String>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -918,6 +936,36 @@ impl Config {
                 SpecularStrategy::default().name().into(),
                 |s| s.parse::<SpecularStrategy>().map_err(|e| e.to_string()),
             )?,
+            bootstrap: c.value("fit.bootstrap", &f.bootstrap, defaults::BOOTSTRAP, |n| {
+                if n <= 10_000 {
+                    Ok(n)
+                } else {
+                    Err(format!(
+                        "{n} is out of range: 0 (off) to 10000 resamples; 200 gives 95 % intervals"
+                    ))
+                }
+            })?,
+        };
+
+        let colour = crate::colour::Colorimetry {
+            observer: c.value(
+                "colour.observer",
+                &raw.colour.observer,
+                crate::colour::Observer::default().to_string(),
+                |o| {
+                    o.parse()
+                        .map_err(|e: crate::colour::ColorimetryError| e.to_string())
+                },
+            )?,
+            weighting: c.value(
+                "colour.weighting",
+                &raw.colour.weighting,
+                crate::colour::Weighting::default().to_string(),
+                |w| {
+                    w.parse()
+                        .map_err(|e: crate::colour::ColorimetryError| e.to_string())
+                },
+            )?,
         };
 
         let log = LogConfig {
@@ -957,6 +1005,7 @@ impl Config {
             devices: DevicesConfig { ma_t12, sra },
             scan,
             fit,
+            colour,
             log,
             station,
             sync,
@@ -1319,6 +1368,22 @@ mod tests {
             );
             assert!(shown.contains(says), "{shown}");
         }
+    }
+
+    #[test]
+    fn colour_and_bootstrap_settings() {
+        let c =
+            parse("[colour]\nobserver = \"10\"\nweighting = \"astm-e308\"\n[fit]\nbootstrap = 0\n")
+                .unwrap();
+        assert_eq!(c.colour.observer, crate::colour::Observer::Cie1964TenDegree);
+        assert_eq!(c.colour.weighting, crate::colour::Weighting::AstmE308);
+        assert_eq!(c.fit.bootstrap, 0);
+        let e = parse("[colour]\nobserver = \"5\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("colour.observer") && e.contains("\"10\""), "{e}");
+        let e = parse("[fit]\nbootstrap = 20000\n").unwrap_err().to_string();
+        assert!(e.contains("fit.bootstrap"), "{e}");
     }
 
     #[test]

@@ -3,11 +3,12 @@
 //! split into diffuse (the 12 MA-T12 geometries) and specular (the 2 SRA geometries).
 //!
 //! Both inputs are BRDF in sr⁻¹; each is turned into a reflectance factor `R = π · f` and then
-//! into CIELAB (D65, 2°) by [`crate::colour`].
+//! into CIELAB by [`crate::colour`]: D65 with the paper's 2° observer and plain summation by
+//! default ([`evaluate`]), or any [`Colorimetry`] ([`evaluate_with`]; SCIENCE.md §7.1).
 
 use serde::{Deserialize, Serialize};
 
-use crate::colour::{Lab, brdf_to_reflectance, ciede2000, reflectance_to_lab};
+use crate::colour::{Colorimetry, Lab, brdf_to_reflectance, ciede2000, reflectance_to_lab};
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT};
 use crate::spectral::Spectrum;
 
@@ -69,13 +70,31 @@ pub fn lab_per_geometry(brdf: &[Spectrum; GEOMETRY_COUNT]) -> [Lab; GEOMETRY_COU
     brdf.map(|f| reflectance_to_lab(&brdf_to_reflectance(&f)))
 }
 
-/// ΔE00 between a measured and an estimated BRDF (both sr⁻¹, [`GEOMETRIES`] order).
+/// CIELAB at each geometry of a BRDF (sr⁻¹) under `colorimetry`.
+pub fn lab_per_geometry_with(
+    brdf: &[Spectrum; GEOMETRY_COUNT],
+    colorimetry: Colorimetry,
+) -> [Lab; GEOMETRY_COUNT] {
+    brdf.map(|f| colorimetry.reflectance_to_lab(&brdf_to_reflectance(&f)))
+}
+
+/// ΔE00 between a measured and an estimated BRDF (both sr⁻¹, [`GEOMETRIES`] order), D65/2°
+/// summation (the paper's colorimetry).
 pub fn evaluate(
     measured: &[Spectrum; GEOMETRY_COUNT],
     estimated: &[Spectrum; GEOMETRY_COUNT],
 ) -> Evaluation {
-    let lab_m = lab_per_geometry(measured);
-    let lab_e = lab_per_geometry(estimated);
+    evaluate_with(measured, estimated, Colorimetry::default())
+}
+
+/// ΔE00 between a measured and an estimated BRDF under `colorimetry`.
+pub fn evaluate_with(
+    measured: &[Spectrum; GEOMETRY_COUNT],
+    estimated: &[Spectrum; GEOMETRY_COUNT],
+    colorimetry: Colorimetry,
+) -> Evaluation {
+    let lab_m = lab_per_geometry_with(measured, colorimetry);
+    let lab_e = lab_per_geometry_with(estimated, colorimetry);
     let per_geometry: [f64; GEOMETRY_COUNT] =
         std::array::from_fn(|g| ciede2000(lab_m[g], lab_e[g]));
     // Split by the device the geometry table names, not by position, so a reordered table

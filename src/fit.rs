@@ -12,14 +12,16 @@ use serde::de::{self, Deserializer, MapAccess, Visitor};
 use serde::ser::Serializer;
 use serde::{Deserialize, Serialize};
 
+use crate::colour::Colorimetry;
 use crate::cost::CostFunction;
-use crate::evaluation::{Evaluation, evaluate};
+use crate::evaluation::{Evaluation, evaluate_with};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
 use crate::model::{self, FresnelCosine, SpecularGeometry};
 use crate::optimise::{self, FitError, FitOutcome, Progress, Settings};
 use crate::processing::{self, MeasuredBrdf, ProcessingError, ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
+use crate::uncertainty::{BootstrapOptions, Uncertainty, UncertaintyError, bootstrap};
 
 /// Everything that decides a fit besides the scan itself.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -28,6 +30,9 @@ pub struct FitRequest {
     pub processing: ProcessingOptions,
     /// Optimiser settings: method, cost function, bounds, Fresnel cosine, seed, …
     pub settings: Settings,
+    /// How the evaluation turns spectra into L*a*b* (observer, weighting); the paper's by default.
+    #[serde(default)]
+    pub colorimetry: Colorimetry,
 }
 
 /// One finished fit of one scan.
@@ -45,6 +50,8 @@ pub struct FitReport {
     pub outcome: FitOutcome,
     /// ΔE00 between measured and estimated colour.
     pub evaluation: Evaluation,
+    /// The bootstrap intervals, when asked for ([`FitReport::with_uncertainty`]).
+    pub uncertainty: Option<Uncertainty>,
 }
 
 /// Why a scan could not be fitted.
@@ -98,7 +105,7 @@ pub fn fit_measured(
         request.settings.fresnel,
         &SpecularGeometry::all(),
     );
-    let evaluation = evaluate(&measured.values, &estimated);
+    let evaluation = evaluate_with(&measured.values, &estimated, request.colorimetry);
     Ok(FitReport {
         sample: sample.to_string(),
         request: request.clone(),
@@ -106,10 +113,29 @@ pub fn fit_measured(
         estimated,
         outcome,
         evaluation,
+        uncertainty: None,
     })
 }
 
 impl FitReport {
+    /// Adds the bootstrap intervals of this fit (SCIENCE.md §10), computed from its measured
+    /// BRDF, settings, colorimetry and parameters; `cancel` stops it between refits.
+    pub fn with_uncertainty(
+        mut self,
+        opts: &BootstrapOptions,
+        cancel: &std::sync::atomic::AtomicBool,
+    ) -> Result<FitReport, UncertaintyError> {
+        self.uncertainty = Some(bootstrap(
+            &self.measured,
+            &self.request.settings,
+            self.request.colorimetry,
+            &self.outcome.params,
+            opts,
+            cancel,
+        )?);
+        Ok(self)
+    }
+
     /// The contract-3 document.
     pub fn document(&self) -> FitDocument {
         let p = &self.outcome.params;
@@ -134,6 +160,8 @@ impl FitReport {
             delta_e00_specular_mean: self.evaluation.specular.mean,
             specular_strategy: self.request.processing.specular,
             fresnel: self.request.settings.fresnel,
+            colorimetry: self.request.colorimetry,
+            uncertainty: self.uncertainty.clone(),
         }
     }
 }
@@ -145,7 +173,7 @@ impl Serialize for FitReport {
 }
 
 /// The JSON object `brdfd fit --json` prints (ARCHITECTURE.md contract 3). The first eleven
-/// keys are the contract; the last four are additions that make a fit self-describing.
+/// keys are the contract; the rest are additions that make a fit self-describing.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitDocument {
     pub sample: String,
@@ -173,6 +201,13 @@ pub struct FitDocument {
     pub specular_strategy: SpecularStrategy,
     /// Which cosine the model's Fresnel term used.
     pub fresnel: FresnelCosine,
+    /// The colorimetry the ΔE00 values were computed with (`{"observer": "2", "weighting":
+    /// "summation"}` unless configured otherwise).
+    #[serde(default)]
+    pub colorimetry: Colorimetry,
+    /// The bootstrap intervals (`brdfd fit --bootstrap N`); absent without them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<Uncertainty>,
 }
 
 /// The fitted parameters as the contract writes them.
@@ -239,6 +274,7 @@ mod tests {
                 seed: 3,
                 ..Settings::default()
             },
+            colorimetry: Colorimetry::default(),
         }
     }
 
@@ -265,6 +301,7 @@ mod tests {
             "delta_e00_specular_mean",
             "specular_strategy",
             "fresnel",
+            "colorimetry",
         ];
         let mut got = keys.clone();
         got.sort();

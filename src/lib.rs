@@ -11,6 +11,7 @@
 //! - [`colour`]: spectra → CIE XYZ/CIELAB (D65, 2°), CIEDE2000, 8-bit sRGB swatches.
 //! - [`evaluation`]: ΔE00 between measured and estimated BRDF per geometry, with summaries.
 //! - [`stats`]: study statistics: mean ΔE00 with 95 % t interval, exact sign test.
+//! - [`uncertainty`]: parameter intervals of a fit by a parametric bootstrap (SCIENCE.md §10).
 //!
 //! Scans and fits (pure, synchronous; file I/O only at the edges):
 //! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
@@ -53,3 +54,4 @@ pub mod sync;
 pub mod synth;
 #[cfg(test)]
 pub(crate) mod test_support;
+pub mod uncertainty;

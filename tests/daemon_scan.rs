@@ -139,6 +139,7 @@ async fn a_reference_a_scan_and_three_fits_land_in_the_store_with_every_row() {
                 &FitRequest {
                     processing: ProcessingOptions::default(),
                     settings,
+                    ..FitRequest::default()
                 },
             )
             .unwrap();

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
+use crate::colour::{Colorimetry, Observer, Weighting};
 use crate::cost::CostFunction;
 use crate::fit::{FitReport, FitRequest, fit_scan};
 use crate::geometry::GEOMETRIES;
@@ -13,6 +14,8 @@ use crate::optimise::{Method, Settings};
 use crate::processing::{ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::wavelengths_nm;
+use crate::uncertainty::BootstrapOptions;
+use std::sync::atomic::AtomicBool;
 
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
@@ -47,6 +50,24 @@ pub struct FitArgs {
     #[arg(long, value_name = "incidence|light-half", default_value = "incidence", value_parser = parse_fresnel)]
     pub fresnel: FresnelCosine,
 
+    /// Standard observer for L*a*b* and ΔE00: `2` (CIE 1931, the paper's) or `10` (CIE 1964,
+    /// what instrument software often uses). Illuminant is always D65.
+    #[arg(long, value_name = "2|10", default_value_t = Observer::default())]
+    pub observer: Observer,
+
+    /// How the 31 bands are weighted into XYZ: `summation` (CIE 15 at the band centres, the
+    /// paper's) or `astm-e308` (ASTM E308 / E2022 weighting factors, as instrument software
+    /// computes L*a*b* from 10 nm data).
+    #[arg(long, value_name = "summation|astm-e308", default_value_t = Weighting::default())]
+    pub weighting: Weighting,
+
+    /// Bootstrap resamples for 95 % intervals of ks, alpha, ior and kd per band (and the spread
+    /// of the ΔE00 summaries): each resample perturbs the measured BRDF with the noise the scan
+    /// itself shows and refits from this fit (SCIENCE.md §10). 200 is a good number; 0 (the
+    /// default) skips it. Adds an `uncertainty` object to `--json` and intervals to the table.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub bootstrap: u32,
+
     /// Print one JSON object on stdout (sample, cost_function, method, seed, params, cost,
     /// evaluations, generations, wall_ms, delta_e00 per geometry, delta_e00_mean, …) instead
     /// of a table.
@@ -80,14 +101,29 @@ impl FitArgs {
                 fresnel: self.fresnel,
                 ..Settings::default()
             },
+            colorimetry: Colorimetry {
+                observer: self.observer,
+                weighting: self.weighting,
+            },
         }
     }
 }
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let scan = Scan::read_file(&args.input)?;
-    let report = fit_scan(&scan, &args.request())
+    let mut report = fit_scan(&scan, &args.request())
         .with_context(|| format!("fitting {}", args.input.display()))?;
+    if args.bootstrap > 0 {
+        let opts = BootstrapOptions {
+            resamples: args.bootstrap,
+            seed: args.seed,
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            noise: None,
+        };
+        report = report
+            .with_uncertainty(&opts, &AtomicBool::new(false))
+            .with_context(|| format!("bootstrapping the fit of {}", args.input.display()))?;
+    }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
@@ -123,8 +159,29 @@ pub fn table(r: &FitReport) -> String {
         "specular lobe    ks {:.5}  alpha {:.5}  ior {:.5}",
         p.ks, p.alpha, p.ior
     );
+    if let Some(u) = &r.uncertainty {
+        let _ = writeln!(
+            t,
+            "95 % intervals   ks [{:.5}, {:.5}]  alpha [{:.5}, {:.5}]  ior [{:.5}, {:.5}]",
+            u.ks[0], u.ks[1], u.alpha[0], u.alpha[1], u.ior[0], u.ior[1]
+        );
+        let _ = writeln!(
+            t,
+            "                 ({}, {} resamples, noise σ {:.4} per value; ΔE00 mean [{:.4}, {:.4}])",
+            u.method, u.resamples, u.noise, u.delta_e00_mean[0], u.delta_e00_mean[1]
+        );
+    }
     let _ = writeln!(t, "kd (sr⁻¹)");
-    for (chunk_nm, chunk_kd) in wavelengths_nm().chunks(8).zip(p.kd.chunks(8)) {
+    if let Some(u) = &r.uncertainty {
+        for (nm, (k, iv)) in wavelengths_nm().iter().zip(p.kd.iter().zip(&u.kd)) {
+            let _ = writeln!(t, "  {nm} {k:.5}  [{:.5}, {:.5}]", iv[0], iv[1]);
+        }
+    }
+    for (chunk_nm, chunk_kd) in wavelengths_nm()
+        .chunks(8)
+        .zip(p.kd.chunks(8))
+        .filter(|_| r.uncertainty.is_none())
+    {
         let cells: Vec<String> = chunk_nm
             .iter()
             .zip(chunk_kd)
@@ -132,7 +189,7 @@ pub fn table(r: &FitReport) -> String {
             .collect();
         let _ = writeln!(t, "  {}", cells.join("  "));
     }
-    let _ = writeln!(t, "ΔE00 per geometry");
+    let _ = writeln!(t, "ΔE00 per geometry ({})", r.request.colorimetry);
     for (geo, de) in GEOMETRIES.iter().zip(e.per_geometry) {
         let _ = writeln!(t, "  {:<8} {:>4}  {de:8.4}", geo.name, geo.device.key());
     }

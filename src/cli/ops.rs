@@ -586,6 +586,38 @@ fn print_fits(detail: &Value) {
                 .map(|e| format!("  {e}"))
                 .unwrap_or_default()
         );
+        print_fit_extras(&fit);
+    }
+}
+
+/// Under a fit's row: the colorimetry of its ΔE00 and, once the bootstrap has run, the 95 %
+/// intervals of the lobe parameters (SCIENCE.md §7.1, §10).
+fn print_fit_extras(fit: &Value) {
+    let c = &fit["colorimetry"];
+    if c.is_object() {
+        println!(
+            "       ΔE00 under D65/{}° {}",
+            s(c, "observer"),
+            s(c, "weighting")
+        );
+    }
+    let u = &fit["uncertainty"];
+    if u.is_object() {
+        let iv = |k: &str| {
+            format!(
+                "[{:.4}, {:.4}]",
+                u[k][0].as_f64().unwrap_or(f64::NAN),
+                u[k][1].as_f64().unwrap_or(f64::NAN)
+            )
+        };
+        println!(
+            "       95 % intervals ({} resamples): ks {}  alpha {}  ior {}  ΔE00 mean {}",
+            u["resamples"],
+            iv("ks"),
+            iv("alpha"),
+            iv("ior"),
+            iv("delta_e00_mean")
+        );
     }
 }
 

@@ -1,7 +1,9 @@
 //! The CIE tables colour is computed with (SCIENCE.md §7), embedded from `src/colour/data/`
 //! and sampled once at the 31 band centres of [`crate::spectral`]:
 //! the CIE 1931 2° observer x̄ȳz̄ (CIE 018:2019 / CIE 15:2018) and illuminant D65
-//! (CIE S 014-2 / ISO 11664-2). Sources are cited in `src/colour/data/README.md`.
+//! (CIE S 014-2 / ISO 11664-2), and the CIE 1964 10° observer (CIE 15:2018) for the `[colour]
+//! observer = "10"` option. Sources are cited in `src/colour/data/README.md`.
+//! The whole 1 nm tables are also available, for the ASTM E308 weights of [`super::e308`].
 //!
 //! Both tables list every band centre (400, 410, …, 700 nm) exactly, so sampling is a lookup,
 //! never an interpolation; a table without one of those rows is rejected.
@@ -12,6 +14,8 @@ use crate::spectral::{BANDS, Spectrum, wavelengths_nm};
 
 /// CIE 1931 2° colour-matching functions, 360–830 nm every 1 nm: `nm,xbar,ybar,zbar`.
 const CMF_CSV: &str = include_str!("data/cie1931_2deg_cmf_1nm.csv");
+/// CIE 1964 10° colour-matching functions, 360–830 nm every 1 nm: `nm,x_bar_10,y_bar_10,z_bar_10`.
+const CMF10_CSV: &str = include_str!("data/cie1964_10deg_cmf_1nm.csv");
 /// CIE D65 relative SPD, 300–780 nm every 5 nm: `nm,d65`.
 const D65_CSV: &str = include_str!("data/cie_d65_spd_5nm.csv");
 
@@ -92,6 +96,76 @@ static D65: LazyLock<Spectrum> = LazyLock::new(|| {
     rows.map(|[s]| s)
 });
 
+static CMF10: LazyLock<[[f64; 3]; BANDS]> = LazyLock::new(|| {
+    sample_table::<3>("cie1964_10deg_cmf_1nm.csv", CMF10_CSV)
+        .unwrap_or_else(|e| panic!("embedded table is damaged: {e}"))
+});
+
+/// Every row of a CIE CSV as `(nm, values)`, in file order (same format as [`sample_table`]).
+pub fn all_rows<const N: usize>(
+    table: &'static str,
+    csv: &str,
+) -> Result<Vec<(f64, [f64; N])>, CieTableError> {
+    let mut out = Vec::new();
+    for (i, raw) in csv.lines().enumerate() {
+        let text = raw.trim();
+        if text.is_empty() || text.starts_with('#') || text.starts_with("nm") {
+            continue;
+        }
+        let bad = || CieTableError::BadRow {
+            table,
+            line: i + 1,
+            text: text.to_string(),
+            expected: N + 1,
+        };
+        let fields: Vec<f64> = text
+            .split(',')
+            .map(|f| f.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| bad())?;
+        if fields.len() != N + 1 || fields.iter().any(|v| !v.is_finite()) {
+            return Err(bad());
+        }
+        out.push((fields[0], std::array::from_fn(|k| fields[k + 1])));
+    }
+    Ok(out)
+}
+
+/// The whole 1 nm table (360–830 nm) of the 2° (`ten_degree = false`) or 10° observer.
+pub fn cmf_1nm(ten_degree: bool) -> Vec<[f64; 3]> {
+    let (name, csv) = if ten_degree {
+        ("cie1964_10deg_cmf_1nm.csv", CMF10_CSV)
+    } else {
+        ("cie1931_2deg_cmf_1nm.csv", CMF_CSV)
+    };
+    let rows =
+        all_rows::<3>(name, csv).unwrap_or_else(|e| panic!("embedded table is damaged: {e}"));
+    // Whole nanometres in order, 360 to 830: checked, since the E308 weights index by nm.
+    for (j, (nm, _)) in rows.iter().enumerate() {
+        assert_eq!(
+            *nm,
+            (360 + j) as f64,
+            "{name}: rows must be every nm from 360"
+        );
+    }
+    assert_eq!(rows.len(), 471, "{name}: rows must end at 830 nm");
+    rows.into_iter().map(|(_, v)| v).collect()
+}
+
+/// The D65 table's rows, `(nm, relative power)`, 300–780 nm every 5 nm.
+pub fn d65_rows() -> Vec<(f64, f64)> {
+    all_rows::<1>("cie_d65_spd_5nm.csv", D65_CSV)
+        .unwrap_or_else(|e| panic!("embedded table is damaged: {e}"))
+        .into_iter()
+        .map(|(nm, [v])| (nm, v))
+        .collect()
+}
+
+/// CIE 1964 10° x̄₁₀, ȳ₁₀, z̄₁₀ at each band centre (dimensionless).
+pub fn cmf10() -> &'static [[f64; 3]; BANDS] {
+    &CMF10
+}
+
 /// CIE 1931 2° x̄, ȳ, z̄ at each band centre (dimensionless).
 pub fn cmf() -> &'static [[f64; 3]; BANDS] {
     &CMF
@@ -115,6 +189,17 @@ mod tests {
         assert_eq!(d65()[0], 82.7549); // 400 nm
         assert_eq!(d65()[16], 100.0); // 560 nm, the normalisation point
         assert_eq!(d65()[BANDS - 1], 71.6091); // 700 nm
+    }
+
+    #[test]
+    fn ten_degree_table_samples_to_the_cie_values() {
+        // CIE 15:2018, 1964 10° observer at 400, 560 and 700 nm.
+        assert_eq!(cmf10()[0], [0.0191097, 0.0020044, 0.0860109]);
+        assert_eq!(cmf10()[16], [0.705224, 0.99734, 0.0]);
+        assert_eq!(cmf10()[BANDS - 1], [0.00957688, 0.00371774, 0.0]);
+        assert_eq!(cmf_1nm(true).len(), 471);
+        assert_eq!(cmf_1nm(false)[200], cmf()[16]);
+        assert_eq!(d65_rows().len(), 97);
     }
 
     #[test]

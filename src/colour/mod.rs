@@ -4,12 +4,20 @@
 //! - [`cie`]: the embedded CIE tables sampled at the band centres.
 //! - [`ciede2000`](mod@ciede2000): ΔE00, proven against Sharma, Wu & Dalal (2005).
 //! - [`srgb`]: XYZ → clipped 8-bit sRGB that says when it clipped.
+//! - [`e308`]: ASTM E308 / E2022 weighting factors for the 10 nm grid.
+//!
+//! [`Colorimetry`] is the `[colour]` choice (SCIENCE.md §7.1): observer 2° (CIE 1931) or 10°
+//! (CIE 1964), weighting by plain summation at the band centres (CIE 15, the paper's) or by
+//! ASTM E308 weights (what instrument software does). The default is the paper's, 2° with
+//! summation, and runs exactly the code the free functions below run, so every result made
+//! before the option existed is unchanged bit for bit.
 //!
 //! Units: reflectance factor is 1 for the perfect white diffuser; BRDF is in sr⁻¹ and becomes a
 //! reflectance factor as `R = π · f`; XYZ is scaled so the white diffuser has Y = 100.
 
 pub mod cie;
 pub mod ciede2000;
+pub mod e308;
 pub mod srgb;
 
 use std::sync::LazyLock;
@@ -47,31 +55,171 @@ struct Weights {
     per_band: [[f64; 3]; crate::spectral::BANDS],
 }
 
-static WEIGHTS: LazyLock<Weights> = LazyLock::new(|| {
-    let cmf = cie::cmf();
-    let s = cie::d65();
-    let per_band = std::array::from_fn(|i| cmf[i].map(|c| s[i] * c));
-    let sum_sy: f64 = per_band.iter().map(|w| w[1]).sum();
-    Weights {
-        k: 100.0 / sum_sy,
-        per_band,
+impl Weights {
+    /// CIE 15 summation at the band centres with the given observer sampled there.
+    fn summation(cmf: &[[f64; 3]; crate::spectral::BANDS]) -> Weights {
+        let s = cie::d65();
+        let per_band = std::array::from_fn(|i| cmf[i].map(|c| s[i] * c));
+        let sum_sy: f64 = per_band.iter().map(|w| w[1]).sum();
+        Weights {
+            k: 100.0 / sum_sy,
+            per_band,
+        }
     }
-});
+
+    /// ASTM E308 weights (already normalised to Y(white) = 100, so k = 1).
+    fn astm_e308(ten_degree: bool) -> Weights {
+        let d65 = e308::d65_1nm(&cie::d65_rows());
+        Weights {
+            k: 1.0,
+            per_band: e308::weights(&cie::cmf_1nm(ten_degree), &d65),
+        }
+    }
+
+    fn xyz(&self, r: &Spectrum) -> Xyz {
+        let mut sum = [0.0; 3];
+        for (ri, wi) in r.iter().zip(&self.per_band) {
+            for c in 0..3 {
+                sum[c] += ri * wi[c];
+            }
+        }
+        Xyz {
+            x: self.k * sum[0],
+            y: self.k * sum[1],
+            z: self.k * sum[2],
+        }
+    }
+}
+
+static WEIGHTS: LazyLock<Weights> = LazyLock::new(|| Weights::summation(cie::cmf()));
+static WEIGHTS_10_SUM: LazyLock<Weights> = LazyLock::new(|| Weights::summation(cie::cmf10()));
+static WEIGHTS_2_E308: LazyLock<Weights> = LazyLock::new(|| Weights::astm_e308(false));
+static WEIGHTS_10_E308: LazyLock<Weights> = LazyLock::new(|| Weights::astm_e308(true));
 
 /// Reflectance factor spectrum → XYZ under D65 for the 2° observer, CIE 15:2018 §7 summation at
 /// the 31 band centres (10 nm step, no interpolation): `X = k Σ R S x̄`, `k = 100 / Σ S ȳ`.
 pub fn reflectance_to_xyz(r: &Spectrum) -> Xyz {
-    let w = &*WEIGHTS;
-    let mut sum = [0.0; 3];
-    for (ri, wi) in r.iter().zip(&w.per_band) {
-        for c in 0..3 {
-            sum[c] += ri * wi[c];
+    WEIGHTS.xyz(r)
+}
+
+/// The CIE standard observer colour is computed for (`[colour] observer`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+pub enum Observer {
+    /// CIE 1931 2° (the paper's).
+    #[default]
+    #[serde(rename = "2")]
+    Cie1931TwoDegree,
+    /// CIE 1964 10° supplementary observer, common in instrument software for samples larger
+    /// than 4° of the visual field.
+    #[serde(rename = "10")]
+    Cie1964TenDegree,
+}
+
+/// How the 31 bands are weighted into XYZ (`[colour] weighting`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+pub enum Weighting {
+    /// CIE 15 summation of `R·S·x̄` at the band centres (the paper's).
+    #[default]
+    #[serde(rename = "summation")]
+    Summation,
+    /// ASTM E308 weighting factors (ASTM E2022, 10 nm, spectrum extended by its end values).
+    #[serde(rename = "astm-e308")]
+    AstmE308,
+}
+
+impl std::fmt::Display for Observer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Observer::Cie1931TwoDegree => "2",
+            Observer::Cie1964TenDegree => "10",
+        })
+    }
+}
+
+impl std::str::FromStr for Observer {
+    type Err = ColorimetryError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().trim_end_matches('°') {
+            "2" => Ok(Observer::Cie1931TwoDegree),
+            "10" => Ok(Observer::Cie1964TenDegree),
+            _ => Err(ColorimetryError::Observer(s.to_string())),
         }
     }
-    Xyz {
-        x: w.k * sum[0],
-        y: w.k * sum[1],
-        z: w.k * sum[2],
+}
+
+impl std::fmt::Display for Weighting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Weighting::Summation => "summation",
+            Weighting::AstmE308 => "astm-e308",
+        })
+    }
+}
+
+impl std::str::FromStr for Weighting {
+    type Err = ColorimetryError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim() {
+            "summation" => Ok(Weighting::Summation),
+            "astm-e308" => Ok(Weighting::AstmE308),
+            _ => Err(ColorimetryError::Weighting(s.to_string())),
+        }
+    }
+}
+
+/// A colorimetry option that does not exist.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ColorimetryError {
+    #[error("observer {0:?} is not known; use \"2\" (CIE 1931, the default) or \"10\" (CIE 1964)")]
+    Observer(String),
+    #[error("weighting {0:?} is not known; use \"summation\" (the default) or \"astm-e308\"")]
+    Weighting(String),
+}
+
+/// How spectra become XYZ and L*a*b*: the observer and the weighting, always D65. Recorded with
+/// every evaluation; the default is the paper's (2°, summation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Colorimetry {
+    #[serde(default)]
+    pub observer: Observer,
+    #[serde(default)]
+    pub weighting: Weighting,
+}
+
+impl std::fmt::Display for Colorimetry {
+    /// e.g. `D65/2° summation`, `D65/10° astm-e308`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "D65/{}° {}", self.observer, self.weighting)
+    }
+}
+
+impl Colorimetry {
+    fn weights(&self) -> &'static Weights {
+        match (self.observer, self.weighting) {
+            (Observer::Cie1931TwoDegree, Weighting::Summation) => &WEIGHTS,
+            (Observer::Cie1964TenDegree, Weighting::Summation) => &WEIGHTS_10_SUM,
+            (Observer::Cie1931TwoDegree, Weighting::AstmE308) => &WEIGHTS_2_E308,
+            (Observer::Cie1964TenDegree, Weighting::AstmE308) => &WEIGHTS_10_E308,
+        }
+    }
+
+    /// Reflectance factor → XYZ (Y of the white diffuser = 100).
+    pub fn reflectance_to_xyz(&self, r: &Spectrum) -> Xyz {
+        self.weights().xyz(r)
+    }
+
+    /// XYZ of reflectance 1 in every band: the CIELAB reference white.
+    pub fn white_point(&self) -> Xyz {
+        self.reflectance_to_xyz(&crate::spectral::flat(1.0))
+    }
+
+    /// Reflectance factor → CIELAB relative to [`Colorimetry::white_point`].
+    pub fn reflectance_to_lab(&self, r: &Spectrum) -> Lab {
+        if *self == Colorimetry::default() {
+            return reflectance_to_lab(r);
+        }
+        xyz_to_lab(self.reflectance_to_xyz(r), self.white_point())
     }
 }
 
@@ -123,6 +271,110 @@ pub fn brdf_to_reflectance(f: &Spectrum) -> Spectrum {
 mod tests {
     use super::*;
     use crate::spectral::{BANDS, flat};
+
+    /// colour-science 0.4.7's XYZ of the 24 ColorChecker spectra, `(patch, observer, e308, sum)`.
+    fn colour_science_reference() -> Vec<(String, Observer, [f64; 3], [f64; 3])> {
+        const CSV: &str = include_str!("data/colorchecker_xyz_d65_astm_e308_colour_science.csv");
+        CSV.lines()
+            .filter(|l| !l.starts_with('#') && !l.starts_with("patch"))
+            .map(|l| {
+                let (name, rest) = l[1..].split_once("\",").unwrap();
+                let f: Vec<f64> = rest.split(',').map(|v| v.parse().unwrap()).collect();
+                let observer = if f[0] == 2.0 {
+                    Observer::Cie1931TwoDegree
+                } else {
+                    Observer::Cie1964TenDegree
+                };
+                (
+                    name.to_string(),
+                    observer,
+                    [f[1], f[2], f[3]],
+                    [f[4], f[5], f[6]],
+                )
+            })
+            .collect()
+    }
+
+    fn check_against_colour_science(weighting: Weighting, tol: f64) {
+        let reference = colour_science_reference();
+        assert_eq!(reference.len(), 48);
+        for (name, observer, e308, sum) in reference {
+            let r = crate::synth::colorchecker_patch(&name)
+                .unwrap_or_else(|| panic!("no ColorChecker patch {name:?}"));
+            let c = Colorimetry {
+                observer,
+                weighting,
+            };
+            let xyz = c.reflectance_to_xyz(&r);
+            let want = match weighting {
+                Weighting::AstmE308 => e308,
+                Weighting::Summation => sum,
+            };
+            for (got, want) in [xyz.x, xyz.y, xyz.z].into_iter().zip(want) {
+                assert!(
+                    (got - want).abs() < tol,
+                    "{name} {c}: {got} vs colour-science {want} ({xyz:?})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn astm_e308_matches_colour_science_for_the_colorchecker_to_1e4() {
+        check_against_colour_science(Weighting::AstmE308, 1e-4);
+    }
+
+    #[test]
+    fn summation_matches_colour_science_for_the_colorchecker_to_1e4() {
+        check_against_colour_science(Weighting::Summation, 1e-4);
+    }
+
+    #[test]
+    fn the_default_colorimetry_is_the_papers_bit_for_bit() {
+        let c = Colorimetry::default();
+        assert_eq!(c.to_string(), "D65/2° summation");
+        for (_, r) in crate::synth::colorchecker() {
+            assert_eq!(c.reflectance_to_lab(r), reflectance_to_lab(r));
+            assert_eq!(c.reflectance_to_xyz(r), reflectance_to_xyz(r));
+        }
+    }
+
+    #[test]
+    fn every_colorimetry_has_white_at_y_100_and_neutral_grey() {
+        for observer in [Observer::Cie1931TwoDegree, Observer::Cie1964TenDegree] {
+            for weighting in [Weighting::Summation, Weighting::AstmE308] {
+                let c = Colorimetry {
+                    observer,
+                    weighting,
+                };
+                assert!((c.white_point().y - 100.0).abs() < 1e-9, "{c}");
+                let lab = c.reflectance_to_lab(&flat(0.5));
+                assert!((lab.l - 76.0693).abs() < 1e-4, "{c}: {lab:?}");
+                assert!(lab.a.abs() < 1e-9 && lab.b.abs() < 1e-9, "{c}: {lab:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn colorimetry_parses_and_names_its_options() {
+        let c: Colorimetry =
+            serde_json::from_str(r#"{"observer":"10","weighting":"astm-e308"}"#).unwrap();
+        assert_eq!(c.observer, Observer::Cie1964TenDegree);
+        assert_eq!(c.weighting, Weighting::AstmE308);
+        assert_eq!(c.to_string(), "D65/10° astm-e308");
+        assert_eq!(
+            "10".parse::<Observer>().unwrap(),
+            Observer::Cie1964TenDegree
+        );
+        let e = "5".parse::<Observer>().unwrap_err().to_string();
+        assert!(e.contains("\"5\"") && e.contains("\"10\""), "{e}");
+        let e = "astm".parse::<Weighting>().unwrap_err().to_string();
+        assert!(e.contains("astm-e308"), "{e}");
+        assert_eq!(
+            serde_json::from_str::<Colorimetry>("{}").unwrap(),
+            Colorimetry::default()
+        );
+    }
 
     #[test]
     fn white_point_matches_science_md() {

@@ -141,6 +141,11 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
                     Some((f.cost.name(), f.method.as_str())),
                     d.estimated.map(|f| reflectance(&f)),
                 ));
+                if let Some([lo, hi]) = super::estimate_band(d) {
+                    let fit = Some((f.cost.name(), f.method.as_str()));
+                    objects.push((DataKind::EstimatedLow, fit, lo));
+                    objects.push((DataKind::EstimatedHigh, fit, hi));
+                }
             }
         }
         for (kind, fit, spectra) in objects {
@@ -150,6 +155,8 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
                 DataKind::Reference => ("Reference", s.scan.reference.name.as_str()),
                 DataKind::Measured => ("Measured", s.name.as_str()),
                 DataKind::Estimated => ("Estimated", s.name.as_str()),
+                DataKind::EstimatedLow => ("EstimatedLow", s.name.as_str()),
+                DataKind::EstimatedHigh => ("EstimatedHigh", s.name.as_str()),
             };
             let _ = writeln!(
                 t,
@@ -175,11 +182,31 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
                     "reflectance factor of the model fitted to \"{}\" with cost function {cost}, method {method}",
                     s.name
                 ),
-                (DataKind::Estimated, None) => unreachable!("estimates carry their fit"),
+                (DataKind::EstimatedLow | DataKind::EstimatedHigh, Some((cost, method))) => {
+                    format!(
+                        "{} end of the 95 % band of the model fitted to \"{}\" with cost \
+                         function {cost}, method {method}: pi*(kd bootstrap interval + specular term)",
+                        if kind == DataKind::EstimatedLow {
+                            "lower"
+                        } else {
+                            "upper"
+                        },
+                        s.name
+                    )
+                }
+                (DataKind::Estimated | DataKind::EstimatedLow | DataKind::EstimatedHigh, None) => {
+                    unreachable!("estimates carry their fit")
+                }
             };
             let _ = writeln!(t, "        <cc:Comment>{}</cc:Comment>", esc(&comment));
             let _ = writeln!(t, "        <cc:ColorValues>");
-            let is_reflectance = matches!(kind, DataKind::Measured | DataKind::Estimated);
+            let is_reflectance = matches!(
+                kind,
+                DataKind::Measured
+                    | DataKind::Estimated
+                    | DataKind::EstimatedLow
+                    | DataKind::EstimatedHigh
+            );
             for g in &GEOMETRIES {
                 let reflectance_factor = is_reflectance || g.device == Device::MaT12;
                 write_spectrum(&mut t, g, &spectra[g.index], reflectance_factor);
@@ -351,7 +378,10 @@ pub(crate) fn observations(
                 })?;
                 let sample = tags.get("sample").map_or(name.clone(), |s| s.to_string());
                 match kind {
-                    DataKind::Measured | DataKind::Estimated => continue,
+                    DataKind::Measured
+                    | DataKind::Estimated
+                    | DataKind::EstimatedLow
+                    | DataKind::EstimatedHigh => continue,
                     DataKind::Reading => Owner::Sample(sample),
                     DataKind::Reference => Owner::ReferenceOf {
                         sample,
@@ -501,7 +531,7 @@ pub(crate) fn observations(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::super::tests::{fixed, study};
     use super::super::{Format, ImportOptions, import};
     use super::*;

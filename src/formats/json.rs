@@ -65,6 +65,12 @@ struct FitDoc<'a> {
     delta_e00: Option<PerGeometry<'a, f64>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     delta_e00_mean: Option<f64>,
+    /// The colorimetry of the ΔE00 values (SCIENCE.md §7.1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    colorimetry: Option<crate::colour::Colorimetry>,
+    /// The bootstrap intervals, as in `brdfd fit --json` (SCIENCE.md §10).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    uncertainty: Option<&'a crate::uncertainty::Uncertainty>,
 }
 
 /// The study as a `brdfd.study/1` document.
@@ -116,6 +122,8 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
                     estimated_reflectance: est.as_ref().map(PerGeometry),
                     delta_e00: d.map(|d| PerGeometry(&d.evaluation.per_geometry)),
                     delta_e00_mean: d.map(|d| d.evaluation.all.mean),
+                    colorimetry: d.map(|d| d.colorimetry),
+                    uncertainty: d.and_then(|d| d.uncertainty.as_ref()),
                 }
             })
             .collect();

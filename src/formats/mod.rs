@@ -41,7 +41,7 @@ use std::str::FromStr;
 
 use crate::cost::CostFunction;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, MA_T12_COUNT};
-use crate::report::study::Study;
+use crate::report::study::{DoneFit, Study};
 use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
 use crate::spectral::{BANDS, Spectrum};
 
@@ -237,14 +237,21 @@ pub enum DataKind {
     Measured,
     /// The fitted model's reflectance factor `π·f`.
     Estimated,
+    /// Lower end of the estimate's 95 % band: `π·(kd_lo(λ) + s_g)`, the bootstrap interval of
+    /// kd plus the point fit's specular term (SCIENCE.md §10). Only for fits with intervals.
+    EstimatedLow,
+    /// Upper end, `π·(kd_hi(λ) + s_g)`.
+    EstimatedHigh,
 }
 
 impl DataKind {
-    pub const ALL: [DataKind; 4] = [
+    pub const ALL: [DataKind; 6] = [
         DataKind::Reading,
         DataKind::Reference,
         DataKind::Measured,
         DataKind::Estimated,
+        DataKind::EstimatedLow,
+        DataKind::EstimatedHigh,
     ];
 
     pub const fn name(self) -> &'static str {
@@ -253,6 +260,8 @@ impl DataKind {
             DataKind::Reference => "reference",
             DataKind::Measured => "measured",
             DataKind::Estimated => "estimated",
+            DataKind::EstimatedLow => "estimated_lo",
+            DataKind::EstimatedHigh => "estimated_hi",
         }
     }
 }
@@ -264,7 +273,10 @@ impl FromStr for DataKind {
             .into_iter()
             .find(|k| k.name() == s)
             .ok_or_else(|| {
-                format!("unknown data kind \"{s}\"; valid: reading, reference, measured, estimated")
+                format!(
+                    "unknown data kind \"{s}\"; valid: reading, reference, measured, estimated, \
+                     estimated_lo, estimated_hi"
+                )
             })
     }
 }
@@ -325,10 +337,42 @@ pub fn rows(study: &Study) -> Vec<SpectralRow> {
                     Some((f.cost, f.method.as_str())),
                     d.estimated.map(|f| reflectance(&f)),
                 );
+                if let Some([lo, hi]) = estimate_band(d) {
+                    push(
+                        DataKind::EstimatedLow,
+                        Some((f.cost, f.method.as_str())),
+                        lo,
+                    );
+                    push(
+                        DataKind::EstimatedHigh,
+                        Some((f.cost, f.method.as_str())),
+                        hi,
+                    );
+                }
             }
         }
     }
     out
+}
+
+/// The 95 % band of a fit's estimated reflectance factor at each geometry, from its bootstrap
+/// interval of kd and its point specular term: `π·(kd_lo + s_g)`, `π·(kd_hi + s_g)`.
+/// `None` without intervals.
+pub fn estimate_band(d: &DoneFit) -> Option<[[Spectrum; GEOMETRY_COUNT]; 2]> {
+    let u = d.uncertainty.as_ref()?;
+    if u.kd.len() != BANDS {
+        return None;
+    }
+    // The point estimate minus kd is the specular term, the same in every band.
+    let band = |end: usize| -> [Spectrum; GEOMETRY_COUNT] {
+        std::array::from_fn(|g| {
+            std::array::from_fn(|b| {
+                let s = d.estimated[g][b] - d.params.kd[b];
+                std::f64::consts::PI * (u.kd[b][end] + s)
+            })
+        })
+    };
+    Some([band(0), band(1)])
 }
 
 /// A device reading as a spectrum: the MA-T12's 31 bands, or the SRA's intensity in every band.
@@ -705,6 +749,68 @@ pub(crate) mod tests {
             .find(|r| r.kind == DataKind::Measured && r.geometry.name == "45as45")
             .unwrap();
         assert_eq!(m.values, reflectance(&s.measured.values[9]));
+    }
+
+    /// The test study with made-up intervals on its first fit: kd ± 10 %.
+    fn study_with_intervals() -> Study {
+        let mut study = study();
+        let crate::report::study::FitState::Done(d) = &mut study.samples[0].fits[0].state else {
+            panic!("the first fit is done");
+        };
+        let p = d.params;
+        d.uncertainty = Some(crate::uncertainty::Uncertainty {
+            method: crate::uncertainty::METHOD.into(),
+            resamples: 200,
+            noise: 0.014,
+            seed: 1,
+            ks: [p.ks * 0.8, p.ks * 1.2],
+            alpha: [p.alpha * 0.8, p.alpha * 1.2],
+            ior: [p.ior * 0.9, p.ior * 1.1],
+            kd: p.kd.iter().map(|k| [k * 0.9, k * 1.1]).collect(),
+            delta_e00_mean: [0.1, 0.2],
+            delta_e00_diffuse_mean: [0.1, 0.2],
+            delta_e00_specular_mean: [1.0, 2.0],
+        });
+        study
+    }
+
+    #[test]
+    fn intervals_travel_in_every_format_and_imports_skip_them() {
+        let with = study_with_intervals();
+        let r = rows(&with);
+        let at = |kind: DataKind| {
+            r.iter()
+                .find(|x| x.kind == kind && x.geometry.name == "15as15")
+                .unwrap()
+                .values
+        };
+        let (lo, est, hi) = (
+            at(DataKind::EstimatedLow),
+            at(DataKind::Estimated),
+            at(DataKind::EstimatedHigh),
+        );
+        let d = with.samples[0].fits[0].done().unwrap();
+        let s = d.estimated[3][0] - d.params.kd[0];
+        assert!((lo[0] - std::f64::consts::PI * (0.9 * d.params.kd[0] + s)).abs() < 1e-12);
+        assert!((0..BANDS).all(|b| lo[b] < est[b] && est[b] < hi[b]));
+        assert_eq!(r.len(), rows(&study()).len() + 2 * 14);
+        let want: Vec<Scan> = with.samples.iter().map(|s| s.scan.clone()).collect();
+        for format in Format::ALL {
+            let text = export(&with, format, &fixed()).unwrap();
+            if format == Format::Json {
+                assert!(text.contains("\"uncertainty\"") && text.contains("\"colorimetry\""));
+            } else if format == Format::Cxf3 {
+                assert!(text.contains("EstimatedLow"));
+                cxf3::tests::validate_with_xmllint(&text);
+            } else {
+                assert!(
+                    text.contains("estimated_lo") || text.contains("EstimatedLow"),
+                    "{format}"
+                );
+            }
+            let got = import(format, "x", &text, None, &ImportOptions::default()).unwrap();
+            assert_eq!(got.len(), want.len(), "{format}");
+        }
     }
 
     #[test]

@@ -94,7 +94,10 @@ pub(crate) fn observations(
                     .parse()
                     .map_err(|e: String| FormatError::invalid(file, line, &table.fields[k], e))?;
                 match data_kind {
-                    DataKind::Measured | DataKind::Estimated => continue,
+                    DataKind::Measured
+                    | DataKind::Estimated
+                    | DataKind::EstimatedLow
+                    | DataKind::EstimatedHigh => continue,
                     DataKind::Reading => Owner::Sample(name.to_string()),
                     DataKind::Reference => {
                         let tile = reference

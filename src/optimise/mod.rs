@@ -483,6 +483,32 @@ pub fn fit_with_observer(
     })
 }
 
+/// A local refit of `measured` warm-started at `start`: the separable method's search and
+/// polish from that one point (no survey, no continuation), whatever `settings.method` is.
+/// The bootstrap ([`crate::uncertainty`]) refits each resample this way from the point fit.
+pub fn refit_local(
+    measured: &MeasuredBrdf,
+    settings: &Settings,
+    start: &Params,
+) -> Result<FitOutcome, FitError> {
+    let started = Instant::now();
+    settings.validate()?;
+    check_input(measured, settings.cost)?;
+    let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds);
+    let run = separable::run_local(&problem, &settings.separable, start);
+    let model = evaluate(&run.params, settings.fresnel, &SpecularGeometry::all());
+    Ok(FitOutcome {
+        params: run.params,
+        cost: cost(settings.cost, measured, &model),
+        evaluations: run.tracker.evaluations,
+        generations: run.tracker.history.len() as u32,
+        wall_ms: started.elapsed().as_secs_f64() * 1e3,
+        best_cost_per_generation: run.tracker.history,
+        method: Method::Separable,
+        seed: settings.seed,
+    })
+}
+
 fn check_input(measured: &MeasuredBrdf, cf: CostFunction) -> Result<(), FitError> {
     for g in 0..GEOMETRY_COUNT {
         let w = GEOMETRIES[g].cos_theta_i();

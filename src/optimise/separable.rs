@@ -81,6 +81,63 @@ impl Map {
     }
 }
 
+impl Map {
+    /// The inverse of [`Map::params`]: (ks, α, μ) → unit cube, clamped into it.
+    fn unit(&self, ks: f64, alpha: f64, ior: f64) -> [f64; 3] {
+        let b = &self.bounds;
+        let t0 = ((ks - b.ks.0) / (b.ks.1 - b.ks.0)).max(0.0).sqrt();
+        let t1 = (alpha / b.alpha.0).ln() / (b.alpha.1 / b.alpha.0).ln();
+        let t2 = (ior - b.ior.0) / (b.ior.1 - b.ior.0);
+        [t0, t1, t2].map(|t| {
+            if t.is_finite() {
+                t.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        })
+    }
+}
+
+/// A local refit warm-started at `start` (the bootstrap's refits, `crate::uncertainty`): one
+/// Nelder–Mead search from `start`, then the usual polishing — no survey, no continuation.
+/// A resample moves the optimum by about the noise, so the search only has to follow it
+/// within its basin; the point fit's global search has already chosen the basin.
+pub(super) fn run_local(problem: &Problem, s: &SeparableSettings, start: &Params) -> Run {
+    let map = Map {
+        bounds: problem.bounds,
+    };
+    let mut tracker = Tracker::new(1 + s.polish_restarts);
+    let count = Cell::new(0u64);
+    let mut kd = [0.0; BANDS];
+    let objective = Criterion::from(problem.cf);
+    let mut cost_at = |t: &[f64; 3]| {
+        count.set(count.get() + 1);
+        let (ks, alpha, ior) = map.params(t);
+        problem.profile(objective, ks, alpha, ior, &mut kd)
+    };
+    let t0 = map.unit(start.ks, start.alpha, start.ior);
+    let f0 = cost_at(&t0);
+    let (best_t, _) = descend(
+        &mut cost_at,
+        &[t0],
+        &[f0],
+        &[],
+        &SeparableSettings { starts: 1, ..*s },
+        &mut |f| {
+            tracker.history.push(f);
+            Ok(())
+        },
+    )
+    .unwrap_or((t0, f0));
+    cost_at(&best_t);
+    tracker.evaluations = count.get();
+    let (ks, alpha, ior) = map.params(&best_t);
+    Run {
+        params: Params { kd, ks, alpha, ior },
+        tracker,
+    }
+}
+
 fn distance_inf(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     (0..3).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max)
 }
@@ -317,6 +374,20 @@ mod tests {
             pick_starts(&pts, &costs, &[[0.05, 0.1, 0.1]], 3, 0.15),
             vec![2, 3, 0]
         );
+    }
+
+    #[test]
+    fn unit_inverts_the_map() {
+        let map = Map {
+            bounds: Bounds::default(),
+        };
+        for t in [[0.0, 0.0, 0.0], [0.3, 0.7, 0.2], [1.0, 1.0, 1.0]] {
+            let (ks, a, i) = map.params(&t);
+            let u = map.unit(ks, a, i);
+            for d in 0..3 {
+                assert!((u[d] - t[d]).abs() < 1e-12, "{t:?} → {u:?}");
+            }
+        }
     }
 
     #[test]

@@ -518,9 +518,20 @@ fn spectra<DB: DrawingBackend>(
                     .map(|d| (f.cost, brdf_to_reflectance(&d.estimated[g.index])))
             })
             .collect();
+        // 95 % bands of the fits that have bootstrap intervals (SCIENCE.md §10), drawn as
+        // error bars at each band centre.
+        let bands: Vec<(CostFunction, [Spectrum; 2])> = s
+            .fits
+            .iter()
+            .filter_map(|f| {
+                let [lo, hi] = crate::formats::estimate_band(f.done()?)?;
+                Some((f.cost, [lo[g.index], hi[g.index]]))
+            })
+            .collect();
         let all = measured
             .iter()
-            .chain(estimates.iter().flat_map(|(_, e)| e.iter()));
+            .chain(estimates.iter().flat_map(|(_, e)| e.iter()))
+            .chain(bands.iter().flat_map(|(_, [_, hi])| hi.iter()));
         let hi = all.fold(0.0f64, |m, v| m.max(*v)) * 1.08;
         let hi = if hi > 0.0 { hi } else { 1.0 };
         let mut chart = ChartBuilder::on(panel)
@@ -549,6 +560,14 @@ fn spectra<DB: DrawingBackend>(
                 nm.iter().zip(e).map(|(&w, &v)| (f64::from(w), v)),
                 cost_colour(*c).stroke_width(2),
             ))?;
+        }
+        for (c, [lo, hi]) in &bands {
+            for (k, &w) in nm.iter().enumerate() {
+                chart.draw_series(LineSeries::new(
+                    [(f64::from(w), lo[k]), (f64::from(w), hi[k])],
+                    cost_colour(*c).stroke_width(1),
+                ))?;
+            }
         }
     }
     let legend = &panels[GEOMETRY_COUNT];

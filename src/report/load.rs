@@ -80,7 +80,8 @@ fn readings_of(
     Ok(out)
 }
 
-fn fit_state(
+async fn fit_state(
+    store: &Store,
     scan: ScanId,
     run: &FitRun,
     measured: &processing::MeasuredBrdf,
@@ -102,7 +103,15 @@ fn fit_state(
                 .get("fresnel")
                 .and_then(|v| serde_json::from_value(v.clone()).ok())
                 .unwrap_or_default();
-            FitState::Done(Box::new(DoneFit::from_params(measured, params, fresnel)))
+            // The colorimetry and the intervals stored with the fit (migration 0011).
+            let detail = store.fit_detail(run.id).await?;
+            FitState::Done(Box::new(DoneFit::from_params_with(
+                measured,
+                params,
+                fresnel,
+                detail.colorimetry.unwrap_or_default(),
+                detail.uncertainty,
+            )))
         }
         FitStatus::Failed => FitState::Failed {
             reason: run
@@ -178,7 +187,7 @@ fn assemble(
             fits.push(FitStudy {
                 cost,
                 method: run.method.clone(),
-                state: fit_state(id, run, &measured)?,
+                state: fit_state(store, id, run, &measured).await?,
             });
         }
     }

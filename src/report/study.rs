@@ -7,14 +7,18 @@
 //! (with the Fresnel cosine it was fitted with), and its evaluation is recomputed from measured
 //! and estimated, so the three can never disagree.
 
+use crate::colour::Colorimetry;
 use crate::cost::CostFunction;
-use crate::evaluation::{Evaluation, evaluate};
+#[cfg(test)]
+use crate::evaluation::evaluate;
+use crate::evaluation::{Evaluation, evaluate_with};
 use crate::fit::FitReport;
 use crate::geometry::GEOMETRY_COUNT;
 use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
 use crate::processing::{MeasuredBrdf, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
+use crate::uncertainty::Uncertainty;
 
 /// Every sample of a study, in the order they are reported.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -70,18 +74,36 @@ pub struct DoneFit {
     pub estimated: [Spectrum; GEOMETRY_COUNT],
     /// ΔE00 between measured and estimated colour.
     pub evaluation: Evaluation,
+    /// The colorimetry the evaluation was computed with (SCIENCE.md §7.1).
+    pub colorimetry: Colorimetry,
+    /// The bootstrap intervals, when they were computed (SCIENCE.md §10).
+    pub uncertainty: Option<Uncertainty>,
 }
 
 impl DoneFit {
-    /// A finished fit from its parameters: the estimated BRDF and the evaluation follow.
+    /// A finished fit from its parameters: the estimated BRDF and the evaluation (the paper's
+    /// colorimetry) follow.
     pub fn from_params(measured: &MeasuredBrdf, params: Params, fresnel: FresnelCosine) -> DoneFit {
+        DoneFit::from_params_with(measured, params, fresnel, Colorimetry::default(), None)
+    }
+
+    /// [`DoneFit::from_params`] under `colorimetry`, with the fit's intervals if any.
+    pub fn from_params_with(
+        measured: &MeasuredBrdf,
+        params: Params,
+        fresnel: FresnelCosine,
+        colorimetry: Colorimetry,
+        uncertainty: Option<Uncertainty>,
+    ) -> DoneFit {
         let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
-        let evaluation = evaluate(&measured.values, &estimated);
+        let evaluation = evaluate_with(&measured.values, &estimated, colorimetry);
         DoneFit {
             params,
             fresnel,
             estimated,
             evaluation,
+            colorimetry,
+            uncertainty,
         }
     }
 }
@@ -184,10 +206,12 @@ impl Study {
                     .map(|r| FitStudy {
                         cost: r.request.settings.cost,
                         method: r.outcome.method.to_string(),
-                        state: FitState::Done(Box::new(DoneFit::from_params(
+                        state: FitState::Done(Box::new(DoneFit::from_params_with(
                             &r.measured,
                             r.outcome.params,
                             r.request.settings.fresnel,
+                            r.request.colorimetry,
+                            r.uncertainty.clone(),
                         ))),
                     })
                     .collect();

@@ -50,10 +50,35 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
         .map(|s| s.name())
         .collect::<Vec<_>>()
         .join(", ");
+    // The colorimetry of the fits' evaluations: the paper's unless configured otherwise.
+    let mut colorimetries: Vec<crate::colour::Colorimetry> = study
+        .samples
+        .iter()
+        .flat_map(|s| {
+            s.fits
+                .iter()
+                .filter_map(|f| f.done().map(|d| d.colorimetry))
+        })
+        .collect();
+    colorimetries.dedup();
+    let colour = match colorimetries.as_slice() {
+        [] => "CIE D65, 2° observer".to_string(),
+        [c] if *c == crate::colour::Colorimetry::default() => "CIE D65, 2° observer".to_string(),
+        cs => cs
+            .iter()
+            .map(|c| {
+                format!(
+                    "CIE D65, {}° observer, {} weighting",
+                    c.observer, c.weighting
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(" / "),
+    };
     let mut b = vec![
         Block::Heading("brdfd study report".into()),
         Block::Para(format!(
-            "{} samples; cost functions {cost_list}; fit method {methods}; SRA readings processed with the {strategies} strategy. Colour: CIE D65, 2° observer, CIELAB, ΔE00 = CIEDE2000 between measured and estimated colour, per geometry (12 MA-T12 + 2 SRA). {} samples take part in the comparison, {} left out.",
+            "{} samples; cost functions {cost_list}; fit method {methods}; SRA readings processed with the {strategies} strategy. Colour: {colour}, CIELAB, ΔE00 = CIEDE2000 between measured and estimated colour, per geometry (12 MA-T12 + 2 SRA). {} samples take part in the comparison, {} left out.",
             study.samples.len(),
             analysis.included.len(),
             analysis.excluded.len()
@@ -147,6 +172,40 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             })
             .collect(),
     });
+    // Parameters with their bootstrap intervals, when any fit has them (SCIENCE.md §10).
+    let with_intervals: Vec<Vec<String>> = study
+        .samples
+        .iter()
+        .flat_map(|s| {
+            s.fits.iter().filter_map(move |f| {
+                let d = f.done()?;
+                let u = d.uncertainty.as_ref()?;
+                let p = &d.params;
+                let cell = |v: f64, iv: [f64; 2]| format!("{v:.4} [{:.4}, {:.4}]", iv[0], iv[1]);
+                Some(vec![
+                    s.name.clone(),
+                    f.cost.to_string(),
+                    cell(p.ks, u.ks),
+                    cell(p.alpha, u.alpha),
+                    cell(p.ior, u.ior),
+                    cell(d.evaluation.all.mean, u.delta_e00_mean),
+                    u.resamples.to_string(),
+                ])
+            })
+        })
+        .collect();
+    if !with_intervals.is_empty() {
+        b.push(Block::Heading(
+            "Fitted lobe parameters with 95 % intervals".into(),
+        ));
+        b.push(Block::Table {
+            caption: "Table 4. Fitted ks, α, μ (ior) and mean ΔE00, each with its 95 % bootstrap interval [low, high]: the measured BRDF perturbed with the noise the scan shows, refitted per resample (parametric bootstrap, SCIENCE.md §10). The ΔE00 interval is the spread of each resample's fit against its resample. Fig. 8 draws the kd intervals as error bars.".into(),
+            head: ["sample", "cost", "ks", "α", "μ", "mean ΔE00", "resamples"]
+                .map(String::from)
+                .to_vec(),
+            rows: with_intervals,
+        });
+    }
     b.push(Block::Heading("Samples left out".into()));
     if analysis.excluded.is_empty() {
         b.push(Block::Para(

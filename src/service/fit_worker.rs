@@ -25,6 +25,7 @@ use crate::fit::{FitReport, FitRequest, FitScanError, fit_measured};
 use crate::optimise::{FitError, Progress, Settings};
 use crate::processing::{MeasuredBrdf, ProcessingOptions};
 use crate::store::{FitResult, FitRunId, FitStatus, ScanId};
+use crate::uncertainty::{BootstrapOptions, UncertaintyError, bootstrap};
 
 use super::events::Event;
 use super::{Service, ServiceError, Timings};
@@ -247,8 +248,66 @@ impl Service {
             )),
             Err(join) => Ended::Failed(format!("the fit's thread ended abnormally: {join}")),
         };
-        self.record_fit_end(fit, scan, cost, ended).await;
+        let stored = self.record_fit_end(fit, scan, cost, ended).await;
         self.forget(fit);
+        if let Some(report) = stored {
+            self.bootstrap_fit(fit, *report).await;
+        }
+    }
+
+    /// After a fit is stored: its bootstrap intervals (`[fit] bootstrap` resamples, SCIENCE.md
+    /// §10) on one blocking thread, one bootstrap at a time and without a fit permit (so the
+    /// next scans' point estimates are not held up), then stored with the fit. Shutdown stops
+    /// it between refits; a fit left without intervals shows none.
+    async fn bootstrap_fit(&self, fit: FitRunId, report: FitReport) {
+        let resamples = self.inner.settings.bootstrap;
+        if resamples == 0 || self.inner.stopping.load(Ordering::Relaxed) {
+            return;
+        }
+        let Ok(permit) = self.inner.bootstrap_slot.clone().acquire_owned().await else {
+            return;
+        };
+        let stopping = self.inner.stopping.clone();
+        let opts = BootstrapOptions {
+            resamples,
+            seed: report.outcome.seed,
+            threads: 1,
+            noise: None,
+        };
+        let joined = tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            catch_unwind(AssertUnwindSafe(|| {
+                bootstrap(
+                    &report.measured,
+                    &report.request.settings,
+                    report.request.colorimetry,
+                    &report.outcome.params,
+                    &opts,
+                    &stopping,
+                )
+            }))
+        })
+        .await;
+        match joined {
+            Ok(Ok(Ok(u))) => {
+                if let Err(e) = self
+                    .timed_store(self.inner.store.set_fit_uncertainty(fit, &u))
+                    .await
+                {
+                    tracing::warn!(error = %e, %fit, "cannot store the fit's uncertainty");
+                }
+            }
+            Ok(Ok(Err(UncertaintyError::Cancelled))) => {
+                tracing::info!(%fit, "bootstrap interrupted by shutdown; the fit has no intervals");
+            }
+            Ok(Ok(Err(e))) => tracing::warn!(error = %e, %fit, "no intervals for the fit"),
+            Ok(Err(payload)) => tracing::error!(
+                %fit,
+                "the bootstrap panicked ({}); this is a bug in brdfd",
+                panic_message(payload.as_ref())
+            ),
+            Err(e) => tracing::error!(error = %e, %fit, "the bootstrap's thread ended abnormally"),
+        }
     }
 
     fn forget(&self, fit: FitRunId) {
@@ -295,6 +354,7 @@ impl Service {
                 reference_reflectance: scan_detail.reference.reference.rho_ref,
             },
             settings,
+            colorimetry: self.inner.settings.colorimetry,
         };
         Ok(Some((
             FitJob {
@@ -308,7 +368,14 @@ impl Service {
         )))
     }
 
-    async fn record_fit_end(&self, fit: FitRunId, scan: ScanId, cost: CostFunction, ended: Ended) {
+    /// Stores how a fit ended; the report when it was stored as done.
+    async fn record_fit_end(
+        &self,
+        fit: FitRunId,
+        scan: ScanId,
+        cost: CostFunction,
+        ended: Ended,
+    ) -> Option<Box<FitReport>> {
         let store = &self.inner.store;
         match ended {
             Ended::Done(report) => {
@@ -323,19 +390,27 @@ impl Service {
                 };
                 let e = &report.evaluation;
                 match self
-                    .timed_store(store.finish_fit(fit, &result, &e.per_geometry))
+                    .timed_store(store.finish_fit_with(
+                        fit,
+                        &result,
+                        &e.per_geometry,
+                        report.request.colorimetry,
+                    ))
                     .await
                 {
-                    Ok(()) => self.inner.events.send(Event::FitDone {
-                        fit,
-                        scan,
-                        cost_function: cost,
-                        cost: outcome.cost,
-                        delta_e00_mean: e.all.mean,
-                        delta_e00_diffuse_mean: e.diffuse.mean,
-                        delta_e00_specular_mean: e.specular.mean,
-                        wall_ms: outcome.wall_ms,
-                    }),
+                    Ok(()) => {
+                        self.inner.events.send(Event::FitDone {
+                            fit,
+                            scan,
+                            cost_function: cost,
+                            cost: outcome.cost,
+                            delta_e00_mean: e.all.mean,
+                            delta_e00_diffuse_mean: e.diffuse.mean,
+                            delta_e00_specular_mean: e.specular.mean,
+                            wall_ms: outcome.wall_ms,
+                        });
+                        return Some(report);
+                    }
                     Err(err) => {
                         let error = format!("cannot store the result: {err}");
                         let _ = self.timed_store(store.fail_fit(fit, &error)).await;
@@ -361,5 +436,6 @@ impl Service {
                 tracing::info!(%fit, "fit interrupted by shutdown; it runs again at the next start");
             }
         }
+        None
     }
 }

@@ -67,6 +67,10 @@ pub struct ServiceSettings {
     pub shutdown_grace: Duration,
     /// Forwarding to the lab's central database (`[station]`, `[sync]`); `None`: none.
     pub sync: Option<crate::sync::ForwarderOptions>,
+    /// How every evaluation turns spectra into L*a*b*.
+    pub colorimetry: crate::colour::Colorimetry,
+    /// Bootstrap resamples per fit (0: no intervals).
+    pub bootstrap: u32,
 }
 
 impl ServiceSettings {
@@ -84,6 +88,8 @@ impl ServiceSettings {
                 o.batch = config.sync.batch;
                 o
             }),
+            colorimetry: config.colour,
+            bootstrap: config.fit.bootstrap,
         }
     }
 
@@ -253,6 +259,9 @@ struct Inner {
     fit_tx: tokio::sync::mpsc::UnboundedSender<FitRunId>,
     fits_queued: AtomicUsize,
     fits_running: AtomicUsize,
+    /// One bootstrap at a time, apart from the fits' permits: a bootstrap never holds up the
+    /// point estimate of a later fit (SCIENCE.md §10).
+    bootstrap_slot: Arc<tokio::sync::Semaphore>,
     timings: Timings,
     /// Each instrument's identity as it last reported it (MA-T12, SRA), copied onto every
     /// reference set and scan as its provenance.
@@ -311,6 +320,7 @@ impl Service {
             fits_queued: AtomicUsize::new(0),
             fits_running: AtomicUsize::new(0),
             identities: Mutex::new([None, None]),
+            bootstrap_slot: Arc::new(tokio::sync::Semaphore::new(1)),
             timings: Timings::default(),
             sync_status: std::sync::OnceLock::new(),
         });

@@ -4,7 +4,9 @@
 //! UPDATE. `finish_fit` writes the result, the 14 ΔE00 values and their summary in one
 //! transaction, so a fit is never `done` without its evaluation.
 
+use crate::colour::Colorimetry;
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
+use crate::uncertainty::Uncertainty;
 
 use super::backend::Db;
 use super::codec;
@@ -171,12 +173,25 @@ impl Store {
     }
 
     /// running → done, with the optimiser's result and the ΔE00 at each geometry (table
-    /// order); the store adds the mean/median/max summaries. One transaction.
+    /// order); the store adds the mean/median/max summaries. One transaction. The ΔE00 are
+    /// recorded as computed with the paper's colorimetry; see [`Store::finish_fit_with`].
     pub async fn finish_fit(
         &self,
         fit: FitRunId,
         outcome: &FitResult,
         delta_e00: &[f64; GEOMETRY_COUNT],
+    ) -> Result<(), StoreError> {
+        self.finish_fit_with(fit, outcome, delta_e00, Colorimetry::default())
+            .await
+    }
+
+    /// [`Store::finish_fit`], recording the colorimetry the ΔE00 values were computed with.
+    pub async fn finish_fit_with(
+        &self,
+        fit: FitRunId,
+        outcome: &FitResult,
+        delta_e00: &[f64; GEOMETRY_COUNT],
+        colorimetry: Colorimetry,
     ) -> Result<(), StoreError> {
         let owner = || format!("fit run {fit}");
         codec::check_finite(&owner, &[outcome.cost], |_| "the cost".into())?;
@@ -238,8 +253,9 @@ impl Store {
         let (a, d, s) = (evaluation.all, evaluation.diffuse, evaluation.specular);
         sqlx::query(
             "INSERT INTO evaluation_summaries (fit_run_id, mean, median, max, diffuse_mean,
-                 diffuse_median, diffuse_max, specular_mean, specular_median, specular_max)
-             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)",
+                 diffuse_median, diffuse_max, specular_mean, specular_median, specular_max,
+                 observer, weighting)
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)",
         )
         .bind(fit.0)
         .bind(a.mean)
@@ -251,10 +267,39 @@ impl Store {
         .bind(s.mean)
         .bind(s.median)
         .bind(s.max)
+        .bind(colorimetry.observer.to_string())
+        .bind(colorimetry.weighting.to_string())
         .execute(&mut *tx)
         .await?;
         tx.commit().await?;
         Ok(())
+    }
+
+    /// Stores the bootstrap intervals of a done fit (they are computed after it is stored).
+    pub async fn set_fit_uncertainty(
+        &self,
+        fit: FitRunId,
+        uncertainty: &Uncertainty,
+    ) -> Result<(), StoreError> {
+        let owner = || format!("fit run {fit}");
+        let mut values = vec![uncertainty.noise];
+        for iv in [uncertainty.ks, uncertainty.alpha, uncertainty.ior]
+            .iter()
+            .chain(&uncertainty.kd)
+        {
+            values.extend_from_slice(iv);
+        }
+        codec::check_finite(&owner, &values, |_| "an uncertainty interval".into())?;
+        let json = to_json("fit uncertainty", uncertainty)?;
+        let done = sqlx::query(
+            "UPDATE fit_runs SET uncertainty_json = $2 WHERE id = $1 AND status = 'done'",
+        )
+        .bind(fit.0)
+        .bind(json)
+        .execute(&self.writer)
+        .await?;
+        self.explain_fit(fit, done.rows_affected(), "done", "store its uncertainty")
+            .await
     }
 
     /// queued | running → failed, with the error.
@@ -336,11 +381,26 @@ impl Store {
                 id: fit.0,
             })?
             .into_run()?;
+        let uncertainty: Option<String> =
+            sqlx::query_scalar("SELECT uncertainty_json FROM fit_runs WHERE id = $1")
+                .bind(fit.0)
+                .fetch_one(&self.reader)
+                .await?;
+        let uncertainty = uncertainty
+            .map(|text| {
+                serde_json::from_str::<Uncertainty>(&text).map_err(|e| StoreError::Corrupt {
+                    table: "fit_runs",
+                    id: fit.0,
+                    detail: format!("uncertainty_json: {e}"),
+                })
+            })
+            .transpose()?;
         let rows: Vec<(String, f64)> =
             sqlx::query_as("SELECT geometry, delta_e00 FROM evaluations WHERE fit_run_id = $1")
                 .bind(fit.0)
                 .fetch_all(&self.reader)
                 .await?;
+        let mut colorimetry = None;
         let evaluation = if rows.is_empty() {
             None
         } else {
@@ -361,9 +421,10 @@ impl Store {
                 });
             }
             // Read back what finish_fit stored, rather than recomputing it.
-            let s: (f64, f64, f64, f64, f64, f64, f64, f64, f64) = sqlx::query_as(
+            type Row = (f64, f64, f64, f64, f64, f64, f64, f64, f64, String, String);
+            let s: Row = sqlx::query_as(
                 "SELECT mean, median, max, diffuse_mean, diffuse_median, diffuse_max,
-                        specular_mean, specular_median, specular_max
+                        specular_mean, specular_median, specular_max, observer, weighting
                  FROM evaluation_summaries WHERE fit_run_id = $1",
             )
             .bind(fit.0)
@@ -374,6 +435,15 @@ impl Store {
                 id: fit.0,
                 detail: "missing summary".into(),
             })?;
+            let corrupt = |e: crate::colour::ColorimetryError| StoreError::Corrupt {
+                table: "evaluation_summaries",
+                id: fit.0,
+                detail: e.to_string(),
+            };
+            colorimetry = Some(Colorimetry {
+                observer: s.9.parse().map_err(corrupt)?,
+                weighting: s.10.parse().map_err(corrupt)?,
+            });
             Some(EvaluationRecord {
                 per_geometry,
                 all: DeltaESummary {
@@ -393,7 +463,12 @@ impl Store {
                 },
             })
         };
-        Ok(FitDetail { run, evaluation })
+        Ok(FitDetail {
+            run,
+            evaluation,
+            colorimetry,
+            uncertainty,
+        })
     }
 
     /// Like `explain_scan`, for fit runs.

@@ -505,6 +505,10 @@ pub struct EvaluationRecord {
 pub struct FitDetail {
     pub run: FitRun,
     pub evaluation: Option<EvaluationRecord>,
+    /// The colorimetry the evaluation was computed with (with the evaluation).
+    pub colorimetry: Option<crate::colour::Colorimetry>,
+    /// The bootstrap intervals, once computed (SCIENCE.md §10).
+    pub uncertainty: Option<crate::uncertainty::Uncertainty>,
 }
 
 #[cfg(test)]

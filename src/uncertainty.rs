@@ -1,0 +1,484 @@
+//! How well a fit's parameters are determined: a parametric bootstrap with warm-started refits
+//! (SCIENCE.md §10), giving 95 % intervals for ks, α, μ and kd per band, and the spread of the
+//! ΔE00 summaries.
+//!
+//! Decisions (SCIENCE.md §10 gives the reasons in full):
+//! - **Parametric, not residual, resampling.** The model cannot reproduce the achromatic SRA
+//!   readings, so the residuals hold a systematic misfit besides the noise (up to the whole
+//!   specular mismatch for cf2, which leaves the diffuse residuals at exactly zero). Resampled
+//!   residuals would recycle that misfit as if it were noise, and for cf2 would recycle nothing
+//!   on the diffuse side. Instead each resample perturbs the *measured* BRDF with the
+//!   instrument's documented noise model: multiplicative N(1, σ) per value, independent per
+//!   band at the 12 MA-T12 geometries, one factor for all 31 bands at each SRA geometry (one
+//!   reading spread flat).
+//! - **σ from the scan itself**, by a contrast in which the model cancels exactly: at one band
+//!   the 12 MA-T12 values differ only by the spectrally flat specular term, so each geometry's
+//!   deviation from the 12-geometry mean is flat in λ; its second difference along λ holds
+//!   noise only ([`estimate_noise`]). A noise-free scan gives σ = 0 and zero-width intervals.
+//! - **Warm-started local refits** ([`crate::optimise::refit_local`]) from the point fit: the
+//!   point fit's global search picked the basin; a resample moves the optimum by about the noise.
+//! - **Percentile intervals** (2.5 % and 97.5 % quantiles of the refitted values), with the
+//!   same cost function, bounds and Fresnel choice as the point fit.
+//! - **Deterministic**: resample `i` draws from ChaCha8 stream `i` of the seed, so the result
+//!   does not depend on the number of threads.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::colour::Colorimetry;
+use crate::evaluation::evaluate_with;
+use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
+use crate::model::{self, Params, SpecularGeometry};
+use crate::optimise::{FitError, Settings, refit_local};
+use crate::processing::MeasuredBrdf;
+use crate::spectral::BANDS;
+
+/// The method's name as written into the `uncertainty` object.
+pub const METHOD: &str = "parametric-bootstrap";
+
+/// How a bootstrap runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BootstrapOptions {
+    /// Resamples (refits). 200 gives 95 % percentile intervals whose ends move by a few per
+    /// cent of their width from one seed to another.
+    pub resamples: u32,
+    /// Seed of the resampling noise.
+    pub seed: u64,
+    /// Threads to refit on (results do not depend on it); at least 1.
+    pub threads: usize,
+    /// Relative noise σ per processed value; `None` estimates it from the scan.
+    pub noise: Option<f64>,
+}
+
+impl Default for BootstrapOptions {
+    fn default() -> Self {
+        BootstrapOptions {
+            resamples: 200,
+            seed: 1,
+            threads: 1,
+            noise: None,
+        }
+    }
+}
+
+/// A 95 % interval `[lo, hi]`.
+pub type Interval = [f64; 2];
+
+/// The `uncertainty` object of a fit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Uncertainty {
+    /// [`METHOD`].
+    pub method: String,
+    /// Resamples refitted.
+    pub resamples: u32,
+    /// Relative noise σ per processed value the resamples were drawn with.
+    pub noise: f64,
+    /// Seed of the resampling noise.
+    pub seed: u64,
+    pub ks: Interval,
+    pub alpha: Interval,
+    pub ior: Interval,
+    /// One interval per band, 400–700 nm, sr⁻¹.
+    pub kd: Vec<Interval>,
+    /// The spread of the ΔE00 summaries: each resample's fit evaluated against its resample.
+    pub delta_e00_mean: Interval,
+    pub delta_e00_diffuse_mean: Interval,
+    pub delta_e00_specular_mean: Interval,
+}
+
+impl Uncertainty {
+    /// Whether `value` of parameter `name` ("ks", "alpha", "ior") lies within its interval.
+    pub fn contains(&self, name: &str, value: f64) -> bool {
+        let [lo, hi] = match name {
+            "ks" => self.ks,
+            "alpha" => self.alpha,
+            "ior" => self.ior,
+            _ => return false,
+        };
+        lo <= value && value <= hi
+    }
+}
+
+/// Why a bootstrap did not finish.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UncertaintyError {
+    #[error("bootstrap needs at least 2 resamples, got {0}; use 200 for 95 % intervals")]
+    TooFewResamples(u32),
+    #[error("bootstrap noise σ {0} must be finite and between 0 and 0.5")]
+    Noise(f64),
+    #[error("bootstrap refit {index}: {source}")]
+    Refit {
+        index: u32,
+        #[source]
+        source: FitError,
+    },
+    #[error("bootstrap cancelled")]
+    Cancelled,
+}
+
+/// The relative noise σ of one processed value, estimated from the 12 MA-T12 spectra.
+///
+/// At band b the MA-T12 values are `kd(b) + s_g` times noise, so `d_g(b) = M_g(b) − mean_g M(b)`
+/// is `s_g − mean s` (flat in λ) plus noise, and its second difference
+/// `D = d(b) − (d(b−1) + d(b+1))/2` is noise only. Each D is divided by its standard deviation
+/// under σ = 1 (computed from the measured values as the noise's scale), and σ is the RMS of
+/// the 12 × 29 standardised contrasts.
+pub fn estimate_noise(measured: &MeasuredBrdf) -> f64 {
+    let n = MA_T12_COUNT as f64;
+    let m = &measured.values;
+    // Var(d_g(b)) / σ² = M_g² (1 − 2/n) + Σ_g' M_g'² / n².
+    let var_d = |g: usize, b: usize| {
+        let sum_sq: f64 = (0..MA_T12_COUNT).map(|h| m[h][b] * m[h][b]).sum();
+        m[g][b] * m[g][b] * (1.0 - 2.0 / n) + sum_sq / (n * n)
+    };
+    let mean = |b: usize| (0..MA_T12_COUNT).map(|h| m[h][b]).sum::<f64>() / n;
+    let (mut sum, mut count) = (0.0, 0usize);
+    for g in 0..MA_T12_COUNT {
+        for b in 1..BANDS - 1 {
+            let d = |b: usize| m[g][b] - mean(b);
+            let contrast = d(b) - 0.5 * (d(b - 1) + d(b + 1));
+            // The three d's are independent apart from their shared means, whose covariance
+            // is of order 1/n²; it is left out (a 1 % effect on σ at n = 12).
+            let var = var_d(g, b) + 0.25 * (var_d(g, b - 1) + var_d(g, b + 1));
+            if var > 0.0 && var.is_finite() {
+                sum += contrast * contrast / var;
+                count += 1;
+            }
+        }
+    }
+    if count == 0 {
+        0.0
+    } else {
+        (sum / count as f64).sqrt()
+    }
+}
+
+/// One resample: `measured` with multiplicative N(1, σ) noise, per band at the MA-T12
+/// geometries and one factor per SRA geometry.
+pub fn resample(measured: &MeasuredBrdf, sigma: f64, rng: &mut ChaCha8Rng) -> MeasuredBrdf {
+    let mut out = *measured;
+    for (g, geo) in GEOMETRIES.iter().enumerate() {
+        match geo.device {
+            Device::MaT12 => {
+                for v in out.values[g].iter_mut() {
+                    *v *= factor(sigma, rng);
+                }
+            }
+            Device::Sra => {
+                let f = factor(sigma, rng);
+                for v in out.values[g].iter_mut() {
+                    *v *= f;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// N(1, σ), redrawn if not positive (a reading is never negative; rare below σ = 0.2).
+fn factor(sigma: f64, rng: &mut ChaCha8Rng) -> f64 {
+    if sigma == 0.0 {
+        return 1.0;
+    }
+    loop {
+        let f = 1.0 + sigma * crate::synth::standard_normal(rng);
+        if f > 0.0 {
+            return f;
+        }
+    }
+}
+
+/// The `q` quantile (0..1) of `xs` by linear interpolation between order statistics
+/// (Hyndman & Fan type 7, the default of R and NumPy).
+pub fn quantile(xs: &mut [f64], q: f64) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    let h = (xs.len() - 1) as f64 * q;
+    let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+    xs[lo] + (h - lo as f64) * (xs[hi] - xs[lo])
+}
+
+fn interval(xs: &mut [f64]) -> Interval {
+    [quantile(xs, 0.025), quantile(xs, 0.975)]
+}
+
+/// What one refit contributes.
+struct Draw {
+    params: Params,
+    de_mean: f64,
+    de_diffuse: f64,
+    de_specular: f64,
+}
+
+/// Bootstraps the fit `point` of `measured` (made with `settings`); `cancel` stops it between
+/// refits.
+pub fn bootstrap(
+    measured: &MeasuredBrdf,
+    settings: &Settings,
+    colorimetry: Colorimetry,
+    point: &Params,
+    opts: &BootstrapOptions,
+    cancel: &AtomicBool,
+) -> Result<Uncertainty, UncertaintyError> {
+    if opts.resamples < 2 {
+        return Err(UncertaintyError::TooFewResamples(opts.resamples));
+    }
+    let sigma = opts.noise.unwrap_or_else(|| estimate_noise(measured));
+    if !(sigma.is_finite() && (0.0..=0.5).contains(&sigma)) {
+        return Err(UncertaintyError::Noise(sigma));
+    }
+    let n = opts.resamples;
+    let threads = opts.threads.clamp(1, n as usize);
+    let one = |i: u32| -> Result<Draw, UncertaintyError> {
+        if cancel.load(Ordering::Relaxed) {
+            return Err(UncertaintyError::Cancelled);
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
+        rng.set_stream(u64::from(i));
+        let m = resample(measured, sigma, &mut rng);
+        let out = refit_local(&m, settings, point)
+            .map_err(|source| UncertaintyError::Refit { index: i, source })?;
+        let est = model::evaluate(&out.params, settings.fresnel, &SpecularGeometry::all());
+        let e = evaluate_with(&m.values, &est, colorimetry);
+        Ok(Draw {
+            params: out.params,
+            de_mean: e.all.mean,
+            de_diffuse: e.diffuse.mean,
+            de_specular: e.specular.mean,
+        })
+    };
+    // Resample i goes to thread i mod threads; every draw is independent of the split.
+    let mut draws: Vec<Option<Result<Draw, UncertaintyError>>> = (0..n).map(|_| None).collect();
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let one = &one;
+                scope.spawn(move || {
+                    (t as u32..n)
+                        .step_by(threads)
+                        .map(|i| (i, one(i)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        for h in handles {
+            for (i, d) in h.join().expect("bootstrap thread panicked") {
+                draws[i as usize] = Some(d);
+            }
+        }
+    });
+    let draws: Vec<Draw> = draws
+        .into_iter()
+        .map(|d| d.expect("every resample ran"))
+        .collect::<Result<_, _>>()?;
+    let col = |f: &dyn Fn(&Draw) -> f64| -> Interval {
+        let mut xs: Vec<f64> = draws.iter().map(f).collect();
+        interval(&mut xs)
+    };
+    let kd: Vec<Interval> = (0..BANDS).map(|b| col(&|d| d.params.kd[b])).collect();
+    Ok(Uncertainty {
+        method: METHOD.to_string(),
+        resamples: n,
+        noise: sigma,
+        seed: opts.seed,
+        ks: col(&|d| d.params.ks),
+        alpha: col(&|d| d.params.alpha),
+        ior: col(&|d| d.params.ior),
+        kd,
+        delta_e00_mean: col(&|d| d.de_mean),
+        delta_e00_diffuse_mean: col(&|d| d.de_diffuse),
+        delta_e00_specular_mean: col(&|d| d.de_specular),
+    })
+}
+
+/// Per-geometry count, kept next to the resampling so a changed geometry table fails here.
+const _: () = assert!(GEOMETRY_COUNT == MA_T12_COUNT + 2);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cost::CostFunction;
+    use crate::fit::{FitRequest, fit_scan};
+    use crate::processing::{ProcessingOptions, process};
+    use crate::synth::{SynthOptions, paper_samples, synth_scan};
+
+    fn scan_measured(sample: usize, noise: f64, seed: u64) -> MeasuredBrdf {
+        let scan = synth_scan(
+            &paper_samples()[sample],
+            &SynthOptions {
+                noise,
+                seed,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        process(&scan, &ProcessingOptions::default()).unwrap()
+    }
+
+    #[test]
+    fn quantiles_follow_type_7() {
+        let mut xs = [3.0, 1.0, 2.0, 4.0, 5.0];
+        assert_eq!(quantile(&mut xs, 0.0), 1.0);
+        assert_eq!(quantile(&mut xs, 0.5), 3.0);
+        assert_eq!(quantile(&mut xs, 1.0), 5.0);
+        assert_eq!(quantile(&mut xs, 0.125), 1.5);
+        let mut ys: Vec<f64> = (0..=200).map(f64::from).collect();
+        assert_eq!(interval(&mut ys), [5.0, 195.0]);
+    }
+
+    #[test]
+    fn noise_estimate_is_zero_on_a_noise_free_scan_and_recovers_sigma() {
+        let clean = scan_measured(0, 0.0, 0);
+        assert!(estimate_noise(&clean) < 1e-12, "{}", estimate_noise(&clean));
+        // Readings carry σ on sample and reference alike: a processed value has √2·σ.
+        for (sigma, seed) in [(0.01, 5), (0.03, 6), (0.003, 7)] {
+            let m = scan_measured(2, sigma, seed);
+            let got = estimate_noise(&m);
+            let want = sigma * 2f64.sqrt();
+            assert!(
+                (got / want - 1.0).abs() < 0.15,
+                "σ {sigma}: estimated {got}, want {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn resampling_is_multiplicative_flat_at_the_sra_and_seeded() {
+        let m = scan_measured(1, 0.0, 0);
+        let mut a = ChaCha8Rng::seed_from_u64(9);
+        let mut b = ChaCha8Rng::seed_from_u64(9);
+        let ra = resample(&m, 0.02, &mut a);
+        assert_eq!(ra, resample(&m, 0.02, &mut b));
+        // The SRA spectra stay flat: one factor for the 31 bands.
+        for g in MA_T12_COUNT..GEOMETRY_COUNT {
+            let f = ra.values[g][0] / m.values[g][0];
+            assert!(
+                ra.values[g]
+                    .iter()
+                    .zip(&m.values[g])
+                    .all(|(r, v)| (r / v - f).abs() < 1e-12)
+            );
+        }
+        // MA-T12 relative deviations have sd ≈ σ.
+        let dev: Vec<f64> = (0..MA_T12_COUNT)
+            .flat_map(|g| (0..BANDS).map(move |b| (g, b)))
+            .map(|(g, b)| ra.values[g][b] / m.values[g][b] - 1.0)
+            .collect();
+        let sd = (dev.iter().map(|d| d * d).sum::<f64>() / dev.len() as f64).sqrt();
+        assert!((sd - 0.02).abs() < 0.003, "sd {sd}");
+        assert_eq!(resample(&m, 0.0, &mut a), m);
+    }
+
+    #[test]
+    fn intervals_bracket_the_point_fit_and_do_not_depend_on_threads() {
+        let scan = synth_scan(
+            &paper_samples()[0],
+            &SynthOptions {
+                noise: 0.01,
+                seed: 11,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let request = FitRequest {
+            settings: Settings {
+                cost: CostFunction::Cf1,
+                ..Settings::default()
+            },
+            ..FitRequest::default()
+        };
+        let report = fit_scan(&scan, &request).unwrap();
+        let never = AtomicBool::new(false);
+        let opts = BootstrapOptions {
+            resamples: 24,
+            ..Default::default()
+        };
+        let run = |threads| {
+            bootstrap(
+                &report.measured,
+                &request.settings,
+                request.colorimetry,
+                &report.outcome.params,
+                &BootstrapOptions { threads, ..opts },
+                &never,
+            )
+            .unwrap()
+        };
+        let u = run(1);
+        assert_eq!(u, run(2));
+        assert_eq!(u.method, METHOD);
+        assert_eq!(u.kd.len(), BANDS);
+        let p = &report.outcome.params;
+        for (name, v, iv) in [
+            ("ks", p.ks, u.ks),
+            ("alpha", p.alpha, u.alpha),
+            ("ior", p.ior, u.ior),
+        ] {
+            assert!(iv[0] < iv[1], "{name}: {iv:?}");
+            // 24 draws centred on the point fit: it lies inside.
+            assert!(iv[0] <= v && v <= iv[1], "{name} {v} not in {iv:?}");
+        }
+        for (b, iv) in u.kd.iter().enumerate() {
+            assert!(iv[0] <= p.kd[b] && p.kd[b] <= iv[1], "kd[{b}]");
+        }
+        assert!(u.delta_e00_mean[0] <= u.delta_e00_mean[1]);
+        assert!((u.noise / (0.01 * 2f64.sqrt()) - 1.0).abs() < 0.2);
+    }
+
+    #[test]
+    fn noise_free_scans_give_intervals_of_zero_width_at_the_truth() {
+        let m = scan_measured(3, 0.0, 0);
+        let truth = &paper_samples()[3].params;
+        let settings = Settings {
+            cost: CostFunction::Cf1,
+            ..Settings::default()
+        };
+        let never = AtomicBool::new(false);
+        let u = bootstrap(
+            &m,
+            &settings,
+            Colorimetry::default(),
+            truth,
+            &BootstrapOptions {
+                resamples: 4,
+                ..Default::default()
+            },
+            &never,
+        )
+        .unwrap();
+        assert!(u.noise < 1e-12, "{}", u.noise);
+        assert!((u.ks[1] - u.ks[0]).abs() < 1e-4 * truth.ks, "{:?}", u.ks);
+    }
+
+    #[test]
+    fn refuses_bad_options_and_stops_when_cancelled() {
+        let m = scan_measured(0, 0.01, 1);
+        let p = paper_samples()[0].params;
+        let s = Settings::default();
+        let never = AtomicBool::new(false);
+        let c = Colorimetry::default();
+        let one = BootstrapOptions {
+            resamples: 1,
+            ..Default::default()
+        };
+        assert_eq!(
+            bootstrap(&m, &s, c, &p, &one, &never),
+            Err(UncertaintyError::TooFewResamples(1))
+        );
+        let noisy = BootstrapOptions {
+            noise: Some(f64::NAN),
+            ..Default::default()
+        };
+        assert!(matches!(
+            bootstrap(&m, &s, c, &p, &noisy, &never),
+            Err(UncertaintyError::Noise(_))
+        ));
+        let yes = AtomicBool::new(true);
+        assert_eq!(
+            bootstrap(&m, &s, c, &p, &BootstrapOptions::default(), &yes),
+            Err(UncertaintyError::Cancelled)
+        );
+    }
+}
