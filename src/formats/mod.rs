@@ -9,6 +9,7 @@
 //!   core schema kept in `src/formats/data/`.
 //! - [`json`]: everything, including the fitted parameters, as one JSON document.
 //! - [`sra`]: the Canon SRA's values as CSV (`sample,geometry,intensity`).
+//! - [`certificate`]: the reference tile's calibration (CGATS or CxF3), for `[reference]`.
 //!
 //! What an export holds, per sample of a [`Study`]: the device readings of the sample and of
 //! the reference tile they are normalised by (`reading`, `reference`), the measured
@@ -27,6 +28,7 @@
 //! correctly rounded `str::parse`, so export → import gives the same scan to the last bit in
 //! every format. Every error names the file, the line and the field.
 
+pub mod certificate;
 pub mod cgats;
 pub mod csv;
 pub mod cxf3;

@@ -181,6 +181,7 @@ async fn sample(store: &Store, id: ScanId) -> Result<SampleStudy, LoadError> {
         scan_id: Some(id.0),
         scan,
         specular,
+        reference_reflectance: detail.reference.reference.rho_ref,
         measured,
         fits,
     })
