@@ -77,7 +77,7 @@ fn readings_of(
     Ok(out)
 }
 
-fn fit_state(
+pub(crate) fn fit_state(
     scan: ScanId,
     run: &FitRun,
     measured: &processing::MeasuredBrdf,
