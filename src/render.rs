@@ -421,7 +421,7 @@ pub fn write_preview(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::model::{self, SpecularGeometry};
     use crate::report::study::{DoneFit, FitState, FitStudy};

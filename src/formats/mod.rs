@@ -9,6 +9,8 @@
 //!   core schema kept in `src/formats/data/`.
 //! - [`json`]: everything, including the fitted parameters, as one JSON document.
 //! - [`sra`]: the Canon SRA's values as CSV (`sample,geometry,intensity`).
+//! - [`gltf`]: glTF 2.0 materials of fitted BRDFs on a sphere (one per fit; RGB approximation).
+//! - [`mitsuba`]: Mitsuba 3 scenes of fitted materials (one per fit; SCIENCE.md §10).
 //! - [`certificate`]: the reference tile's calibration (CGATS or CxF3), for `[reference]`.
 //!
 //! What an export holds, per sample of a [`Study`]: the device readings of the sample and of
@@ -32,7 +34,9 @@ pub mod certificate;
 pub mod cgats;
 pub mod csv;
 pub mod cxf3;
+pub mod gltf;
 pub mod json;
+pub mod mitsuba;
 pub mod sra;
 mod table;
 
