@@ -278,8 +278,8 @@ async fn show_fit(
     Ok(Json(s.store().fit_detail(fit).await?))
 }
 
-/// The sphere preview of one fit, drawn on request on a blocking thread (about 10 ms in a
-/// release build, README "Performance"). 409 while the fit has no result.
+/// The sphere preview of one fit, drawn on request on a blocking thread (`cargo bench --bench
+/// render` measures it). 409 while the fit has no result.
 async fn fit_preview(State(s): State<Service>, Path(id): Path<String>) -> Response {
     let refuse =
         |status: StatusCode, error: String| (status, Json(ErrorBody { error })).into_response();
