@@ -187,6 +187,31 @@ impl Client {
         self.finish(self.get_request(path).call())
     }
 
+    /// `GET path` → bytes (a PNG preview); a refusal is read as the JSON error it is.
+    pub fn get_bytes(&self, path: &str) -> Result<Vec<u8>, ClientError> {
+        let mut response = self
+            .agent
+            .get(&self.url(path))
+            .call()
+            .map_err(|e| self.transport(e))?;
+        let status = response.status().as_u16();
+        let body = response
+            .body_mut()
+            .with_config()
+            .limit(64 << 20)
+            .read_to_vec()
+            .map_err(|e| self.transport(e))?;
+        if (200..300).contains(&status) {
+            return Ok(body);
+        }
+        let text = String::from_utf8_lossy(&body);
+        let message = serde_json::from_str::<Value>(&text)
+            .ok()
+            .and_then(|v| v.get("error").and_then(Value::as_str).map(str::to_string))
+            .unwrap_or_else(|| format!("HTTP {status}: {text}"));
+        Err(ClientError::Refused { status, message })
+    }
+
     /// `POST path` with a JSON body (or none) → JSON.
     pub fn post(&self, path: &str, body: Option<&Value>) -> Result<Value, ClientError> {
         let request = self.post_request(path);

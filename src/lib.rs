@@ -19,6 +19,7 @@
 //! - [`fit`]: one scan → processing → optimiser → ΔE00 evaluation, and the fit report (JSON).
 //! - [`report`]: study reports: the paper's figures 4–12 (PNG, SVG), statistics, HTML/Markdown.
 //! - [`formats`]: exchange formats: CGATS.17, CxF3, CSV, JSON exports; instrument-software imports.
+//! - [`render`]: spectral sphere previews of fitted materials (PNG).
 //!
 //! Command line:
 //! - [`cli`]: the `brdfd` subcommands (`fit`, `synth`, `demo`, …); `src/main.rs` only runs it.
@@ -44,6 +45,7 @@ pub mod geometry;
 pub mod model;
 pub mod optimise;
 pub mod processing;
+pub mod render;
 pub mod report;
 pub mod scan;
 pub mod service;

@@ -90,6 +90,51 @@ pub struct ProcessingOptions {
     pub reference_reflectance: Option<Spectrum>,
 }
 
+/// The scale of every reflectance and BRDF brdfd derives from a scan (SCIENCE.md §3): relative
+/// to the reference tile (ρ_ref = 1, the paper's choice and the default) or absolute (the tile's
+/// calibrated reflectance applied). Previews and renderer exports say which.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "scale", rename_all = "kebab-case")]
+pub enum Scale {
+    /// ρ_ref = 1: a reflectance of 1 means "as bright as the tile", not the perfect diffuser.
+    RelativeToTile,
+    /// The tile's certificate applied; `tile_mean` is its band mean ρ̄_ref.
+    Absolute { tile_mean: f64 },
+}
+
+impl Scale {
+    /// The scale that a calibration table (or none) gives.
+    pub fn of(reference_reflectance: Option<&Spectrum>) -> Scale {
+        match reference_reflectance {
+            None => Scale::RelativeToTile,
+            Some(rho) => Scale::Absolute {
+                tile_mean: rho.iter().sum::<f64>() / BANDS as f64,
+            },
+        }
+    }
+
+    /// One line for a picture or a file header.
+    pub fn describe(&self) -> String {
+        match self {
+            Scale::RelativeToTile => "relative scale: reflectance relative to the reference tile \
+                 (no tile calibration; a real Munsell N9 reflects about 0.77, so this is about \
+                 30 % too bright)"
+                .into(),
+            Scale::Absolute { tile_mean } => format!(
+                "absolute scale: reference tile calibrated (mean reflectance factor {tile_mean:.4})"
+            ),
+        }
+    }
+
+    /// `"absolute"` or `"relative-to-tile"`, for machine-readable fields.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Scale::RelativeToTile => "relative-to-tile",
+            Scale::Absolute { .. } => "absolute",
+        }
+    }
+}
+
 /// Why a scan could not be turned into a measured BRDF.
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessingError {
@@ -108,6 +153,11 @@ pub enum ProcessingError {
 }
 
 impl ProcessingOptions {
+    /// The scale of what these options produce.
+    pub fn scale(&self) -> Scale {
+        Scale::of(self.reference_reflectance.as_ref())
+    }
+
     fn rho_ref(&self) -> Result<Spectrum, ProcessingError> {
         let rho = self.reference_reflectance.unwrap_or([1.0; BANDS]);
         for (band, &value) in rho.iter().enumerate() {
@@ -261,6 +311,25 @@ mod tests {
         assert!(
             e.starts_with("reference_reflectance[3] (430 nm): -0.1 must be"),
             "{e}"
+        );
+    }
+
+    #[test]
+    fn scale_says_absolute_only_with_a_calibration() {
+        assert_eq!(ProcessingOptions::default().scale(), Scale::RelativeToTile);
+        let opts = ProcessingOptions {
+            reference_reflectance: Some([0.77; BANDS]),
+            ..Default::default()
+        };
+        let Scale::Absolute { tile_mean } = opts.scale() else {
+            panic!("a calibration gives the absolute scale")
+        };
+        close(tile_mean, 0.77);
+        assert!(opts.scale().describe().starts_with("absolute scale"));
+        assert!(
+            Scale::RelativeToTile
+                .describe()
+                .starts_with("relative scale")
         );
     }
 

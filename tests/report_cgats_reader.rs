@@ -124,6 +124,7 @@ fn study() -> Study {
                 scan_id: None,
                 scan,
                 specular: SpecularStrategy::Ratio,
+                reference_reflectance: None,
                 measured,
                 fits,
             }

@@ -14,6 +14,7 @@
 //! | `POST /abort` | stop the reference or scan in progress | 200 `{"aborted": …}` |
 //! | `GET /fits/{id}` | a fit run and its evaluation | 200 |
 //! | `POST /fits/{id}/cancel` | cancel a queued or running fit | 202 |
+//! | `GET /fits/{id}/preview.png` | the fitted material on a sphere ([`crate::render`]) | 200 `image/png` |
 //! | `GET /events` | server-sent events, one per [`crate::service::Event`] | `text/event-stream` |
 //!
 //! Every request but `GET /healthz` needs `Authorization: Bearer <token>`; Host, Origin and
@@ -207,6 +208,7 @@ pub fn router(service: Service, options: &ApiOptions) -> Router {
         .route("/abort", post(abort))
         .route("/fits/{id}", get(show_fit))
         .route("/fits/{id}/cancel", post(cancel_fit))
+        .route("/fits/{id}/preview.png", get(fit_preview))
         .route("/events", get(events))
         .layer(Extension(EventPermits(
             Arc::new(Semaphore::new(options.max_event_subscribers)),
@@ -380,6 +382,61 @@ async fn show_fit(
 ) -> ApiResult<impl IntoResponse> {
     let fit: FitRunId = parse_id("fit", &id)?;
     Ok(Json(s.store().fit_detail(fit).await?))
+}
+
+/// The sphere preview of one fit, drawn on request on a blocking thread (`cargo bench --bench
+/// render` measures it). 409 while the fit has no result.
+async fn fit_preview(State(s): State<Service>, Path(id): Path<String>) -> Response {
+    let refuse =
+        |status: StatusCode, error: String| (status, Json(ErrorBody { error })).into_response();
+    let fit: FitRunId = match parse_id("fit", &id) {
+        Ok(f) => f,
+        Err(e) => return e.into_response(),
+    };
+    let run = match s.store().fit_detail(fit).await {
+        Ok(d) => d.run,
+        Err(e) => return ApiError::from(e).into_response(),
+    };
+    let selection = crate::report::load::Selection::Scans(vec![run.scan]);
+    let study = match crate::report::load::from_store(s.store(), &selection).await {
+        Ok(study) => study,
+        Err(crate::report::load::LoadError::Store(e)) => return ApiError::from(e).into_response(),
+        Err(e) => return refuse(StatusCode::CONFLICT, e.to_string()),
+    };
+    let cost = run.cost_function;
+    let drawn = tokio::task::spawn_blocking(move || {
+        let mut sample = study
+            .samples
+            .into_iter()
+            .next()
+            .ok_or("the scan has no study")?;
+        // The study holds the latest finished fit per cost function; draw this one.
+        let state = crate::report::load::fit_state(run.scan, &run, &sample.measured)
+            .map_err(|e| e.to_string())?;
+        if !matches!(state, crate::report::FitState::Done(_)) {
+            return Err(format!(
+                "fit {fit} is {}, not done: it has no material to draw yet",
+                run.status
+            ));
+        }
+        sample.fits = vec![crate::report::FitStudy {
+            cost,
+            method: run.method.clone(),
+            state,
+        }];
+        crate::render::preview(&sample, &[cost])
+            .and_then(|p| p.png())
+            .map_err(|e| e.to_string())
+    })
+    .await;
+    match drawn {
+        Ok(Ok(png)) => ([(axum::http::header::CONTENT_TYPE, "image/png")], png).into_response(),
+        Ok(Err(e)) => refuse(StatusCode::CONFLICT, e),
+        Err(e) => refuse(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("the preview failed: {e}"),
+        ),
+    }
 }
 
 async fn cancel_fit(

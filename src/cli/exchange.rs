@@ -15,33 +15,77 @@ fn parse_format(s: &str) -> Result<Format, String> {
     s.parse()
 }
 
+/// What `export-format` writes: an exchange file, or renderer materials (one file per fit).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExportKind {
+    Exchange(Format),
+    /// Mitsuba 3 scenes, one per finished fit.
+    Mitsuba,
+    /// glTF 2.0 files, one per finished fit.
+    Gltf,
+}
+
+fn parse_export_kind(s: &str) -> Result<ExportKind, String> {
+    match s {
+        "mitsuba" => Ok(ExportKind::Mitsuba),
+        "gltf" => Ok(ExportKind::Gltf),
+        _ => s.parse().map(ExportKind::Exchange).map_err(|_| {
+            format!("unknown format \"{s}\"; valid: cgats, cxf3, csv, json, mitsuba, gltf")
+        }),
+    }
+}
+
 #[derive(Debug, clap::Args)]
 pub struct ExportArgs {
     /// `cgats` (CGATS.17 text), `cxf3` (X-Rite CxF3 XML), `csv`, or `json` (everything,
-    /// including fitted parameters).
-    #[arg(long, value_name = "cgats|cxf3|csv|json", value_parser = parse_format)]
-    pub format: Format,
+    /// including fitted parameters); or, for renderers, one file per finished fit into the
+    /// directory --out: `mitsuba` (Mitsuba 3 scene: spectral material, sphere, camera, the
+    /// preview's D65 light) or `gltf` (glTF 2.0 material on a sphere, RGB approximation).
+    #[arg(long, value_name = "cgats|cxf3|csv|json|mitsuba|gltf", value_parser = parse_export_kind)]
+    pub format: ExportKind,
 
     #[command(flatten)]
     pub select: StoreSelection,
 
-    /// File to write (refused if it exists, unless --force).
-    #[arg(long, value_name = "FILE")]
+    /// File to write (refused if it exists, unless --force); a directory (created if missing)
+    /// for `mitsuba` and `gltf`, whose files are likewise never replaced without --force.
+    #[arg(long, value_name = "FILE|DIR")]
     pub out: PathBuf,
 
-    /// Replace FILE if it exists.
+    /// Replace files that exist.
     #[arg(long)]
     pub force: bool,
 }
 
 pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     let study = args.select.load()?;
-    let text = formats::export(&study, args.format, &ExportOptions::default())?;
+    let format = match args.format {
+        ExportKind::Exchange(f) => f,
+        kind => {
+            let opts = ExportOptions::default();
+            let files = match kind {
+                ExportKind::Mitsuba => formats::mitsuba::scenes(&study, &opts)?
+                    .into_iter()
+                    .map(|(n, t)| (n, t.into_bytes()))
+                    .collect::<Vec<_>>(),
+                _ => formats::gltf::files(&study, &opts)?,
+            };
+            std::fs::create_dir_all(&args.out)
+                .with_context(|| format!("creating {}", args.out.display()))?;
+            for (name, bytes) in &files {
+                let path = args.out.join(name);
+                super::write_new_file(&path, bytes, args.force)?;
+                println!("{}", path.display());
+            }
+            return Ok(());
+        }
+    };
+    let text = formats::export(&study, format, &ExportOptions::default())?;
     super::write_new_file(&args.out, text.as_bytes(), args.force)?;
     println!(
         "{} samples as {} in {}",
         study.samples.len(),
-        args.format,
+        format,
         args.out.display()
     );
     Ok(())

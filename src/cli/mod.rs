@@ -11,6 +11,7 @@ pub mod exchange;
 pub mod fit;
 pub mod ops;
 pub mod record;
+pub mod render;
 pub mod replay;
 pub mod report;
 pub mod serve;
@@ -40,6 +41,9 @@ pub enum Command {
     /// summary (HTML, Markdown) with ΔE00 per sample and cost function, means with 95 % CI and
     /// sign tests.
     Report(report::ReportArgs),
+    /// Draw a sample's fitted material on a sphere (31 bands, D65), one sphere per cost
+    /// function, beside its measured swatches, as PNG.
+    Render(render::RenderArgs),
     /// Export stored scans and fits as CGATS.17, X-Rite CxF3, CSV or JSON.
     ExportFormat(exchange::ExportArgs),
     /// Turn an instrument software export (MA-T12 CGATS or CxF3 + SRA CSV) or a brdfd export
@@ -82,6 +86,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Synth(args) => synth::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Report(args) => report::run(&args),
+        Command::Render(args) => render::run(&args),
         Command::ExportFormat(args) => exchange::export(&args),
         Command::ImportFormat(args) => exchange::import(&args),
         Command::Serve(args) => serve::run(&args),

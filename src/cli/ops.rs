@@ -130,6 +130,10 @@ pub struct ShowArgs {
     /// Print the daemon's JSON (every reading, raw frames in hex, every fit).
     #[arg(long)]
     pub json: bool,
+    /// Also write each finished fit's sphere preview (`GET /fits/{id}/preview.png`) into DIR
+    /// as `fit-<id>-<cost>.png` (see `brdfd render --help` for what the picture shows).
+    #[arg(long, value_name = "DIR")]
+    pub preview: Option<std::path::PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -684,6 +688,23 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
         println!("  {:<7} {:<9} {text}", s(r, "device"), s(r, "geometry"));
     }
     print_fits(&v);
+    if let Some(dir) = &args.preview {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        for fit in v["fits"].as_array().into_iter().flatten() {
+            let run = &fit["run"];
+            if run["status"] != "done" {
+                continue;
+            }
+            let path = dir.join(format!(
+                "fit-{}-{}.png",
+                id(run, "id"),
+                s(run, "cost_function")
+            ));
+            let png = client.get_bytes(&format!("/fits/{}/preview.png", id(run, "id")))?;
+            std::fs::write(&path, png).with_context(|| format!("writing {}", path.display()))?;
+            println!("preview {}", path.display());
+        }
+    }
     Ok(())
 }
 

@@ -52,6 +52,17 @@ fn code_unclamped(linear: f64) -> f64 {
     (encoded * 255.0).round()
 }
 
+/// CIE XYZ (Y = 100 for the white diffuser) → sRGB values before clipping and quantisation
+/// (the transfer curve extended past [0, 1] as in [`xyz_to_srgb8`]; 1 is code 255). The
+/// sphere previews use it so that their pixels follow the swatches' colour path exactly.
+pub fn xyz_to_srgb_unclipped(xyz: Xyz) -> [f64; 3] {
+    let v = [xyz.x / 100.0, xyz.y / 100.0, xyz.z / 100.0];
+    XYZ_TO_LINEAR_SRGB.map(|row| {
+        let linear = row[0] * v[0] + row[1] * v[1] + row[2] * v[2];
+        encode(linear.abs()).copysign(linear)
+    })
+}
+
 /// CIE XYZ (Y = 100 for the white diffuser) → clipped 8-bit sRGB.
 ///
 /// `clipped` is set when clipping changes an 8-bit code, i.e. a channel rounds to a code outside

@@ -44,6 +44,11 @@ struct SampleDoc<'a> {
     scan_id: Option<i64>,
     scan: serde_json::Value,
     specular_strategy: crate::processing::SpecularStrategy,
+    /// "absolute" (calibrated reference tile) or "relative-to-tile" (SCIENCE.md §3).
+    scale: &'static str,
+    /// The tile's calibrated reflectance the readings were normalised with, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reference_reflectance: Option<Spectrum>,
     measured_reflectance: PerGeometry<'a, Spectrum>,
     fits: Vec<FitDoc<'a>>,
 }
@@ -132,6 +137,8 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
             scan_id: s.scan_id,
             scan,
             specular_strategy: s.specular,
+            scale: s.scale().name(),
+            reference_reflectance: s.reference_reflectance,
             measured_reflectance: PerGeometry(&measured[i]),
             fits,
         });

@@ -9,6 +9,9 @@
 //!   core schema kept in `src/formats/data/`.
 //! - [`json`]: everything, including the fitted parameters, as one JSON document.
 //! - [`sra`]: the Canon SRA's values as CSV (`sample,geometry,intensity`).
+//! - [`gltf`]: glTF 2.0 materials of fitted BRDFs on a sphere (one per fit; RGB approximation).
+//! - [`mitsuba`]: Mitsuba 3 scenes of fitted materials (one per fit; SCIENCE.md §10).
+//! - [`certificate`]: the reference tile's calibration (CGATS or CxF3), for `[reference]`.
 //!
 //! What an export holds, per sample of a [`Study`]: the device readings of the sample and of
 //! the reference tile they are normalised by (`reading`, `reference`), the measured
@@ -27,10 +30,13 @@
 //! correctly rounded `str::parse`, so export → import gives the same scan to the last bit in
 //! every format. Every error names the file, the line and the field.
 
+pub mod certificate;
 pub mod cgats;
 pub mod csv;
 pub mod cxf3;
+pub mod gltf;
 pub mod json;
+pub mod mitsuba;
 pub mod sra;
 mod table;
 
@@ -238,7 +244,7 @@ pub enum DataKind {
     /// The fitted model's reflectance factor `π·f`.
     Estimated,
     /// Lower end of the estimate's 95 % band: `π·(kd_lo(λ) + s_g)`, the bootstrap interval of
-    /// kd plus the point fit's specular term (SCIENCE.md §10). Only for fits with intervals.
+    /// kd plus the point fit's specular term (SCIENCE.md §11). Only for fits with intervals.
     EstimatedLow,
     /// Upper end, `π·(kd_hi(λ) + s_g)`.
     EstimatedHigh,

@@ -47,7 +47,7 @@ impl Table {
     }
 
     /// The column of each band, 400–700 nm.
-    fn bands(&self) -> Result<[usize; BANDS], FormatError> {
+    pub(crate) fn bands(&self) -> Result<[usize; BANDS], FormatError> {
         let mut out = [0; BANDS];
         for (slot, nm) in out.iter_mut().zip(wavelengths_nm()) {
             *slot = self.require(

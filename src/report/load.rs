@@ -80,11 +80,29 @@ fn readings_of(
     Ok(out)
 }
 
-async fn fit_state(
-    store: &Store,
+/// What a fit run's stored detail adds to its row (migration 0011): the colorimetry of its
+/// evaluation and its bootstrap intervals.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct FitExtras {
+    pub colorimetry: Option<crate::colour::Colorimetry>,
+    pub uncertainty: Option<crate::uncertainty::Uncertainty>,
+}
+
+/// A fit run as a study fit, without its stored extras (the paper's colorimetry, no intervals).
+pub(crate) fn fit_state(
     scan: ScanId,
     run: &FitRun,
     measured: &processing::MeasuredBrdf,
+) -> Result<FitState, LoadError> {
+    fit_state_with(scan, run, measured, &FitExtras::default())
+}
+
+/// A fit run as a study fit, evaluated under its stored colorimetry, with its intervals.
+fn fit_state_with(
+    scan: ScanId,
+    run: &FitRun,
+    measured: &processing::MeasuredBrdf,
+    extras: &FitExtras,
 ) -> Result<FitState, LoadError> {
     Ok(match run.status {
         FitStatus::Done => {
@@ -104,13 +122,12 @@ async fn fit_state(
                 .and_then(|v| serde_json::from_value(v.clone()).ok())
                 .unwrap_or_default();
             // The colorimetry and the intervals stored with the fit (migration 0011).
-            let detail = store.fit_detail(run.id).await?;
             FitState::Done(Box::new(DoneFit::from_params_with(
                 measured,
                 params,
                 fresnel,
-                detail.colorimetry.unwrap_or_default(),
-                detail.uncertainty,
+                extras.colorimetry.unwrap_or_default(),
+                extras.uncertainty.clone(),
             )))
         }
         FitStatus::Failed => FitState::Failed {
@@ -132,6 +149,7 @@ fn assemble(
     detail: ScanDetail,
     processed: Vec<Processed>,
     runs: Vec<FitRun>,
+    extras: &HashMap<i64, FitExtras>,
 ) -> Result<SampleStudy, LoadError> {
     if detail.scan.state != ScanState::Complete {
         return Err(LoadError::NotComplete {
@@ -187,7 +205,12 @@ fn assemble(
             fits.push(FitStudy {
                 cost,
                 method: run.method.clone(),
-                state: fit_state(store, id, run, &measured).await?,
+                state: fit_state_with(
+                    id,
+                    run,
+                    &measured,
+                    extras.get(&run.id.0).unwrap_or(&FitExtras::default()),
+                )?,
             });
         }
     }
@@ -196,6 +219,7 @@ fn assemble(
         scan_id: Some(id.0),
         scan,
         specular,
+        reference_reflectance: detail.reference.reference.rho_ref,
         measured,
         fits,
     })
@@ -206,7 +230,18 @@ async fn sample(store: &Store, id: ScanId) -> Result<SampleStudy, LoadError> {
     let detail = store.scan_detail(id).await?;
     let processed = store.processed_for_scan(id).await?;
     let runs = store.fits_for_scan(id).await?;
-    assemble(id, detail, processed, runs)
+    let mut extras = HashMap::new();
+    for run in &runs {
+        let d = store.fit_detail(run.id).await?;
+        extras.insert(
+            run.id.0,
+            FitExtras {
+                colorimetry: d.colorimetry,
+                uncertainty: d.uncertainty,
+            },
+        );
+    }
+    assemble(id, detail, processed, runs, &extras)
 }
 
 /// The study of the selected scans.
@@ -251,7 +286,9 @@ pub async fn from_central(
     for s in scans {
         let id = s.detail.scan.id;
         let station = s.station.clone();
-        let mut sample = assemble(id, s.detail, s.processed, s.fits)?;
+        // The central schema does not carry the intervals and colorimetry of migration 0011
+        // yet: central reports use the paper's colorimetry and show no intervals.
+        let mut sample = assemble(id, s.detail, s.processed, s.fits, &HashMap::new())?;
         if several {
             sample.name = format!("{} [{station}]", sample.name);
         }

@@ -17,6 +17,8 @@ pub mod summary;
 
 use std::path::{Path, PathBuf};
 
+use crate::cost::CostFunction;
+
 pub use analysis::Analysis;
 pub use study::{DoneFit, FitState, FitStudy, SampleStudy, Study};
 
@@ -48,6 +50,8 @@ pub struct ReportFiles {
     pub figures: Vec<[PathBuf; 2]>,
     pub markdown: PathBuf,
     pub html: PathBuf,
+    /// One sphere preview per sample with a finished fit ([`crate::render`]), PNG.
+    pub previews: Vec<PathBuf>,
 }
 
 /// Writes every figure and the summary pages of `study` into `dir` (created if missing).
@@ -72,6 +76,35 @@ pub fn write_report(
         progress(&f.stem, i, total);
         written.push(figures::render(f, study, &analysis, dir)?);
     }
+    // One sphere preview per sample (PNG only: the spheres are pixels, not vector shapes).
+    let mut previews = Vec::new();
+    let (mut md_previews, mut html_previews) = (String::new(), String::new());
+    for s in &study.samples {
+        if !CostFunction::ALL.iter().any(|c| s.done(*c).is_some()) {
+            continue;
+        }
+        let name = format!("preview-{}.png", crate::synth::slug(&s.name));
+        let path = dir.join(&name);
+        progress(&name, figs.len(), total);
+        crate::render::write_preview(s, &CostFunction::ALL, &path).map_err(|e| {
+            ReportError::Figure {
+                path: path.clone(),
+                message: e.to_string(),
+            }
+        })?;
+        let caption = format!(
+            "{}: the fitted material per cost function on a sphere, 31 bands under a directional D65 light with a weak ambient (brdfd render); {}.",
+            s.name,
+            s.scale().describe()
+        );
+        md_previews.push_str(&format!("![{name}]({name})\n\n{caption}\n\n"));
+        html_previews.push_str(&format!(
+            "<figure>\n<img src=\"{name}\" alt=\"preview of {0}\">\n<figcaption>{1}</figcaption>\n</figure>\n",
+            html_escape(&s.name),
+            html_escape(&caption)
+        ));
+        previews.push(path);
+    }
     progress("summary", figs.len(), total);
     let write = |name: &str, text: String| -> Result<PathBuf, ReportError> {
         let path = dir.join(name);
@@ -81,14 +114,29 @@ pub fn write_report(
         })?;
         Ok(path)
     };
-    let markdown = write("summary.md", summary::markdown(study, &analysis, &figs))?;
-    let html = write("index.html", summary::html(study, &analysis, &figs))?;
+    let mut md = summary::markdown(study, &analysis, &figs);
+    let mut html = summary::html(study, &analysis, &figs);
+    if !previews.is_empty() {
+        md.push_str(&format!("\n## Previews\n\n{md_previews}"));
+        let at = html.rfind("</body>").unwrap_or(html.len());
+        html.insert_str(at, &format!("<h2>Previews</h2>\n{html_previews}"));
+    }
+    let markdown = write("summary.md", md)?;
+    let html = write("index.html", html)?;
     progress("done", total, total);
     Ok(ReportFiles {
         figures: written,
         markdown,
         html,
+        previews,
     })
+}
+
+fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
 #[cfg(test)]
@@ -126,6 +174,14 @@ mod tests {
         let html = std::fs::read_to_string(&files.html).unwrap();
         assert!(html.contains("<img src=\"fig04-measured-swatches.png\""));
         assert!(html.contains("<td>T.Manzana green</td>"));
+        // One preview per sample with a finished fit, in both summaries.
+        assert_eq!(files.previews.len(), study.samples.len());
+        for p in &files.previews {
+            assert_eq!(&std::fs::read(p).unwrap()[..4], b"\x89PNG");
+            let name = p.file_name().unwrap().to_str().unwrap();
+            assert!(md.contains(&format!("![{name}]({name})")), "{name}");
+            assert!(html.contains(&format!("<img src=\"{name}\"")), "{name}");
+        }
     }
 
     #[test]

@@ -15,7 +15,7 @@ use crate::evaluation::{Evaluation, evaluate_with};
 use crate::fit::FitReport;
 use crate::geometry::GEOMETRY_COUNT;
 use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
-use crate::processing::{MeasuredBrdf, SpecularStrategy};
+use crate::processing::{MeasuredBrdf, Scale, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
 use crate::uncertainty::Uncertainty;
@@ -38,6 +38,9 @@ pub struct SampleStudy {
     pub scan: Scan,
     /// How the SRA readings were turned into spectra for `measured`.
     pub specular: SpecularStrategy,
+    /// The reference tile's calibrated reflectance `measured` was processed with; `None`:
+    /// relative to the tile (SCIENCE.md §3). [`SampleStudy::scale`] says which.
+    pub reference_reflectance: Option<Spectrum>,
     /// The measured BRDF, sr⁻¹, at the 14 geometries.
     pub measured: MeasuredBrdf,
     /// One entry per cost function the sample was fitted with, in [`CostFunction::ALL`] order.
@@ -130,6 +133,11 @@ impl FitStudy {
 }
 
 impl SampleStudy {
+    /// Absolute (calibrated tile) or relative to the tile.
+    pub fn scale(&self) -> Scale {
+        Scale::of(self.reference_reflectance.as_ref())
+    }
+
     /// The fit under `cost`, if the sample was fitted with it.
     pub fn fit(&self, cost: CostFunction) -> Option<&FitStudy> {
         self.fits.iter().find(|f| f.cost == cost)
@@ -221,6 +229,7 @@ impl Study {
                     scan_id: None,
                     scan: scan.clone(),
                     specular: first.request.processing.specular,
+                    reference_reflectance: first.request.processing.reference_reflectance,
                     measured: first.measured,
                     fits,
                 }
@@ -279,6 +288,7 @@ pub(crate) mod tests {
                     scan_id: None,
                     scan,
                     specular: SpecularStrategy::Ratio,
+                    reference_reflectance: None,
                     measured,
                     fits,
                 }

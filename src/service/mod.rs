@@ -63,6 +63,9 @@ pub struct ServiceSettings {
     pub max_concurrent_fits: usize,
     /// How the SRA readings become spectra.
     pub specular: SpecularStrategy,
+    /// The reference tile's calibrated reflectance (`[reference] reflectance`), recorded with
+    /// every reference set measured; `None`: results relative to the tile.
+    pub reference_reflectance: Option<crate::spectral::Spectrum>,
     /// How long shutdown waits for the scan in progress and the fits to stop.
     pub shutdown_grace: Duration,
     /// Forwarding to the lab's central database (`[station]`, `[sync]`); `None`: none.
@@ -82,6 +85,7 @@ impl ServiceSettings {
             seed: config.fit.seed,
             max_concurrent_fits: config.fit.max_concurrent_fits.get(),
             specular: config.fit.specular,
+            reference_reflectance: config.reference.reflectance,
             shutdown_grace: Duration::from_secs(10),
             sync: config.sync.url.as_ref().map(|url| {
                 let mut o = crate::sync::ForwarderOptions::new(config.station.id.clone(), url);

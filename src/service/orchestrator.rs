@@ -133,7 +133,10 @@ impl Service {
         let (guard, listener) = self.task_slot().await?;
         self.check_idle()?;
         let reference = self
-            .timed_store(self.inner.store.begin_reference("Munsell N9", None))
+            .timed_store(self.inner.store.begin_reference(
+                "Munsell N9",
+                self.inner.settings.reference_reflectance.as_ref(),
+            ))
             .await?;
         let provenance = self.provenance(Source::Measured, None);
         if let Err(e) = self

@@ -1,0 +1,228 @@
+//! Mitsuba 3 scenes of fitted materials (`brdfd export-format --format mitsuba`): one XML
+//! scene per finished fit, with the material, a unit sphere, an orthographic camera and the
+//! preview's light ([`crate::render`]), so `mitsuba scene.xml` draws what `brdfd render` draws.
+//!
+//! The material, SCIENCE.md §11: brdfd's `f = kd(λ) + ks·F·D·G/(π cosθi cosθr)` as Mitsuba's
+//! `blendbsdf` at weight ½ of
+//! - `diffuse` with reflectance `2π·kd(λ)` as `<spectrum>` wavelength:value pairs at the 31
+//!   band centres, held flat to 360 and 830 nm (Mitsuba's range; its `diffuse` is
+//!   reflectance/π; the blend halves it);
+//! - `roughconductor`, GGX, `alpha` = α, `eta` = μ, `k` = 0 (a dielectric's Fresnel), with
+//!   `specular_reflectance` = `2·ks·4/π`: Mitsuba's lobe is `F·D·G/(4 cosθi cosθr)`, so the 4
+//!   vs π denominator and the blend's ½ are folded into this weight.
+//!
+//! What remains different is the Fresnel factor: Mitsuba's is the exact dielectric Fresnel on
+//! the microfacet normal (l·h), brdfd's the paper's Schlick on cosθi. Mitsuba's value is
+//! brdfd's with the lobe scaled by `F_exact(l·h; μ) / F_Schlick(cosθi; f0)`; SCIENCE.md §11
+//! tabulates that ratio at the 14 geometries, and `tests/export_mitsuba.rs` checks both in
+//! Mitsuba itself. D and G are the same functions in both (GGX, Smith–Walter G1).
+//!
+//! The light: Mitsuba's `directional` emitter with the `d65` spectrum along −l (l =
+//! [`crate::render::DEFAULT_LIGHT`]) and a `constant` D65 environment of radiance
+//! `AMBIENT / π` times the light's irradiance unit, which gives a diffuse surface the preview's
+//! ambient; Mitsuba's ambient also reaches the lobe (the preview leaves that out).
+
+use std::fmt::Write as _;
+
+use crate::model::FresnelCosine;
+use crate::render::{AMBIENT, DEFAULT_LIGHT, SPHERE_PX};
+use crate::report::{DoneFit, SampleStudy};
+use crate::spectral::wavelengths_nm;
+
+use super::{ExportOptions, FormatError};
+
+/// `specular_reflectance` for a given ks: `2 · ks · 4/π` (the blend's ½ and the 4-vs-π
+/// denominator folded in).
+pub fn specular_weight(ks: f64) -> f64 {
+    2.0 * ks * 4.0 / std::f64::consts::PI
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+        .replace("--", "- -")
+}
+
+/// The Mitsuba 3 scene of one finished fit of `sample`.
+pub fn scene(
+    sample: &SampleStudy,
+    cost: crate::cost::CostFunction,
+    method: &str,
+    fit: &DoneFit,
+    opts: &ExportOptions,
+) -> Result<String, FormatError> {
+    let p = &fit.params;
+    let finite =
+        p.kd.iter().all(|v| v.is_finite()) && [p.ks, p.alpha, p.ior].iter().all(|v| v.is_finite());
+    if !finite || p.alpha <= 0.0 || p.ior < 1.0 {
+        return Err(FormatError::Unwritable {
+            format: "mitsuba",
+            message: format!(
+                "{} ({cost}): parameters out of the model's domain (α {}, μ {}); refit the scan",
+                sample.name, p.alpha, p.ior
+            ),
+        });
+    }
+    let mut t = String::new();
+    let _ = writeln!(t, r#"<?xml version="1.0" encoding="utf-8"?>"#);
+    let _ = writeln!(
+        t,
+        "<!-- {}: sample \"{}\", cost function {cost}, method {method}, Fresnel cosine {}; written {}.\n     {}.\n     brdfd's model f = kd + ks·F·D·G/(π cosθi cosθr) as blendbsdf(½ diffuse 2π·kd, ½ roughconductor GGX with specular_reflectance 2·ks·4/π).\n     Remaining difference: Mitsuba's exact Fresnel on l·h against brdfd's Schlick on cosθi (brdfd's SCIENCE.md §11). -->",
+        esc(&opts.originator),
+        esc(&sample.name),
+        match fit.fresnel {
+            FresnelCosine::Incidence => "incidence",
+            FresnelCosine::LightHalf => "light-half",
+        },
+        esc(&opts.created),
+        esc(&sample.scale().describe()),
+    );
+    let _ = writeln!(t, r#"<scene version="3.0.0">"#);
+    // Resolution and samples per pixel can be overridden: `mitsuba -D res=64 -D spp=16`.
+    let _ = writeln!(
+        t,
+        r#"    <default name="res" value="{SPHERE_PX}"/>
+    <default name="spp" value="64"/>"#
+    );
+    // Mitsuba samples 360–830 nm and a spectrum is zero outside the wavelengths it is given,
+    // which would darken the blue and red ends of a render: the end values are held flat to
+    // 360 and 830 nm, as brdfd's colour sums (400–700 nm only) implicitly do.
+    let reflectance: Vec<f64> =
+        p.kd.iter()
+            .map(|kd| 2.0 * std::f64::consts::PI * kd)
+            .collect();
+    let mut pairs = vec![format!("360:{}", reflectance[0])];
+    pairs.extend(
+        wavelengths_nm()
+            .iter()
+            .zip(&reflectance)
+            .map(|(nm, r)| format!("{nm}:{r}")),
+    );
+    pairs.push(format!("830:{}", reflectance[reflectance.len() - 1]));
+    let _ = writeln!(
+        t,
+        r#"    <bsdf type="blendbsdf" id="material">
+        <float name="weight" value="0.5"/>
+        <bsdf type="diffuse">
+            <spectrum name="reflectance" value="{}"/>
+        </bsdf>
+        <bsdf type="roughconductor">
+            <string name="distribution" value="ggx"/>
+            <float name="alpha" value="{}"/>
+            <float name="eta" value="{}"/>
+            <float name="k" value="0"/>
+            <float name="specular_reflectance" value="{}"/>
+        </bsdf>
+    </bsdf>
+    <shape type="sphere">
+        <ref id="material"/>
+    </shape>"#,
+        pairs.join(", "),
+        p.alpha,
+        p.ior,
+        specular_weight(p.ks)
+    );
+    let [lx, ly, lz] = DEFAULT_LIGHT;
+    let radius_px = crate::render::View::default().radius_px;
+    let _ = writeln!(
+        t,
+        r#"    <emitter type="directional">
+        <vector name="direction" x="{}" y="{}" z="{}"/>
+        <spectrum type="d65" name="irradiance"/>
+    </emitter>
+    <emitter type="constant">
+        <spectrum type="d65" name="radiance">
+            <float name="scale" value="{}"/>
+        </spectrum>
+    </emitter>
+    <integrator type="direct"/>
+    <sensor type="orthographic">
+        <transform name="to_world">
+            <scale x="{s}" y="{s}"/>
+            <lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>
+        </transform>
+        <sampler type="independent">
+            <integer name="sample_count" value="$spp"/>
+        </sampler>
+        <film type="hdrfilm">
+            <integer name="width" value="$res"/>
+            <integer name="height" value="$res"/>
+            <string name="pixel_format" value="rgb"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+</scene>"#,
+        -lx,
+        -ly,
+        -lz,
+        AMBIENT / std::f64::consts::PI,
+        s = f64::from(SPHERE_PX) / 2.0 / radius_px,
+    );
+    Ok(t)
+}
+
+/// Every finished fit of the study as `(file name, scene)`: `<sample>-<cost>.xml`.
+pub fn scenes(
+    study: &crate::report::Study,
+    opts: &ExportOptions,
+) -> Result<Vec<(String, String)>, FormatError> {
+    let mut out = Vec::new();
+    for s in &study.samples {
+        for f in &s.fits {
+            if let Some(d) = f.done() {
+                let name = format!("{}-{}.xml", crate::synth::slug(&s.name), f.cost);
+                out.push((name, scene(s, f.cost, &f.method, d, opts)?));
+            }
+        }
+    }
+    if out.is_empty() {
+        return Err(FormatError::Unwritable {
+            format: "mitsuba",
+            message: "no finished fit in the selection: nothing to export".into(),
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scene_holds_the_material_sphere_camera_and_light() {
+        let s = crate::render::tests::sample(true);
+        let d = s.done(crate::cost::CostFunction::Cf1).unwrap();
+        let xml = scene(
+            &s,
+            crate::cost::CostFunction::Cf1,
+            "separable",
+            d,
+            &ExportOptions::default(),
+        )
+        .unwrap();
+        roxmltree::Document::parse(&xml).unwrap();
+        assert!(xml.contains("absolute scale"));
+        assert!(xml.contains(&format!(
+            "400:{}",
+            2.0 * std::f64::consts::PI * d.params.kd[0]
+        )));
+        assert!(xml.contains(&format!(
+            r#"<float name="specular_reflectance" value="{}"/>"#,
+            specular_weight(d.params.ks)
+        )));
+        assert!(xml.contains(r#"<shape type="sphere">"#));
+        let names: Vec<String> = scenes(
+            &crate::report::Study {
+                samples: vec![s.clone()],
+            },
+            &ExportOptions::default(),
+        )
+        .unwrap()
+        .into_iter()
+        .map(|(n, _)| n)
+        .collect();
+        assert_eq!(names.len(), 2, "m2 failed, so two scenes: {names:?}");
+    }
+}
