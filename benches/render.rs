@@ -33,6 +33,7 @@ fn study() -> Study {
                     cost,
                     ..Settings::default()
                 },
+                ..FitRequest::default()
             };
             fit_scan(&scan, &request).unwrap()
         })

@@ -96,7 +96,7 @@ fn main() -> anyhow::Result<()> {
     );
 
     let mut latencies = Vec::new();
-    let mut poll_until_idle = |latencies: &mut Vec<f64>| -> anyhow::Result<()> {
+    let poll_until_idle = |latencies: &mut Vec<f64>| -> anyhow::Result<()> {
         loop {
             let t = Instant::now();
             let status = client.get("/status")?;
@@ -153,6 +153,10 @@ fn main() -> anyhow::Result<()> {
     let events_seen: usize = streams.into_iter().map(|h| h.join().unwrap_or(0)).sum();
     println!("events delivered to the {subscribers} subscribers: {events_seen}");
     anyhow::ensure!(state == "complete", "the scan did not complete: {state}");
-    anyhow::ensure!(closed == idle_count, "{} idle connections left open", idle_count - closed);
+    anyhow::ensure!(
+        closed == idle_count,
+        "{} idle connections left open",
+        idle_count - closed
+    );
     Ok(())
 }

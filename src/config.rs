@@ -92,6 +92,7 @@ pub struct Config {
     pub log: LogConfig,
     pub station: StationConfig,
     pub sync: SyncConfig,
+    pub reference: ReferenceConfig,
 }
 
 /// `[station]`
@@ -109,7 +110,6 @@ pub struct SyncConfig {
     pub url: Option<String>,
     /// Outbox entries forwarded per PostgreSQL transaction.
     pub batch: usize,
-    pub reference: ReferenceConfig,
 }
 
 /// `[store]`
@@ -417,6 +417,8 @@ struct RawConfig {
     station: RawStation,
     #[serde(default)]
     sync: RawSync,
+    #[serde(default)]
+    reference: RawReference,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -430,7 +432,6 @@ struct RawStation {
 struct RawSync {
     url: S<String>,
     batch: S<u64>,
-    reference: RawReference,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -1201,7 +1202,7 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 25] = [
+        const KEYS: [&str; 26] = [
             "path",
             "listen",
             "allow_remote",

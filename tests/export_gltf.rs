@@ -55,6 +55,7 @@ fn every_gltf_file_passes_the_khronos_validator() {
                             cost,
                             ..Settings::default()
                         },
+                        ..FitRequest::default()
                     },
                 )
                 .unwrap()

@@ -68,6 +68,7 @@ fn study() -> Study {
                             cost,
                             ..Settings::default()
                         },
+                        ..FitRequest::default()
                     };
                     fit_scan(scan, &request).unwrap()
                 })

@@ -6,9 +6,6 @@
 
 mod common;
 
-use brdfd::api::ApiServer;
-use brdfd::client::Client;
-
 use common::*;
 
 /// Width and height of a PNG.
@@ -24,9 +21,7 @@ async fn the_api_and_show_draw_each_finished_fit() {
     let _serial = serial();
     bounded(async {
         let d = start_builtin(strict_fast()).await;
-        let api = ApiServer::start(d.service.clone(), "127.0.0.1:0".parse().unwrap())
-            .await
-            .unwrap();
+        let (api, client, token_file) = start_api(&d.service, d.dir.path()).await;
         let addr = api.local_addr();
         measure_reference(&d.service).await;
         let sample = mock_devices::recordings::samples()[0].sample.unwrap();
@@ -35,7 +30,6 @@ async fn the_api_and_show_draw_each_finished_fit() {
         assert_eq!(fits.len(), 3);
         let fit = fits[0].id;
 
-        let client = Client::new(addr);
         let (png, missing, bad) = tokio::task::spawn_blocking(move || {
             (
                 client.get_bytes(&format!("/fits/{fit}/preview.png")),
@@ -55,9 +49,19 @@ async fn the_api_and_show_draw_each_finished_fit() {
         let out = dir.path().to_str().unwrap().to_string();
         let addr_arg = addr.to_string();
         let scan_arg = scan.to_string();
+        let token_arg = token_file.display().to_string();
         let show = tokio::task::spawn_blocking(move || {
             run_brdfd(
-                &["show", &scan_arg, "--addr", &addr_arg, "--preview", &out],
+                &[
+                    "show",
+                    &scan_arg,
+                    "--addr",
+                    &addr_arg,
+                    "--token-file",
+                    &token_arg,
+                    "--preview",
+                    &out,
+                ],
                 None,
             )
         })

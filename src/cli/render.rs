@@ -84,6 +84,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
                         cost,
                         ..Settings::default()
                     },
+                    colorimetry: config.colour,
                 };
                 reports.push(
                     fit_scan(&scan, &request)
@@ -98,6 +99,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
                 scans: vec![id],
                 db: args.db.clone(),
                 config: args.config.clone(),
+                station: None,
+                include_simulated: true,
             };
             load_study(&select.db_path()?, &Selection::Scans(vec![ScanId(id)]))?
         }
