@@ -167,6 +167,8 @@ pub static TABLES: [Table; 10] = [
             ("queued_at_ms", Int),
             ("started_at_ms", Int),
             ("finished_at_ms", Int),
+            // Migration 0011 (central 0002): the bootstrap intervals.
+            ("uncertainty_json", Text),
         ],
     },
     Table {
@@ -184,6 +186,9 @@ pub static TABLES: [Table; 10] = [
             ("specular_mean", Real),
             ("specular_median", Real),
             ("specular_max", Real),
+            // Migration 0011 (central 0002): the colorimetry of the evaluation.
+            ("observer", Text),
+            ("weighting", Text),
         ],
     },
     Table {
