@@ -1187,7 +1187,12 @@ mod tests {
         cert.push_str("\nEND_DATA\n");
         std::fs::write(dir.path().join("n9.cgats"), cert).unwrap();
         let toml_path = dir.path().join("brdfd.toml");
-        std::fs::write(&toml_path, "[reference]\nreflectance = \"n9.cgats\"\n").unwrap();
+        std::fs::write(
+            &toml_path,
+            "[reference]\nreflectance = \"n9.cgats\"\n[devices.ma_t12]\ntransport = \"usb\"\n\
+             [devices.sra]\ntransport = \"serial\"\n",
+        )
+        .unwrap();
         let c = Config::load(&toml_path).unwrap();
         assert_eq!(c.reference.reflectance, Some([0.765; 31]));
         let e = parse("[reference]\nreflectance = \"missing.cgats\"\n")

@@ -26,7 +26,11 @@ fn a_calibrated_tile_is_recorded_and_scales_the_measured_brdf() {
             let rho: [f64; BANDS] = std::array::from_fn(|b| 0.74 + 0.002 * b as f64);
             let values: Vec<String> = rho.iter().map(f64::to_string).collect();
             let config = Config::from_toml(
-                &format!("[reference]\nreflectance = [{}]\n", values.join(", ")),
+                &format!(
+                    "[reference]\nreflectance = [{}]\n[devices.ma_t12]\ntransport = \"simulated\"\n\
+                     [devices.sra]\ntransport = \"simulated\"\n",
+                    values.join(", ")
+                ),
                 "brdfd.toml",
             )
             .unwrap();
