@@ -190,8 +190,7 @@ impl Client {
     /// `GET path` → bytes (a PNG preview); a refusal is read as the JSON error it is.
     pub fn get_bytes(&self, path: &str) -> Result<Vec<u8>, ClientError> {
         let mut response = self
-            .agent
-            .get(&self.url(path))
+            .get_request(path)
             .call()
             .map_err(|e| self.transport(e))?;
         let status = response.status().as_u16();

@@ -166,11 +166,12 @@ fn bad_cost_fails_with_one_line() {
 }
 
 /// Every subcommand of `brdfd`, as `--help` lists them (README.md teaches each one).
-const SUBCOMMANDS: [&str; 18] = [
+const SUBCOMMANDS: [&str; 20] = [
     "fit",
     "synth",
     "demo",
     "report",
+    "render",
     "export-format",
     "import-format",
     "serve",
@@ -185,6 +186,7 @@ const SUBCOMMANDS: [&str; 18] = [
     "import",
     "replay",
     "record",
+    "sync",
 ];
 
 #[test]

@@ -253,7 +253,7 @@ async fn assert_same(db: &Path, url: &str, station: &str) {
             t.name
         );
     }
-    let store = Store::open(db).await.unwrap();
+    let store = Store::open_read_only(db).await.unwrap();
     let local_study = from_store(&store, &Selection::All).await.unwrap();
     let c = Central::connect(url).await.unwrap();
     let central_study = from_central(
@@ -344,7 +344,7 @@ async fn a_station_report_from_the_central_database_is_the_report_of_its_store()
     // Drawing the figures in a debug build takes a while on a loaded machine: outside the
     // bound of the daemon part.
     let out = tempfile::tempdir().unwrap();
-    let store = Store::open(&d.db).await.unwrap();
+    let store = Store::open_read_only(&d.db).await.unwrap();
     let local = from_store(&store, &Selection::All).await.unwrap();
     let c = Central::connect(&db.url).await.unwrap();
     let central = from_central(

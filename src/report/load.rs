@@ -286,9 +286,48 @@ pub async fn from_central(
     for s in scans {
         let id = s.detail.scan.id;
         let station = s.station.clone();
-        // The central schema does not carry the intervals and colorimetry of migration 0011
-        // yet: central reports use the paper's colorimetry and show no intervals.
-        let mut sample = assemble(id, s.detail, s.processed, s.fits, &HashMap::new())?;
+        // The intervals and colorimetry of migration 0011, forwarded by central step 0002.
+        let mut extras = HashMap::new();
+        for run in &s.fits {
+            let row: Option<(Option<String>, Option<String>, Option<String>)> = sqlx::query_as(
+                "SELECT f.uncertainty_json, e.observer, e.weighting
+                 FROM fit_runs f LEFT JOIN evaluation_summaries e
+                   ON e.station = f.station AND e.fit_run_id = f.id
+                 WHERE f.station = $1 AND f.id = $2",
+            )
+            .bind(&station)
+            .bind(run.id.0)
+            .fetch_optional(pool)
+            .await
+            .map_err(crate::store::StoreError::from)?;
+            let Some((uncertainty, observer, weighting)) = row else {
+                continue;
+            };
+            let inconsistent = |message: String| LoadError::Inconsistent { scan: id, message };
+            let uncertainty = uncertainty
+                .map(|t| serde_json::from_str(&t))
+                .transpose()
+                .map_err(|e| inconsistent(format!("fit run {}: uncertainty_json: {e}", run.id)))?;
+            let colorimetry = match (observer, weighting) {
+                (Some(o), Some(w)) => Some(crate::colour::Colorimetry {
+                    observer: o
+                        .parse()
+                        .map_err(|e| inconsistent(format!("fit run {}: observer: {e}", run.id)))?,
+                    weighting: w
+                        .parse()
+                        .map_err(|e| inconsistent(format!("fit run {}: weighting: {e}", run.id)))?,
+                }),
+                _ => None,
+            };
+            extras.insert(
+                run.id.0,
+                FitExtras {
+                    colorimetry,
+                    uncertainty,
+                },
+            );
+        }
+        let mut sample = assemble(id, s.detail, s.processed, s.fits, &extras)?;
         if several {
             sample.name = format!("{} [{station}]", sample.name);
         }

@@ -18,7 +18,7 @@ use super::StoreError;
 use super::codec::{self, ReadingRow};
 use super::fits::FitRow;
 use super::ids::{ReferenceId, ScanId};
-use super::records::{FitRun, Processed, Reading, ReferenceDetail, ScanDetail};
+use super::records::{FitRun, Processed, Reading, ReferenceDetail, ScanDetail, provenance_columns};
 use super::references::ReferenceRow;
 use super::scans::{ProcessedRow, ScanRow};
 
@@ -78,6 +78,8 @@ pub async fn load_scans(
 ) -> Result<Vec<CentralScan>, StoreError> {
     let station = selection.station.as_deref();
     let ids = selection.scans.as_deref();
+    let provenance_s = provenance_columns("s");
+    let provenance_r = provenance_columns("r");
     // Scans.
     let scan_rows = fetch(
         pool,
@@ -86,7 +88,8 @@ pub async fn load_scans(
          SELECT s.station, s.id, s.sample_id, sa.name AS sample, s.reference_id, s.state,
                 s.reason, s.requested_at_ms, s.started_at_ms, s.finished_at_ms,
                 (SELECT COUNT(*) FROM readings r WHERE r.station = s.station AND r.scan_id = s.id)
-                    AS reading_count
+                    AS reading_count,
+                {provenance_s}
          FROM sel JOIN scans s ON s.station = sel.station AND s.id = sel.id
          JOIN samples sa ON sa.station = s.station AND sa.id = s.sample_id
          ORDER BY s.station, s.id"
@@ -123,7 +126,8 @@ pub async fn load_scans(
          SELECT r.station, r.id, r.name, r.status, r.reason, r.rho_ref, r.taken_at_ms,
                 r.completed_at_ms,
                 (SELECT COUNT(*) FROM reference_readings rr
-                 WHERE rr.station = r.station AND rr.reference_id = r.id) AS reading_count
+                 WHERE rr.station = r.station AND rr.reference_id = r.id) AS reading_count,
+                {provenance_r}
          FROM reference_sets r
          WHERE (r.station, r.id) IN (SELECT station, reference_id FROM sel)"
         ),
