@@ -521,6 +521,7 @@ pub(crate) mod tests {
         SampleStudy {
             name: truth.sample.clone(),
             scan_id: None,
+            origin: None,
             scan,
             specular: opts.specular,
             reference_reflectance: opts.reference_reflectance,

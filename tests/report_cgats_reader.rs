@@ -122,6 +122,7 @@ fn study() -> Study {
             SampleStudy {
                 name: truth.sample.clone(),
                 scan_id: None,
+                origin: None,
                 scan,
                 specular: SpecularStrategy::Ratio,
                 reference_reflectance: None,
@@ -144,7 +145,7 @@ fn littlecms_reads_the_cgats_export_in_strict_mode() {
     let it8 = It8::load(&text).unwrap_or_else(|e| panic!("LittleCMS refused the export: {e}"));
 
     let fields = it8.fields();
-    assert_eq!(fields.len(), 38);
+    assert_eq!(fields.len(), 50);
     assert_eq!(
         &fields[..7],
         [
@@ -157,8 +158,13 @@ fn littlecms_reads_the_cgats_export_in_strict_mode() {
             "GEOMETRY"
         ]
     );
+    // The sample's provenance, then the spectrum.
+    for (i, name) in formats::PROVENANCE_FIELDS.iter().enumerate() {
+        assert_eq!(fields[7 + i], name.to_uppercase());
+    }
+    let spectral = 7 + formats::PROVENANCE_FIELDS.len();
     for (i, nm) in wavelengths_nm().iter().enumerate() {
-        assert_eq!(fields[7 + i], format!("SPECTRAL_NM{nm}"));
+        assert_eq!(fields[spectral + i], format!("SPECTRAL_NM{nm}"));
     }
     assert_eq!(it8.property("ORIGINATOR").as_deref(), Some("brdfd test"));
     let rows = formats::rows(&study);
@@ -171,11 +177,12 @@ fn littlecms_reads_the_cgats_export_in_strict_mode() {
         assert_eq!(it8.text(i, 1), r.sample);
         assert_eq!(it8.text(i, 2), r.kind.name());
         assert_eq!(it8.text(i, 6), r.geometry.name);
+        assert_eq!(it8.text(i, 10), r.origin[3], "SOURCE");
         for (b, v) in r.values.iter().enumerate() {
             // LittleCMS keeps a number it parsed as text with 10 significant digits ("%.10g"),
             // so agreement to that is what it can show (brdfd's own import, with str::parse,
             // is exact to the bit: see the formats module's tests).
-            let got = it8.number(i, 7 + b);
+            let got = it8.number(i, spectral + b);
             assert!(
                 (got - v).abs() <= 5e-10 * v.abs().max(1e-300),
                 "row {i} band {b}: {got} vs {v}"

@@ -13,7 +13,9 @@ use brdfd::optimise::Settings;
 use brdfd::report::load::{Selection, from_store};
 use brdfd::report::{Analysis, FitState};
 use brdfd::scan::Scan;
-use brdfd::store::{FitResult, NewFit, ReadingValues, Store};
+use brdfd::store::{
+    FitResult, InstrumentProvenance, NewFit, Provenance, ReadingValues, Source, Store,
+};
 use brdfd::synth::{SynthOptions, paper_samples, synth_scan};
 
 fn values(readings: &brdfd::scan::DeviceReadings, g: &brdfd::geometry::Geometry) -> ReadingValues {
@@ -58,6 +60,25 @@ async fn fill(path: &Path) -> Vec<Scan> {
                 .unwrap();
         }
         store.complete_scan(id).await.unwrap();
+        // Each scan by its own (real) pair of instruments, so exports must tell them apart.
+        let instrument = |model: &str, serial: String| InstrumentProvenance {
+            model: model.into(),
+            serial,
+            firmware: "2.1.0".into(),
+            simulated: Some(false),
+        };
+        store
+            .set_scan_provenance(
+                id,
+                &Provenance {
+                    ma_t12: instrument("MA-T12", format!("MT-{i:03}")),
+                    sra: instrument("RA-532H", format!("RA-{i:03}")),
+                    source: Source::Measured,
+                    source_detail: None,
+                },
+            )
+            .await
+            .unwrap();
         let request = FitRequest::default();
         let measured = brdfd::processing::process(&scan, &request.processing).unwrap();
         let p = store
@@ -360,6 +381,12 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
         "{md}"
     );
     assert!(md.contains("| cf1 | separable | 2 |"), "{md}");
+    // The provenance table names each scan's instruments.
+    assert!(md.contains("Table 5. Provenance"), "{md}");
+    assert!(
+        md.contains("| measured | MA-T12 serial MT-001 firmware 2.1.0 | RA-532H serial RA-001 firmware 2.1.0 |"),
+        "{md}"
+    );
 
     // A scan id that is not there, and a store that is not there.
     let e = Command::new(env!("CARGO_BIN_EXE_brdfd"))
@@ -408,6 +435,24 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
             "--out",
             path.to_str().unwrap(),
         ]);
+        // Every export says which instruments measured each scan.
+        let text = std::fs::read_to_string(&path).unwrap();
+        for i in 0..scans.len() {
+            for serial in [format!("MT-{i:03}"), format!("RA-{i:03}")] {
+                assert!(text.contains(&serial), "{format}: no serial {serial}");
+            }
+        }
+        if format == "csv" {
+            let mut r = csv::Reader::from_path(&path).unwrap();
+            let head = r.headers().unwrap().clone();
+            let col = |name: &str| head.iter().position(|h| h == name).unwrap();
+            let first = r.records().next().unwrap().unwrap();
+            assert_eq!(&first[col("scan_id")], "1");
+            assert_eq!(&first[col("source")], "measured");
+            assert_eq!(&first[col("ma_t12_serial")], "MT-000");
+            assert_eq!(&first[col("sra_simulated")], "no");
+            assert!(first[col("measured_at")].ends_with('Z'));
+        }
         let back = dir.path().join(format!("back-{format}"));
         brdfd(&[
             "import-format",

@@ -10,7 +10,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::config::Config;
 use crate::report::load::{Selection, from_central, from_store};
-use crate::report::{Study, write_report};
+use crate::report::{Study, write_report_with};
 use crate::store::central::CentralSelection;
 use crate::store::{ScanId, Store};
 
@@ -265,6 +265,12 @@ pub struct ReportArgs {
     /// `summary.md` into; created if missing.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+
+    /// Draw the per-sample figures (swatches, spectra, lightness panels, box plots, previews)
+    /// for at most this many samples, the first in report order; the tables and the statistics
+    /// always cover every selected scan.
+    #[arg(long, value_name = "N", default_value_t = crate::report::ReportOptions::MAX_SAMPLE_FIGURES)]
+    pub max_sample_figures: usize,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
@@ -275,7 +281,10 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             .expect("a valid template")
             .progress_chars("=> "),
     );
-    let files = write_report(&study, &args.out, &mut |step, done, total| {
+    let opts = crate::report::ReportOptions {
+        max_sample_figures: args.max_sample_figures,
+    };
+    let files = write_report_with(&study, &args.out, &opts, &mut |step, done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
         bar.set_message(step.to_string());

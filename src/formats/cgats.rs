@@ -6,8 +6,9 @@
 //! units in `#` comments, and declares every field that is not a CGATS standard one with
 //! `KEYWORD` (`DATA_KIND`, `REFERENCE_NAME`, `COST_FUNCTION`, `METHOD`, `GEOMETRY`), as the
 //! standard asks, so strict readers (LittleCMS built with `CMS_STRICT_CGATS`) accept the file.
-//! Data fields: `SAMPLE_ID SAMPLE_NAME DATA_KIND REFERENCE_NAME COST_FUNCTION METHOD GEOMETRY
-//! SPECTRAL_NM400 … SPECTRAL_NM700`; text values are quoted, numbers use Rust's shortest
+//! Data fields: `SAMPLE_ID SAMPLE_NAME DATA_KIND REFERENCE_NAME COST_FUNCTION METHOD GEOMETRY`,
+//! the sample's provenance (`SCAN_ID STATION MEASURED_AT SOURCE MA_T12_MODEL … SRA_SIMULATED`,
+//! all quoted), `SPECTRAL_NM400 … SPECTRAL_NM700`; text values are quoted, numbers use Rust's shortest
 //! round-trip form. `COST_FUNCTION` and `METHOD` are `""` except on `estimated` rows.
 //!
 //! Read: the first data table; one data set per line (what every writer does); quoted strings,
@@ -20,13 +21,27 @@ use super::{ExportOptions, FormatError, rows};
 use crate::report::study::Study;
 use crate::spectral::wavelengths_nm;
 
-/// Fields that are not CGATS.17 standard ones and so are declared with `KEYWORD`.
-pub const DECLARED: [&str; 5] = [
+/// Fields that are not CGATS.17 standard ones and so are declared with `KEYWORD`: the row's
+/// kind, reference, fit and geometry, then the sample's provenance
+/// ([`super::PROVENANCE_FIELDS`], upper-cased).
+pub const DECLARED: [&str; 17] = [
     "DATA_KIND",
     "REFERENCE_NAME",
     "COST_FUNCTION",
     "METHOD",
     "GEOMETRY",
+    "SCAN_ID",
+    "STATION",
+    "MEASURED_AT",
+    "SOURCE",
+    "MA_T12_MODEL",
+    "MA_T12_SERIAL",
+    "MA_T12_FIRMWARE",
+    "MA_T12_SIMULATED",
+    "SRA_MODEL",
+    "SRA_SERIAL",
+    "SRA_FIRMWARE",
+    "SRA_SIMULATED",
 ];
 
 /// A CGATS quoted string; CGATS has no escape for `"` or a line break, so those are refused.
@@ -102,6 +117,9 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
             quoted(r.method.as_deref().unwrap_or(""))?,
             quoted(r.geometry.name)?,
         );
+        for v in &r.origin {
+            let _ = write!(t, "\t{}", quoted(v)?);
+        }
         for v in r.values {
             let _ = write!(t, "\t{v}");
         }
@@ -284,6 +302,27 @@ mod tests {
     }
 
     #[test]
+    fn the_provenance_fields_are_declared_and_written_per_row() {
+        assert_eq!(
+            DECLARED[5..].to_vec(),
+            super::super::PROVENANCE_FIELDS
+                .map(|f| f.to_uppercase())
+                .to_vec()
+        );
+        let text = write(&super::super::tests::stored_study(), &fixed()).unwrap();
+        assert!(text.contains("KEYWORD \"MA_T12_SERIAL\""));
+        let row = text
+            .lines()
+            .skip_while(|l| *l != "BEGIN_DATA")
+            .nth(1)
+            .unwrap();
+        assert!(
+            row.contains("\"11\"\t\"bench-2\"\t\"2024-05-01T12:00:00Z\"\t\"measured\"\t\"MA-T12\"\t\"MT-7\"\t\"2.1.0\"\t\"no\""),
+            "{row}"
+        );
+    }
+
+    #[test]
     fn the_header_declares_every_custom_field_before_the_data_format() {
         let text = write(&study(), &fixed()).unwrap();
         let format_at = text.find("BEGIN_DATA_FORMAT").unwrap();
@@ -293,10 +332,12 @@ mod tests {
         }
         assert!(text.starts_with("CGATS.17\n"));
         let table = parse("x", &text).unwrap();
-        assert_eq!(table.fields.len(), 38);
+        assert_eq!(table.fields.len(), 50);
         assert_eq!(table.fields[6], "GEOMETRY");
-        assert_eq!(table.fields[7], "SPECTRAL_NM400");
-        assert_eq!(table.fields[37], "SPECTRAL_NM700");
+        assert_eq!(table.fields[7], "SCAN_ID");
+        assert_eq!(table.fields[18], "SRA_SIMULATED");
+        assert_eq!(table.fields[19], "SPECTRAL_NM400");
+        assert_eq!(table.fields[49], "SPECTRAL_NM700");
         assert_eq!(table.rows.len(), (3 * 3 + 8) * 14);
         assert_eq!(table.rows[0].1[1], "T.Freesia pink");
         let est = table.rows.iter().find(|r| r.1[2] == "estimated").unwrap();
@@ -367,7 +408,7 @@ mod tests {
         assert_eq!(
             e,
             format!(
-                "m.txt:{}: data set: 37 values, expected 38 (one per field of BEGIN_DATA_FORMAT, one data set per line)",
+                "m.txt:{}: data set: 49 values, expected 50 (one per field of BEGIN_DATA_FORMAT, one data set per line)",
                 data + 1
             )
         );
@@ -391,7 +432,7 @@ mod tests {
             .position(|l| l.contains("\"reference\"") && l.contains("\"45as45\""))
             .unwrap();
         let mut cells: Vec<String> = lines[r].split('\t').map(str::to_string).collect();
-        cells[10] = "0".into();
+        cells[22] = "0".into(); // SPECTRAL_NM430, after 7 + 12 text fields
         lines[r] = cells.join("\t");
         let e = err(&lines.join("\n"));
         assert!(
@@ -406,7 +447,7 @@ mod tests {
         assert!(err("").contains("m.txt:1: file: empty"));
         let e = err(&good.replace("END_DATA\n", ""));
         assert!(e.contains("END_DATA: BEGIN_DATA is never closed"), "{e}");
-        let e = err(&good.replace("GEOMETRY\tSPECTRAL", "GEO\tSPECTRAL"));
+        let e = err(&good.replace("GEOMETRY\tSCAN_ID", "GEO\tSCAN_ID"));
         assert!(e.contains(": fields: no geometry column"), "{e}");
     }
 

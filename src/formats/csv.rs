@@ -3,11 +3,14 @@
 //! data-frame tools.
 //!
 //! Columns: `sample,data_kind,reference,cost_function,method,device,geometry,theta_i_deg,
-//! theta_r_deg,phi_r_deg,nm400,…,nm700`. The angle columns are for the reader's convenience;
-//! on import the geometry is taken from its name (SCIENCE.md §2), never from the angles.
+//! theta_r_deg,phi_r_deg`, the sample's provenance ([`super::PROVENANCE_FIELDS`]: `scan_id,
+//! station,measured_at,source,ma_t12_model,…,sra_simulated`), then `nm400,…,nm700`. The angle
+//! columns are for the reader's convenience; on import the geometry is taken from its name
+//! (SCIENCE.md §2), never from the angles, and the provenance columns are not read (an imported
+//! scan's provenance is the import).
 
 use super::table::Table;
-use super::{FormatError, rows};
+use super::{FormatError, PROVENANCE_FIELDS, rows};
 use crate::report::study::Study;
 use crate::spectral::wavelengths_nm;
 
@@ -27,6 +30,7 @@ pub fn header() -> Vec<String> {
     ]
     .map(String::from)
     .to_vec();
+    h.extend(PROVENANCE_FIELDS.map(String::from));
     h.extend(wavelengths_nm().iter().map(|nm| format!("nm{nm}")));
     h
 }
@@ -56,6 +60,7 @@ pub fn write(study: &Study) -> Result<String, FormatError> {
             g.theta_r_deg.to_string(),
             g.phi_r_deg.to_string(),
         ];
+        rec.extend(r.origin);
         rec.extend(r.values.iter().map(|v| v.to_string()));
         w.write_record(&rec).map_err(csv_error)?;
     }
@@ -148,11 +153,11 @@ mod tests {
         let e = err(&lines.join("\n"));
         assert_eq!(
             e,
-            "x.csv:6: record: 40 values, expected 41 (one per column of the header)"
+            "x.csv:6: record: 52 values, expected 53 (one per column of the header)"
         );
         let mut lines: Vec<String> = good.lines().map(str::to_string).collect();
         let mut cells: Vec<String> = lines[3].split(',').map(str::to_string).collect();
-        cells[12] = "NaN".into();
+        cells[24] = "NaN".into(); // nm420, after 10 geometry and 12 provenance columns
         lines[3] = cells.join(",");
         let e = err(&lines.join("\n"));
         assert_eq!(e, "x.csv:4: nm420: NaN is not a finite number");
@@ -168,7 +173,7 @@ mod tests {
         );
         let mut lines: Vec<String> = good.lines().map(str::to_string).collect();
         let mut cells: Vec<String> = lines[2].split(',').map(str::to_string).collect();
-        cells[20] = "-0.5".into();
+        cells[32] = "-0.5".into();
         lines[2] = cells.join(",");
         let e = err(&lines.join("\n"));
         assert_eq!(

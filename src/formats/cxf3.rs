@@ -6,10 +6,13 @@
 //! - `ColorSpecificationCollection`: one `ColorSpecification` per geometry, `Id="cs-<name>"`,
 //!   whose `MeasurementSpec/GeometryChoice/MultiAngle` holds one `BRDFAngle` with
 //!   `Notation="<geometry name>"`, `IlluminationAngle` θi and `Aspecular` (degrees, SCIENCE.md
-//!   §2), the 400 nm / 10 nm `WavelengthRange` and the instrument as `Device`.
+//!   §2), the 400 nm / 10 nm `WavelengthRange` and the instrument as `Device` (with the
+//!   `Model` it reported and its `SerialNumber` when one instrument measured every sample).
 //! - `ObjectCollection`: per sample one `Object` per data kind (and per finished fit), its
 //!   `ColorValues` holding one spectrum per geometry, and a `TagCollection Name="brdfd"`
-//!   saying `data_kind`, `sample`, `reference`, and for estimates `cost_function` and `method`.
+//!   saying `data_kind`, `sample`, `reference`, for estimates `cost_function` and `method`, and
+//!   for a stored scan its provenance ([`super::PROVENANCE_FIELDS`]: scan id, station, time,
+//!   each instrument's model, serial, firmware and whether it was simulated).
 //! - A spectrum is a `ReflectanceSpectrum` (`StartWL="400"`) when it is a reflectance factor
 //!   inside the schema's `ReflectanceDataType` range (−0.1, 3.0); otherwise — SRA device
 //!   intensities, and specular reflectance factors above 3 — a `CustomSpectrum` of 31
@@ -115,6 +118,7 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
     let _ = writeln!(t, "    <cc:ObjectCollection>");
     let mut id = 0;
     for s in &study.samples {
+        let origin = super::provenance_values(s);
         // (kind, (cost function, method) of an estimate, one spectrum per geometry)
         type Object<'a> = (DataKind, Option<(&'a str, &'a str)>, [Spectrum; 14]);
         let mut objects: Vec<Object> = vec![
@@ -222,6 +226,12 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
                 tags.push(("cost_function", cost.to_string()));
                 tags.push(("method", method.to_string()));
             }
+            // Where, when and by which instruments (empty/unknown for in-memory studies).
+            for (k, v) in super::PROVENANCE_FIELDS.iter().zip(&origin) {
+                if !v.is_empty() {
+                    tags.push((k, v.clone()));
+                }
+            }
             for (k, v) in tags {
                 let _ = writeln!(t, "          <cc:Tag Name=\"{k}\" Value=\"{}\"/>", esc(&v));
             }
@@ -231,11 +241,34 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
     }
     let _ = writeln!(t, "    </cc:ObjectCollection>");
     let _ = writeln!(t, "    <cc:ColorSpecificationCollection>");
+    // The instrument behind each device's geometries: its serial (and the model it reported)
+    // when one instrument measured every sample of the file; per sample it is in the tags.
+    let instrument = |device: Device| -> Option<(String, String)> {
+        let mut seen = study.samples.iter().map(|s| {
+            s.origin.as_ref().map(|o| match device {
+                Device::MaT12 => (
+                    o.provenance.ma_t12.model.clone(),
+                    o.provenance.ma_t12.serial.clone(),
+                ),
+                Device::Sra => (
+                    o.provenance.sra.model.clone(),
+                    o.provenance.sra.serial.clone(),
+                ),
+            })
+        });
+        let first = seen.next()??;
+        (first.1 != "unknown" && seen.all(|o| o.as_ref() == Some(&first))).then_some(first)
+    };
+    let instruments = [instrument(Device::MaT12), instrument(Device::Sra)];
     for g in &GEOMETRIES {
         let (manufacturer, model) = match g.device {
             Device::MaT12 => ("X-Rite", "MA-T12"),
             Device::Sra => ("Canon", "RA-532H"),
         };
+        let reported = &instruments[match g.device {
+            Device::MaT12 => 0,
+            Device::Sra => 1,
+        }];
         let _ = writeln!(t, "      <cc:ColorSpecification Id=\"{}\">", spec_id(g));
         let _ = writeln!(t, "        <cc:MeasurementSpec>");
         let _ = writeln!(
@@ -267,7 +300,23 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
             t,
             "            <cc:Manufacturer>{manufacturer}</cc:Manufacturer>"
         );
-        let _ = writeln!(t, "            <cc:Model>{model}</cc:Model>");
+        match reported {
+            Some((reported_model, serial)) => {
+                let _ = writeln!(
+                    t,
+                    "            <cc:Model>{}</cc:Model>",
+                    esc(reported_model)
+                );
+                let _ = writeln!(
+                    t,
+                    "            <cc:SerialNumber>{}</cc:SerialNumber>",
+                    esc(serial)
+                );
+            }
+            None => {
+                let _ = writeln!(t, "            <cc:Model>{model}</cc:Model>");
+            }
+        }
         let _ = writeln!(t, "          </cc:Device>");
         let _ = writeln!(t, "        </cc:MeasurementSpec>");
         let _ = writeln!(t, "      </cc:ColorSpecification>");
@@ -589,6 +638,40 @@ pub(crate) mod tests {
         assert!(xml.contains("<cc:BRDFAngle Notation=\"45as110\">"));
         assert!(xml.contains("<cc:CustomSpectrum Name=\"sra-20\""));
         validate_with_xmllint(&xml);
+    }
+
+    #[test]
+    fn the_export_names_the_instruments_and_stays_valid() {
+        let xml = write(&super::super::tests::stored_study(), &fixed()).unwrap();
+        // One MA-T12 measured every sample: its serial is the device's, per geometry.
+        assert_eq!(
+            xml.matches("<cc:SerialNumber>MT-7</cc:SerialNumber>")
+                .count(),
+            12
+        );
+        assert_eq!(
+            xml.matches("<cc:SerialNumber>SIM-RA</cc:SerialNumber>")
+                .count(),
+            2
+        );
+        // Per object, every provenance field as a tag.
+        assert!(xml.contains("<cc:Tag Name=\"ma_t12_serial\" Value=\"MT-7\"/>"));
+        assert!(xml.contains("<cc:Tag Name=\"sra_simulated\" Value=\"yes\"/>"));
+        assert!(xml.contains("<cc:Tag Name=\"scan_id\" Value=\"12\"/>"));
+        assert!(xml.contains("<cc:Tag Name=\"station\" Value=\"bench-2\"/>"));
+        validate_with_xmllint(&xml);
+        // Two instruments in one file: no single serial is claimed for the device.
+        let mut mixed = super::super::tests::stored_study();
+        mixed.samples[1]
+            .origin
+            .as_mut()
+            .unwrap()
+            .provenance
+            .ma_t12
+            .serial = "MT-8".into();
+        let xml = write(&mixed, &fixed()).unwrap();
+        assert!(!xml.contains("<cc:SerialNumber>MT-"), "{xml}");
+        assert!(xml.contains("<cc:Tag Name=\"ma_t12_serial\" Value=\"MT-8\"/>"));
     }
 
     #[test]

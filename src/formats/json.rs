@@ -1,7 +1,8 @@
 //! The whole study as one JSON document, `brdfd.study/1`: per sample the scan (embedded as a
 //! `brdfd.scan/1` object, ARCHITECTURE.md contract 2), the specular strategy, the measured
 //! reflectance factor per geometry and every fit (status, method, Fresnel cosine, parameters,
-//! estimated reflectance factor and ΔE00 per geometry). Numbers are serde_json's shortest
+//! estimated reflectance factor and ΔE00 per geometry) and, for a stored scan, its `origin`:
+//! station, time and the instruments' provenance. Numbers are serde_json's shortest
 //! round-trip form.
 //!
 //! Import reads the scans back from a `brdfd.study/1` document, or takes a lone
@@ -42,6 +43,9 @@ struct Doc<'a> {
 struct SampleDoc<'a> {
     name: &'a str,
     scan_id: Option<i64>,
+    /// Where, when and by which instruments the scan was measured (stored studies only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    origin: Option<OriginDoc<'a>>,
     scan: serde_json::Value,
     specular_strategy: crate::processing::SpecularStrategy,
     /// "absolute" (calibrated reference tile) or "relative-to-tile" (SCIENCE.md §3).
@@ -51,6 +55,16 @@ struct SampleDoc<'a> {
     reference_reflectance: Option<Spectrum>,
     measured_reflectance: PerGeometry<'a, Spectrum>,
     fits: Vec<FitDoc<'a>>,
+}
+
+#[derive(Serialize)]
+struct OriginDoc<'a> {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    station: Option<&'a str>,
+    /// RFC 3339 UTC.
+    measured_at: String,
+    /// Per instrument model, serial, firmware and `simulated`; `source` and `source_detail`.
+    provenance: &'a crate::store::Provenance,
 }
 
 #[derive(Serialize)]
@@ -135,6 +149,11 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
         samples.push(SampleDoc {
             name: &s.name,
             scan_id: s.scan_id,
+            origin: s.origin.as_ref().map(|o| OriginDoc {
+                station: o.station.as_deref(),
+                measured_at: super::rfc3339_utc(o.measured_at_ms.div_euclid(1000)),
+                provenance: &o.provenance,
+            }),
             scan,
             specular_strategy: s.specular,
             scale: s.scale().name(),

@@ -47,9 +47,10 @@ use std::str::FromStr;
 
 use crate::cost::CostFunction;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, MA_T12_COUNT};
-use crate::report::study::{DoneFit, Study};
+use crate::report::study::{DoneFit, SampleStudy, Study};
 use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
 use crate::spectral::{BANDS, Spectrum};
+use crate::store::Provenance;
 
 /// The reference tile's name when an instrument file does not say.
 pub const DEFAULT_REFERENCE: &str = "Munsell N9";
@@ -299,7 +300,62 @@ pub struct SpectralRow {
     /// Set for `estimated` rows.
     pub method: Option<String>,
     pub geometry: &'static Geometry,
+    /// The sample's provenance, in [`PROVENANCE_FIELDS`] order.
+    pub origin: [String; PROVENANCE_FIELDS.len()],
     pub values: Spectrum,
+}
+
+/// The provenance every spectral export carries per sample, by column name (CSV; CGATS upper-
+/// cases them): the store's scan id, the station (central database only), when the scan was
+/// measured (RFC 3339 UTC), how its readings came in (`measured`, `imported`, `replay`), and per
+/// instrument its model, serial, firmware and whether it was simulated (`yes`, `no`,
+/// `unknown`). A study made in memory (`brdfd demo`) has no scan id, station or time (empty)
+/// and `unknown` instruments.
+pub const PROVENANCE_FIELDS: [&str; 12] = [
+    "scan_id",
+    "station",
+    "measured_at",
+    "source",
+    "ma_t12_model",
+    "ma_t12_serial",
+    "ma_t12_firmware",
+    "ma_t12_simulated",
+    "sra_model",
+    "sra_serial",
+    "sra_firmware",
+    "sra_simulated",
+];
+
+/// One sample's [`PROVENANCE_FIELDS`] values.
+pub fn provenance_values(s: &SampleStudy) -> [String; PROVENANCE_FIELDS.len()] {
+    let unknown = Provenance::unknown();
+    let (station, measured_at, p) = match &s.origin {
+        Some(o) => (
+            o.station.clone().unwrap_or_default(),
+            rfc3339_utc(o.measured_at_ms.div_euclid(1000)),
+            &o.provenance,
+        ),
+        None => (String::new(), String::new(), &unknown),
+    };
+    let simulated = |v: Option<bool>| match v {
+        Some(true) => "yes",
+        Some(false) => "no",
+        None => "unknown",
+    };
+    [
+        s.scan_id.map_or(String::new(), |id| id.to_string()),
+        station,
+        measured_at,
+        p.source.to_string(),
+        p.ma_t12.model.clone(),
+        p.ma_t12.serial.clone(),
+        p.ma_t12.firmware.clone(),
+        simulated(p.ma_t12.simulated).into(),
+        p.sra.model.clone(),
+        p.sra.serial.clone(),
+        p.sra.firmware.clone(),
+        simulated(p.sra.simulated).into(),
+    ]
 }
 
 /// Every spectrum of a study, per sample: readings, reference, measured, then each finished
@@ -307,6 +363,7 @@ pub struct SpectralRow {
 pub fn rows(study: &Study) -> Vec<SpectralRow> {
     let mut out = Vec::new();
     for s in &study.samples {
+        let origin = provenance_values(s);
         let mut push =
             |kind, fit: Option<(CostFunction, &str)>, spectra: [Spectrum; GEOMETRY_COUNT]| {
                 for g in &GEOMETRIES {
@@ -317,6 +374,7 @@ pub fn rows(study: &Study) -> Vec<SpectralRow> {
                         cost_function: fit.map(|f| f.0),
                         method: fit.map(|f| f.1.to_string()),
                         geometry: g,
+                        origin: origin.clone(),
                         values: spectra[g.index],
                     });
                 }
@@ -730,6 +788,74 @@ pub(crate) mod tests {
 
     pub(crate) fn study() -> Study {
         study_from_truth(3, Some(2))
+    }
+
+    /// [`study`] as loaded from a store: scan ids 11, 12, 13, measured by one real MA-T12
+    /// (serial MT-7) and a simulated SRA, on station "bench-2".
+    pub(crate) fn stored_study() -> Study {
+        use crate::report::study::Origin;
+        use crate::store::{InstrumentProvenance, Source};
+        let mut s = study();
+        for (i, sample) in s.samples.iter_mut().enumerate() {
+            sample.scan_id = Some(11 + i as i64);
+            sample.origin = Some(Origin {
+                station: Some("bench-2".into()),
+                measured_at_ms: 1_714_564_800_000 + 60_000 * i as i64,
+                provenance: Provenance {
+                    ma_t12: InstrumentProvenance {
+                        model: "MA-T12".into(),
+                        serial: "MT-7".into(),
+                        firmware: "2.1.0".into(),
+                        simulated: Some(false),
+                    },
+                    sra: InstrumentProvenance {
+                        model: "RA-532H".into(),
+                        serial: "SIM-RA".into(),
+                        firmware: "sim".into(),
+                        simulated: Some(true),
+                    },
+                    source: Source::Measured,
+                    source_detail: None,
+                },
+            });
+        }
+        s
+    }
+
+    #[test]
+    fn every_spectral_row_carries_its_samples_provenance() {
+        let rows = rows(&stored_study());
+        let first = &rows[0];
+        assert_eq!(
+            first.origin,
+            [
+                "11",
+                "bench-2",
+                "2024-05-01T12:00:00Z",
+                "measured",
+                "MA-T12",
+                "MT-7",
+                "2.1.0",
+                "no",
+                "RA-532H",
+                "SIM-RA",
+                "sim",
+                "yes"
+            ]
+            .map(String::from)
+        );
+        let last = rows.last().unwrap();
+        assert_eq!(last.origin[0], "13");
+        assert_eq!(last.origin[2], "2024-05-01T12:02:00Z");
+        // A study made in memory says it does not know.
+        let mem = rows_of_memory();
+        assert_eq!(mem[0].origin[0], "");
+        assert_eq!(mem[0].origin[3], "unknown");
+        assert_eq!(mem[0].origin[7], "unknown");
+    }
+
+    fn rows_of_memory() -> Vec<SpectralRow> {
+        rows(&study())
     }
 
     #[test]

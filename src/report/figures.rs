@@ -88,6 +88,14 @@ pub struct Figure {
     size: (u32, u32),
 }
 
+impl Figure {
+    /// Whether the figure is drawn from the study's samples one by one (swatches, spectra,
+    /// lightness panels, box plots), as opposed to its summary statistics (Fig. 12).
+    pub fn per_sample(&self) -> bool {
+        !matches!(self.kind, Kind::MeanCi)
+    }
+}
+
 #[derive(Debug, Clone, PartialEq)]
 enum Kind {
     MeasuredSwatches,

@@ -23,7 +23,7 @@ use crate::store::{
     ScanState, Store, StoreError,
 };
 
-use super::study::{DoneFit, FitState, FitStudy, SampleStudy, Study};
+use super::study::{DoneFit, FitState, FitStudy, Origin, SampleStudy, Study};
 
 /// Which scans a report covers.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -214,9 +214,18 @@ fn assemble(
             });
         }
     }
+    let origin = Origin {
+        station: None,
+        measured_at_ms: detail
+            .scan
+            .started_at_ms
+            .unwrap_or(detail.scan.requested_at_ms),
+        provenance: detail.scan.provenance.clone(),
+    };
     Ok(SampleStudy {
         name: scan.sample.clone(),
         scan_id: Some(id.0),
+        origin: Some(origin),
         scan,
         specular,
         reference_reflectance: detail.reference.reference.rho_ref,
@@ -286,41 +295,30 @@ pub async fn from_central(
     for s in scans {
         let id = s.detail.scan.id;
         let station = s.station.clone();
-        // The intervals and colorimetry of migration 0011, forwarded by central step 0002.
+        // The intervals and colorimetry of migration 0011, forwarded by central step 0002,
+        // fetched with the fit runs in the same query.
         let mut extras = HashMap::new();
-        for run in &s.fits {
-            let row: Option<(Option<String>, Option<String>, Option<String>)> = sqlx::query_as(
-                "SELECT f.uncertainty_json, e.observer, e.weighting
-                 FROM fit_runs f LEFT JOIN evaluation_summaries e
-                   ON e.station = f.station AND e.fit_run_id = f.id
-                 WHERE f.station = $1 AND f.id = $2",
-            )
-            .bind(&station)
-            .bind(run.id.0)
-            .fetch_optional(pool)
-            .await
-            .map_err(crate::store::StoreError::from)?;
-            let Some((uncertainty, observer, weighting)) = row else {
-                continue;
-            };
+        for (run, text) in &s.fit_extras {
             let inconsistent = |message: String| LoadError::Inconsistent { scan: id, message };
-            let uncertainty = uncertainty
-                .map(|t| serde_json::from_str(&t))
+            let uncertainty = text
+                .uncertainty_json
+                .as_deref()
+                .map(serde_json::from_str)
                 .transpose()
-                .map_err(|e| inconsistent(format!("fit run {}: uncertainty_json: {e}", run.id)))?;
-            let colorimetry = match (observer, weighting) {
+                .map_err(|e| inconsistent(format!("fit run {run}: uncertainty_json: {e}")))?;
+            let colorimetry = match (&text.observer, &text.weighting) {
                 (Some(o), Some(w)) => Some(crate::colour::Colorimetry {
                     observer: o
                         .parse()
-                        .map_err(|e| inconsistent(format!("fit run {}: observer: {e}", run.id)))?,
+                        .map_err(|e| inconsistent(format!("fit run {run}: observer: {e}")))?,
                     weighting: w
                         .parse()
-                        .map_err(|e| inconsistent(format!("fit run {}: weighting: {e}", run.id)))?,
+                        .map_err(|e| inconsistent(format!("fit run {run}: weighting: {e}")))?,
                 }),
                 _ => None,
             };
             extras.insert(
-                run.id.0,
+                *run,
                 FitExtras {
                     colorimetry,
                     uncertainty,
@@ -329,6 +327,10 @@ pub async fn from_central(
         }
         let mut sample = assemble(id, s.detail, s.processed, s.fits, &extras)?;
         if several {
+            // As with the name: one station's study is the study of its own store.
+            if let Some(origin) = sample.origin.as_mut() {
+                origin.station = Some(station.clone());
+            }
             sample.name = format!("{} [{station}]", sample.name);
         }
         samples.push(sample);

@@ -54,32 +54,79 @@ pub struct ReportFiles {
     pub previews: Vec<PathBuf>,
 }
 
-/// Writes every figure and the summary pages of `study` into `dir` (created if missing).
-/// `progress` is told each step's name before it runs (a progress bar, or nothing).
+/// How a report is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReportOptions {
+    /// The figures that show samples one by one (swatches, spectra, lightness panels, box
+    /// plots, previews) show at most this many, the first in report order; the tables and the
+    /// statistics (Fig. 12) always cover every sample. A lab-wide study of thousands of scans
+    /// would otherwise draw a swatch chart tens of thousands of pixels high and thousands of
+    /// spectra files; the summary says when figures show fewer samples than the tables.
+    pub max_sample_figures: usize,
+}
+
+impl ReportOptions {
+    /// The default of [`ReportOptions::max_sample_figures`].
+    pub const MAX_SAMPLE_FIGURES: usize = 100;
+}
+
+impl Default for ReportOptions {
+    fn default() -> Self {
+        ReportOptions {
+            max_sample_figures: ReportOptions::MAX_SAMPLE_FIGURES,
+        }
+    }
+}
+
+/// Writes every figure and the summary pages of `study` into `dir` (created if missing), with
+/// the default [`ReportOptions`]. `progress` is told each step's name before it runs (a
+/// progress bar, or nothing).
 pub fn write_report(
     study: &Study,
     dir: &Path,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<ReportFiles, ReportError> {
+    write_report_with(study, dir, &ReportOptions::default(), progress)
+}
+
+/// [`write_report`] with explicit options.
+pub fn write_report_with(
+    study: &Study,
+    dir: &Path,
+    opts: &ReportOptions,
+    progress: &mut dyn FnMut(&str, usize, usize),
+) -> Result<ReportFiles, ReportError> {
     if study.samples.is_empty() {
         return Err(ReportError::Empty);
     }
+    // The samples the per-sample figures show.
+    let shown = opts.max_sample_figures.max(1).min(study.samples.len());
+    let subset;
+    let drawn: &Study = if shown < study.samples.len() {
+        subset = Study {
+            samples: study.samples[..shown].to_vec(),
+        };
+        &subset
+    } else {
+        study
+    };
     std::fs::create_dir_all(dir).map_err(|source| ReportError::Directory {
         path: dir.to_path_buf(),
         source,
     })?;
     let analysis = Analysis::of(study);
-    let figs = figures::figures(study);
+    let figs = figures::figures(drawn);
     let total = figs.len() + 1;
     let mut written = Vec::new();
     for (i, f) in figs.iter().enumerate() {
         progress(&f.stem, i, total);
-        written.push(figures::render(f, study, &analysis, dir)?);
+        let from = if f.per_sample() { drawn } else { study };
+        written.push(figures::render(f, from, &analysis, dir)?);
     }
     // One sphere preview per sample (PNG only: the spheres are pixels, not vector shapes).
     let mut previews = Vec::new();
     let (mut md_previews, mut html_previews) = (String::new(), String::new());
-    for s in &study.samples {
+    for s in &drawn.samples {
         if !CostFunction::ALL.iter().any(|c| s.done(*c).is_some()) {
             continue;
         }
@@ -116,6 +163,18 @@ pub fn write_report(
     };
     let mut md = summary::markdown(study, &analysis, &figs);
     let mut html = summary::html(study, &analysis, &figs);
+    if shown < study.samples.len() {
+        let note = format!(
+            "The figures that show samples one by one (Fig. 4–11 and the previews) show the \
+             first {shown} of the {} samples; the tables and Fig. 12 cover all of them. Draw \
+             others by naming their scans, or raise --max-sample-figures.",
+            study.samples.len()
+        );
+        let at = md.find("\n## ").unwrap_or(md.len());
+        md.insert_str(at, &format!("\n{note}\n"));
+        let at = html.find("<h2>").unwrap_or(html.len());
+        html.insert_str(at, &format!("<p>{}</p>\n", html_escape(&note)));
+    }
     if !previews.is_empty() {
         md.push_str(&format!("\n## Previews\n\n{md_previews}"));
         let at = html.rfind("</body>").unwrap_or(html.len());
@@ -182,6 +241,39 @@ mod tests {
             assert!(md.contains(&format!("![{name}]({name})")), "{name}");
             assert!(html.contains(&format!("<img src=\"{name}\"")), "{name}");
         }
+    }
+
+    #[test]
+    fn a_large_study_draws_its_first_samples_and_tabulates_all() {
+        let study = study_from_truth(3, None);
+        let dir = tempfile::tempdir().unwrap();
+        let opts = ReportOptions {
+            max_sample_figures: 2,
+        };
+        let files = write_report_with(&study, dir.path(), &opts, &mut |_, _, _| {}).unwrap();
+        // 4, 5, 6, 7×3, 8×2 (not 3), 9, 10, 11, 12.
+        assert_eq!(files.figures.len(), 3 + 3 + 2 + 4);
+        assert_eq!(files.previews.len(), 2);
+        let md = std::fs::read_to_string(&files.markdown).unwrap();
+        assert!(md.contains("show the first 2 of the 3 samples"), "{md}");
+        // Every sample is still in Table 1.
+        for s in &study.samples {
+            assert!(md.contains(&format!("| {} |", s.name)), "{}", s.name);
+        }
+        let spectra: Vec<_> = files
+            .figures
+            .iter()
+            .filter(|[png, _]| png.to_string_lossy().contains("fig08-"))
+            .collect();
+        assert_eq!(spectra.len(), 2);
+        assert!(
+            !dir.path()
+                .join(format!(
+                    "fig08-spectra-{}.png",
+                    crate::synth::slug(&study.samples[2].name)
+                ))
+                .exists()
+        );
     }
 
     #[test]

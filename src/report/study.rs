@@ -18,6 +18,7 @@ use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
 use crate::processing::{MeasuredBrdf, Scale, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
+use crate::store::Provenance;
 use crate::uncertainty::Uncertainty;
 
 /// Every sample of a study, in the order they are reported.
@@ -34,6 +35,9 @@ pub struct SampleStudy {
     pub name: String,
     /// The store's scan id, when the study was loaded from a store.
     pub scan_id: Option<i64>,
+    /// Where, when and by which instruments the scan was measured, when the study was loaded
+    /// from a store (`None` for studies made in memory: `brdfd demo`, tests).
+    pub origin: Option<Origin>,
     /// The scan: the sample's readings and the reference readings they were normalised by.
     pub scan: Scan,
     /// How the SRA readings were turned into spectra for `measured`.
@@ -45,6 +49,19 @@ pub struct SampleStudy {
     pub measured: MeasuredBrdf,
     /// One entry per cost function the sample was fitted with, in [`CostFunction::ALL`] order.
     pub fits: Vec<FitStudy>,
+}
+
+/// Where, when and by what a stored scan was measured: what every export and the report
+/// carry per sample, so a file read later still says which instrument (real or simulated)
+/// produced its numbers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Origin {
+    /// The station that measured it, when read from the lab's central database.
+    pub station: Option<String>,
+    /// When the scan started (else when it was requested), ms since the Unix epoch.
+    pub measured_at_ms: i64,
+    /// The instruments as they reported themselves, and how the readings came in.
+    pub provenance: Provenance,
 }
 
 /// The fit of one sample under one cost function.
@@ -227,6 +244,7 @@ impl Study {
                 SampleStudy {
                     name: scan.sample.clone(),
                     scan_id: None,
+                    origin: None,
                     scan: scan.clone(),
                     specular: first.request.processing.specular,
                     reference_reflectance: first.request.processing.reference_reflectance,
@@ -286,6 +304,7 @@ pub(crate) mod tests {
                 SampleStudy {
                     name: scan.sample.clone(),
                     scan_id: None,
+                    origin: None,
                     scan,
                     specular: SpecularStrategy::Ratio,
                     reference_reflectance: None,

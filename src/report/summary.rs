@@ -206,6 +206,49 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             rows: with_intervals,
         });
     }
+    // Where, when and by which instruments each stored scan was measured.
+    if study.samples.iter().any(|s| s.origin.is_some()) {
+        let stations = study
+            .samples
+            .iter()
+            .any(|s| s.origin.as_ref().is_some_and(|o| o.station.is_some()));
+        let mut head = vec!["sample".to_string(), "scan".to_string()];
+        if stations {
+            head.push("station".into());
+        }
+        head.extend(["measured at (UTC)", "source", "MA-T12", "SRA"].map(String::from));
+        let rows = study
+            .samples
+            .iter()
+            .map(|s| {
+                let mut row = vec![
+                    s.name.clone(),
+                    s.scan_id.map_or(String::new(), |id| id.to_string()),
+                ];
+                match &s.origin {
+                    Some(o) => {
+                        if stations {
+                            row.push(o.station.clone().unwrap_or_default());
+                        }
+                        row.push(crate::formats::rfc3339_utc(
+                            o.measured_at_ms.div_euclid(1000),
+                        ));
+                        row.push(o.provenance.source.to_string());
+                        row.push(o.provenance.ma_t12.describe());
+                        row.push(o.provenance.sra.describe());
+                    }
+                    None => row.resize(head.len(), "unknown".into()),
+                }
+                row
+            })
+            .collect();
+        b.push(Block::Heading("Where the scans were measured".into()));
+        b.push(Block::Table {
+            caption: "Table 5. Provenance of each scan: the store's scan id, when it was measured, how its readings came in (measured by the daemon, imported from a file, replayed), and each instrument as it reported itself — model, serial, firmware, and whether it was a simulated instrument. A report mixes simulated and real scans only with --include-simulated.".into(),
+            head,
+            rows,
+        });
+    }
     b.push(Block::Heading("Samples left out".into()));
     if analysis.excluded.is_empty() {
         b.push(Block::Para(

@@ -24,7 +24,7 @@ use crate::cost::CostFunction;
 use crate::fit::{FitReport, FitRequest, FitScanError, fit_measured};
 use crate::optimise::{FitError, Progress, Settings};
 use crate::processing::{MeasuredBrdf, ProcessingOptions};
-use crate::store::{FitResult, FitRunId, FitStatus, ScanId};
+use crate::store::{FitResult, FitRunId, FitStatus, ScanId, StoreError};
 use crate::uncertainty::{BootstrapOptions, UncertaintyError, bootstrap};
 
 use super::events::Event;
@@ -343,10 +343,13 @@ impl Service {
             .timed_store(store.scan_detail(scan))
             .await
             .map_err(|e| fail(e.into()))?;
+        // Settings the store cannot read back are a damaged store, not the caller's mistake.
         let settings: Settings = serde_json::from_value(run.settings.clone()).map_err(|e| {
-            fail(ServiceError::BadRequest(format!(
-                "fit run {fit}: stored settings unreadable: {e}"
-            )))
+            fail(ServiceError::Store(StoreError::Corrupt {
+                table: "fit_runs",
+                id: fit.0,
+                detail: format!("settings: {e}"),
+            }))
         })?;
         let request = FitRequest {
             processing: ProcessingOptions {

@@ -190,6 +190,32 @@ struct Busy {
     abort: Arc<Notify>,
 }
 
+/// The instruments claimed by one operation ([`Service::claim`]); dropping it frees them. It
+/// dereferences to the operation's abort signal.
+pub(crate) struct BusyClaim {
+    inner: Arc<Inner>,
+    abort: Arc<Notify>,
+}
+
+impl std::ops::Deref for BusyClaim {
+    type Target = Notify;
+    fn deref(&self) -> &Notify {
+        &self.abort
+    }
+}
+
+impl std::fmt::Debug for BusyClaim {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BusyClaim").finish_non_exhaustive()
+    }
+}
+
+impl Drop for BusyClaim {
+    fn drop(&mut self) {
+        *self.inner.busy.lock().unwrap_or_else(|p| p.into_inner()) = None;
+    }
+}
+
 /// `GET /status`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Status {
@@ -404,8 +430,10 @@ impl Service {
         out
     }
 
-    /// Claims the instruments for `operation`, or says who has them.
-    fn claim(&self, operation: Operation) -> Result<Arc<Notify>, ServiceError> {
+    /// Claims the instruments for `operation`, or says who has them. The claim holds until the
+    /// returned guard is dropped — at the end of the operation's task, or when that task
+    /// panics or is cancelled — so the instruments can never stay "busy" with nobody using them.
+    fn claim(&self, operation: Operation) -> Result<BusyClaim, ServiceError> {
         let mut busy = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
         if let Some(b) = busy.as_ref() {
             return Err(ServiceError::Busy {
@@ -419,7 +447,10 @@ impl Service {
             since: Instant::now(),
             abort: abort.clone(),
         });
-        Ok(abort)
+        Ok(BusyClaim {
+            inner: self.inner.clone(),
+            abort,
+        })
     }
 
     /// Fails with `Busy` if the instruments are in use (checked before writing anything).
@@ -432,10 +463,6 @@ impl Service {
             }),
             None => Ok(()),
         }
-    }
-
-    fn release(&self) {
-        *self.inner.busy.lock().unwrap_or_else(|p| p.into_inner()) = None;
     }
 
     /// What the instruments are doing now.

@@ -18,7 +18,8 @@
 //!   readings; an abort or shutdown marks it `aborted` with the reason.
 
 use std::collections::HashSet;
-use std::time::Instant;
+use std::future::Future;
+use std::time::{Duration, Instant};
 
 use drivers::{DriverError, Instrument, ReadingValue, ReceivedReading};
 use tokio::sync::{Notify, broadcast};
@@ -125,6 +126,32 @@ fn device_readings(readings: &[crate::store::Reading]) -> DeviceReadings {
     out
 }
 
+/// How often [`retry_store_write`] tries a write.
+pub(crate) const END_WRITE_ATTEMPTS: u32 = 5;
+
+/// Runs `write` until it succeeds, fails for a reason a retry cannot fix (a life-cycle
+/// refusal, a missing row), or has been tried [`END_WRITE_ATTEMPTS`] times; waits 100 ms,
+/// 200 ms, 400 ms, 800 ms between tries.
+pub(crate) async fn retry_store_write<F, Fut>(mut write: F) -> Result<(), StoreError>
+where
+    F: FnMut() -> Fut,
+    Fut: Future<Output = Result<(), StoreError>>,
+{
+    let mut wait = Duration::from_millis(100);
+    let mut attempt = 1;
+    loop {
+        match write().await {
+            Err(StoreError::Database(e)) if attempt < END_WRITE_ATTEMPTS => {
+                tracing::warn!(error = %e, attempt, "store write failed; trying again");
+                tokio::time::sleep(wait).await;
+                wait *= 2;
+                attempt += 1;
+            }
+            other => return other,
+        }
+    }
+}
+
 impl Service {
     /// Starts measuring the white reference tile on both instruments. Returns at once with the
     /// new reference set's id; progress comes as events. Refused while the instruments are
@@ -175,7 +202,7 @@ impl Service {
             service
                 .run_reference(reference, &abort, &mut listener)
                 .await;
-            service.release();
+            drop(abort);
             drop(guard);
         });
         Ok(reference)
@@ -232,7 +259,7 @@ impl Service {
         tokio::spawn(async move {
             let mut listener = listener;
             service.run_scan(scan, &abort, &mut listener).await;
-            service.release();
+            drop(abort);
             drop(guard);
         });
         Ok(scan)
@@ -254,6 +281,26 @@ impl Service {
         Ok((guard, c.listener()))
     }
 
+    /// Writes how a reference or scan ended (failed or aborted), retrying while the store
+    /// fails for a reason that may pass (a locked or full disk, an I/O error): up to
+    /// [`END_WRITE_ATTEMPTS`] tries, backing off from 100 ms to 1.6 s. The readings are already
+    /// committed one by one, so nothing measured is lost either way; if every try fails the row
+    /// stays `measuring`, and the next start marks it failed ("daemon stopped during the scan").
+    async fn record_end<F, Fut>(&self, what: &str, id: i64, write: F)
+    where
+        F: FnMut() -> Fut,
+        Fut: Future<Output = Result<(), StoreError>>,
+    {
+        if let Err(e) = self.timed_store(retry_store_write(write)).await {
+            tracing::error!(
+                error = %e,
+                what,
+                id,
+                "cannot record how the {what} ended; the next start marks it failed"
+            );
+        }
+    }
+
     async fn run_reference(&self, reference: ReferenceId, abort: &Notify, stop: &mut Shutdown) {
         let acquired = self
             .acquire(Target::Reference(reference), abort, stop)
@@ -264,12 +311,10 @@ impl Service {
             .clone()
             .or_else(|| (!acquired.errors.is_empty()).then(|| acquired.errors.join("; ")));
         if let Some(reason) = reason {
-            if let Err(e) = self
-                .timed_store(store.fail_reference(reference, &reason))
-                .await
-            {
-                tracing::error!(error = %e, %reference, "cannot mark the reference failed");
-            }
+            self.record_end("reference", reference.0, || {
+                store.fail_reference(reference, &reason)
+            })
+            .await;
             self.inner
                 .events
                 .send(Event::ReferenceFailed { reference, reason });
@@ -288,9 +333,10 @@ impl Service {
             }
             Err(e) => {
                 let reason = e.to_string();
-                let _ = self
-                    .timed_store(store.fail_reference(reference, &reason))
-                    .await;
+                self.record_end("reference", reference.0, || {
+                    store.fail_reference(reference, &reason)
+                })
+                .await;
                 self.inner
                     .events
                     .send(Event::ReferenceFailed { reference, reason });
@@ -302,32 +348,29 @@ impl Service {
         let store = &self.inner.store;
         if let Err(e) = self.timed_store(store.start_measuring(scan)).await {
             let reason = format!("cannot start measuring: {e}");
-            let _ = self.timed_store(store.fail_scan(scan, &reason)).await;
+            self.record_end("scan", scan.0, || store.fail_scan(scan, &reason))
+                .await;
             self.inner.events.send(Event::ScanFailed { scan, reason });
             return;
         }
         let acquired = self.acquire(Target::Scan(scan), abort, stop).await;
         if let Some(reason) = acquired.aborted {
-            match self
-                .timed_store(store.abort_scan_because(scan, &reason))
-                .await
-            {
-                Ok(()) => self.inner.events.send(Event::ScanAborted { scan, reason }),
-                Err(e) => tracing::error!(error = %e, %scan, "cannot mark the scan aborted"),
-            }
+            self.record_end("scan", scan.0, || store.abort_scan_because(scan, &reason))
+                .await;
+            self.inner.events.send(Event::ScanAborted { scan, reason });
             return;
         }
         if !acquired.errors.is_empty() {
             let reason = acquired.errors.join("; ");
-            match self.timed_store(store.fail_scan(scan, &reason)).await {
-                Ok(()) => self.inner.events.send(Event::ScanFailed { scan, reason }),
-                Err(e) => tracing::error!(error = %e, %scan, "cannot mark the scan failed"),
-            }
+            self.record_end("scan", scan.0, || store.fail_scan(scan, &reason))
+                .await;
+            self.inner.events.send(Event::ScanFailed { scan, reason });
             return;
         }
         if let Err(e) = self.timed_store(store.complete_scan(scan)).await {
             let reason = e.to_string();
-            let _ = self.timed_store(store.fail_scan(scan, &reason)).await;
+            self.record_end("scan", scan.0, || store.fail_scan(scan, &reason))
+                .await;
             self.inner.events.send(Event::ScanFailed { scan, reason });
             return;
         }
@@ -621,8 +664,8 @@ impl Service {
 
     /// Imports a `brdfd.scan/1` scan: its reference readings become a reference set (named
     /// with [`IMPORTED_SUFFIX`]; never the reference in force for new scans), its readings a
-    /// complete scan (in one transaction), which is then processed and fitted like a measured
-    /// one. Returns the scan's id and its fits.
+    /// complete scan, all in one transaction, which is then processed and fitted like a
+    /// measured one. Returns the scan's id and its fits.
     pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
         file.validate()?;
         check_name("sample name", &file.sample)?;
@@ -635,47 +678,16 @@ impl Service {
             ..Provenance::unknown()
         };
         let name = format!("{}{IMPORTED_SUFFIX}", file.reference.name);
-        let reference = self.timed_store(store.begin_reference(&name, None)).await?;
-        if let Err(e) = self
-            .timed_store(store.set_reference_provenance(reference, &provenance))
-            .await
-        {
-            let _ = store.fail_reference(reference, &e.to_string()).await;
-            return Err(e.into());
-        }
-        let readings = new_readings(&file.reference.readings);
-        for r in &readings {
-            if let Err(e) = self
-                .timed_store(store.add_reference_reading(
-                    reference,
-                    r.device,
-                    r.geometry,
-                    &r.values,
-                    r.raw_frame,
-                ))
-                .await
-            {
-                let _ = store.fail_reference(reference, &e.to_string()).await;
-                return Err(e.into());
-            }
-        }
-        self.timed_store(store.complete_reference(reference))
+        // One transaction: a failure leaves no half-imported reference or scan behind.
+        let (_reference, scan) = self
+            .timed_store(store.import_scan(
+                &file.sample,
+                &name,
+                &provenance,
+                &new_readings(&file.reference.readings),
+                &new_readings(&file.readings),
+            ))
             .await?;
-        let scan = self
-            .timed_store(store.request_scan(&file.sample, reference))
-            .await?;
-        self.timed_store(store.set_scan_provenance(scan, &provenance))
-            .await?;
-        self.timed_store(store.start_measuring(scan)).await?;
-        let readings = new_readings(&file.readings);
-        if let Err(e) = self
-            .timed_store(store.add_readings_tx(scan, &readings))
-            .await
-        {
-            let _ = store.fail_scan(scan, &format!("import failed: {e}")).await;
-            return Err(e.into());
-        }
-        self.timed_store(store.complete_scan(scan)).await?;
         self.inner.events.send(Event::ScanComplete { scan });
         let fits = self
             .process_and_queue(scan, &RefitRequest::default())

@@ -43,8 +43,23 @@ async fn the_instruments_are_claimed_by_one_operation_at_a_time() {
     tokio::time::timeout(Duration::from_secs(1), first.notified())
         .await
         .expect("abort notified");
-    s.release();
+    drop(first);
     assert!(s.check_idle().is_ok());
+    assert!(matches!(s.abort(), Err(ServiceError::Idle)));
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_task_that_panics_frees_the_instruments() {
+    let s = service().await;
+    let claim = s.claim(Operation::Scan { scan: ScanId(4) }).unwrap();
+    assert!(s.check_idle().is_err());
+    let task = tokio::spawn(async move {
+        let _claim = claim;
+        panic!("a bug in the scan task");
+    });
+    assert!(task.await.unwrap_err().is_panic());
+    assert!(s.check_idle().is_ok(), "the claim outlived its task");
     assert!(matches!(s.abort(), Err(ServiceError::Idle)));
     s.shutdown().await;
 }
@@ -123,4 +138,47 @@ fn settings_follow_the_configuration() {
         (f.cost, f.method, f.seed),
         (CostFunction::Cf1, Method::Paper, 4)
     );
+}
+
+#[tokio::test]
+async fn the_end_of_a_scan_is_written_again_until_the_store_takes_it() {
+    use super::orchestrator::{END_WRITE_ATTEMPTS, retry_store_write};
+    use crate::store::StoreError;
+    use std::sync::atomic::{AtomicU32, Ordering};
+
+    // A disk that refuses twice, then accepts: the third try lands.
+    let tries = AtomicU32::new(0);
+    let out = retry_store_write(|| async {
+        if tries.fetch_add(1, Ordering::SeqCst) < 2 {
+            Err(StoreError::Database(sqlx::Error::PoolTimedOut))
+        } else {
+            Ok(())
+        }
+    })
+    .await;
+    assert!(out.is_ok(), "{out:?}");
+    assert_eq!(tries.load(Ordering::SeqCst), 3);
+
+    // A disk that never recovers: tried the stated number of times, and the error comes back.
+    let tries = AtomicU32::new(0);
+    let out = retry_store_write(|| async {
+        tries.fetch_add(1, Ordering::SeqCst);
+        Err(StoreError::Database(sqlx::Error::PoolTimedOut))
+    })
+    .await;
+    assert!(matches!(out, Err(StoreError::Database(_))), "{out:?}");
+    assert_eq!(tries.load(Ordering::SeqCst), END_WRITE_ATTEMPTS);
+
+    // A refusal a retry cannot fix (the scan is no longer measuring) is not retried.
+    let tries = AtomicU32::new(0);
+    let out = retry_store_write(|| async {
+        tries.fetch_add(1, Ordering::SeqCst);
+        Err(StoreError::NotFound {
+            what: "scan",
+            id: 9,
+        })
+    })
+    .await;
+    assert!(matches!(out, Err(StoreError::NotFound { .. })), "{out:?}");
+    assert_eq!(tries.load(Ordering::SeqCst), 1);
 }

@@ -31,6 +31,17 @@ pub struct CentralScan {
     pub processed: Vec<Processed>,
     /// Its fit runs, oldest first.
     pub fits: Vec<FitRun>,
+    /// What each fit run's detail adds (migration 0011, forwarded by central step 0002), by
+    /// fit run id; the report parses it.
+    pub fit_extras: HashMap<i64, FitExtrasText>,
+}
+
+/// A fit run's bootstrap intervals and evaluation colorimetry as stored (text columns).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct FitExtrasText {
+    pub uncertainty_json: Option<String>,
+    pub observer: Option<String>,
+    pub weighting: Option<String>,
 }
 
 /// Which scans of the central database.
@@ -192,6 +203,7 @@ pub async fn load_scans(
     }
     // Fit runs.
     let mut fits: HashMap<Key, Vec<FitRun>> = HashMap::new();
+    let mut extras: HashMap<Key, HashMap<i64, FitExtrasText>> = HashMap::new();
     for row in fetch(
         pool,
         &format!(
@@ -199,9 +211,11 @@ pub async fn load_scans(
          SELECT f.station, f.id, f.scan_id, f.processed_id, p.specular, f.method,
                 f.cost_function, f.settings_json, f.seed, f.status, f.error, f.cost,
                 f.params_json, f.best_cost_per_generation_json, f.evaluations, f.generations,
-                f.wall_ms, f.queued_at_ms, f.started_at_ms, f.finished_at_ms
+                f.wall_ms, f.queued_at_ms, f.started_at_ms, f.finished_at_ms,
+                f.uncertainty_json, e.observer, e.weighting
          FROM sel JOIN fit_runs f ON f.station = sel.station AND f.scan_id = sel.id
          JOIN processed p ON p.station = f.station AND p.id = f.processed_id
+         LEFT JOIN evaluation_summaries e ON e.station = f.station AND e.fit_run_id = f.id
          ORDER BY f.station, f.id"
         ),
         station,
@@ -210,9 +224,16 @@ pub async fn load_scans(
     .await?
     {
         let k = key(&row, "scan_id")?;
-        fits.entry(k)
-            .or_default()
-            .push(FitRow::from_row(&row)?.into_run()?);
+        let run = FitRow::from_row(&row)?.into_run()?;
+        extras.entry(k.clone()).or_default().insert(
+            run.id.0,
+            FitExtrasText {
+                uncertainty_json: row.try_get("uncertainty_json")?,
+                observer: row.try_get("observer")?,
+                weighting: row.try_get("weighting")?,
+            },
+        );
+        fits.entry(k).or_default().push(run);
     }
     let mut out = Vec::with_capacity(scan_rows.len());
     for row in &scan_rows {
@@ -236,6 +257,7 @@ pub async fn load_scans(
             },
             processed: processed.remove(&k).unwrap_or_default(),
             fits: fits.remove(&k).unwrap_or_default(),
+            fit_extras: extras.remove(&k).unwrap_or_default(),
         });
     }
     if let Some(ids) = ids {

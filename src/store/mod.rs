@@ -241,7 +241,6 @@ impl Store {
             .await?)
     }
 
-    /// `table` is always a constant of this module, never outside input.
     async fn set_provenance(
         &self,
         table: &'static str,
@@ -249,6 +248,24 @@ impl Store {
         id: i64,
         p: &Provenance,
     ) -> Result<(), StoreError> {
+        write_provenance(&self.writer, table, what, id, p).await
+    }
+}
+
+/// Sets the provenance columns of row `id` of `table` (`scans` or `reference_sets`) through
+/// `ex` (the writer, or a transaction). `table` is always a constant of this module, never
+/// outside input.
+pub(crate) async fn write_provenance<'e, E>(
+    ex: E,
+    table: &'static str,
+    what: &'static str,
+    id: i64,
+    p: &Provenance,
+) -> Result<(), StoreError>
+where
+    E: sqlx::Executor<'e, Database = backend::Db>,
+{
+    {
         let flag = |s: Option<bool>| s.map(i64::from);
         let sql = format!(
             "UPDATE {table} SET ma_t12_model = $2, ma_t12_serial = $3, ma_t12_firmware = $4,
@@ -268,7 +285,7 @@ impl Store {
             .bind(flag(p.sra.simulated))
             .bind(p.source.as_str())
             .bind(p.source_detail.as_deref())
-            .execute(&self.writer)
+            .execute(ex)
             .await?;
         if done.rows_affected() == 0 {
             return Err(StoreError::NotFound { what, id });

@@ -12,8 +12,8 @@ use super::backend::{self, Db};
 use super::codec::{self, ReadingRow};
 use super::ids::{ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
 use super::records::{
-    NewReading, Processed, ProvenanceRow, ReadingValues, ReferenceStatus, ScanDetail, ScanFilter,
-    ScanState, ScanSummary, provenance_columns,
+    NewReading, Processed, Provenance, ProvenanceRow, ReadingValues, ReferenceStatus, ScanDetail,
+    ScanFilter, ScanState, ScanSummary, provenance_columns,
 };
 use super::references::reference_status;
 use super::{Store, StoreError, now_ms};
@@ -278,6 +278,127 @@ impl Store {
         }
         tx.commit().await?;
         Ok(ids)
+    }
+
+    /// Stores an imported scan in one transaction: its reference readings as a complete
+    /// reference set named `reference_name`, the sample (created on first use), and the scan,
+    /// complete, with its 14 readings and `provenance` on both. All or nothing: a failure
+    /// anywhere leaves no reference set, scan or reading behind. Same checks as
+    /// [`Store::add_reference_reading`] and [`Store::add_reading`]; both sets must hold each of
+    /// the 14 geometries once.
+    pub async fn import_scan(
+        &self,
+        sample_name: &str,
+        reference_name: &str,
+        provenance: &Provenance,
+        reference_readings: &[NewReading<'_>],
+        readings: &[NewReading<'_>],
+    ) -> Result<(ReferenceId, ScanId), StoreError> {
+        for (field, name) in [
+            ("sample name", sample_name),
+            ("reference name", reference_name),
+        ] {
+            if name.trim().is_empty() {
+                return Err(StoreError::Empty { field });
+            }
+        }
+        let reference_owner = || format!("imported reference \"{reference_name}\"");
+        let scan_owner = || format!("imported scan of \"{sample_name}\"");
+        let mut checked = Vec::with_capacity(reference_readings.len() + readings.len());
+        for (set, owner, is_reference) in [
+            (
+                reference_readings,
+                &reference_owner as &dyn Fn() -> String,
+                true,
+            ),
+            (readings, &scan_owner, false),
+        ] {
+            let mut present = Vec::with_capacity(set.len());
+            for r in set {
+                let g = codec::check_reading(owner, r.device, r.geometry, &r.values, is_reference)?;
+                if present.contains(&g.name) {
+                    return Err(StoreError::DuplicateReading {
+                        owner: owner(),
+                        geometry: g.name,
+                    });
+                }
+                present.push(g.name);
+                checked.push((is_reference, r, g));
+            }
+            if present.len() != GEOMETRY_COUNT {
+                let present: Vec<String> = present.iter().map(|g| g.to_string()).collect();
+                let missing = codec::missing_geometries(&present);
+                return Err(if is_reference {
+                    StoreError::ReferenceIncomplete {
+                        reference: ReferenceId(0),
+                        have: present.len(),
+                        missing,
+                    }
+                } else {
+                    StoreError::ScanIncomplete {
+                        scan: ScanId(0),
+                        have: present.len(),
+                        missing,
+                    }
+                });
+            }
+        }
+        let now = now_ms();
+        let mut tx = self.writer.begin().await?;
+        let reference: i64 = sqlx::query_scalar(
+            "INSERT INTO reference_sets (name, status, taken_at_ms, completed_at_ms)
+             VALUES ($1, 'complete', $2, $2) RETURNING id",
+        )
+        .bind(reference_name)
+        .bind(now)
+        .fetch_one(&mut *tx)
+        .await?;
+        super::write_provenance(
+            &mut *tx,
+            "reference_sets",
+            ReferenceId::WHAT,
+            reference,
+            provenance,
+        )
+        .await?;
+        let sample: i64 = sqlx::query_scalar(backend::UPSERT_SAMPLE)
+            .bind(sample_name)
+            .bind(now)
+            .fetch_one(&mut *tx)
+            .await?;
+        let scan: i64 = sqlx::query_scalar(
+            "INSERT INTO scans
+                 (sample_id, reference_id, state, requested_at_ms, started_at_ms, finished_at_ms)
+             VALUES ($1, $2, 'complete', $3, $3, $3) RETURNING id",
+        )
+        .bind(sample)
+        .bind(reference)
+        .bind(now)
+        .fetch_one(&mut *tx)
+        .await?;
+        super::write_provenance(&mut *tx, "scans", ScanId::WHAT, scan, provenance).await?;
+        for (is_reference, r, g) in checked {
+            let sql = if is_reference {
+                "INSERT INTO reference_readings
+                     (reference_id, device, geometry, values_f64le, raw_frame, taken_at_ms)
+                 VALUES ($1, $2, $3, $4, $5, $6)"
+            } else {
+                "INSERT INTO readings
+                     (scan_id, device, geometry, values_f64le, raw_frame, received_at_ms)
+                 VALUES ($1, $2, $3, $4, $5, $6)"
+            };
+            sqlx::query(sql)
+                .bind(if is_reference { reference } else { scan })
+                .bind(r.device.key())
+                .bind(g.name)
+                .bind(codec::encode_f64s(r.values.as_slice()))
+                .bind(r.raw_frame)
+                .bind(now)
+                .execute(&mut *tx)
+                .await?;
+        }
+        tx.commit().await?;
+        Ok((ReferenceId(reference), ScanId(scan)))
     }
 
     /// measuring → complete. Refused unless the scan is `measuring` and holds all 14 readings.
