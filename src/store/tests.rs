@@ -516,6 +516,112 @@ async fn a_batch_of_readings_is_stored_whole_or_not_at_all() {
 }
 
 #[tokio::test]
+async fn an_import_is_stored_whole_or_not_at_all() {
+    let store = Store::open_in_memory().await.unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let frames: Vec<Vec<u8>> = GEOMETRIES.iter().map(frame).collect();
+    let set = |rng: &mut ChaCha8Rng, offset: f64| -> Vec<ReadingValues> {
+        GEOMETRIES
+            .iter()
+            .map(|g| match values_for(g, rng) {
+                ReadingValues::Spectrum(s) => ReadingValues::Spectrum(s.map(|x| offset + x)),
+                ReadingValues::Intensity(x) => ReadingValues::Intensity(offset + x),
+            })
+            .collect()
+    };
+    let (reference_values, sample_values) = (set(&mut rng, 0.5), set(&mut rng, 0.0));
+    let batch = |values: &[ReadingValues]| -> Vec<NewReading<'_>> {
+        GEOMETRIES
+            .iter()
+            .zip(values)
+            .zip(&frames)
+            .map(|((g, v), f)| NewReading {
+                device: g.device,
+                geometry: g,
+                values: *v,
+                raw_frame: f,
+            })
+            .collect()
+    };
+    let (reference, sample) = (batch(&reference_values), batch(&sample_values));
+    let provenance = Provenance {
+        source: Source::Imported,
+        source_detail: Some("x.scan.json".into()),
+        ..Provenance::unknown()
+    };
+    const TABLES: [&str; 5] = [
+        "reference_sets",
+        "reference_readings",
+        "samples",
+        "scans",
+        "readings",
+    ];
+    async fn counts(store: &Store) -> Vec<i64> {
+        let mut out = Vec::new();
+        for t in TABLES {
+            out.push(store.count_rows(t).await.unwrap());
+        }
+        out
+    }
+    let empty = counts(&store).await;
+
+    // Refused before anything is written: a missing geometry, a repeated one.
+    let e = store
+        .import_scan("S", "N9 (imported)", &provenance, &reference, &sample[..13])
+        .await
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("holds 13 of 14 readings (missing sra-60)"),
+        "{e}"
+    );
+    let mut repeated = sample.clone();
+    repeated[13] = repeated[12];
+    let e = store
+        .import_scan("S", "N9 (imported)", &provenance, &reference, &repeated)
+        .await
+        .unwrap_err();
+    assert!(matches!(e, StoreError::DuplicateReading { .. }), "{e}");
+    assert_eq!(counts(&store).await, empty);
+
+    // A failure inside the transaction, at the very last row (the disk refuses it): nothing
+    // of the reference set, the sample, the scan or the 27 rows before it stays.
+    sqlx::query(
+        "CREATE TRIGGER refuse_last BEFORE INSERT ON readings WHEN NEW.geometry = 'sra-60'
+         BEGIN SELECT RAISE(ABORT, 'disk I/O error'); END",
+    )
+    .execute(&store.writer)
+    .await
+    .unwrap();
+    let e = store
+        .import_scan("S", "N9 (imported)", &provenance, &reference, &sample)
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("disk I/O error"), "{e}");
+    assert_eq!(counts(&store).await, empty);
+
+    // Without the fault it lands complete, with its provenance.
+    sqlx::query("DROP TRIGGER refuse_last")
+        .execute(&store.writer)
+        .await
+        .unwrap();
+    let (reference_id, scan) = store
+        .import_scan("S", "N9 (imported)", &provenance, &reference, &sample)
+        .await
+        .unwrap();
+    let d = store.scan_detail(scan).await.unwrap();
+    assert_eq!(d.scan.state, ScanState::Complete);
+    assert_eq!(d.scan.provenance, provenance);
+    assert_eq!(d.reference.reference.id, reference_id);
+    assert_eq!(d.reference.reference.provenance, provenance);
+    assert_eq!(d.reference.readings.len(), GEOMETRY_COUNT);
+    for (r, n) in d.readings.iter().zip(&sample) {
+        assert_eq!(r.values, n.values);
+        assert_eq!(r.raw_frame, n.raw_frame);
+    }
+}
+
+#[tokio::test]
 async fn processed_scans_and_fit_runs() {
     let store = Store::open_in_memory().await.unwrap();
     let reference = complete_reference(&store).await;
