@@ -15,6 +15,7 @@ pub mod render;
 pub mod replay;
 pub mod report;
 pub mod serve;
+pub mod shell;
 pub mod sync;
 pub mod synth;
 
@@ -77,6 +78,10 @@ pub enum Command {
     /// Forward a station's store to the lab's central PostgreSQL database (what `[sync] url`
     /// makes the daemon do continuously), e.g. from a stopped station.
     Sync(sync::SyncArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(shell::CompletionsArgs),
+    /// Print the man page (roff), or write one per subcommand into a directory.
+    Man(shell::ManArgs),
 }
 
 /// Runs one parsed command line.
@@ -102,6 +107,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Replay(args) => replay::run(&args),
         Command::Record(args) => record::run(&args),
         Command::Sync(args) => sync::run(&args),
+        Command::Completions(args) => shell::completions(&args),
+        Command::Man(args) => shell::man(&args),
     }
 }
 

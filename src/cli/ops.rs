@@ -192,6 +192,27 @@ pub fn utc(ms: i64) -> String {
     crate::formats::rfc3339_utc(ms.div_euclid(1000)).replacen('T', " ", 1)
 }
 
+/// A date and time in the machine's time zone (`TZ`, else `/etc/localtime`) with its UTC
+/// offset, e.g. `2026-11-24 20:14:14 +01:00`, as the operator's clock shows it; UTC (`Z`) when
+/// the zone cannot be read.
+pub fn local_time(ms: i64) -> String {
+    local_time_in(
+        ms,
+        &jiff::tz::TimeZone::try_system().unwrap_or(jiff::tz::TimeZone::UTC),
+    )
+}
+
+/// [`local_time`] in zone `tz`.
+pub fn local_time_in(ms: i64, tz: &jiff::tz::TimeZone) -> String {
+    match jiff::Timestamp::from_millisecond(ms) {
+        Ok(t) => t
+            .to_zoned_datetime(tz.clone())
+            .strftime("%Y-%m-%d %H:%M:%S %:z")
+            .to_string(),
+        Err(_) => utc(ms),
+    }
+}
+
 fn id(v: &Value, key: &str) -> i64 {
     v.get(key).and_then(Value::as_i64).unwrap_or(-1)
 }
@@ -523,18 +544,18 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{:>5}  {:<22} {:<9} {:>8}  {:<20}  {:<4} reason",
-        "id", "sample", "state", "readings", "requested (UTC)", "sim"
+        "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<4} reason",
+        "id", "sample", "state", "readings", "requested (local time)", "sim"
     );
     let mut last = None;
     for r in &rows {
         println!(
-            "{:>5}  {:<22} {:<9} {:>8}  {:<20}  {:<4} {}",
+            "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<4} {}",
             id(r, "id"),
             s(r, "sample"),
             s(r, "state"),
             id(r, "reading_count"),
-            utc(r["requested_at_ms"].as_i64().unwrap_or(0)),
+            local_time(r["requested_at_ms"].as_i64().unwrap_or(0)),
             simulated_mark(&r["provenance"]),
             s(r, "reason")
         );
@@ -645,7 +666,7 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
     );
     println!(
         "requested {}, {} of 14 readings",
-        utc(scan["requested_at_ms"].as_i64().unwrap_or(0)),
+        local_time(scan["requested_at_ms"].as_i64().unwrap_or(0)),
         scan["reading_count"]
     );
     let provenance = &scan["provenance"];
@@ -867,6 +888,22 @@ mod tests {
         assert_eq!(utc(951_827_696_000), "2000-02-29 12:34:56Z");
         // 2026-11-24 19:14:14 UTC = 1795547654 s.
         assert_eq!(utc(1_795_547_654_000), "2026-11-24 19:14:14Z");
+    }
+
+    #[test]
+    fn local_times_carry_their_offset() {
+        use jiff::tz::{Offset, TimeZone};
+        let oslo = TimeZone::fixed(Offset::from_hours(1).unwrap());
+        assert_eq!(
+            local_time_in(1_795_547_654_000, &oslo),
+            "2026-11-24 20:14:14 +01:00"
+        );
+        let west = TimeZone::fixed(Offset::from_seconds(-(5 * 3600 + 1800)).unwrap());
+        assert_eq!(local_time_in(0, &west), "1969-12-31 18:30:00 -05:30");
+        assert_eq!(
+            local_time_in(0, &TimeZone::UTC),
+            "1970-01-01 00:00:00 +00:00"
+        );
     }
 
     #[test]
