@@ -30,9 +30,14 @@ pub enum ClientError {
         message: String,
         token_source: String,
     },
-    /// The daemon refused the request; its message says why and what to do.
+    /// The daemon refused the request; its message says why and what to do, and `kind` (the
+    /// API's machine-readable word, empty when it gave none) what sort of refusal it is.
     #[error("{message}")]
-    Refused { status: u16, message: String },
+    Refused {
+        status: u16,
+        kind: String,
+        message: String,
+    },
     /// The connection failed in another way.
     #[error("talking to the brdfd daemon on {addr}: {detail}")]
     Transport { addr: SocketAddr, detail: String },
@@ -42,6 +47,34 @@ impl ClientError {
     /// Whether the daemon answered 409 Conflict (busy, or a state that forbids the request).
     pub fn is_conflict(&self) -> bool {
         matches!(self, ClientError::Refused { status: 409, .. })
+    }
+
+    /// Whether asking again later may succeed: the instruments are busy, the daemon is shutting
+    /// down, or it is at a connection or subscriber limit (503).
+    pub fn is_busy(&self) -> bool {
+        match self {
+            ClientError::Refused { status, kind, .. } => {
+                *status == 503 || kind == "busy" || kind == "shutting_down"
+            }
+            _ => false,
+        }
+    }
+}
+
+/// The message and kind of a refusal's JSON body (or the body itself, when it is not one).
+fn refusal(status: u16, body: &str) -> ClientError {
+    let parsed: Option<crate::api::ErrorBody> = serde_json::from_str(body).ok();
+    match parsed {
+        Some(b) => ClientError::Refused {
+            status,
+            kind: b.kind.unwrap_or_default(),
+            message: b.error,
+        },
+        None => ClientError::Refused {
+            status,
+            kind: String::new(),
+            message: format!("HTTP {status}: {body}"),
+        },
     }
 }
 
@@ -154,18 +187,18 @@ impl Client {
         if (200..300).contains(&status) {
             Ok(body)
         } else {
-            let message = serde_json::from_str::<Value>(&body)
-                .ok()
-                .and_then(|v| v.get("error").and_then(Value::as_str).map(str::to_string))
-                .unwrap_or_else(|| format!("HTTP {status}: {body}"));
+            let refused = refusal(status, &body);
             if status == 401 {
+                let ClientError::Refused { message, .. } = refused else {
+                    unreachable!("refusal() makes a Refused")
+                };
                 return Err(ClientError::Unauthorized {
                     addr: self.addr,
                     message,
                     token_source: self.token_source.clone(),
                 });
             }
-            Err(ClientError::Refused { status, message })
+            Err(refused)
         }
     }
 
@@ -203,12 +236,7 @@ impl Client {
         if (200..300).contains(&status) {
             return Ok(body);
         }
-        let text = String::from_utf8_lossy(&body);
-        let message = serde_json::from_str::<Value>(&text)
-            .ok()
-            .and_then(|v| v.get("error").and_then(Value::as_str).map(str::to_string))
-            .unwrap_or_else(|| format!("HTTP {status}: {text}"));
-        Err(ClientError::Refused { status, message })
+        Err(refusal(status, &String::from_utf8_lossy(&body)))
     }
 
     /// `POST path` with a JSON body (or none) → JSON.
@@ -245,6 +273,7 @@ impl Client {
                 .err()
                 .unwrap_or(ClientError::Refused {
                     status,
+                    kind: String::new(),
                     message: "the daemon refused the event stream".into(),
                 }));
         }

@@ -1,5 +1,7 @@
 //! The `brdfd` binary: parse the command line, run it, and on failure print the error chain on
-//! one line to stderr with a non-zero exit status (2 for usage errors, 1 otherwise).
+//! one line to stderr with a non-zero exit status that says what kind of failure it was
+//! (`cli::EXIT_CODES_HELP`: 2 usage, 3 no daemon, 4 busy, 5 not authorised, 6 refused, 1
+//! otherwise).
 
 use std::process::ExitCode;
 
@@ -22,7 +24,7 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             eprintln!("error: {}", cli::usage_error_line(&e));
-            return ExitCode::from(2);
+            return ExitCode::from(cli::exit::USAGE);
         }
     };
     if !matches!(parsed.command, cli::Command::Serve(_)) {
@@ -32,7 +34,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", cli::one_line(&e));
-            ExitCode::FAILURE
+            ExitCode::from(cli::exit_code(&e))
         }
     }
 }

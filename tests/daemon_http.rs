@@ -97,7 +97,8 @@ async fn the_api_serves_scans_refuses_a_second_scan_and_streams_events() {
             move || brdfd(&["scan", "--sample", "T.Busy", "--addr", &a])
         })
         .await;
-        assert_eq!(out.status.code(), Some(1));
+        // Exit 4: busy, retry later.
+        assert_eq!(out.status.code(), Some(4));
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(
             stderr.starts_with("error: the instruments are busy: reference"),
@@ -121,7 +122,9 @@ async fn the_api_serves_scans_refuses_a_second_scan_and_streams_events() {
         })
         .await;
         match &e {
-            ClientError::Refused { status, message } => {
+            ClientError::Refused {
+                status, message, ..
+            } => {
                 assert_eq!(*status, 409);
                 assert!(
                     message.contains(&format!("scan {scan} is in progress")),
@@ -270,7 +273,8 @@ fn every_operator_command_says_when_no_daemon_is_listening() {
         vec!["show", "1", "--addr", &a],
     ] {
         let out = brdfd(&args);
-        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        // Exit 3: no daemon.
+        assert_eq!(out.status.code(), Some(3), "{args:?}");
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(
             stderr.trim_end(),

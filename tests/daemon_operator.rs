@@ -129,10 +129,11 @@ fn ok(out: &std::process::Output, what: &str) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-/// Exit status 1 with exactly one line on stderr, starting `error: ` and containing `want`.
-fn fails(out: &std::process::Output, want: &str, what: &str) {
+/// Exit status `code` (README "Exit status": 1 failed, 6 refused by the daemon's state) with
+/// exactly one line on stderr, starting `error: ` and containing `want`.
+fn fails(out: &std::process::Output, code: i32, want: &str, what: &str) {
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{what}: {stderr}");
+    assert_eq!(out.status.code(), Some(code), "{what}: {stderr}");
     assert_eq!(
         stderr.trim_end().lines().count(),
         1,
@@ -200,18 +201,21 @@ async fn refit_cancel_abort_and_every_operator_error_through_http_and_the_cli() 
             }
         };
 
-        // Errors before anything is measured: exit 1, one line naming what to do.
-        fails(&run(vec!["abort"]).await, "nothing", "abort while idle");
+        // Errors before anything is measured: one line naming what to do; exit 6 where the
+        // daemon's state refuses it, 1 for a bad file.
+        fails(&run(vec!["abort"]).await, 6, "nothing", "abort while idle");
         fails(
             &run(vec!["refit", "99", "--cost", "cf1"]).await,
+            6,
             "99",
             "refit unknown scan",
         );
-        fails(&run(vec!["show", "99"]).await, "99", "show unknown scan");
+        fails(&run(vec!["show", "99"]).await, 6, "99", "show unknown scan");
         let out_file = d.dir.path().join("x.scan.json");
         let out_s: &'static str = Box::leak(out_file.display().to_string().into_boxed_str());
         fails(
             &run(vec!["export", "99", "-o", out_s]).await,
+            6,
             "99",
             "export unknown scan",
         );
@@ -221,16 +225,19 @@ async fn refit_cancel_abort_and_every_operator_error_through_http_and_the_cli() 
         let bad_s: &'static str = Box::leak(bad.display().to_string().into_boxed_str());
         fails(
             &run(vec!["import", bad_s]).await,
+            1,
             "bad.scan.json",
             "import a bad file",
         );
         fails(
             &run(vec!["import", "/nonexistent/x.scan.json"]).await,
+            1,
             "x.scan.json",
             "import a missing file",
         );
         fails(
             &run(vec!["scan", "--sample", "T.First"]).await,
+            6,
             "brdfd reference",
             "scan without a reference",
         );
@@ -246,7 +253,7 @@ async fn refit_cancel_abort_and_every_operator_error_through_http_and_the_cli() 
             let out = blocking(move || cli(&addr, &wrong, &["status"])).await;
             assert_eq!(
                 out.status.code(),
-                Some(1),
+                Some(5),
                 "{}",
                 String::from_utf8_lossy(&out.stderr)
             );
@@ -402,8 +409,48 @@ async fn refit_cancel_abort_and_every_operator_error_through_http_and_the_cli() 
         assert!((1..14).contains(&n), "{n} readings kept");
         fails(
             &run(vec!["refit", "2"]).await,
+            6,
             "aborted",
             "refit an aborted scan",
+        );
+
+        // --json: `status` is the daemon's JSON; `scan` is NDJSON — the answer, every event of
+        // this scan in order, then the scan's detail — and nothing else on stdout.
+        let status: Value =
+            serde_json::from_str(&ok(&run(vec!["status", "--json"]).await, "status --json"))
+                .unwrap();
+        assert!(status["busy"].is_null(), "{status}");
+        let out = ok(
+            &run(vec!["scan", "--sample", "T.Json", "--json"]).await,
+            "scan --json",
+        );
+        let lines: Vec<Value> = out
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+            .collect();
+        let types: Vec<&str> = lines.iter().map(|v| v["type"].as_str().unwrap()).collect();
+        assert_eq!(types.first(), Some(&"accepted"), "{types:?}");
+        assert_eq!(types.last(), Some(&"result"), "{types:?}");
+        let scan = lines[0]["scan"].as_i64().unwrap();
+        assert_eq!(
+            types.iter().filter(|t| **t == "scan_reading").count(),
+            14,
+            "{types:?}"
+        );
+        assert!(types.contains(&"scan_complete"), "{types:?}");
+        assert_eq!(
+            types.iter().filter(|t| **t == "fit_done").count(),
+            3,
+            "{types:?}"
+        );
+        let result = &lines.last().unwrap()["scan"];
+        assert_eq!(result["scan"]["id"].as_i64(), Some(scan), "{result}");
+        assert_eq!(result["scan"]["state"], "complete", "{result}");
+        assert!(
+            lines[1..lines.len() - 1]
+                .iter()
+                .all(|e| e["scan"].as_i64() == Some(scan)),
+            "only this scan's events"
         );
 
         // Never more fits at once than `[fit] max_concurrent_fits` (2) over everything above.
@@ -468,6 +515,7 @@ async fn a_stale_reference_is_refused_by_refit_until_allowed() {
         assert!(fits_of(&client, 1).is_empty());
         fails(
             &run(vec!["refit", "1", "--cost", "cf2"]).await,
+            6,
             "--allow-stale-reference",
             "refit against a stale reference",
         );

@@ -233,7 +233,7 @@ fn split_host_port(authority: &str) -> (&str, Option<&str>) {
 }
 
 fn refuse(status: StatusCode, message: String) -> Response {
-    let mut r = (status, axum::Json(ErrorBody { error: message })).into_response();
+    let mut r = (status, axum::Json(ErrorBody::message(message))).into_response();
     if status == StatusCode::UNAUTHORIZED {
         r.headers_mut()
             .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));

@@ -71,13 +71,53 @@ impl From<StoreError> for ApiError {
     }
 }
 
-/// The body of every refusal.
+/// The body of every refusal: the message for people, and for refusals of the service a
+/// machine-readable `kind` (see [`ApiError::kind`]) so that scripts can tell "busy, retry
+/// later" from "refused".
 #[derive(Debug, Serialize, Deserialize)]
 pub struct ErrorBody {
     pub error: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kind: Option<String>,
+}
+
+impl ErrorBody {
+    /// A refusal with a message and no kind.
+    pub fn message(error: impl Into<String>) -> ErrorBody {
+        ErrorBody {
+            error: error.into(),
+            kind: None,
+        }
+    }
 }
 
 impl ApiError {
+    /// What kind of refusal this is: `busy` and `shutting_down` mean "retry later";
+    /// `no_reference`, `idle`, `not_complete`, `stale_reference`, `conflict` that the request
+    /// does not fit the daemon's state; `not_found`; `bad_request`, `invalid_scan`,
+    /// `processing` that the request itself is wrong; `store` a failure of the store.
+    pub fn kind(&self) -> &'static str {
+        match &self.0 {
+            ServiceError::Busy { .. } => "busy",
+            ServiceError::ShuttingDown => "shutting_down",
+            ServiceError::NoReference => "no_reference",
+            ServiceError::Idle => "idle",
+            ServiceError::NotComplete { .. } => "not_complete",
+            ServiceError::StaleReference { .. } => "stale_reference",
+            ServiceError::BadRequest(_) => "bad_request",
+            ServiceError::InvalidScan(_) => "invalid_scan",
+            ServiceError::Processing(_) => "processing",
+            ServiceError::Store(StoreError::NotFound { .. }) => "not_found",
+            ServiceError::Store(
+                StoreError::ScanState { .. }
+                | StoreError::FitState { .. }
+                | StoreError::ReferenceState { .. }
+                | StoreError::AlreadyProcessed { .. },
+            ) => "conflict",
+            ServiceError::Store(_) => "store",
+        }
+    }
+
     pub fn status(&self) -> StatusCode {
         match &self.0 {
             ServiceError::Busy { .. }
@@ -112,6 +152,7 @@ impl IntoResponse for ApiError {
             status,
             Json(ErrorBody {
                 error: self.0.to_string(),
+                kind: Some(self.kind().to_string()),
             }),
         )
             .into_response()
@@ -225,7 +266,7 @@ async fn healthz() -> impl IntoResponse {
 
 /// A refusal that is not a [`ServiceError`]: a limit of the API itself.
 fn limit_refusal(status: StatusCode, message: String) -> Response {
-    (status, Json(ErrorBody { error: message })).into_response()
+    (status, Json(ErrorBody::message(message))).into_response()
 }
 
 async fn status(State(s): State<Service>) -> ApiResult<impl IntoResponse> {
@@ -387,8 +428,9 @@ async fn show_fit(
 /// The sphere preview of one fit, drawn on request on a blocking thread (`cargo bench --bench
 /// render` measures it). 409 while the fit has no result.
 async fn fit_preview(State(s): State<Service>, Path(id): Path<String>) -> Response {
-    let refuse =
-        |status: StatusCode, error: String| (status, Json(ErrorBody { error })).into_response();
+    let refuse = |status: StatusCode, error: String| {
+        (status, Json(ErrorBody::message(error))).into_response()
+    };
     let fit: FitRunId = match parse_id("fit", &id) {
         Ok(f) => f,
         Err(e) => return e.into_response(),

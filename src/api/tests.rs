@@ -48,9 +48,7 @@ fn each_refusal_has_its_status_code_and_a_json_message() {
         let api = ApiError(e);
         assert_eq!(api.status().as_u16(), code, "{message}");
     }
-    let body = serde_json::to_value(ErrorBody {
-        error: "scan 5 does not exist in the store".into(),
-    })
-    .unwrap();
+    let body =
+        serde_json::to_value(ErrorBody::message("scan 5 does not exist in the store")).unwrap();
     assert_eq!(body["error"], "scan 5 does not exist in the store");
 }

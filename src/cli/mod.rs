@@ -21,7 +21,7 @@ pub mod synth;
 
 /// brdfd: spectral BRDF from two handheld instruments (X-Rite MA-T12 + Canon RA-532H).
 #[derive(Debug, Parser)]
-#[command(name = "brdfd", version, about, propagate_version = true)]
+#[command(name = "brdfd", version, about, propagate_version = true, after_help = EXIT_CODES_HELP)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -63,9 +63,9 @@ pub enum Command {
     /// Fit a stored scan again (other cost functions, method or seed).
     Refit(ops::RefitArgs),
     /// Stop the reference or scan in progress (its readings are kept).
-    Abort(ops::DaemonArgs),
+    Abort(ops::StatusArgs),
     /// The running daemon's state: what it is doing, the reference in force, fits pending.
-    Status(ops::DaemonArgs),
+    Status(ops::StatusArgs),
     /// Write a stored scan as a brdfd.scan/1 file.
     Export(ops::ExportArgs),
     /// Import a brdfd.scan/1 file into the store; the daemon fits it.
@@ -82,6 +82,50 @@ pub enum Command {
     Completions(shell::CompletionsArgs),
     /// Print the man page (roff), or write one per subcommand into a directory.
     Man(shell::ManArgs),
+}
+
+/// The exit statuses, as `--help` lists them.
+pub const EXIT_CODES_HELP: &str = "\
+Exit status:
+  0  done
+  1  failed: the work ran and failed (a scan or fit failed or was aborted), or another error
+  2  usage: bad arguments, or a request the daemon refused as malformed
+  3  no daemon: nothing answers on the address, or the connection broke
+  4  busy: the instruments are busy or the daemon is shutting down or full; retry later
+  5  not authorised: the API token is missing or wrong, or the request was refused as
+     cross-origin or for a wrong Host
+  6  refused: the daemon's state does not allow it (no reference, stale reference, scan not
+     complete), or no such scan or fit";
+
+/// The exit statuses of [`EXIT_CODES_HELP`].
+pub mod exit {
+    pub const FAILED: u8 = 1;
+    pub const USAGE: u8 = 2;
+    pub const NO_DAEMON: u8 = 3;
+    pub const BUSY: u8 = 4;
+    pub const NOT_AUTHORISED: u8 = 5;
+    pub const REFUSED: u8 = 6;
+}
+
+/// The exit status for an error of [`run`]: the first daemon answer in its chain decides.
+pub fn exit_code(err: &anyhow::Error) -> u8 {
+    use crate::client::ClientError;
+    for cause in err.chain() {
+        if let Some(e) = cause.downcast_ref::<ClientError>() {
+            return match e {
+                ClientError::NotRunning { .. } | ClientError::Transport { .. } => exit::NO_DAEMON,
+                ClientError::Unauthorized { .. } => exit::NOT_AUTHORISED,
+                e if e.is_busy() => exit::BUSY,
+                ClientError::Refused { status, .. } => match status {
+                    403 | 421 => exit::NOT_AUTHORISED,
+                    400 | 413 | 415 | 422 => exit::USAGE,
+                    404 | 409 => exit::REFUSED,
+                    _ => exit::FAILED,
+                },
+            };
+        }
+    }
+    exit::FAILED
 }
 
 /// Runs one parsed command line.
@@ -230,6 +274,64 @@ mod tests {
         let e = Cli::try_parse_from(["brdfd", "fit", "--input", "x", "--cost", "cf9"]).unwrap_err();
         let line = usage_error_line(&e);
         assert!(line.contains("unknown cost function \"cf9\""), "{line}");
+    }
+
+    #[test]
+    fn daemon_answers_map_to_distinct_exit_statuses() {
+        use crate::client::ClientError;
+        let addr: std::net::SocketAddr = "127.0.0.1:7878".parse().unwrap();
+        let refused = |status: u16, kind: &str| ClientError::Refused {
+            status,
+            kind: kind.into(),
+            message: "m".into(),
+        };
+        let cases = [
+            (ClientError::NotRunning { addr }, exit::NO_DAEMON),
+            (
+                ClientError::Transport {
+                    addr,
+                    detail: "reset".into(),
+                },
+                exit::NO_DAEMON,
+            ),
+            (
+                ClientError::Unauthorized {
+                    addr,
+                    message: "m".into(),
+                    token_source: "t".into(),
+                },
+                exit::NOT_AUTHORISED,
+            ),
+            (refused(409, "busy"), exit::BUSY),
+            (refused(503, "shutting_down"), exit::BUSY),
+            (refused(503, ""), exit::BUSY),
+            (refused(409, "no_reference"), exit::REFUSED),
+            (refused(404, "not_found"), exit::REFUSED),
+            (refused(400, "bad_request"), exit::USAGE),
+            (refused(415, ""), exit::USAGE),
+            (refused(403, ""), exit::NOT_AUTHORISED),
+            (refused(500, "store"), exit::FAILED),
+        ];
+        for (e, code) in cases {
+            let text = e.to_string();
+            // Wrapped in context, as the commands return it.
+            let err = anyhow::Error::new(e).context("scan");
+            assert_eq!(exit_code(&err), code, "{text}");
+        }
+        assert_eq!(
+            exit_code(&anyhow::anyhow!("scan 3 failed: timeout")),
+            exit::FAILED
+        );
+        let codes: std::collections::HashSet<u8> = [
+            exit::FAILED,
+            exit::USAGE,
+            exit::NO_DAEMON,
+            exit::BUSY,
+            exit::NOT_AUTHORISED,
+            exit::REFUSED,
+        ]
+        .into();
+        assert_eq!(codes.len(), 6);
     }
 
     #[test]

@@ -85,6 +85,20 @@ pub struct ReferenceArgs {
     /// Return once the daemon has accepted the request, without following progress.
     #[arg(long)]
     pub detach: bool,
+    /// NDJSON on stdout: the daemon's answer, then each of its events about this reference
+    /// (`GET /events` objects), one per line.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `brdfd status` and `brdfd abort`.
+#[derive(Debug, clap::Args)]
+pub struct StatusArgs {
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+    /// Print the daemon's JSON answer.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -97,6 +111,10 @@ pub struct ScanArgs {
     /// Return once the daemon has accepted the request, without following progress.
     #[arg(long)]
     pub detach: bool,
+    /// NDJSON on stdout: the daemon's answer, each of its events about this scan and its fits
+    /// (`GET /events` objects), then `{"type":"result","scan":…}` with the scan's detail.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -158,6 +176,9 @@ pub struct RefitArgs {
     /// Return once queued, without following progress.
     #[arg(long)]
     pub detach: bool,
+    /// NDJSON on stdout, as for `brdfd scan --json`.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -173,6 +194,9 @@ pub struct ExportArgs {
     /// Replace FILE if it exists.
     #[arg(long)]
     pub force: bool,
+    /// With --output: print `{"scan":…,"file":…}` instead of the sentence.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -185,6 +209,9 @@ pub struct ImportArgs {
     /// Return once imported, without following the fits.
     #[arg(long)]
     pub detach: bool,
+    /// NDJSON on stdout, as for `brdfd scan --json`.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// A date and time in UTC from milliseconds since the Unix epoch, e.g. `2026-11-24 19:14:14Z`.
@@ -278,20 +305,25 @@ fn simulated_mark(provenance: &Value) -> &'static str {
 struct Progress {
     bars: MultiProgress,
     tty: bool,
+    /// NDJSON mode: no bars, no sentences; the events themselves go to stdout.
+    json: bool,
 }
 
 impl Progress {
-    fn new() -> Progress {
-        let tty = std::io::stderr().is_terminal();
+    fn new(json: bool) -> Progress {
+        let tty = std::io::stderr().is_terminal() && !json;
         let bars = MultiProgress::with_draw_target(if tty {
             ProgressDrawTarget::stderr()
         } else {
             ProgressDrawTarget::hidden()
         });
-        Progress { bars, tty }
+        Progress { bars, tty, json }
     }
 
     fn line(&self, text: &str) {
+        if self.json {
+            return;
+        }
         if self.tty {
             let _ = self.bars.println(text);
         } else {
@@ -319,8 +351,9 @@ fn follow(
     reference: Option<i64>,
     scan: Option<i64>,
     mut fits_pending: Vec<i64>,
+    json: bool,
 ) -> anyhow::Result<()> {
-    let p = Progress::new();
+    let p = Progress::new(json);
     let readings = p.bar(14, "readings".into());
     if scan.is_none() && reference.is_none() {
         readings.finish_and_clear();
@@ -337,6 +370,9 @@ fn follow(
         let ty = s(&ev, "type");
         let mine_scan = scan.is_some_and(|id_| id(&ev, "scan") == id_);
         let mine_ref = reference.is_some_and(|id_| id(&ev, "reference") == id_);
+        if p.json && (mine_scan || mine_ref || ty == "shutting_down") {
+            println!("{ev}");
+        }
         match ty.as_str() {
             "scan_reading" if mine_scan => {
                 readings.set_position(ev["k"].as_u64().unwrap_or(0));
@@ -498,9 +534,22 @@ pub fn reference(args: &ReferenceArgs) -> anyhow::Result<()> {
     let events = (!args.detach).then(|| client.events()).transpose()?;
     let v = client.post("/reference", None)?;
     let reference = id(&v, "reference");
-    println!("reference {reference} started: measuring the Munsell N9 tile on both instruments");
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    } else {
+        println!(
+            "reference {reference} started: measuring the Munsell N9 tile on both instruments"
+        );
+    }
     match events {
-        Some(events) => follow(&client, events, Some(reference), None, Vec::new()),
+        Some(events) => follow(
+            &client,
+            events,
+            Some(reference),
+            None,
+            Vec::new(),
+            args.json,
+        ),
         None => Ok(()),
     }
 }
@@ -510,11 +559,15 @@ pub fn scan(args: &ScanArgs) -> anyhow::Result<()> {
     let events = (!args.detach).then(|| client.events()).transpose()?;
     let v = client.post("/scans", Some(&json!({ "sample": args.sample })))?;
     let scan = id(&v, "scan");
-    println!("scan {scan} started: sample \"{}\"", args.sample);
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    } else {
+        println!("scan {scan} started: sample \"{}\"", args.sample);
+    }
     match events {
         Some(events) => {
-            follow(&client, events, None, Some(scan), Vec::new())?;
-            print_fits(&client.get(&format!("/scans/{scan}"))?);
+            follow(&client, events, None, Some(scan), Vec::new(), args.json)?;
+            result(&client.get(&format!("/scans/{scan}"))?, args.json);
             Ok(())
         }
         None => Ok(()),
@@ -745,16 +798,24 @@ pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
         .flatten()
         .filter_map(Value::as_i64)
         .collect();
-    println!("scan {}: fits {fits:?} queued", args.scan);
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    } else {
+        println!("scan {}: fits {fits:?} queued", args.scan);
+    }
     if let Some(events) = events.filter(|_| !fits.is_empty()) {
-        follow(&client, events, None, Some(args.scan), fits)?;
-        print_fits(&client.get(&format!("/scans/{}", args.scan))?);
+        follow(&client, events, None, Some(args.scan), fits, args.json)?;
+        result(&client.get(&format!("/scans/{}", args.scan))?, args.json);
     }
     Ok(())
 }
 
-pub fn abort(args: &DaemonArgs) -> anyhow::Result<()> {
-    let v = args.client()?.post("/abort", None)?;
+pub fn abort(args: &StatusArgs) -> anyhow::Result<()> {
+    let v = args.daemon.client()?.post("/abort", None)?;
+    if args.json {
+        println!("{v}");
+        return Ok(());
+    }
     let op = &v["aborted"];
     match s(op, "kind").as_str() {
         "scan" => println!(
@@ -766,9 +827,13 @@ pub fn abort(args: &DaemonArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn status(args: &DaemonArgs) -> anyhow::Result<()> {
-    let v = args.client()?.get("/status")?;
-    println!("brdfd {} on {}", s(&v, "version"), args.addr()?);
+pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
+    let v = args.daemon.client()?.get("/status")?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("brdfd {} on {}", s(&v, "version"), args.daemon.addr()?);
     match v["busy"].as_object() {
         Some(b) => {
             let op = &b["operation"];
@@ -826,7 +891,11 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     match &args.output {
         Some(path) => {
             super::write_new_file(path, text.as_bytes(), args.force)?;
-            eprintln!("scan {} written to {}", args.scan, path.display());
+            if args.json {
+                println!("{}", json!({ "scan": args.scan, "file": path }));
+            } else {
+                eprintln!("scan {} written to {}", args.scan, path.display());
+            }
         }
         None => println!("{text}"),
     }
@@ -849,21 +918,44 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
         .flatten()
         .filter_map(Value::as_i64)
         .collect();
-    println!(
-        "{} imported as scan {scan}; fits {fits:?} queued",
-        args.file.display()
-    );
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    } else {
+        println!(
+            "{} imported as scan {scan}; fits {fits:?} queued",
+            args.file.display()
+        );
+    }
     if let Some(events) = events {
         if !fits.is_empty() {
             // Fits may already have finished before the stream saw them: check first.
             let pending = pending_fits(&client, scan)?;
             if !pending.is_empty() {
-                follow(&client, events, None, Some(scan), pending)?;
+                follow(&client, events, None, Some(scan), pending, args.json)?;
             }
         }
-        print_fits(&client.get(&format!("/scans/{scan}"))?);
+        result(&client.get(&format!("/scans/{scan}"))?, args.json);
     }
     Ok(())
+}
+
+/// `value` (a JSON object) with `"type": kind` in front, as one NDJSON line.
+fn tagged(kind: &str, value: &Value) -> Value {
+    let mut out = serde_json::Map::new();
+    out.insert("type".into(), Value::from(kind));
+    if let Some(fields) = value.as_object() {
+        out.extend(fields.clone());
+    }
+    Value::Object(out)
+}
+
+/// The end of a followed scan: its fits as a table, or `{"type":"result","scan":…}`.
+fn result(detail: &Value, json: bool) {
+    if json {
+        println!("{}", json!({ "type": "result", "scan": detail }));
+    } else {
+        print_fits(detail);
+    }
 }
 
 fn pending_fits(client: &Client, scan: i64) -> anyhow::Result<Vec<i64>> {
