@@ -742,6 +742,49 @@ fn reference_reflectance(
     Ok((rho, source))
 }
 
+/// Where the configuration in force came from (`brdfd serve` says so at start).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ConfigOrigin {
+    /// A file, and how it was found: `--config`, `BRDFD_CONFIG`, `$XDG_CONFIG_HOME/brdfd`,
+    /// `/etc/brdfd`.
+    File { path: PathBuf, via: &'static str },
+    /// No file anywhere: the built-in defaults.
+    Defaults,
+}
+
+impl std::fmt::Display for ConfigOrigin {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ConfigOrigin::File { path, via } => write!(f, "{} (from {via})", path.display()),
+            ConfigOrigin::Defaults => f.write_str(
+                "built-in defaults (no --config, BRDFD_CONFIG, $XDG_CONFIG_HOME/brdfd/brdfd.toml \
+                 or /etc/brdfd/brdfd.toml)",
+            ),
+        }
+    }
+}
+
+/// What [`Config::search`] looks at, taken from the process (or made up in tests).
+#[derive(Debug, Clone, Default)]
+pub struct SearchEnv {
+    pub brdfd_config: Option<PathBuf>,
+    pub xdg_config_home: Option<PathBuf>,
+    pub home: Option<PathBuf>,
+    /// `/etc`.
+    pub etc: PathBuf,
+}
+
+impl SearchEnv {
+    pub fn from_process() -> SearchEnv {
+        SearchEnv {
+            brdfd_config: std::env::var_os("BRDFD_CONFIG").map(PathBuf::from),
+            xdg_config_home: std::env::var_os("XDG_CONFIG_HOME").map(PathBuf::from),
+            home: std::env::var_os("HOME").map(PathBuf::from),
+            etc: PathBuf::from("/etc"),
+        }
+    }
+}
+
 impl Config {
     /// Reads and checks a configuration file.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
@@ -752,9 +795,60 @@ impl Config {
         Config::from_toml(&text, &path.display().to_string())
     }
 
-    /// The file at `path` if given, else the defaults.
+    /// The file at `path` if given, else the first found by [`Config::search`] (the built-in
+    /// defaults when there is none).
     pub fn load_or_default(path: Option<&Path>) -> Result<Config, ConfigError> {
-        path.map_or_else(|| Ok(Config::default()), Config::load)
+        Config::load_found(path).map(|(c, _)| c)
+    }
+
+    /// [`Config::load_or_default`], also saying where the configuration came from.
+    pub fn load_found(path: Option<&Path>) -> Result<(Config, ConfigOrigin), ConfigError> {
+        let origin = match path {
+            Some(p) => ConfigOrigin::File {
+                path: p.to_path_buf(),
+                via: "--config",
+            },
+            None => Config::search(&SearchEnv::from_process()),
+        };
+        let config = match &origin {
+            ConfigOrigin::File { path, .. } => Config::load(path)?,
+            ConfigOrigin::Defaults => Config::default(),
+        };
+        Ok((config, origin))
+    }
+
+    /// Where a command without `--config` finds its configuration, first match wins:
+    /// `BRDFD_CONFIG`, `$XDG_CONFIG_HOME/brdfd/brdfd.toml` (`~/.config/brdfd/brdfd.toml` when
+    /// XDG_CONFIG_HOME is unset), `/etc/brdfd/brdfd.toml`; else the built-in defaults
+    /// (simulated instruments). `BRDFD_CONFIG` names a file that must exist; the others are
+    /// used only if they do.
+    pub fn search(env: &SearchEnv) -> ConfigOrigin {
+        if let Some(p) = env
+            .brdfd_config
+            .as_ref()
+            .filter(|p| !p.as_os_str().is_empty())
+        {
+            return ConfigOrigin::File {
+                path: p.clone(),
+                via: "BRDFD_CONFIG",
+            };
+        }
+        let user = env
+            .xdg_config_home
+            .clone()
+            .filter(|p| p.is_absolute())
+            .or_else(|| env.home.as_ref().map(|h| h.join(".config")))
+            .map(|d| d.join("brdfd").join("brdfd.toml"));
+        let candidates = [
+            (user, "$XDG_CONFIG_HOME/brdfd"),
+            (Some(env.etc.join("brdfd").join("brdfd.toml")), "/etc/brdfd"),
+        ];
+        for (path, via) in candidates {
+            if let Some(path) = path.filter(|p| p.is_file()) {
+                return ConfigOrigin::File { path, via };
+            }
+        }
+        ConfigOrigin::Defaults
     }
 
     /// Parses and checks TOML text; `origin` names it in errors (the file name). Keys left out
@@ -1105,6 +1199,68 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_configuration_is_searched_in_the_documented_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let etc = dir.path().join("etc");
+        let xdg = dir.path().join("xdg");
+        let home = dir.path().join("home");
+        let env = |brdfd: Option<PathBuf>| SearchEnv {
+            brdfd_config: brdfd,
+            xdg_config_home: Some(xdg.clone()),
+            home: Some(home.clone()),
+            etc: etc.clone(),
+        };
+        // Nothing anywhere: the defaults.
+        assert_eq!(Config::search(&env(None)), ConfigOrigin::Defaults);
+        // /etc/brdfd/brdfd.toml.
+        std::fs::create_dir_all(etc.join("brdfd")).unwrap();
+        std::fs::write(etc.join("brdfd/brdfd.toml"), "").unwrap();
+        assert_eq!(
+            Config::search(&env(None)),
+            ConfigOrigin::File {
+                path: etc.join("brdfd/brdfd.toml"),
+                via: "/etc/brdfd"
+            }
+        );
+        // The user's file wins over /etc.
+        std::fs::create_dir_all(xdg.join("brdfd")).unwrap();
+        std::fs::write(xdg.join("brdfd/brdfd.toml"), "").unwrap();
+        assert_eq!(
+            Config::search(&env(None)),
+            ConfigOrigin::File {
+                path: xdg.join("brdfd/brdfd.toml"),
+                via: "$XDG_CONFIG_HOME/brdfd"
+            }
+        );
+        // Without XDG_CONFIG_HOME: ~/.config.
+        let mut no_xdg = env(None);
+        no_xdg.xdg_config_home = None;
+        std::fs::create_dir_all(home.join(".config/brdfd")).unwrap();
+        std::fs::write(home.join(".config/brdfd/brdfd.toml"), "").unwrap();
+        assert_eq!(
+            Config::search(&no_xdg),
+            ConfigOrigin::File {
+                path: home.join(".config/brdfd/brdfd.toml"),
+                via: "$XDG_CONFIG_HOME/brdfd"
+            }
+        );
+        // BRDFD_CONFIG wins over both, even when the file is missing (then loading says so).
+        let named = dir.path().join("named.toml");
+        assert_eq!(
+            Config::search(&env(Some(named.clone()))),
+            ConfigOrigin::File {
+                path: named,
+                via: "BRDFD_CONFIG"
+            }
+        );
+        assert!(
+            ConfigOrigin::Defaults
+                .to_string()
+                .contains("/etc/brdfd/brdfd.toml")
+        );
+    }
 
     /// Sections other than `[devices.*]` on their own: transports may be left out.
     fn parse(text: &str) -> Result<Config, ConfigError> {

@@ -20,8 +20,9 @@ use crate::store::Store;
 
 #[derive(Debug, clap::Args)]
 pub struct ServeArgs {
-    /// The configuration file (see config/brdfd.toml, every key commented). Without it the
-    /// defaults run on simulated instruments.
+    /// The configuration file (see config/brdfd.toml, every key commented). Without it:
+    /// BRDFD_CONFIG, else $XDG_CONFIG_HOME/brdfd/brdfd.toml (~/.config/…), else
+    /// /etc/brdfd/brdfd.toml, else the built-in defaults on simulated instruments.
     #[arg(long, short, value_name = "FILE")]
     pub config: Option<PathBuf>,
 
@@ -62,8 +63,9 @@ pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 }
 
 pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
-    let explicit_config = args.config.is_some();
-    let mut config = Config::load_or_default(args.config.as_deref())?;
+    let (mut config, origin) = Config::load_found(args.config.as_deref())?;
+    let explicit_config = origin != crate::config::ConfigOrigin::Defaults;
+    eprintln!("configuration: {origin}");
     if let Some(listen) = args.listen {
         // The same check as [api] listen: the flag must not be a way around it.
         config.api.listen = crate::config::check_listen(listen, config.api.allow_remote)
