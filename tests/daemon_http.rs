@@ -195,6 +195,33 @@ async fn the_api_serves_scans_refuses_a_second_scan_and_streams_events() {
         let f = blocking(move || c.get(&format!("/fits/{fit}")).unwrap()).await;
         assert_eq!(f["run"]["cost_function"], "cf1");
 
+        // The same state in Prometheus text format, behind the token.
+        let c = client.clone();
+        let metrics = blocking(move || c.get_text("/metrics").unwrap()).await;
+        for line in [
+            "brdfd_scans{state=\"complete\"} 1",
+            "brdfd_readings 14",
+            "brdfd_fit_runs{status=\"done\",cost_function=\"cf1\"} 1",
+            "brdfd_fits_queued 0",
+            "brdfd_busy 0",
+            "brdfd_simulated{instrument=\"sra\"} 1",
+            "# TYPE brdfd_device_transitions_total counter",
+        ] {
+            assert!(metrics.lines().any(|l| l == line), "{line} in\n{metrics}");
+        }
+        assert!(
+            metrics.contains(
+                "brdfd_device_transitions_total{instrument=\"ma_t12\",state=\"connected\"}"
+            ),
+            "{metrics}"
+        );
+        let anonymous = brdfd::client::Client::new(addr).without_token("sent no token");
+        let refused = blocking(move || anonymous.get_text("/metrics").unwrap_err()).await;
+        assert!(
+            matches!(refused, ClientError::Unauthorized { .. }),
+            "{refused}"
+        );
+
         // The CLI's views of the same.
         let out = blocking({
             let a = addr_arg.clone();

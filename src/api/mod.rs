@@ -28,6 +28,7 @@
 //! not JSON) and 421 (a host name the daemon does not answer to).
 
 pub mod access;
+pub mod metrics;
 pub mod server;
 
 use std::convert::Infallible;
@@ -240,6 +241,7 @@ pub fn router(service: Service, options: &ApiOptions) -> Router {
     Router::new()
         .route("/healthz", get(healthz))
         .route("/status", get(status))
+        .route("/metrics", get(metrics))
         .route("/reference", post(reference))
         .route("/scans", post(request_scan).get(list_scans))
         .route("/scans/import", post(import_scan))
@@ -267,6 +269,19 @@ async fn healthz() -> impl IntoResponse {
 /// A refusal that is not a [`ServiceError`]: a limit of the API itself.
 fn limit_refusal(status: StatusCode, message: String) -> Response {
     (status, Json(ErrorBody::message(message))).into_response()
+}
+
+/// `GET /metrics`: Prometheus text format ([`metrics`]).
+async fn metrics(State(s): State<Service>) -> ApiResult<Response> {
+    let text = metrics::render(&s).await?;
+    Ok((
+        [(
+            axum::http::header::CONTENT_TYPE,
+            "text/plain; version=0.0.4; charset=utf-8",
+        )],
+        text,
+    )
+        .into_response())
 }
 
 async fn status(State(s): State<Service>) -> ApiResult<impl IntoResponse> {

@@ -298,6 +298,8 @@ struct Inner {
     identities: Mutex<[Option<drivers::Identity>; 2]>,
     /// The forwarder's status, once it started.
     sync_status: std::sync::OnceLock<Arc<Mutex<crate::sync::SyncStatus>>>,
+    /// How often each instrument changed connection state: (instrument, state) → count.
+    device_transitions: Mutex<std::collections::BTreeMap<(&'static str, &'static str), u64>>,
 }
 
 /// The running service; clones share it.
@@ -353,6 +355,7 @@ impl Service {
             bootstrap_slot: Arc::new(tokio::sync::Semaphore::new(1)),
             timings: Timings::default(),
             sync_status: std::sync::OnceLock::new(),
+            device_transitions: Mutex::new(Default::default()),
         });
         let service = Service { inner };
         service.start_fit_worker(fit_rx).await;
@@ -538,6 +541,18 @@ impl Service {
                 .get()
                 .map(|s| s.lock().unwrap_or_else(|p| p.into_inner()).clone()),
         })
+    }
+
+    /// How often each instrument has been connected, disconnected, reconnecting or in error
+    /// since start: `((instrument, state), count)`, for `GET /metrics`.
+    pub fn device_transitions(&self) -> Vec<((&'static str, &'static str), u64)> {
+        self.inner
+            .device_transitions
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .iter()
+            .map(|(k, v)| (*k, *v))
+            .collect()
     }
 
     /// Whether a scan has nothing more coming: it is not being measured, and none of its fits

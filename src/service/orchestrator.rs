@@ -713,7 +713,10 @@ impl Service {
                 let s = service.clone();
                 tokio::spawn(async move {
                     match h.identify().await {
-                        Ok(identity) => s.record_instrument(h.instrument(), &identity).await,
+                        Ok(identity) => {
+                            s.count_transition(h.instrument(), "connected");
+                            s.record_instrument(h.instrument(), &identity).await
+                        }
                         Err(e) => tracing::warn!(error = %e, "instrument not available at start"),
                     }
                 });
@@ -740,6 +743,17 @@ impl Service {
         });
     }
 
+    /// Counts one connection change of `instrument` for `GET /metrics`.
+    fn count_transition(&self, instrument: Instrument, state: &'static str) {
+        *self
+            .inner
+            .device_transitions
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .entry((instrument.key(), state))
+            .or_default() += 1;
+    }
+
     async fn on_device_event(&self, ev: drivers::Event) {
         let (instrument, state, detail) = match ev {
             drivers::Event::Connected {
@@ -764,6 +778,7 @@ impl Service {
             drivers::Event::Error { instrument, error } => (instrument, "error", error.to_string()),
             drivers::Event::Measuring { .. } | drivers::Event::Reading { .. } => return,
         };
+        self.count_transition(instrument, state);
         self.inner.events.send(Event::Device {
             device: instrument.key(),
             state,

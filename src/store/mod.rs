@@ -195,6 +195,16 @@ impl Store {
     }
 }
 
+/// What [`Store::metric_counts`] counts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MetricCounts {
+    /// (state, scans).
+    pub scans: Vec<(String, i64)>,
+    /// (status, cost function, fit runs, summed wall time in ms of those that recorded one).
+    pub fits: Vec<(String, String, i64, Option<f64>)>,
+    pub readings: i64,
+}
+
 impl Store {
     /// Records which instruments measured scan `scan` and how its readings came in.
     pub async fn set_scan_provenance(
@@ -239,6 +249,29 @@ impl Store {
         Ok(sqlx::query_scalar(&format!("SELECT COUNT(*) FROM {table}"))
             .fetch_one(&self.reader)
             .await?)
+    }
+
+    /// The counts `GET /metrics` reports: scans by state, fit runs by status with the wall time
+    /// of the finished ones, and stored readings.
+    pub async fn metric_counts(&self) -> Result<MetricCounts, StoreError> {
+        let scans: Vec<(String, i64)> =
+            sqlx::query_as("SELECT state, COUNT(*) FROM scans GROUP BY state ORDER BY state")
+                .fetch_all(&self.reader)
+                .await?;
+        let fits: Vec<(String, String, i64, Option<f64>)> = sqlx::query_as(
+            "SELECT status, cost_function, COUNT(*), SUM(CAST(wall_ms AS REAL))
+             FROM fit_runs GROUP BY status, cost_function ORDER BY status, cost_function",
+        )
+        .fetch_all(&self.reader)
+        .await?;
+        let readings: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM readings")
+            .fetch_one(&self.reader)
+            .await?;
+        Ok(MetricCounts {
+            scans,
+            fits,
+            readings,
+        })
     }
 
     async fn set_provenance(
