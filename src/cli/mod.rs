@@ -7,6 +7,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod demo;
+pub mod doctor;
 pub mod exchange;
 pub mod fit;
 pub mod ops;
@@ -77,6 +78,9 @@ pub enum Command {
     /// Forward a station's store to the lab's central PostgreSQL database (what `[sync] url`
     /// makes the daemon do continuously), e.g. from a stopped station.
     Sync(sync::SyncArgs),
+    /// Check the whole set-up at once (configuration, store and its lock, daemon and token,
+    /// MA-T12 on USB, the SRA's serial port, the clock), each failure with its fix.
+    Doctor(doctor::DoctorArgs),
 }
 
 /// Runs one parsed command line.
@@ -102,6 +106,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Replay(args) => replay::run(&args),
         Command::Record(args) => record::run(&args),
         Command::Sync(args) => sync::run(&args),
+        Command::Doctor(args) => doctor::run(&args),
     }
 }
 
