@@ -165,15 +165,26 @@ fn with_a_daemon_running_on_simulated_instruments_every_check_passes() {
     assert!(d.detail("config").contains("brdfd.toml parses"));
     assert_eq!(d.status("store"), "ok");
     assert_eq!(d.status("store lock"), "ok");
-    assert!(d.detail("store lock").contains("held by the running daemon"));
+    assert!(
+        d.detail("store lock")
+            .contains("held by the running daemon")
+    );
     assert_eq!(d.status("daemon"), "ok");
-    assert!(d.detail("daemon").contains("accepts the token"), "{}", d.json);
+    assert!(
+        d.detail("daemon").contains("accepts the token"),
+        "{}",
+        d.json
+    );
     for device in ["MA-T12 (USB)", "SRA (serial)"] {
         assert_eq!(d.status(device), "skipped");
         assert_eq!(d.detail(device), "simulated: skipped");
     }
     assert_eq!(d.status("clock"), "ok");
-    assert!(d.text.contains("skip MA-T12 (USB): simulated: skipped"), "{}", d.text);
+    assert!(
+        d.text.contains("skip MA-T12 (USB): simulated: skipped"),
+        "{}",
+        d.text
+    );
 }
 
 #[test]
@@ -206,8 +217,16 @@ fn a_store_directory_the_user_cannot_write_fails_with_its_fix() {
     std::fs::set_permissions(&store, std::fs::Permissions::from_mode(0o755)).unwrap();
     assert!(!d.success);
     assert_eq!(d.status("store"), "fail", "{}", d.json);
-    assert!(d.detail("store").contains("cannot create files in"), "{}", d.json);
-    assert!(d.detail("store").contains("Permission denied"), "{}", d.json);
+    assert!(
+        d.detail("store").contains("cannot create files in"),
+        "{}",
+        d.json
+    );
+    assert!(
+        d.detail("store").contains("Permission denied"),
+        "{}",
+        d.json
+    );
     assert!(d.fix("store").contains("chown"), "{}", d.json);
     assert!(d.text.contains("FAIL store:"), "{}", d.text);
     assert!(d.text.contains("fix: run brdfd as the user"), "{}", d.text);
@@ -234,7 +253,11 @@ fn no_daemon_no_mat12_and_no_serial_port_fail_with_their_fixes() {
     assert_eq!(d.status("MA-T12 (USB)"), "fail");
     // No X-Rite device with this (unused) product id is attached to a test machine.
     assert!(d.detail("MA-T12 (USB)").contains("7fff"), "{}", d.json);
-    assert!(d.fix("MA-T12 (USB)").contains("lsusb -d 0765:"), "{}", d.json);
+    assert!(
+        d.fix("MA-T12 (USB)").contains("lsusb -d 0765:"),
+        "{}",
+        d.json
+    );
     assert_eq!(d.status("SRA (serial)"), "fail");
     assert!(
         d.detail("SRA (serial)")
@@ -277,8 +300,16 @@ fn a_serial_port_in_a_group_the_user_is_not_in_fails_naming_the_group() {
         "{}",
         d.json
     );
-    assert!(d.detail("SRA (serial)").contains("is not in it"), "{}", d.json);
-    assert!(d.fix("SRA (serial)").contains("usermod -aG root"), "{}", d.json);
+    assert!(
+        d.detail("SRA (serial)").contains("is not in it"),
+        "{}",
+        d.json
+    );
+    assert!(
+        d.fix("SRA (serial)").contains("usermod -aG root"),
+        "{}",
+        d.json
+    );
     // The owner's group is fine.
     let d = doctor(&cfg, None);
     assert_eq!(d.status("SRA (serial)"), "ok", "{}", d.json);
@@ -296,12 +327,17 @@ fn a_lock_held_by_a_live_process_without_a_daemon_fails() {
     assert!(!d.success);
     assert_eq!(d.status("store lock"), "fail", "{}", d.json);
     assert!(
-        d.detail("store lock")
-            .contains(&format!("held by pid {pid} (pid {pid} — brdfd replay), which is running")),
+        d.detail("store lock").contains(&format!(
+            "held by pid {pid} (pid {pid} — brdfd replay), which is running"
+        )),
         "{}",
         d.json
     );
-    assert!(d.fix("store lock").contains(&format!("kill {pid}")), "{}", d.json);
+    assert!(
+        d.fix("store lock").contains(&format!("kill {pid}")),
+        "{}",
+        d.json
+    );
     drop(lock);
     // Released: the file still names this process, which no longer holds it.
     let d = doctor(&cfg, None);
@@ -327,8 +363,11 @@ fn a_lock_naming_a_process_that_has_ended() {
 
     // A crashed daemon's lock file: it names the dead pid, and nobody holds the lock. That is
     // harmless (flock ends with its holder), and said so.
-    std::fs::write(&lock_file, format!("pid {dead} — brdfd serve on http://127.0.0.1:7878\n"))
-        .unwrap();
+    std::fs::write(
+        &lock_file,
+        format!("pid {dead} — brdfd serve on http://127.0.0.1:7878\n"),
+    )
+    .unwrap();
     let d = doctor(&cfg, None);
     assert_eq!(d.status("store lock"), "ok", "{}", d.json);
     assert!(
@@ -341,8 +380,11 @@ fn a_lock_naming_a_process_that_has_ended() {
     // Held, but by a process other than the one named (one that inherited the descriptor of a
     // dead daemon): a failure, with how to find the real holder.
     let lock = brdfd::store::StoreLock::acquire(&db, "brdfd serve").unwrap();
-    std::fs::write(&lock_file, format!("pid {dead} — brdfd serve on http://127.0.0.1:7878\n"))
-        .unwrap();
+    std::fs::write(
+        &lock_file,
+        format!("pid {dead} — brdfd serve on http://127.0.0.1:7878\n"),
+    )
+    .unwrap();
     let d = doctor(&cfg, None);
     drop(lock);
     assert!(!d.success);

@@ -218,10 +218,7 @@ fn ingested(lab: &Lab) -> Vec<(String, String)> {
             }
         }
         store.close().await;
-        files
-            .into_iter()
-            .map(|f| (f.sha256, f.file_name))
-            .collect()
+        files.into_iter().map(|f| (f.sha256, f.file_name)).collect()
     })
 }
 
@@ -370,7 +367,10 @@ fn broken_files_go_to_failed_with_the_reason_and_nothing_is_stored() {
         "{why}"
     );
     assert!(why.contains("drop it into"), "{why}");
-    assert_eq!(reason("bad.sra.csv"), why.replace("bad.txt was", "bad.sra.csv was"));
+    assert_eq!(
+        reason("bad.sra.csv"),
+        why.replace("bad.txt was", "bad.sra.csv was")
+    );
     let why = reason("cut.scan.json");
     assert!(why.contains("cut.scan.json"), "{why}");
     let why = reason("lonely.sra.csv");
@@ -429,7 +429,9 @@ fn the_same_content_twice_is_imported_once() {
     // A second drop of a name already in done/ keeps both files there.
     let other = example("t-pebble-grey").to_json_pretty().unwrap();
     std::fs::write(lab.sub("a.scan.json"), &other).unwrap();
-    wait_for("the new a.scan.json in done/", || lab.names("done").len() == 2);
+    wait_for("the new a.scan.json in done/", || {
+        lab.names("done").len() == 2
+    });
     assert_eq!(
         lab.names("done"),
         BTreeSet::from(["a.scan.json".into(), "a-2.scan.json".into()])

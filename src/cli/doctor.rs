@@ -167,7 +167,13 @@ pub fn diagnose(args: &DoctorArgs) -> Report {
             checks.push(serial_check(&config.devices.sra.transport));
         }
         None => {
-            for name in ["store", "store lock", "daemon", "MA-T12 (USB)", "SRA (serial)"] {
+            for name in [
+                "store",
+                "store lock",
+                "daemon",
+                "MA-T12 (USB)",
+                "SRA (serial)",
+            ] {
                 checks.push(Check::skipped(name, "the configuration does not parse"));
             }
         }
@@ -252,10 +258,18 @@ fn store_check(db: &Path) -> Check {
         if !file.exists() {
             continue;
         }
-        if let Err(e) = std::fs::OpenOptions::new().read(true).write(true).open(&file) {
+        if let Err(e) = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&file)
+        {
             return Check::fail(
                 NAME,
-                format!("{} cannot open {} for writing ({e})", user(), file.display()),
+                format!(
+                    "{} cannot open {} for writing ({e})",
+                    user(),
+                    file.display()
+                ),
                 format!(
                     "run brdfd as the file's owner, or chown it to brdfd's user: chown USER {}",
                     file.display()
@@ -315,10 +329,9 @@ fn lock_check(db: &Path, daemon_ok: bool, addr: SocketAddr) -> Check {
             Check::ok(NAME, detail)
         }
         Ok(Some(holder)) => match named_pid(&holder) {
-            Some(pid) if alive(pid) && daemon_ok => Check::ok(
-                NAME,
-                format!("held by the running daemon ({holder})"),
-            ),
+            Some(pid) if alive(pid) && daemon_ok => {
+                Check::ok(NAME, format!("held by the running daemon ({holder})"))
+            }
             Some(pid) if alive(pid) => Check::fail(
                 NAME,
                 format!(
@@ -390,11 +403,9 @@ fn daemon_check(config: &Config, args: &DoctorArgs) -> Check {
             ),
             Err(e) => {
                 // Whether anything listens is still worth saying.
-                let listening = std::net::TcpStream::connect_timeout(
-                    &addr,
-                    std::time::Duration::from_secs(2),
-                )
-                .is_ok();
+                let listening =
+                    std::net::TcpStream::connect_timeout(&addr, std::time::Duration::from_secs(2))
+                        .is_ok();
                 return Check::fail(
                     NAME,
                     format!(
@@ -712,8 +723,14 @@ mod tests {
     #[test]
     fn simulated_instruments_are_skipped() {
         let c = usb_check(&MaT12Transport::Simulated { session: None });
-        assert_eq!((c.status, c.detail.as_str()), (Outcome::Skipped, "simulated: skipped"));
+        assert_eq!(
+            (c.status, c.detail.as_str()),
+            (Outcome::Skipped, "simulated: skipped")
+        );
         let c = serial_check(&SraTransport::Simulated { session: None });
-        assert_eq!((c.status, c.detail.as_str()), (Outcome::Skipped, "simulated: skipped"));
+        assert_eq!(
+            (c.status, c.detail.as_str()),
+            (Outcome::Skipped, "simulated: skipped")
+        );
     }
 }

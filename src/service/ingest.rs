@@ -166,7 +166,10 @@ struct Watch {
 }
 
 /// The files of `dir` (names, kinds) with their size and modification time.
-fn list(dir: &Path) -> std::io::Result<Vec<(String, Kind, String, u64, Option<SystemTime>)>> {
+/// A listed file: name, kind, pairing NAME, size, modification time.
+type Listed = (String, Kind, String, u64, Option<SystemTime>);
+
+fn list(dir: &Path) -> std::io::Result<Vec<Listed>> {
     let mut out = Vec::new();
     for entry in std::fs::read_dir(dir)? {
         let entry = entry?;
@@ -284,9 +287,8 @@ enum Failure {
 
 /// The scans in a unit's files (read from `.importing/`), with their content hash.
 fn read_unit(dir: &Path, unit: &Unit, reference: &str) -> Result<(String, Vec<Scan>), String> {
-    let read = |name: &str| {
-        std::fs::read(dir.join(name)).map_err(|e| format!("cannot read {name}: {e}"))
-    };
+    let read =
+        |name: &str| std::fs::read(dir.join(name)).map_err(|e| format!("cannot read {name}: {e}"));
     let main = read(&unit.main)?;
     let partner = unit.partner.as_deref().map(read).transpose()?;
     let hash = content_hash(&main, partner.as_deref());
@@ -432,10 +434,7 @@ impl Service {
                     return;
                 }
             }
-            if let Err(e) = self
-                .process_and_queue(scan, &RefitRequest::default())
-                .await
-            {
+            if let Err(e) = self.process_and_queue(scan, &RefitRequest::default()).await {
                 // Not the file's fault once it is stored (e.g. a reading processing refuses):
                 // the scan stays, unfitted, as an import through the API would.
                 tracing::warn!(error = %e, %scan, file = %file.file_name, "imported scan not fitted");
@@ -494,7 +493,10 @@ impl Service {
             seen.insert(name.clone(), s);
         }
         watch.seen = seen;
-        let files: Vec<_> = listing.into_iter().map(|(n, k, s, _, _)| (n, k, s)).collect();
+        let files: Vec<_> = listing
+            .into_iter()
+            .map(|(n, k, s, _, _)| (n, k, s))
+            .collect();
         let (units, waiting) = units(
             &files,
             |n| {
@@ -618,9 +620,7 @@ impl Service {
                     s.last_file = Some(file.clone());
                     s.last_error = Some(format!("{file}: {reason}"));
                 });
-                self.inner
-                    .events
-                    .send(Event::FileRejected { file, reason });
+                self.inner.events.send(Event::FileRejected { file, reason });
             }
         }
     }
@@ -670,7 +670,12 @@ impl Service {
             .collect();
         let readings: Vec<_> = scans
             .iter()
-            .map(|s| (new_readings(&s.reference.readings), new_readings(&s.readings)))
+            .map(|s| {
+                (
+                    new_readings(&s.reference.readings),
+                    new_readings(&s.readings),
+                )
+            })
             .collect();
         let imports: Vec<ImportedScan<'_>> = scans
             .iter()
@@ -811,7 +816,10 @@ mod tests {
             content_hash(b"a", Some(b"bc"))
         );
         let dir = tempfile::tempdir().unwrap();
-        assert_eq!(free_name(dir.path(), "p.sra.csv"), dir.path().join("p.sra.csv"));
+        assert_eq!(
+            free_name(dir.path(), "p.sra.csv"),
+            dir.path().join("p.sra.csv")
+        );
         std::fs::write(dir.path().join("p.sra.csv"), "").unwrap();
         assert_eq!(
             free_name(dir.path(), "p.sra.csv"),

@@ -44,9 +44,8 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use sqlx::Row;
 
 pub use error::StoreError;
-pub use ingest::{FileImport, IngestedFile};
-pub use scans::ImportedScan;
 pub use ids::{FitRunId, InstrumentId, ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
+pub use ingest::{FileImport, IngestedFile};
 pub use lock::{LockError, StoreLock};
 pub use records::{
     DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, Instrument,
@@ -54,6 +53,7 @@ pub use records::{
     ReferenceDetail, ReferenceStatus, ReferenceSummary, ScanDetail, ScanFilter, ScanState,
     ScanSummary, Source,
 };
+pub use scans::ImportedScan;
 
 use backend::Pool;
 

@@ -593,8 +593,7 @@ impl ImportedScan<'_> {
     fn checked(&self) -> Result<Vec<(bool, &NewReading<'_>, &'static Geometry)>, StoreError> {
         let reference_owner = || format!("imported reference \"{}\"", self.reference_name);
         let scan_owner = || format!("imported scan of \"{}\"", self.sample_name);
-        let mut checked =
-            Vec::with_capacity(self.reference_readings.len() + self.readings.len());
+        let mut checked = Vec::with_capacity(self.reference_readings.len() + self.readings.len());
         for (set, owner, is_reference) in [
             (
                 self.reference_readings,
