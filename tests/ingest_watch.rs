@@ -540,3 +540,137 @@ fn a_daemon_killed_mid_import_finishes_at_the_next_start() {
     let hashes: BTreeSet<&String> = rows.iter().map(|(h, _)| h).collect();
     assert_eq!(hashes.len(), 41);
 }
+
+/// In-process: a daemon stopped after an import committed but before its fits were queued
+/// (the row says `fits_queued = 0` and the scan has no fit) queues them at the next start, and
+/// the folder's task records that it did.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
+    let _serial = serial();
+    bounded(async {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = tmp.path().join("brdfd.db");
+        let inbox = tmp.path().join("inbox");
+        std::fs::create_dir(&inbox).unwrap();
+        let scan = example("t-manzana-green");
+        let readings = |r: &brdfd::scan::DeviceReadings| {
+            brdfd::geometry::GEOMETRIES
+                .iter()
+                .map(|g| brdfd::store::NewReading {
+                    device: g.device,
+                    geometry: g,
+                    values: match g.device {
+                        brdfd::geometry::Device::MaT12 => {
+                            brdfd::store::ReadingValues::Spectrum(r.ma_t12[g.index])
+                        }
+                        brdfd::geometry::Device::Sra => brdfd::store::ReadingValues::Intensity(
+                            r.sra[g.index - brdfd::geometry::MA_T12_COUNT],
+                        ),
+                    },
+                    raw_frame: &[],
+                })
+                .collect::<Vec<_>>()
+        };
+        let provenance = brdfd::store::Provenance {
+            source: brdfd::store::Source::Imported,
+            source_detail: Some("imported from x.scan.json, brdfd.scan/1 file".into()),
+            ..brdfd::store::Provenance::unknown()
+        };
+        let (r, m) = (readings(&scan.reference.readings), readings(&scan.readings));
+        let store = brdfd::store::Store::open(&db).await.unwrap();
+        let hash = "ab".repeat(32);
+        let imported = store
+            .import_file(
+                &hash,
+                "x.scan.json",
+                None,
+                &[brdfd::store::ImportedScan {
+                    sample_name: &scan.sample,
+                    reference_name: "Munsell N9 (imported)",
+                    provenance: &provenance,
+                    reference_readings: &r,
+                    readings: &m,
+                }],
+            )
+            .await
+            .unwrap();
+        let brdfd::store::FileImport::Imported(file) = imported else {
+            panic!("{imported:?}")
+        };
+        assert!(!file.fits_queued);
+        let scan_id = file.scans[0];
+        assert!(store.fits_for_scan(scan_id).await.unwrap().is_empty());
+        // The same hash again is refused inside the transaction, writing nothing.
+        let again = store
+            .import_file(
+                &hash,
+                "y.scan.json",
+                None,
+                &[brdfd::store::ImportedScan {
+                    sample_name: "other",
+                    reference_name: "Munsell N9 (imported)",
+                    provenance: &provenance,
+                    reference_readings: &r,
+                    readings: &m,
+                }],
+            )
+            .await
+            .unwrap();
+        assert_eq!(
+            again,
+            brdfd::store::FileImport::AlreadyImported(file.clone())
+        );
+        store.close().await;
+
+        let devices = brdfd::service::Devices::simulated(
+            playlist(drivers::Instrument::MaT12),
+            playlist(drivers::Instrument::Sra),
+            &strict_fast(),
+            [None, None],
+        )
+        .unwrap();
+        let store = brdfd::store::Store::open(&db).await.unwrap();
+        let settings = brdfd::service::ServiceSettings {
+            cost_functions: vec![brdfd::cost::CostFunction::Cf2],
+            bootstrap: 0,
+            ingest: Some(brdfd::service::IngestSettings {
+                dir: inbox.clone(),
+                settle: Duration::from_millis(50),
+                poll: Duration::from_millis(20),
+                pair_wait: Duration::from_secs(600),
+                reference: "Munsell N9".into(),
+            }),
+            ..settings()
+        };
+        let service = brdfd::service::Service::start(
+            store.clone(),
+            devices,
+            settings,
+            brdfd::service::ServiceOptions::default(),
+        )
+        .await
+        .unwrap();
+        let deadline = Instant::now() + STEP_TIMEOUT;
+        loop {
+            let files = store.ingested_files().await.unwrap();
+            if files[0].fits_queued {
+                break;
+            }
+            assert!(Instant::now() < deadline, "the fits were never queued");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        let fits = store.fits_for_scan(scan_id).await.unwrap();
+        assert_eq!(fits.len(), 1, "{fits:?}");
+        assert!(service.wait_settled(scan_id, STEP_TIMEOUT).await.unwrap());
+        let fits = store.fits_for_scan(scan_id).await.unwrap();
+        assert_eq!(fits[0].status, brdfd::store::FitStatus::Done, "{fits:?}");
+        // The folders were made, and the status shows the folder.
+        for sub in ["done", "failed", ".importing"] {
+            assert!(inbox.join(sub).is_dir(), "{sub}");
+        }
+        let status = service.status().await.unwrap().ingest.unwrap();
+        assert_eq!(status.dir, inbox.display().to_string());
+        service.shutdown().await;
+    })
+    .await;
+}
