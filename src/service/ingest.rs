@@ -517,6 +517,11 @@ impl Service {
             if self.ingest_stopping() {
                 return;
             }
+            // A file of the same name still in flight (a store failure being retried) is not
+            // replaced: this one waits until that one is done.
+            if unit.names().iter().any(|n| importing.join(n).exists()) {
+                continue;
+            }
             // Into .importing/ first: from here on the file is the daemon's.
             let mut moved = Vec::new();
             let mut failed = None;
