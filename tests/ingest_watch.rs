@@ -698,3 +698,101 @@ fn a_watch_folder_that_does_not_exist_stops_the_start_naming_it() {
         "{err}"
     );
 }
+
+/// In-process: a store that fails the import (a trigger stands for a full disk) leaves the
+/// file in `.importing/` with the error in the status and no half-imported scan; once the
+/// store works again the next pass imports it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
+    use sqlx::Connection;
+    let _serial = serial();
+    bounded(async {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = tmp.path().join("brdfd.db");
+        let inbox = tmp.path().join("inbox");
+        std::fs::create_dir(&inbox).unwrap();
+        let store = brdfd::store::Store::open(&db).await.unwrap();
+        // A second connection to the same file, as another process would have.
+        let mut raw = sqlx::SqliteConnection::connect(&format!("sqlite://{}", db.display()))
+            .await
+            .unwrap();
+        sqlx::query(
+            "CREATE TRIGGER full_disk BEFORE INSERT ON ingested_files
+             BEGIN SELECT RAISE(ABORT, 'database or disk is full (test)'); END",
+        )
+        .execute(&mut raw)
+        .await
+        .unwrap();
+        let devices = brdfd::service::Devices::simulated(
+            playlist(drivers::Instrument::MaT12),
+            playlist(drivers::Instrument::Sra),
+            &strict_fast(),
+            [None, None],
+        )
+        .unwrap();
+        let settings = brdfd::service::ServiceSettings {
+            cost_functions: vec![brdfd::cost::CostFunction::Cf2],
+            bootstrap: 0,
+            ingest: Some(brdfd::service::IngestSettings {
+                dir: inbox.clone(),
+                settle: Duration::from_millis(50),
+                poll: Duration::from_millis(20),
+                pair_wait: Duration::from_secs(600),
+                reference: "Munsell N9".into(),
+            }),
+            ..settings()
+        };
+        let service = brdfd::service::Service::start(
+            store.clone(),
+            devices,
+            settings,
+            brdfd::service::ServiceOptions::default(),
+        )
+        .await
+        .unwrap();
+        let text = example("t-lavender-blue").to_json_pretty().unwrap();
+        std::fs::write(inbox.join("l.scan.json"), &text).unwrap();
+        let deadline = Instant::now() + STEP_TIMEOUT;
+        let status = loop {
+            let s = service.status().await.unwrap().ingest.unwrap();
+            if s.last_error.is_some() {
+                break s;
+            }
+            assert!(Instant::now() < deadline, "no error reported");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        };
+        let e = status.last_error.unwrap();
+        assert!(e.contains("l.scan.json: the store failed"), "{e}");
+        assert!(e.contains("disk is full (test)"), "{e}");
+        assert!(e.contains("left in .importing/ and tried again"), "{e}");
+        assert!(inbox.join(".importing/l.scan.json").is_file());
+        assert!(!inbox.join("failed/l.scan.json").exists());
+        // The transaction left nothing behind.
+        let all = brdfd::store::ScanFilter {
+            limit: 500,
+            ..Default::default()
+        };
+        assert!(store.list_scans(&all).await.unwrap().is_empty());
+        assert_eq!(status.imported, 0);
+
+        sqlx::query("DROP TRIGGER full_disk")
+            .execute(&mut raw)
+            .await
+            .unwrap();
+        raw.close().await.unwrap();
+        let deadline = Instant::now() + STEP_TIMEOUT;
+        while !inbox.join("done/l.scan.json").is_file() {
+            assert!(
+                Instant::now() < deadline,
+                "never imported after the store recovered"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        assert!(!inbox.join(".importing/l.scan.json").exists());
+        assert_eq!(store.list_scans(&all).await.unwrap().len(), 1);
+        assert_eq!(store.ingested_files().await.unwrap().len(), 1);
+        assert_eq!(service.status().await.unwrap().ingest.unwrap().imported, 1);
+        service.shutdown().await;
+    })
+    .await;
+}
