@@ -183,6 +183,47 @@ fn cgats_export(scan: &Scan) -> String {
     t
 }
 
+/// The same as X-Rite CxF3 (the shape `src/formats/cxf3.rs` reads by object name: the grid
+/// in the specification, bands beyond 400–700 nm).
+fn cxf3_export(scan: &Scan) -> String {
+    let mut xml = format!(
+        "<?xml version=\"1.0\"?>\n<CxF xmlns=\"{}\"><Resources><ObjectCollection>\n",
+        brdfd::formats::cxf3::NAMESPACE
+    );
+    for (i, (name, r)) in [
+        (scan.reference.name.as_str(), &scan.reference.readings),
+        (scan.sample.as_str(), &scan.readings),
+    ]
+    .iter()
+    .enumerate()
+    {
+        xml += &format!(
+            "<Object ObjectType=\"Standard\" Name=\"{name}\" Id=\"x{i}\"><CreationDate>2024-05-01T12:00:00Z</CreationDate><ColorValues>\n"
+        );
+        for g in brdfd::geometry::ma_t12() {
+            let vals: Vec<String> = std::iter::once("0.5".to_string())
+                .chain(r.ma_t12[g.index].iter().map(|v| v.to_string()))
+                .chain(std::iter::once("0.5".to_string()))
+                .collect();
+            xml += &format!(
+                "<ReflectanceSpectrum ColorSpecification=\"m{}\">{}</ReflectanceSpectrum>\n",
+                g.index,
+                vals.join(" ")
+            );
+        }
+        xml += "</ColorValues></Object>\n";
+    }
+    xml += "</ObjectCollection><ColorSpecificationCollection>";
+    for g in brdfd::geometry::ma_t12() {
+        xml += &format!(
+            "<ColorSpecification Id=\"m{}\"><MeasurementSpec><MeasurementType>Spectrum_Reflectance</MeasurementType><GeometryChoice><MultiAngle><BRDFAngle Notation=\"{}\"><IlluminationAngle>{}</IlluminationAngle><Aspecular>{}</Aspecular></BRDFAngle></MultiAngle></GeometryChoice><WavelengthRange StartWL=\"390\" Increment=\"10\"/></MeasurementSpec></ColorSpecification>",
+            g.index, g.name, g.theta_i_deg, g.aspecular_deg
+        );
+    }
+    xml += "</ColorSpecificationCollection></Resources></CxF>\n";
+    xml
+}
+
 fn sra_csv(scan: &Scan) -> String {
     brdfd::formats::sra::write_scans(std::slice::from_ref(scan))
 }
@@ -477,13 +518,18 @@ fn a_hundred_files_at_once_are_each_imported_once() {
     let _serial = serial();
     let lab = Lab::new(100, 600_000);
     let daemon = lab.serve();
-    // 60 scan files and 20 MA-T12 exports, each with its SRA CSV: 100 files, 80 imports.
+    // 60 scan files and 20 MA-T12 exports (10 CGATS, 10 CxF3), each with its SRA CSV: 100
+    // files, 80 imports.
     let mut files = many(60);
     let mut mains = BTreeSet::new();
     for (i, mut scan) in many_scans(20).into_iter().enumerate() {
         scan.sample = format!("{} (export {i})", scan.sample);
-        let name = format!("export {i:02}.cgats");
-        files.push((name.clone(), cgats_export(&scan)));
+        let (name, text) = if i % 2 == 0 {
+            (format!("export {i:02}.cgats"), cgats_export(&scan))
+        } else {
+            (format!("Export {i:02}.CXF"), cxf3_export(&scan))
+        };
+        files.push((name.clone(), text));
         files.push((format!("export {i:02}.sra.csv"), sra_csv(&scan)));
         mains.insert(name);
     }
