@@ -93,6 +93,35 @@ pub struct Config {
     pub station: StationConfig,
     pub sync: SyncConfig,
     pub reference: ReferenceConfig,
+    pub ingest: IngestConfig,
+}
+
+/// `[ingest]`: the watch folder (src/service/ingest.rs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IngestConfig {
+    /// The folder watched for instrument-software exports and scan files; `None`: no folder.
+    pub watch: Option<PathBuf>,
+    /// A file is imported once its size and modification time stayed the same this long.
+    pub settle: Duration,
+    /// How often the folder is listed.
+    pub poll: Duration,
+    /// How long an MA-T12 export waits for its SRA CSV (and an SRA CSV for its export) before
+    /// it is imported alone (or, for an SRA CSV, rejected).
+    pub pair_wait: Duration,
+    /// In an instrument's export, the object with this name is the white reference tile.
+    pub reference: String,
+}
+
+impl Default for IngestConfig {
+    fn default() -> Self {
+        IngestConfig {
+            watch: None,
+            settle: Duration::from_millis(defaults::INGEST_SETTLE_MS),
+            poll: Duration::from_millis(defaults::INGEST_POLL_MS),
+            pair_wait: Duration::from_millis(defaults::INGEST_PAIR_WAIT_MS),
+            reference: crate::formats::DEFAULT_REFERENCE.to_string(),
+        }
+    }
 }
 
 /// `[station]`
@@ -330,6 +359,9 @@ mod defaults {
     pub const BOOTSTRAP: u32 = 200;
     pub const LEVEL: &str = "info";
     pub const SYNC_BATCH: u64 = 500;
+    pub const INGEST_SETTLE_MS: u64 = 2_000;
+    pub const INGEST_POLL_MS: u64 = 1_000;
+    pub const INGEST_PAIR_WAIT_MS: u64 = 60_000;
 }
 
 impl Default for Config {
@@ -388,6 +420,7 @@ impl Default for Config {
                 batch: defaults::SYNC_BATCH as usize,
             },
             reference: ReferenceConfig::default(),
+            ingest: IngestConfig::default(),
         }
     }
 }
@@ -419,6 +452,18 @@ struct RawConfig {
     sync: RawSync,
     #[serde(default)]
     reference: RawReference,
+    #[serde(default)]
+    ingest: RawIngest,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawIngest {
+    watch: S<String>,
+    settle_ms: S<u64>,
+    poll_ms: S<u64>,
+    pair_wait_ms: S<u64>,
+    reference: S<String>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -1181,6 +1226,50 @@ impl Config {
             }
         };
 
+        let g = &raw.ingest;
+        let ms_in = |lo: u64, hi: u64| {
+            move |ms: u64| {
+                if (lo..=hi).contains(&ms) {
+                    Ok(Duration::from_millis(ms))
+                } else {
+                    Err(format!("{ms} is out of range: {lo} to {hi} ms"))
+                }
+            }
+        };
+        let ingest = IngestConfig {
+            watch: c.path("ingest.watch", &g.watch)?,
+            settle: c.value(
+                "ingest.settle_ms",
+                &g.settle_ms,
+                defaults::INGEST_SETTLE_MS,
+                ms_in(10, 3_600_000),
+            )?,
+            poll: c.value(
+                "ingest.poll_ms",
+                &g.poll_ms,
+                defaults::INGEST_POLL_MS,
+                ms_in(10, 60_000),
+            )?,
+            pair_wait: c.value(
+                "ingest.pair_wait_ms",
+                &g.pair_wait_ms,
+                defaults::INGEST_PAIR_WAIT_MS,
+                ms_in(0, 86_400_000),
+            )?,
+            reference: c.value(
+                "ingest.reference",
+                &g.reference,
+                crate::formats::DEFAULT_REFERENCE.to_string(),
+                |r| {
+                    if r.trim().is_empty() {
+                        Err("must name the reference tile, e.g. \"Munsell N9\"".into())
+                    } else {
+                        Ok(r)
+                    }
+                },
+            )?,
+        };
+
         Ok(Config {
             store,
             api,
@@ -1192,6 +1281,7 @@ impl Config {
             station,
             sync,
             reference,
+            ingest,
         })
     }
 }
@@ -1363,7 +1453,7 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 26] = [
+        const KEYS: [&str; 31] = [
             "path",
             "listen",
             "allow_remote",
@@ -1390,6 +1480,11 @@ mod tests {
             "json",
             "level",
             "reflectance",
+            "watch",
+            "settle_ms",
+            "poll_ms",
+            "pair_wait_ms",
+            "reference",
         ];
         let lines: Vec<&str> = SHIPPED.lines().collect();
         for key in KEYS {
@@ -1408,6 +1503,30 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn ingest_settings() {
+        let d = Config::default().ingest;
+        assert_eq!(d.watch, None);
+        assert_eq!(d.settle, Duration::from_secs(2));
+        let c = parse(
+            "[ingest]\nwatch = \"/srv/inbox\"\nsettle_ms = 50\npoll_ms = 20\npair_wait_ms = 0\n\
+             reference = \"N9 tile\"\n",
+        )
+        .unwrap();
+        assert_eq!(c.ingest.watch, Some(PathBuf::from("/srv/inbox")));
+        assert_eq!(c.ingest.settle, Duration::from_millis(50));
+        assert_eq!(c.ingest.poll, Duration::from_millis(20));
+        assert_eq!(c.ingest.pair_wait, Duration::ZERO);
+        assert_eq!(c.ingest.reference, "N9 tile");
+        let e = parse("[ingest]\nsettle_ms = 5\n").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "test.toml:2: ingest.settle_ms: 5 is out of range: 10 to 3600000 ms"
+        );
+        let e = parse("[ingest]\nwatch = \"\"\n").unwrap_err().to_string();
+        assert!(e.contains("ingest.watch: must not be empty"), "{e}");
     }
 
     #[test]

@@ -166,7 +166,7 @@ fn bad_cost_fails_with_one_line() {
 }
 
 /// Every subcommand of `brdfd`, as `--help` lists them (README.md teaches each one).
-const SUBCOMMANDS: [&str; 20] = [
+const SUBCOMMANDS: [&str; 23] = [
     "fit",
     "synth",
     "demo",
@@ -187,6 +187,9 @@ const SUBCOMMANDS: [&str; 20] = [
     "replay",
     "record",
     "sync",
+    "doctor",
+    "completions",
+    "man",
 ];
 
 #[test]

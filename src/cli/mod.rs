@@ -7,6 +7,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod demo;
+pub mod doctor;
 pub mod exchange;
 pub mod fit;
 pub mod ops;
@@ -78,6 +79,9 @@ pub enum Command {
     /// Forward a station's store to the lab's central PostgreSQL database (what `[sync] url`
     /// makes the daemon do continuously), e.g. from a stopped station.
     Sync(sync::SyncArgs),
+    /// Check the whole set-up at once (configuration, store and its lock, daemon and token,
+    /// MA-T12 on USB, the SRA's serial port, the clock), each failure with its fix.
+    Doctor(doctor::DoctorArgs),
     /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
     Completions(shell::CompletionsArgs),
     /// Print the man page (roff), or write one per subcommand into a directory.
@@ -153,6 +157,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sync(args) => sync::run(&args),
         Command::Completions(args) => shell::completions(&args),
         Command::Man(args) => shell::man(&args),
+        Command::Doctor(args) => doctor::run(&args),
     }
 }
 

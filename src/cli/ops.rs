@@ -880,6 +880,19 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
             }
         );
     }
+    if let Some(ingest) = v["ingest"].as_object() {
+        println!(
+            "watch folder {}: {} imported, {} rejected since start, {} waiting{}",
+            ingest["dir"].as_str().unwrap_or("?"),
+            ingest["imported"],
+            ingest["rejected"],
+            ingest["waiting"],
+            match ingest["last_error"].as_str() {
+                Some(e) => format!("; last error: {e}"),
+                None => String::new(),
+            }
+        );
+    }
     Ok(())
 }
 

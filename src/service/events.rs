@@ -112,6 +112,17 @@ pub enum Event {
         state: &'static str,
         detail: String,
     },
+    /// A file of the watch folder (`[ingest] watch`) was imported and moved to `done/`.
+    FileImported {
+        /// The file (an export and its SRA CSV: "NAME.cxf and NAME.sra.csv").
+        file: String,
+        scans: Vec<ScanId>,
+        /// SHA-256 of its content.
+        sha256: String,
+    },
+    /// A file of the watch folder was not imported: it moved to `failed/`, with the reason in
+    /// `FILE.error.txt`.
+    FileRejected { file: String, reason: String },
     /// The daemon is shutting down.
     ShuttingDown,
 }
@@ -138,6 +149,8 @@ impl Event {
             Event::FitFailed { .. } => "fit_failed",
             Event::FitCancelled { .. } => "fit_cancelled",
             Event::Device { .. } => "device",
+            Event::FileImported { .. } => "file_imported",
+            Event::FileRejected { .. } => "file_rejected",
             Event::ShuttingDown => "shutting_down",
         }
     }
@@ -181,7 +194,8 @@ impl EventBus {
             | Event::ReferenceFailed { .. }
             | Event::FitFailed { .. }
             | Event::ReferenceStale { .. }
-            | Event::ProcessingFailed { .. } => {
+            | Event::ProcessingFailed { .. }
+            | Event::FileRejected { .. } => {
                 tracing::warn!(event = %event.to_json(), "{}", event.kind())
             }
             _ => tracing::info!(event = %event.to_json(), "{}", event.kind()),

@@ -12,6 +12,8 @@
 //!
 //! - [`Service`] is the handle (cheap to clone) the HTTP API and the in-process callers use.
 //! - [`devices`] builds the instruments (simulated or real, with the recording tap).
+//! - [`ingest`] is the watch folder (`[ingest] watch`): exports and scan files dropped there
+//!   are imported, fitted, and moved to `done/` or `failed/`.
 //! - [`shutdown`] is the mini-redis style stop signal and task tracking.
 //! - [`ServiceError`] says why a request was refused.
 //!
@@ -23,6 +25,7 @@ pub mod devices;
 mod error;
 pub mod events;
 mod fit_worker;
+pub mod ingest;
 mod orchestrator;
 pub mod shutdown;
 
@@ -46,6 +49,7 @@ pub use devices::{DeviceSetupError, Devices};
 pub use error::ServiceError;
 pub use events::{Event, EventBus};
 pub use fit_worker::{FitFn, FitJob, default_fit_fn};
+pub use ingest::{IngestSettings, IngestStatus};
 pub use orchestrator::{IMPORTED_SUFFIX, scan_from_detail};
 
 use shutdown::Coordinator;
@@ -74,6 +78,8 @@ pub struct ServiceSettings {
     pub colorimetry: crate::colour::Colorimetry,
     /// Bootstrap resamples per fit (0: no intervals).
     pub bootstrap: u32,
+    /// The watch folder (`[ingest]`); `None`: none.
+    pub ingest: Option<IngestSettings>,
 }
 
 impl ServiceSettings {
@@ -94,6 +100,7 @@ impl ServiceSettings {
             }),
             colorimetry: config.colour,
             bootstrap: config.fit.bootstrap,
+            ingest: IngestSettings::from_config(&config.ingest),
         }
     }
 
@@ -231,6 +238,8 @@ pub struct Status {
     pub timings: TimingSplit,
     /// Forwarding to the central database (backlog, last error), when configured.
     pub sync: Option<crate::sync::SyncStatus>,
+    /// The watch folder (files waiting, imported, rejected, last error), when configured.
+    pub ingest: Option<IngestStatus>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -300,6 +309,8 @@ struct Inner {
     sync_status: std::sync::OnceLock<Arc<Mutex<crate::sync::SyncStatus>>>,
     /// How often each instrument changed connection state: (instrument, state) → count.
     device_transitions: Mutex<std::collections::BTreeMap<(&'static str, &'static str), u64>>,
+    /// The watch folder's status, once it started.
+    ingest_status: std::sync::OnceLock<Arc<Mutex<IngestStatus>>>,
 }
 
 /// The running service; clones share it.
@@ -356,6 +367,7 @@ impl Service {
             timings: Timings::default(),
             sync_status: std::sync::OnceLock::new(),
             device_transitions: Mutex::new(Default::default()),
+            ingest_status: std::sync::OnceLock::new(),
         });
         let service = Service { inner };
         service.start_fit_worker(fit_rx).await;
@@ -365,6 +377,9 @@ impl Service {
         }
         if let Some(options) = service.inner.settings.sync.clone() {
             service.start_forwarder(options).await?;
+        }
+        if let Some(ingest) = service.inner.settings.ingest.clone() {
+            service.start_ingest(ingest).await?;
         }
         Ok(service)
     }
@@ -540,6 +555,7 @@ impl Service {
                 .sync_status
                 .get()
                 .map(|s| s.lock().unwrap_or_else(|p| p.into_inner()).clone()),
+            ingest: self.ingest_status(),
         })
     }
 

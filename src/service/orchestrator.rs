@@ -863,7 +863,7 @@ pub fn check_name(what: &str, name: &str) -> Result<(), ServiceError> {
 }
 
 /// A scan file's readings as store readings, in table order, with empty raw frames.
-fn new_readings(r: &DeviceReadings) -> Vec<NewReading<'static>> {
+pub(super) fn new_readings(r: &DeviceReadings) -> Vec<NewReading<'static>> {
     geometry::GEOMETRIES
         .iter()
         .map(|g| NewReading {

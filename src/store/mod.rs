@@ -6,6 +6,8 @@
 //!   scans) and `fits.rs` (fit runs and evaluations).
 //! - [`ids`] holds the row-id newtypes, [`records`] what goes in and comes out, [`StoreError`]
 //!   every failure. `backend.rs` holds every SQLite-specific bit (pragmas, pools, upserts).
+//! - `ingest.rs` holds the watch folder's verbs: a dropped file's scans and its content hash
+//!   in one transaction (`[ingest] watch`).
 //! - [`central`] reads the lab's central PostgreSQL database (see `src/sync/`) back into
 //!   these same records, for reports across stations.
 //! - The schema lives in `migrations/` (one commented step per file), embedded in the binary
@@ -29,6 +31,7 @@ mod codec;
 mod error;
 mod fits;
 pub mod ids;
+mod ingest;
 pub mod lock;
 pub mod records;
 mod references;
@@ -42,6 +45,7 @@ use sqlx::Row;
 
 pub use error::StoreError;
 pub use ids::{FitRunId, InstrumentId, ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
+pub use ingest::{FileImport, IngestedFile};
 pub use lock::{LockError, StoreLock};
 pub use records::{
     DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, Instrument,
@@ -49,6 +53,7 @@ pub use records::{
     ReferenceDetail, ReferenceStatus, ReferenceSummary, ScanDetail, ScanFilter, ScanState,
     ScanSummary, Source,
 };
+pub use scans::ImportedScan;
 
 use backend::Pool;
 

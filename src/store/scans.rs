@@ -294,111 +294,18 @@ impl Store {
         reference_readings: &[NewReading<'_>],
         readings: &[NewReading<'_>],
     ) -> Result<(ReferenceId, ScanId), StoreError> {
-        for (field, name) in [
-            ("sample name", sample_name),
-            ("reference name", reference_name),
-        ] {
-            if name.trim().is_empty() {
-                return Err(StoreError::Empty { field });
-            }
-        }
-        let reference_owner = || format!("imported reference \"{reference_name}\"");
-        let scan_owner = || format!("imported scan of \"{sample_name}\"");
-        let mut checked = Vec::with_capacity(reference_readings.len() + readings.len());
-        for (set, owner, is_reference) in [
-            (
-                reference_readings,
-                &reference_owner as &dyn Fn() -> String,
-                true,
-            ),
-            (readings, &scan_owner, false),
-        ] {
-            let mut present = Vec::with_capacity(set.len());
-            for r in set {
-                let g = codec::check_reading(owner, r.device, r.geometry, &r.values, is_reference)?;
-                if present.contains(&g.name) {
-                    return Err(StoreError::DuplicateReading {
-                        owner: owner(),
-                        geometry: g.name,
-                    });
-                }
-                present.push(g.name);
-                checked.push((is_reference, r, g));
-            }
-            if present.len() != GEOMETRY_COUNT {
-                let present: Vec<String> = present.iter().map(|g| g.to_string()).collect();
-                let missing = codec::missing_geometries(&present);
-                return Err(if is_reference {
-                    StoreError::ReferenceIncomplete {
-                        reference: ReferenceId(0),
-                        have: present.len(),
-                        missing,
-                    }
-                } else {
-                    StoreError::ScanIncomplete {
-                        scan: ScanId(0),
-                        have: present.len(),
-                        missing,
-                    }
-                });
-            }
-        }
-        let now = now_ms();
-        let mut tx = self.writer.begin().await?;
-        let reference: i64 = sqlx::query_scalar(
-            "INSERT INTO reference_sets (name, status, taken_at_ms, completed_at_ms)
-             VALUES ($1, 'complete', $2, $2) RETURNING id",
-        )
-        .bind(reference_name)
-        .bind(now)
-        .fetch_one(&mut *tx)
-        .await?;
-        super::write_provenance(
-            &mut *tx,
-            "reference_sets",
-            ReferenceId::WHAT,
-            reference,
+        let import = ImportedScan {
+            sample_name,
+            reference_name,
             provenance,
-        )
-        .await?;
-        let sample: i64 = sqlx::query_scalar(backend::UPSERT_SAMPLE)
-            .bind(sample_name)
-            .bind(now)
-            .fetch_one(&mut *tx)
-            .await?;
-        let scan: i64 = sqlx::query_scalar(
-            "INSERT INTO scans
-                 (sample_id, reference_id, state, requested_at_ms, started_at_ms, finished_at_ms)
-             VALUES ($1, $2, 'complete', $3, $3, $3) RETURNING id",
-        )
-        .bind(sample)
-        .bind(reference)
-        .bind(now)
-        .fetch_one(&mut *tx)
-        .await?;
-        super::write_provenance(&mut *tx, "scans", ScanId::WHAT, scan, provenance).await?;
-        for (is_reference, r, g) in checked {
-            let sql = if is_reference {
-                "INSERT INTO reference_readings
-                     (reference_id, device, geometry, values_f64le, raw_frame, taken_at_ms)
-                 VALUES ($1, $2, $3, $4, $5, $6)"
-            } else {
-                "INSERT INTO readings
-                     (scan_id, device, geometry, values_f64le, raw_frame, received_at_ms)
-                 VALUES ($1, $2, $3, $4, $5, $6)"
-            };
-            sqlx::query(sql)
-                .bind(if is_reference { reference } else { scan })
-                .bind(r.device.key())
-                .bind(g.name)
-                .bind(codec::encode_f64s(r.values.as_slice()))
-                .bind(r.raw_frame)
-                .bind(now)
-                .execute(&mut *tx)
-                .await?;
-        }
+            reference_readings,
+            readings,
+        };
+        import.check()?;
+        let mut tx = self.writer.begin().await?;
+        let ids = import.insert(&mut tx, now_ms()).await?;
         tx.commit().await?;
-        Ok((ReferenceId(reference), ScanId(scan)))
+        Ok(ids)
     }
 
     /// measuring → complete. Refused unless the scan is `measuring` and holds all 14 readings.
@@ -654,5 +561,140 @@ impl Store {
             expected,
             action,
         })
+    }
+}
+
+/// One scan to import, as [`Store::import_scan`] takes it; the watch folder imports several
+/// of these in one transaction (`ingest.rs`).
+#[derive(Debug, Clone, Copy)]
+pub struct ImportedScan<'a> {
+    pub sample_name: &'a str,
+    pub reference_name: &'a str,
+    pub provenance: &'a Provenance,
+    pub reference_readings: &'a [NewReading<'a>],
+    pub readings: &'a [NewReading<'a>],
+}
+
+impl ImportedScan<'_> {
+    /// The checks of [`Store::add_reference_reading`] and [`Store::add_reading`], before any
+    /// write: non-empty names, and each of the 14 geometries once in both sets.
+    pub(super) fn check(&self) -> Result<(), StoreError> {
+        for (field, name) in [
+            ("sample name", self.sample_name),
+            ("reference name", self.reference_name),
+        ] {
+            if name.trim().is_empty() {
+                return Err(StoreError::Empty { field });
+            }
+        }
+        self.checked().map(|_| ())
+    }
+
+    fn checked(&self) -> Result<Vec<(bool, &NewReading<'_>, &'static Geometry)>, StoreError> {
+        let reference_owner = || format!("imported reference \"{}\"", self.reference_name);
+        let scan_owner = || format!("imported scan of \"{}\"", self.sample_name);
+        let mut checked = Vec::with_capacity(self.reference_readings.len() + self.readings.len());
+        for (set, owner, is_reference) in [
+            (
+                self.reference_readings,
+                &reference_owner as &dyn Fn() -> String,
+                true,
+            ),
+            (self.readings, &scan_owner, false),
+        ] {
+            let mut present = Vec::with_capacity(set.len());
+            for r in set {
+                let g = codec::check_reading(owner, r.device, r.geometry, &r.values, is_reference)?;
+                if present.contains(&g.name) {
+                    return Err(StoreError::DuplicateReading {
+                        owner: owner(),
+                        geometry: g.name,
+                    });
+                }
+                present.push(g.name);
+                checked.push((is_reference, r, g));
+            }
+            if present.len() != GEOMETRY_COUNT {
+                let present: Vec<String> = present.iter().map(|g| g.to_string()).collect();
+                let missing = codec::missing_geometries(&present);
+                return Err(if is_reference {
+                    StoreError::ReferenceIncomplete {
+                        reference: ReferenceId(0),
+                        have: present.len(),
+                        missing,
+                    }
+                } else {
+                    StoreError::ScanIncomplete {
+                        scan: ScanId(0),
+                        have: present.len(),
+                        missing,
+                    }
+                });
+            }
+        }
+        Ok(checked)
+    }
+
+    /// Writes the reference set, the sample (created on first use) and the complete scan with
+    /// their readings and provenance inside `tx`; [`ImportedScan::check`] must have passed.
+    pub(super) async fn insert(
+        &self,
+        tx: &mut sqlx::Transaction<'_, Db>,
+        now: i64,
+    ) -> Result<(ReferenceId, ScanId), StoreError> {
+        let checked = self.checked()?;
+        let reference: i64 = sqlx::query_scalar(
+            "INSERT INTO reference_sets (name, status, taken_at_ms, completed_at_ms)
+             VALUES ($1, 'complete', $2, $2) RETURNING id",
+        )
+        .bind(self.reference_name)
+        .bind(now)
+        .fetch_one(&mut **tx)
+        .await?;
+        super::write_provenance(
+            &mut **tx,
+            "reference_sets",
+            ReferenceId::WHAT,
+            reference,
+            self.provenance,
+        )
+        .await?;
+        let sample: i64 = sqlx::query_scalar(backend::UPSERT_SAMPLE)
+            .bind(self.sample_name)
+            .bind(now)
+            .fetch_one(&mut **tx)
+            .await?;
+        let scan: i64 = sqlx::query_scalar(
+            "INSERT INTO scans
+                 (sample_id, reference_id, state, requested_at_ms, started_at_ms, finished_at_ms)
+             VALUES ($1, $2, 'complete', $3, $3, $3) RETURNING id",
+        )
+        .bind(sample)
+        .bind(reference)
+        .bind(now)
+        .fetch_one(&mut **tx)
+        .await?;
+        super::write_provenance(&mut **tx, "scans", ScanId::WHAT, scan, self.provenance).await?;
+        for (is_reference, r, g) in checked {
+            let sql = if is_reference {
+                "INSERT INTO reference_readings
+                     (reference_id, device, geometry, values_f64le, raw_frame, taken_at_ms)
+                 VALUES ($1, $2, $3, $4, $5, $6)"
+            } else {
+                "INSERT INTO readings
+                     (scan_id, device, geometry, values_f64le, raw_frame, received_at_ms)
+                 VALUES ($1, $2, $3, $4, $5, $6)"
+            };
+            sqlx::query(sql)
+                .bind(if is_reference { reference } else { scan })
+                .bind(r.device.key())
+                .bind(g.name)
+                .bind(codec::encode_f64s(r.values.as_slice()))
+                .bind(r.raw_frame)
+                .bind(now)
+                .execute(&mut **tx)
+                .await?;
+        }
+        Ok((ReferenceId(reference), ScanId(scan)))
     }
 }

@@ -225,6 +225,35 @@ mod tests {
     /// Columns of station tables that stay on the station: none today.
     const LOCAL_ONLY: &[(&str, &str)] = &[];
 
+    /// Station tables that are not forwarded at all: the outbox itself, and the watch
+    /// folder's record of imported files (its scans are forwarded like any other).
+    const LOCAL_TABLES: &[&str] = &[
+        "sync_outbox",
+        "sync_identity",
+        "ingested_files",
+        "ingested_scans",
+    ];
+
+    #[tokio::test]
+    async fn every_station_table_is_forwarded_or_local() {
+        let store = Store::open_in_memory().await.unwrap();
+        let pool = store.sync_pools().0.clone();
+        let names: Vec<String> = sqlx::query_scalar(
+            "SELECT name FROM sqlite_master WHERE type = 'table'
+               AND name NOT LIKE 'sqlite_%' AND name NOT LIKE '_sqlx_%'",
+        )
+        .fetch_all(&pool)
+        .await
+        .unwrap();
+        for n in &names {
+            assert!(
+                TABLES.iter().any(|t| t.name == n) || LOCAL_TABLES.contains(&n.as_str()),
+                "station table {n} is neither forwarded (src/sync/tables.rs and a central \
+                 migration) nor listed in LOCAL_TABLES"
+            );
+        }
+    }
+
     #[tokio::test]
     async fn every_station_column_is_forwarded() {
         let store = Store::open_in_memory().await.unwrap();

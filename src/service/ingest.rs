@@ -1,0 +1,834 @@
+//! The watch folder (`[ingest] watch = "DIR"`): what the instruments' own software exports,
+//! and brdfd scan files, dropped into DIR become stored, fitted scans without an operator.
+//!
+//! This module owns the folder's life cycle; the parsing is `src/formats/` (the same code as
+//! `brdfd import-format`) and the writing is one store transaction ([`Store::import_file`]).
+//!
+//! **What is read, and how files pair.** `NAME.scan.json` is a `brdfd.scan/1` file. `NAME.cxf`
+//! (CxF3) and `NAME.txt` / `NAME.cgats` (CGATS) are MA-T12 exports; the SRA's CSV of the same
+//! session is `NAME.sra.csv` (same NAME, case-insensitive), and the two are imported together.
+//! An export whose `.sra.csv` has not appeared within `pair_wait` is imported alone (which works
+//! for brdfd's own exports, which hold the SRA readings, and otherwise fails saying where the
+//! CSV goes); an `.sra.csv` with no export after `pair_wait` is moved to `failed/`. Names
+//! starting with `.` (partial uploads of many tools) and other files are left alone.
+//!
+//! **When.** The folder is listed every `poll` (polling, not inotify: it works the same on
+//! network shares and bind mounts, where the instrument PC may write and inotify sees nothing,
+//! and needs no dependency; a listing a second is nothing next to a scan). A file is taken once
+//! its size and modification time have stayed the same for `settle`, so a file still being
+//! written (or copied in pieces) is never read half-way.
+//!
+//! **Crash safety.** A file taken is first renamed into `DIR/.importing/` (atomic on one file
+//! system), read from there, hashed (SHA-256) and parsed; its scans and its hash are written in
+//! one store transaction (`ingested_files`, `migrations/0012_ingest.sql`); then its fits are
+//! queued and the hash row marked so; only then is the file renamed into `DIR/done/`. Whatever
+//! is in `.importing/` at any pass (at start: what a stopped daemon left there) is finished
+//! first: a hash already recorded means the import committed, and the file goes to `done/`;
+//! otherwise the import runs again (it left nothing behind). Scans imported but whose fits were
+//! not queued yet are queued at start. A file is never imported twice: the same content dropped
+//! again, under any name, is moved to `failed/` naming the earlier import. A store failure (a
+//! full disk) leaves the file in `.importing/` to be tried again at the next pass.
+//!
+//! **Outcomes.** `DIR/done/NAME`, or `DIR/failed/NAME` with `DIR/failed/NAME.error.txt` saying
+//! why (the parser's message names file, line and field); an existing name there gets `-2`,
+//! `-3`, … before its first dot. Each file gives an [`Event::FileImported`] or
+//! [`Event::FileRejected`], and `status` shows the folder's counts and last error.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+
+use crate::formats::{self, Format, ImportOptions};
+use crate::scan::Scan;
+use crate::store::{FileImport, ImportedScan, Provenance, Source, StoreError};
+
+use super::events::Event;
+use super::orchestrator::{IMPORTED_SUFFIX, check_name, new_readings};
+use super::{RefitRequest, Service, ServiceError};
+
+/// Where finished files go, and the folder of files being imported.
+pub const DONE: &str = "done";
+pub const FAILED: &str = "failed";
+pub const IMPORTING: &str = ".importing";
+
+/// The watch folder's settings (`[ingest]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IngestSettings {
+    pub dir: PathBuf,
+    pub settle: Duration,
+    pub poll: Duration,
+    pub pair_wait: Duration,
+    /// In an instrument's export, the object with this name is the reference tile.
+    pub reference: String,
+}
+
+impl IngestSettings {
+    pub fn from_config(c: &crate::config::IngestConfig) -> Option<IngestSettings> {
+        c.watch.as_ref().map(|dir| IngestSettings {
+            dir: dir.clone(),
+            settle: c.settle,
+            poll: c.poll,
+            pair_wait: c.pair_wait,
+            reference: c.reference.clone(),
+        })
+    }
+}
+
+/// The watch folder in `GET /status`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct IngestStatus {
+    /// The folder watched.
+    pub dir: String,
+    /// Files seen and not yet taken (still changing, or waiting for their pair).
+    pub waiting: usize,
+    /// Files imported since start.
+    pub imported: u64,
+    /// Files moved to failed/ since start.
+    pub rejected: u64,
+    /// The last file imported or rejected.
+    pub last_file: Option<String>,
+    /// The last rejection or error, with its file.
+    pub last_error: Option<String>,
+}
+
+/// What a file in the folder is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    ScanFile,
+    Export(Format),
+    SraCsv,
+}
+
+/// The kind of a file name and the NAME part that pairs it, or `None` for files left alone.
+fn kind_of(name: &str) -> Option<(Kind, String)> {
+    if name.starts_with('.') {
+        return None;
+    }
+    let lower = name.to_ascii_lowercase();
+    for (suffix, kind) in [
+        (".scan.json", Kind::ScanFile),
+        (".sra.csv", Kind::SraCsv),
+        (".cxf", Kind::Export(Format::Cxf3)),
+        (".cgats", Kind::Export(Format::Cgats)),
+        (".txt", Kind::Export(Format::Cgats)),
+    ] {
+        if let Some(stem) = lower.strip_suffix(suffix)
+            && !stem.is_empty()
+        {
+            return Some((kind, stem.to_string()));
+        }
+    }
+    None
+}
+
+/// One import: a file, or an export with its SRA CSV.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Unit {
+    main: String,
+    partner: Option<String>,
+    /// Rejected without reading (an SRA CSV with no export).
+    orphan: bool,
+}
+
+impl Unit {
+    fn names(&self) -> Vec<&str> {
+        std::iter::once(self.main.as_str())
+            .chain(self.partner.as_deref())
+            .collect()
+    }
+
+    fn shown(&self) -> String {
+        match &self.partner {
+            Some(p) => format!("{} and {p}", self.main),
+            None => self.main.clone(),
+        }
+    }
+}
+
+/// What a file looked like when last listed.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    size: u64,
+    mtime: Option<SystemTime>,
+    /// Since when size and mtime are what they are.
+    unchanged_since: Instant,
+    first_seen: Instant,
+}
+
+/// The watcher's memory between passes.
+#[derive(Debug, Default)]
+struct Watch {
+    seen: HashMap<String, Seen>,
+}
+
+/// The files of `dir` (names, kinds) with their size and modification time.
+/// A listed file: name, kind, pairing NAME, size, modification time.
+type Listed = (String, Kind, String, u64, Option<SystemTime>);
+
+fn list(dir: &Path) -> std::io::Result<Vec<Listed>> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let Ok(name) = entry.file_name().into_string() else {
+            continue;
+        };
+        let Some((kind, stem)) = kind_of(&name) else {
+            continue;
+        };
+        // Follows symbolic links; a file that vanished meanwhile is skipped.
+        let Ok(meta) = std::fs::metadata(entry.path()) else {
+            continue;
+        };
+        if !meta.is_file() {
+            continue;
+        }
+        out.push((name, kind, stem, meta.len(), meta.modified().ok()));
+    }
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    Ok(out)
+}
+
+/// Groups the files of a listing into imports. `ready(name)` says whether a file has settled;
+/// `waited(name)` whether it has waited `pair_wait` for its pair. Returns the units ready and
+/// how many files still wait.
+fn units(
+    files: &[(String, Kind, String)],
+    ready: impl Fn(&str) -> bool,
+    waited: impl Fn(&str) -> bool,
+) -> (Vec<Unit>, usize) {
+    let mut out = Vec::new();
+    let mut taken = 0;
+    let sra_of = |stem: &str| {
+        files
+            .iter()
+            .find(|(_, k, s)| *k == Kind::SraCsv && s == stem)
+            .map(|(n, _, _)| n.clone())
+    };
+    let has_export = |stem: &str| {
+        files
+            .iter()
+            .any(|(_, k, s)| matches!(k, Kind::Export(_)) && s == stem)
+    };
+    for (name, kind, stem) in files {
+        match kind {
+            Kind::ScanFile if ready(name) => out.push(Unit {
+                main: name.clone(),
+                partner: None,
+                orphan: false,
+            }),
+            Kind::Export(_) if ready(name) => match sra_of(stem) {
+                Some(sra) if ready(&sra) => out.push(Unit {
+                    main: name.clone(),
+                    partner: Some(sra),
+                    orphan: false,
+                }),
+                Some(_) => {}
+                None if waited(name) => out.push(Unit {
+                    main: name.clone(),
+                    partner: None,
+                    orphan: false,
+                }),
+                None => {}
+            },
+            Kind::SraCsv if ready(name) && !has_export(stem) && waited(name) => out.push(Unit {
+                main: name.clone(),
+                partner: None,
+                orphan: true,
+            }),
+            _ => {}
+        }
+    }
+    for u in &out {
+        taken += u.names().len();
+    }
+    (out, files.len() - taken)
+}
+
+/// The SHA-256 of a file, or of an export and its SRA CSV (each length-prefixed).
+pub fn content_hash(main: &[u8], partner: Option<&[u8]>) -> String {
+    let mut h = Sha256::new();
+    match partner {
+        None => h.update(main),
+        Some(p) => {
+            for part in [main, p] {
+                h.update((part.len() as u64).to_le_bytes());
+                h.update(part);
+            }
+        }
+    }
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// A free name for `name` in `dir`: itself, else `STEM-2.REST`, `STEM-3.REST`, …
+fn free_name(dir: &Path, name: &str) -> PathBuf {
+    let first = dir.join(name);
+    if !first.exists() {
+        return first;
+    }
+    let (stem, rest) = match name.find('.') {
+        Some(i) if i > 0 => (&name[..i], &name[i..]),
+        _ => (name, ""),
+    };
+    (2..)
+        .map(|n| dir.join(format!("{stem}-{n}{rest}")))
+        .find(|p| !p.exists())
+        .expect("an unused name")
+}
+
+/// Why a file could not be imported: its fault (moved to failed/) or the store's (tried again).
+enum Failure {
+    Rejected(String),
+    Retry(String),
+}
+
+/// The scans in a unit's files (read from `.importing/`), with their content hash.
+fn read_unit(dir: &Path, unit: &Unit, reference: &str) -> Result<(String, Vec<Scan>), String> {
+    let read =
+        |name: &str| std::fs::read(dir.join(name)).map_err(|e| format!("cannot read {name}: {e}"));
+    let main = read(&unit.main)?;
+    let partner = unit.partner.as_deref().map(read).transpose()?;
+    let hash = content_hash(&main, partner.as_deref());
+    let (kind, stem) = kind_of(&unit.main).ok_or("not a file the watch folder reads")?;
+    let text = |name: &str, bytes: Vec<u8>| {
+        String::from_utf8(bytes).map_err(|e| {
+            format!(
+                "{name}: not UTF-8 text (byte {}): export it as UTF-8",
+                e.utf8_error().valid_up_to()
+            )
+        })
+    };
+    let scans = match kind {
+        Kind::ScanFile => vec![Scan::from_json(&main).map_err(|e| format!("{}: {e}", unit.main))?],
+        Kind::SraCsv => {
+            return Err(format!(
+                "{}: an SRA CSV with no MA-T12 export beside it; drop it together with \
+                 {stem}.cxf, {stem}.txt or {stem}.cgats (the same NAME)",
+                unit.main
+            ));
+        }
+        Kind::Export(format) => {
+            let main_text = text(&unit.main, main)?;
+            let sra = match (&unit.partner, partner) {
+                (Some(name), Some(bytes)) => Some((name.clone(), text(name, bytes)?)),
+                _ => None,
+            };
+            formats::import(
+                format,
+                &unit.main,
+                &main_text,
+                sra.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
+                &ImportOptions {
+                    reference: reference.to_string(),
+                },
+            )
+            .map_err(|e| {
+                let mut m = e.to_string();
+                if unit.partner.is_none() {
+                    m.push_str(&format!(
+                        " (an MA-T12 export is imported with the SRA's CSV beside it, named \
+                         {stem}.sra.csv; none was there)"
+                    ));
+                }
+                m
+            })?
+        }
+    };
+    Ok((hash, scans))
+}
+
+impl Service {
+    /// Starts the watch-folder task: checks the folder, creates `done/`, `failed/` and
+    /// `.importing/` in it, then polls until shutdown.
+    pub(super) async fn start_ingest(&self, settings: IngestSettings) -> Result<(), ServiceError> {
+        let dir = &settings.dir;
+        if !dir.is_dir() {
+            return Err(ServiceError::BadRequest(format!(
+                "[ingest] watch = {}: no such directory; create it (writable by brdfd's user) \
+                 or fix the setting",
+                dir.display()
+            )));
+        }
+        for sub in [DONE, FAILED, IMPORTING] {
+            std::fs::create_dir_all(dir.join(sub)).map_err(|e| {
+                ServiceError::BadRequest(format!(
+                    "[ingest] watch = {}: cannot create {sub}/ in it: {e}; make the folder \
+                     writable by brdfd's user",
+                    dir.display()
+                ))
+            })?;
+        }
+        let status = Arc::new(Mutex::new(IngestStatus {
+            dir: dir.display().to_string(),
+            waiting: 0,
+            imported: 0,
+            rejected: 0,
+            last_file: None,
+            last_error: None,
+        }));
+        let _ = self.inner.ingest_status.set(status);
+        let (guard, mut stop) = self.task_slot().await?;
+        tracing::info!(dir = %dir.display(), "watching the folder for exports and scan files");
+        let service = self.clone();
+        tokio::spawn(async move {
+            let _guard = guard;
+            service.queue_pending_ingest_fits().await;
+            let mut watch = Watch::default();
+            loop {
+                service.ingest_pass(&settings, &mut watch).await;
+                tokio::select! {
+                    _ = tokio::time::sleep(settings.poll) => {}
+                    _ = stop.recv() => break,
+                }
+            }
+        });
+        Ok(())
+    }
+
+    fn ingest_stopping(&self) -> bool {
+        self.inner
+            .stopping
+            .load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    fn with_ingest_status(&self, f: impl FnOnce(&mut IngestStatus)) {
+        if let Some(s) = self.inner.ingest_status.get() {
+            f(&mut s.lock().unwrap_or_else(|p| p.into_inner()));
+        }
+    }
+
+    /// The watch folder's state, when one is configured.
+    pub fn ingest_status(&self) -> Option<IngestStatus> {
+        self.inner
+            .ingest_status
+            .get()
+            .map(|s| s.lock().unwrap_or_else(|p| p.into_inner()).clone())
+    }
+
+    /// Queues the fits of imported files whose fits a stopped daemon had not queued yet.
+    async fn queue_pending_ingest_fits(&self) {
+        let pending = match self.inner.store.ingested_awaiting_fits().await {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::error!(error = %e, "cannot read the watch folder's imports");
+                return;
+            }
+        };
+        for file in pending {
+            self.queue_ingest_fits(&file).await;
+        }
+    }
+
+    /// Processes the scans of an imported file and queues their fits (those with no fit yet),
+    /// then records that this was done.
+    async fn queue_ingest_fits(&self, file: &crate::store::IngestedFile) {
+        for &scan in &file.scans {
+            match self.inner.store.fits_for_scan(scan).await {
+                Ok(fits) if !fits.is_empty() => continue,
+                Ok(_) => {}
+                Err(e) => {
+                    tracing::error!(error = %e, %scan, "cannot read the fits of an imported scan");
+                    return;
+                }
+            }
+            if let Err(e) = self.process_and_queue(scan, &RefitRequest::default()).await {
+                // Not the file's fault once it is stored (e.g. a reading processing refuses):
+                // the scan stays, unfitted, as an import through the API would.
+                tracing::warn!(error = %e, %scan, file = %file.file_name, "imported scan not fitted");
+            }
+        }
+        if let Err(e) = self.inner.store.mark_ingest_fits_queued(file.id).await {
+            tracing::error!(error = %e, "cannot record that the imported scans' fits are queued");
+        }
+    }
+
+    /// One pass: finish what is in `.importing/`, then take the files that have settled.
+    async fn ingest_pass(&self, settings: &IngestSettings, watch: &mut Watch) {
+        let dir = &settings.dir;
+        let importing = dir.join(IMPORTING);
+        // 1. In flight (left by a stopped daemon, or a store failure at the last pass).
+        match list(&importing) {
+            Ok(files) if !files.is_empty() => {
+                let files: Vec<_> = files.into_iter().map(|(n, k, s, _, _)| (n, k, s)).collect();
+                let (units, _) = units(&files, |_| true, |_| true);
+                for unit in units {
+                    if self.ingest_stopping() {
+                        return;
+                    }
+                    self.finish(settings, &unit, true).await;
+                }
+            }
+            Ok(_) => {}
+            Err(e) => self.note_error(format!("cannot list {}: {e}", importing.display())),
+        }
+        // 2. New files that have settled.
+        let listing = match list(dir) {
+            Ok(l) => l,
+            Err(e) => {
+                self.note_error(format!("cannot list {}: {e}", dir.display()));
+                return;
+            }
+        };
+        let now = Instant::now();
+        let mut seen = HashMap::with_capacity(listing.len());
+        for (name, _, _, size, mtime) in &listing {
+            let s = match watch.seen.get(name) {
+                Some(s) if s.size == *size && s.mtime == *mtime => *s,
+                Some(s) => Seen {
+                    size: *size,
+                    mtime: *mtime,
+                    unchanged_since: now,
+                    first_seen: s.first_seen,
+                },
+                None => Seen {
+                    size: *size,
+                    mtime: *mtime,
+                    unchanged_since: now,
+                    first_seen: now,
+                },
+            };
+            seen.insert(name.clone(), s);
+        }
+        watch.seen = seen;
+        let files: Vec<_> = listing
+            .into_iter()
+            .map(|(n, k, s, _, _)| (n, k, s))
+            .collect();
+        let (units, waiting) = units(
+            &files,
+            |n| {
+                watch
+                    .seen
+                    .get(n)
+                    .is_some_and(|s| now.duration_since(s.unchanged_since) >= settings.settle)
+            },
+            |n| {
+                watch
+                    .seen
+                    .get(n)
+                    .is_some_and(|s| now.duration_since(s.first_seen) >= settings.pair_wait)
+            },
+        );
+        self.with_ingest_status(|s| s.waiting = waiting);
+        for unit in units {
+            if self.ingest_stopping() {
+                return;
+            }
+            // A file of the same name still in flight (a store failure being retried) is not
+            // replaced: this one waits until that one is done.
+            if unit.names().iter().any(|n| importing.join(n).exists()) {
+                continue;
+            }
+            // Into .importing/ first: from here on the file is the daemon's.
+            let mut moved = Vec::new();
+            let mut failed = None;
+            for name in unit.names() {
+                match std::fs::rename(dir.join(name), importing.join(name)) {
+                    Ok(()) => moved.push(name),
+                    Err(e) => {
+                        failed = Some(format!("cannot move {name} into {IMPORTING}/: {e}"));
+                        break;
+                    }
+                }
+            }
+            for name in unit.names() {
+                watch.seen.remove(name);
+            }
+            if let Some(e) = failed {
+                // Put back what moved, to be tried again at the next pass.
+                for name in moved {
+                    let _ = std::fs::rename(importing.join(name), dir.join(name));
+                }
+                self.note_error(e);
+                continue;
+            }
+            self.finish(settings, &unit, false).await;
+        }
+    }
+
+    fn note_error(&self, message: String) {
+        let mut changed = false;
+        self.with_ingest_status(|s| {
+            changed = s.last_error.as_deref() != Some(message.as_str());
+            s.last_error = Some(message.clone());
+        });
+        if changed {
+            tracing::error!(error = %message, "watch folder");
+        }
+    }
+
+    /// Imports a unit whose files are in `.importing/`, and moves them to `done/` or
+    /// `failed/`. `recovering`: the files were found in `.importing/` (a previous pass or run
+    /// took them), so a recorded hash means that import committed.
+    async fn finish(&self, settings: &IngestSettings, unit: &Unit, recovering: bool) {
+        let dir = &settings.dir;
+        let importing = dir.join(IMPORTING);
+        let outcome = if unit.orphan {
+            Err(Failure::Rejected(format!(
+                "{}: an SRA CSV with no MA-T12 export beside it within {} s; drop it together \
+                 with its export (NAME.cxf, NAME.txt or NAME.cgats for NAME.sra.csv)",
+                unit.main,
+                settings.pair_wait.as_secs()
+            )))
+        } else {
+            self.import_unit(settings, unit, recovering).await
+        };
+        match outcome {
+            Ok(done) => {
+                for name in unit.names() {
+                    let to = free_name(&dir.join(DONE), name);
+                    if let Err(e) = std::fs::rename(importing.join(name), &to) {
+                        self.note_error(format!("cannot move {name} into {DONE}/: {e}"));
+                    }
+                }
+                if let Some((file, scans, sha256)) = done {
+                    self.with_ingest_status(|s| {
+                        s.imported += 1;
+                        s.last_file = Some(file.clone());
+                    });
+                    self.inner.events.send(Event::FileImported {
+                        file,
+                        scans,
+                        sha256,
+                    });
+                }
+            }
+            Err(Failure::Retry(message)) => {
+                self.note_error(format!(
+                    "{}: {message}; left in {IMPORTING}/ and tried again",
+                    unit.shown()
+                ));
+            }
+            Err(Failure::Rejected(reason)) => {
+                let failed = dir.join(FAILED);
+                for name in unit.names() {
+                    let to = free_name(&failed, name);
+                    let note = PathBuf::from(format!("{}.error.txt", to.display()));
+                    let text = format!(
+                        "{} was not imported into the store.\n\n{reason}\n\nFix the file and \
+                         drop it into {} again.\n",
+                        name,
+                        dir.display()
+                    );
+                    if let Err(e) = std::fs::write(&note, text)
+                        .and_then(|()| std::fs::rename(importing.join(name), &to))
+                    {
+                        self.note_error(format!("cannot move {name} into {FAILED}/: {e}"));
+                    }
+                }
+                let file = unit.shown();
+                self.with_ingest_status(|s| {
+                    s.rejected += 1;
+                    s.last_file = Some(file.clone());
+                    s.last_error = Some(format!("{file}: {reason}"));
+                });
+                self.inner.events.send(Event::FileRejected { file, reason });
+            }
+        }
+    }
+
+    /// Reads, checks and stores one unit. `Ok(Some(..))`: imported now (file, scans, hash);
+    /// `Ok(None)`: an import that committed before a stop (recovering).
+    #[allow(clippy::type_complexity)]
+    async fn import_unit(
+        &self,
+        settings: &IngestSettings,
+        unit: &Unit,
+        recovering: bool,
+    ) -> Result<Option<(String, Vec<crate::store::ScanId>, String)>, Failure> {
+        let importing = settings.dir.join(IMPORTING);
+        let (hash, scans) = {
+            let unit = unit.clone();
+            let reference = settings.reference.clone();
+            let dir = importing.clone();
+            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference))
+                .await
+                .map_err(|e| Failure::Retry(format!("reading the file failed: {e}")))?
+                .map_err(Failure::Rejected)?
+        };
+        for s in &scans {
+            check_name("sample name", &s.sample)
+                .and_then(|()| check_name("reference name", &s.reference.name))
+                .map_err(|e| Failure::Rejected(format!("{}: {e}", unit.main)))?;
+        }
+        let detail = match &unit.partner {
+            Some(p) => format!(
+                "imported from {} and {p}, instrument software export",
+                unit.main
+            ),
+            None if kind_of(&unit.main).is_some_and(|(k, _)| k == Kind::ScanFile) => {
+                format!("imported from {}, brdfd.scan/1 file", unit.main)
+            }
+            None => format!("imported from {}, instrument software export", unit.main),
+        };
+        let provenance = Provenance {
+            source: Source::Imported,
+            source_detail: Some(detail),
+            ..Provenance::unknown()
+        };
+        let names: Vec<String> = scans
+            .iter()
+            .map(|s| format!("{}{IMPORTED_SUFFIX}", s.reference.name))
+            .collect();
+        let readings: Vec<_> = scans
+            .iter()
+            .map(|s| {
+                (
+                    new_readings(&s.reference.readings),
+                    new_readings(&s.readings),
+                )
+            })
+            .collect();
+        let imports: Vec<ImportedScan<'_>> = scans
+            .iter()
+            .zip(&names)
+            .zip(&readings)
+            .map(|((s, name), (r, m))| ImportedScan {
+                sample_name: &s.sample,
+                reference_name: name,
+                provenance: &provenance,
+                reference_readings: r,
+                readings: m,
+            })
+            .collect();
+        let stored = self
+            .timed_store(self.inner.store.import_file(
+                &hash,
+                &unit.main,
+                unit.partner.as_deref(),
+                &imports,
+            ))
+            .await;
+        match stored {
+            Ok(FileImport::Imported(file)) => {
+                for &scan in &file.scans {
+                    self.inner.events.send(Event::ScanComplete { scan });
+                }
+                self.queue_ingest_fits(&file).await;
+                Ok(Some((unit.shown(), file.scans, hash)))
+            }
+            Ok(FileImport::AlreadyImported(file)) if recovering => {
+                // This run or the last took it and committed; only the move was left.
+                if !file.fits_queued {
+                    self.queue_ingest_fits(&file).await;
+                }
+                Ok(None)
+            }
+            Ok(FileImport::AlreadyImported(file)) => {
+                let scans: Vec<String> = file.scans.iter().map(|s| s.to_string()).collect();
+                Err(Failure::Rejected(format!(
+                    "already imported: the same content (SHA-256 {hash}) was imported from {} \
+                     at {} as scan{} {}; nothing was imported again",
+                    match &file.partner_name {
+                        Some(p) => format!("{} and {p}", file.file_name),
+                        None => file.file_name.clone(),
+                    },
+                    formats::rfc3339_utc(file.imported_at_ms / 1000),
+                    if scans.len() == 1 { "" } else { "s" },
+                    scans.join(", ")
+                )))
+            }
+            Err(StoreError::Database(e)) => Err(Failure::Retry(format!("the store failed: {e}"))),
+            Err(e) => Err(Failure::Rejected(format!("{}: {e}", unit.main))),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn files(names: &[&str]) -> Vec<(String, Kind, String)> {
+        names
+            .iter()
+            .map(|n| {
+                let (k, s) = kind_of(n).unwrap();
+                (n.to_string(), k, s)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn names_say_what_a_file_is_and_how_it_pairs() {
+        assert_eq!(
+            kind_of("Panel 3.CXF"),
+            Some((Kind::Export(Format::Cxf3), "panel 3".into()))
+        );
+        assert_eq!(
+            kind_of("a.txt"),
+            Some((Kind::Export(Format::Cgats), "a".into()))
+        );
+        assert_eq!(kind_of("a.SRA.csv"), Some((Kind::SraCsv, "a".into())));
+        assert_eq!(kind_of("a.scan.json"), Some((Kind::ScanFile, "a".into())));
+        for ignored in [".a.cxf", "a.csv", "a.json", "a.cxf.part", ".scan.json", "x"] {
+            assert_eq!(kind_of(ignored), None, "{ignored}");
+        }
+    }
+
+    #[test]
+    fn exports_pair_with_their_sra_csv_and_wait_for_it() {
+        let f = files(&["a.cxf", "a.sra.csv", "b.txt", "c.sra.csv", "d.scan.json"]);
+        // Everything settled, nothing waited long: a pairs, d goes alone, b and c wait.
+        let (u, waiting) = units(&f, |_| true, |_| false);
+        assert_eq!(
+            u,
+            vec![
+                Unit {
+                    main: "a.cxf".into(),
+                    partner: Some("a.sra.csv".into()),
+                    orphan: false
+                },
+                Unit {
+                    main: "d.scan.json".into(),
+                    partner: None,
+                    orphan: false
+                },
+            ]
+        );
+        assert_eq!(waiting, 2);
+        // After pair_wait: b alone, c rejected as an orphan.
+        let (u, waiting) = units(&f, |_| true, |_| true);
+        assert_eq!(u.len(), 4);
+        assert!(u.contains(&Unit {
+            main: "b.txt".into(),
+            partner: None,
+            orphan: false
+        }));
+        assert!(u.contains(&Unit {
+            main: "c.sra.csv".into(),
+            partner: None,
+            orphan: true
+        }));
+        assert_eq!(waiting, 0);
+        // A pair waits while its CSV is still changing.
+        let (u, waiting) = units(&f, |n| n != "a.sra.csv", |_| true);
+        assert!(!u.iter().any(|u| u.main == "a.cxf"));
+        assert_eq!(waiting, 2);
+    }
+
+    #[test]
+    fn hashes_and_free_names() {
+        assert_eq!(
+            content_hash(b"abc", None),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+        // Moving bytes between the two files of a pair changes the hash.
+        assert_ne!(
+            content_hash(b"ab", Some(b"c")),
+            content_hash(b"a", Some(b"bc"))
+        );
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(
+            free_name(dir.path(), "p.sra.csv"),
+            dir.path().join("p.sra.csv")
+        );
+        std::fs::write(dir.path().join("p.sra.csv"), "").unwrap();
+        assert_eq!(
+            free_name(dir.path(), "p.sra.csv"),
+            dir.path().join("p-2.sra.csv")
+        );
+    }
+}

@@ -1,0 +1,869 @@
+//! The watch folder (`[ingest] watch`, src/service/ingest.rs) against a live `brdfd serve`
+//! child on loopback: simulated instruments, a real SQLite store and folder in a temporary
+//! directory, every request with the token. Each test ends by checking that the store and the
+//! folders agree: every file dropped is in `done/` (its scans stored once, with their
+//! provenance) or in `failed/` beside its `.error.txt` (nothing stored), and nothing is left in
+//! the folder or in `.importing/`.
+
+// `serial()` is held across each whole test on purpose.
+#![allow(clippy::await_holding_lock)]
+
+mod common;
+
+use std::collections::BTreeSet;
+use std::io::{BufRead, BufReader, Write};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use brdfd::client::Client;
+use brdfd::scan::Scan;
+use serde_json::Value;
+
+use common::*;
+
+struct Daemon {
+    child: Child,
+    addr: SocketAddr,
+    client: Client,
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Daemon {
+    /// SIGTERM, and the exit status must be success.
+    fn stop(mut self) {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        let status = self.child.wait().unwrap();
+        assert!(status.success(), "brdfd serve ended with {status}");
+    }
+
+    /// SIGKILL: no chance to finish anything.
+    fn kill(mut self) {
+        self.child.kill().unwrap();
+        self.child.wait().unwrap();
+    }
+
+    fn ingest(&self) -> Value {
+        self.client.get("/status").unwrap()["ingest"].clone()
+    }
+}
+
+/// The test's directory: `brdfd.toml`, the store and the watch folder `inbox/`.
+struct Lab {
+    _tmp: tempfile::TempDir,
+    dir: PathBuf,
+    inbox: PathBuf,
+}
+
+impl Lab {
+    fn new(settle_ms: u64, pair_wait_ms: u64) -> Lab {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
+        let inbox = dir.join("inbox");
+        std::fs::create_dir(&inbox).unwrap();
+        let text = format!(
+            "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\n\n[log]\nlevel = \"warn\"\n\n\
+             [fit]\ncost_functions = [\"cf2\"]\nbootstrap = 0\n\n\
+             [ingest]\nwatch = \"{}\"\nsettle_ms = {settle_ms}\npoll_ms = 20\npair_wait_ms = {pair_wait_ms}\n\n\
+             [devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n",
+            dir.join("brdfd.db").display(),
+            inbox.display()
+        );
+        std::fs::write(dir.join("brdfd.toml"), text).unwrap();
+        Lab {
+            _tmp: tmp,
+            dir,
+            inbox,
+        }
+    }
+
+    fn serve(&self) -> Daemon {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_brdfd"))
+            .args(["serve", "--config"])
+            .arg(self.dir.join("brdfd.toml"))
+            .env_remove("BRDFD_TOKEN")
+            .env_remove("BRDFD_CONFIG")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("brdfd serve starts");
+        let stdout = child.stdout.take().unwrap();
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut line = String::new();
+            let _ = BufReader::new(stdout).read_line(&mut line);
+            let _ = tx.send(line);
+        });
+        let line = rx
+            .recv_timeout(STEP_TIMEOUT)
+            .expect("the daemon prints where it listens");
+        let addr: SocketAddr = line
+            .split("http://")
+            .nth(1)
+            .and_then(|rest| rest.split_whitespace().next())
+            .and_then(|a| a.parse().ok())
+            .unwrap_or_else(|| panic!("no address in {line:?}"));
+        Daemon {
+            child,
+            addr,
+            client: client_of_serve(addr, &self.dir),
+        }
+    }
+
+    fn sub(&self, name: &str) -> PathBuf {
+        self.inbox.join(name)
+    }
+
+    /// The file names in `inbox/SUB` (`""`: the folder itself, files only).
+    fn names(&self, sub: &str) -> BTreeSet<String> {
+        std::fs::read_dir(self.inbox.join(sub))
+            .unwrap()
+            .map(|e| e.unwrap())
+            .filter(|e| e.file_type().unwrap().is_file())
+            .map(|e| e.file_name().into_string().unwrap())
+            .collect()
+    }
+
+    /// Everything dropped has been dealt with: the folder and `.importing/` are empty.
+    fn settled(&self) -> bool {
+        self.names("").is_empty() && self.names(".importing").is_empty()
+    }
+}
+
+/// Polls `cond` until it holds, failing after [`STEP_TIMEOUT`] with `what`.
+fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
+    let deadline = Instant::now() + STEP_TIMEOUT;
+    while !cond() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn example(name: &str) -> Scan {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(format!("{name}.scan.json"));
+    Scan::read_file(path).unwrap()
+}
+
+/// What the MA-T12's software writes for one session: the tile and the sample by name, 12
+/// rows each (the shape `src/formats/cgats.rs` reads by object name).
+fn cgats_export(scan: &Scan) -> String {
+    let mut t = String::from(
+        "CGATS.17\nORIGINATOR \"MA-T12 software\"\nKEYWORD \"GEOMETRY\"\nBEGIN_DATA_FORMAT\nSAMPLE_ID SAMPLE_NAME GEOMETRY",
+    );
+    for nm in brdfd::spectral::wavelengths_nm() {
+        t += &format!(" SPECTRAL_NM{nm}");
+    }
+    t += "\nEND_DATA_FORMAT\nBEGIN_DATA\n";
+    let mut id = 0;
+    for (name, readings) in [
+        (scan.reference.name.as_str(), &scan.reference.readings),
+        (scan.sample.as_str(), &scan.readings),
+    ] {
+        for g in brdfd::geometry::ma_t12() {
+            id += 1;
+            t += &format!("{id} \"{name}\" {}", g.name);
+            for v in readings.ma_t12[g.index] {
+                t += &format!(" {v}");
+            }
+            t += "\n";
+        }
+    }
+    t += "END_DATA\n";
+    t
+}
+
+/// The same as X-Rite CxF3 (the shape `src/formats/cxf3.rs` reads by object name: the grid
+/// in the specification, bands beyond 400–700 nm).
+fn cxf3_export(scan: &Scan) -> String {
+    let mut xml = format!(
+        "<?xml version=\"1.0\"?>\n<CxF xmlns=\"{}\"><Resources><ObjectCollection>\n",
+        brdfd::formats::cxf3::NAMESPACE
+    );
+    for (i, (name, r)) in [
+        (scan.reference.name.as_str(), &scan.reference.readings),
+        (scan.sample.as_str(), &scan.readings),
+    ]
+    .iter()
+    .enumerate()
+    {
+        xml += &format!(
+            "<Object ObjectType=\"Standard\" Name=\"{name}\" Id=\"x{i}\"><CreationDate>2024-05-01T12:00:00Z</CreationDate><ColorValues>\n"
+        );
+        for g in brdfd::geometry::ma_t12() {
+            let vals: Vec<String> = std::iter::once("0.5".to_string())
+                .chain(r.ma_t12[g.index].iter().map(|v| v.to_string()))
+                .chain(std::iter::once("0.5".to_string()))
+                .collect();
+            xml += &format!(
+                "<ReflectanceSpectrum ColorSpecification=\"m{}\">{}</ReflectanceSpectrum>\n",
+                g.index,
+                vals.join(" ")
+            );
+        }
+        xml += "</ColorValues></Object>\n";
+    }
+    xml += "</ObjectCollection><ColorSpecificationCollection>";
+    for g in brdfd::geometry::ma_t12() {
+        xml += &format!(
+            "<ColorSpecification Id=\"m{}\"><MeasurementSpec><MeasurementType>Spectrum_Reflectance</MeasurementType><GeometryChoice><MultiAngle><BRDFAngle Notation=\"{}\"><IlluminationAngle>{}</IlluminationAngle><Aspecular>{}</Aspecular></BRDFAngle></MultiAngle></GeometryChoice><WavelengthRange StartWL=\"390\" Increment=\"10\"/></MeasurementSpec></ColorSpecification>",
+            g.index, g.name, g.theta_i_deg, g.aspecular_deg
+        );
+    }
+    xml += "</ColorSpecificationCollection></Resources></CxF>\n";
+    xml
+}
+
+fn sra_csv(scan: &Scan) -> String {
+    brdfd::formats::sra::write_scans(std::slice::from_ref(scan))
+}
+
+/// Every scan in the store, newest first (the daemon's listing).
+fn scans(client: &Client) -> Vec<Value> {
+    let v = client.get("/scans?limit=500").unwrap();
+    v.as_array()
+        .or_else(|| v["scans"].as_array())
+        .unwrap_or_else(|| panic!("no scan list in {v}"))
+        .clone()
+}
+
+/// The rows of `ingested_files` (hash, file name), from the stopped daemon's store.
+fn ingested(lab: &Lab) -> Vec<(String, String)> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let store = brdfd::store::Store::open(lab.dir.join("brdfd.db"))
+            .await
+            .unwrap();
+        let files = store.ingested_files().await.unwrap();
+        // Each file's scans are in the store, complete, with the file in their provenance.
+        for f in &files {
+            assert!(!f.scans.is_empty());
+            for &s in &f.scans {
+                let d = store.scan_detail(s).await.unwrap();
+                assert_eq!(d.scan.state, brdfd::store::ScanState::Complete);
+                let detail = d.scan.provenance.source_detail.unwrap_or_default();
+                assert!(detail.contains(&f.file_name), "{detail} / {}", f.file_name);
+            }
+        }
+        store.close().await;
+        files.into_iter().map(|f| (f.sha256, f.file_name)).collect()
+    })
+}
+
+/// Writes `bytes` to `path` in `pieces` parts, flushing each.
+fn write_in_pieces(path: &Path, bytes: &[u8], pieces: usize, between: impl Fn(usize)) {
+    let mut f = std::fs::File::create(path).unwrap();
+    let size = bytes.len().div_ceil(pieces);
+    for (i, chunk) in bytes.chunks(size).enumerate() {
+        f.write_all(chunk).unwrap();
+        f.flush().unwrap();
+        between(i);
+    }
+}
+
+#[test]
+fn files_written_slowly_in_pieces_are_imported_whole_and_fitted() {
+    let _serial = serial();
+    // A settle time long enough that a pause between two pieces never reaches it.
+    let lab = Lab::new(3000, 600_000);
+    let daemon = lab.serve();
+    let mut events = daemon.client.events().unwrap();
+    let scan = example("t-sky-blue");
+    let export = cgats_export(&scan);
+    let csv = sra_csv(&scan);
+
+    // The export in ten pieces; after the first, wait until the daemon has seen the partial
+    // file (it counts as waiting), so the pieces really arrive under its eyes.
+    write_in_pieces(&lab.sub("session 1.cgats"), export.as_bytes(), 10, |i| {
+        if i == 0 {
+            wait_for("the daemon to see the partial export", || {
+                daemon.ingest()["waiting"].as_u64() == Some(1)
+            });
+        }
+        std::thread::sleep(Duration::from_millis(30));
+    });
+    // The export is complete but its SRA CSV is not there: it waits for it (pair_wait is
+    // long), however long it has settled.
+    write_in_pieces(&lab.sub("session 1.sra.csv"), csv.as_bytes(), 3, |_| {
+        std::thread::sleep(Duration::from_millis(30))
+    });
+    wait_for("both files in done/", || {
+        lab.names("done") == BTreeSet::from(["session 1.cgats".into(), "session 1.sra.csv".into()])
+    });
+    assert!(lab.settled());
+    assert!(lab.names("failed").is_empty(), "{:?}", lab.names("failed"));
+
+    // One scan, the export's readings bit for bit, its provenance naming both files.
+    let list = scans(&daemon.client);
+    assert_eq!(list.len(), 1, "{list:?}");
+    let id = list[0]["id"].as_i64().unwrap();
+    let shown = daemon.client.get(&format!("/scans/{id}")).unwrap();
+    assert_eq!(shown["scan"]["sample"], scan.sample.as_str());
+    assert_eq!(shown["scan"]["provenance"]["source"], "imported");
+    assert_eq!(
+        shown["scan"]["provenance"]["source_detail"],
+        "imported from session 1.cgats and session 1.sra.csv, instrument software export"
+    );
+    let exported = Scan::from_json(
+        daemon
+            .client
+            .get_text(&format!("/scans/{id}/export"))
+            .unwrap()
+            .as_bytes(),
+    )
+    .unwrap();
+    assert_eq!(exported.readings, scan.readings);
+    assert_eq!(exported.reference.readings, scan.reference.readings);
+    // Fitted like a measured scan: the configured cost function's fit is queued or further.
+    let fits = shown["fits"].as_array().unwrap();
+    assert_eq!(fits.len(), 1, "{shown}");
+
+    // The event, and the status.
+    let imported = events
+        .by_ref()
+        .find(|e| e["type"] == "file_imported")
+        .expect("a file_imported event");
+    assert_eq!(imported["file"], "session 1.cgats and session 1.sra.csv");
+    assert_eq!(imported["scans"][0].as_i64(), Some(id));
+    assert_eq!(imported["sha256"].as_str().unwrap().len(), 64);
+    let status = daemon.ingest();
+    assert_eq!(status["imported"], 1, "{status}");
+    assert_eq!(status["rejected"], 0, "{status}");
+    assert_eq!(status["waiting"], 0, "{status}");
+    let cli = run_brdfd(
+        &[
+            "status",
+            "--config",
+            lab.dir.join("brdfd.toml").to_str().unwrap(),
+            "--addr",
+            &daemon.addr.to_string(),
+        ],
+        None,
+    );
+    let out = String::from_utf8_lossy(&cli.stdout);
+    assert!(cli.status.success(), "{out}");
+    assert!(
+        out.contains("inbox: 1 imported, 0 rejected since start, 0 waiting"),
+        "{out}"
+    );
+    daemon.stop();
+    let rows = ingested(&lab);
+    assert_eq!(rows.len(), 1);
+    assert_eq!(rows[0].1, "session 1.cgats");
+}
+
+#[test]
+fn broken_files_go_to_failed_with_the_reason_and_nothing_is_stored() {
+    let _serial = serial();
+    let lab = Lab::new(100, 300);
+    let daemon = lab.serve();
+    let mut events = daemon.client.events().unwrap();
+    let scan = example("t-pebble-grey");
+
+    // A number that is not one, on a known line of the export.
+    let export = cgats_export(&scan);
+    let mut lines: Vec<String> = export.lines().map(str::to_string).collect();
+    let line = lines.iter().position(|l| l.starts_with("14 ")).unwrap() + 1;
+    // The last value of data row 14 (SPECTRAL_NM700) becomes a word.
+    let (row, _) = lines[line - 1].rsplit_once(' ').unwrap();
+    lines[line - 1] = format!("{row} zero");
+    let bad = lines.join("\n") + "\n";
+    std::fs::write(lab.sub("bad.txt"), &bad).unwrap();
+    std::fs::write(lab.sub("bad.sra.csv"), sra_csv(&scan)).unwrap();
+    // A scan file cut short, an SRA CSV without its export, and a file the folder ignores.
+    let json = scan.to_json_pretty().unwrap();
+    std::fs::write(lab.sub("cut.scan.json"), &json[..json.len() / 2]).unwrap();
+    std::fs::write(lab.sub("lonely.sra.csv"), sra_csv(&scan)).unwrap();
+    std::fs::write(lab.sub("notes.md"), "not for brdfd").unwrap();
+
+    wait_for("four files and their reasons in failed/", || {
+        lab.names("failed").len() == 8
+    });
+    assert_eq!(
+        lab.names(""),
+        BTreeSet::from(["notes.md".into()]),
+        "only the unknown file stays"
+    );
+    assert!(lab.names(".importing").is_empty());
+    assert!(lab.names("done").is_empty());
+    let reason = |name: &str| {
+        std::fs::read_to_string(lab.sub("failed").join(format!("{name}.error.txt"))).unwrap()
+    };
+    let why = reason("bad.txt");
+    assert!(
+        why.contains(&format!("bad.txt:{line}: SPECTRAL_NM700")),
+        "{why}"
+    );
+    assert!(why.contains("drop it into"), "{why}");
+    assert_eq!(
+        reason("bad.sra.csv"),
+        why.replace("bad.txt was", "bad.sra.csv was")
+    );
+    let why = reason("cut.scan.json");
+    assert!(why.contains("cut.scan.json"), "{why}");
+    let why = reason("lonely.sra.csv");
+    assert!(why.contains("no MA-T12 export beside it"), "{why}");
+
+    // Nothing stored; three rejections (the pair counts once), each an event.
+    assert!(scans(&daemon.client).is_empty());
+    let status = daemon.ingest();
+    assert_eq!(status["rejected"], 3, "{status}");
+    assert_eq!(status["imported"], 0, "{status}");
+    assert!(status["last_error"].as_str().is_some(), "{status}");
+    let rejected: BTreeSet<String> = events
+        .by_ref()
+        .filter(|e| e["type"] == "file_rejected")
+        .take(3)
+        .map(|e| e["file"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(
+        rejected,
+        BTreeSet::from([
+            "bad.txt and bad.sra.csv".into(),
+            "cut.scan.json".into(),
+            "lonely.sra.csv".into()
+        ])
+    );
+    daemon.stop();
+    assert!(ingested(&lab).is_empty());
+}
+
+#[test]
+fn the_same_content_twice_is_imported_once() {
+    let _serial = serial();
+    let lab = Lab::new(100, 600_000);
+    let daemon = lab.serve();
+    let bytes = example("t-sky-blue").to_json_pretty().unwrap();
+    std::fs::write(lab.sub("a.scan.json"), &bytes).unwrap();
+    wait_for("a.scan.json in done/", || lab.names("done").len() == 1);
+    // The same bytes again, under the same name and under another.
+    std::fs::write(lab.sub("a.scan.json"), &bytes).unwrap();
+    std::fs::write(lab.sub("b.scan.json"), &bytes).unwrap();
+    wait_for("both copies in failed/", || lab.names("failed").len() == 4);
+    assert!(lab.settled());
+    assert_eq!(
+        lab.names("failed"),
+        BTreeSet::from([
+            "a.scan.json".into(),
+            "a.scan.json.error.txt".into(),
+            "b.scan.json".into(),
+            "b.scan.json.error.txt".into(),
+        ])
+    );
+    let why = std::fs::read_to_string(lab.sub("failed/b.scan.json.error.txt")).unwrap();
+    assert!(why.contains("already imported"), "{why}");
+    assert!(why.contains("from a.scan.json"), "{why}");
+    assert_eq!(scans(&daemon.client).len(), 1);
+    // A second drop of a name already in done/ keeps both files there.
+    let other = example("t-pebble-grey").to_json_pretty().unwrap();
+    std::fs::write(lab.sub("a.scan.json"), &other).unwrap();
+    wait_for("the new a.scan.json in done/", || {
+        lab.names("done").len() == 2
+    });
+    assert_eq!(
+        lab.names("done"),
+        BTreeSet::from(["a.scan.json".into(), "a-2.scan.json".into()])
+    );
+    assert_eq!(scans(&daemon.client).len(), 2);
+    daemon.stop();
+    assert_eq!(ingested(&lab).len(), 2);
+}
+
+/// `n` distinct scans: the examples under numbered sample names.
+fn many_scans(n: usize) -> Vec<Scan> {
+    let names = [
+        "t-freesia-pink",
+        "t-lavender-blue",
+        "t-mandarin-orange",
+        "t-manzana-green",
+        "t-pebble-grey",
+        "t-prairie-green",
+        "t-saffron-yellow",
+        "t-sky-blue",
+    ];
+    let examples: Vec<Scan> = names.iter().map(|n| example(n)).collect();
+    (0..n)
+        .map(|i| {
+            let mut s = examples[i % examples.len()].clone();
+            s.sample = format!("{} #{i}", s.sample);
+            s
+        })
+        .collect()
+}
+
+/// The scan files of `n` distinct samples (the examples under numbered names).
+fn many(n: usize) -> Vec<(String, String)> {
+    many_scans(n)
+        .into_iter()
+        .enumerate()
+        .map(|(i, s)| (format!("s{i:03}.scan.json"), s.to_json_pretty().unwrap()))
+        .collect()
+}
+
+#[test]
+fn a_hundred_files_at_once_are_each_imported_once() {
+    let _serial = serial();
+    let lab = Lab::new(100, 600_000);
+    let daemon = lab.serve();
+    // 60 scan files and 20 MA-T12 exports (10 CGATS, 10 CxF3), each with its SRA CSV: 100
+    // files, 80 imports.
+    let mut files = many(60);
+    let mut mains = BTreeSet::new();
+    for (i, mut scan) in many_scans(20).into_iter().enumerate() {
+        scan.sample = format!("{} (export {i})", scan.sample);
+        let (name, text) = if i % 2 == 0 {
+            (format!("export {i:02}.cgats"), cgats_export(&scan))
+        } else {
+            (format!("Export {i:02}.CXF"), cxf3_export(&scan))
+        };
+        files.push((name.clone(), text));
+        files.push((format!("export {i:02}.sra.csv"), sra_csv(&scan)));
+        mains.insert(name);
+    }
+    assert_eq!(files.len(), 100);
+    for (name, text) in &files {
+        std::fs::write(lab.sub(name), text).unwrap();
+    }
+    wait_for("100 files in done/", || lab.names("done").len() == 100);
+    assert!(lab.settled());
+    assert!(lab.names("failed").is_empty(), "{:?}", lab.names("failed"));
+    let expected: BTreeSet<String> = files.iter().map(|(n, _)| n.clone()).collect();
+    assert_eq!(lab.names("done"), expected);
+    let samples: BTreeSet<String> = scans(&daemon.client)
+        .iter()
+        .map(|s| s["sample"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(samples.len(), 80);
+    assert_eq!(daemon.ingest()["imported"], 80);
+    daemon.stop();
+    let rows = ingested(&lab);
+    assert_eq!(rows.len(), 80);
+    let names: BTreeSet<String> = rows.into_iter().map(|(_, n)| n).collect();
+    let mut imported: BTreeSet<String> = files
+        .iter()
+        .map(|(n, _)| n.clone())
+        .filter(|n| n.ends_with(".scan.json"))
+        .collect();
+    imported.extend(mains);
+    assert_eq!(names, imported);
+}
+
+#[test]
+fn a_daemon_killed_mid_import_finishes_at_the_next_start() {
+    let _serial = serial();
+    let lab = Lab::new(100, 600_000);
+    let files = many(40);
+    let daemon = lab.serve();
+    for (name, text) in &files {
+        std::fs::write(lab.sub(name), text).unwrap();
+    }
+    wait_for("some files imported", || {
+        daemon.ingest()["imported"].as_u64().unwrap_or(0) >= 3
+    });
+    daemon.kill();
+    let done_before = lab.names("done").len();
+    // Whatever the kill interrupted, add both in-flight states by hand: a file whose import
+    // committed but which was not moved yet (a copy of one in done/ put back into
+    // .importing/), and a file moved into .importing/ whose import never started.
+    let committed = lab.names("done").into_iter().next().unwrap();
+    std::fs::copy(
+        lab.sub("done").join(&committed),
+        lab.sub(".importing").join("committed.scan.json"),
+    )
+    .unwrap();
+    let mut fresh = example("t-sky-blue");
+    fresh.sample = "in flight".into();
+    std::fs::write(
+        lab.sub(".importing/fresh.scan.json"),
+        fresh.to_json_pretty().unwrap(),
+    )
+    .unwrap();
+
+    let daemon = lab.serve();
+    wait_for("every file in done/", || lab.names("done").len() == 42);
+    assert!(lab.settled(), "{:?}", lab.names(".importing"));
+    assert!(lab.names("failed").is_empty(), "{:?}", lab.names("failed"));
+    // How far the first run got varies; the two hand-made states are there either way.
+    eprintln!("{done_before} of 40 files were done when the daemon was killed");
+    let samples: Vec<String> = scans(&daemon.client)
+        .iter()
+        .map(|s| s["sample"].as_str().unwrap().to_string())
+        .collect();
+    // 40 + the fresh one; the committed copy was not imported again.
+    assert_eq!(samples.len(), 41, "{samples:?}");
+    assert_eq!(samples.iter().collect::<BTreeSet<_>>().len(), 41);
+    assert!(samples.contains(&"in flight".to_string()));
+    daemon.stop();
+    let rows = ingested(&lab);
+    assert_eq!(rows.len(), 41);
+    let hashes: BTreeSet<&String> = rows.iter().map(|(h, _)| h).collect();
+    assert_eq!(hashes.len(), 41);
+}
+
+/// In-process: a daemon stopped after an import committed but before its fits were queued
+/// (the row says `fits_queued = 0` and the scan has no fit) queues them at the next start, and
+/// the folder's task records that it did.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
+    let _serial = serial();
+    bounded(async {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = tmp.path().join("brdfd.db");
+        let inbox = tmp.path().join("inbox");
+        std::fs::create_dir(&inbox).unwrap();
+        let scan = example("t-manzana-green");
+        let readings = |r: &brdfd::scan::DeviceReadings| {
+            brdfd::geometry::GEOMETRIES
+                .iter()
+                .map(|g| brdfd::store::NewReading {
+                    device: g.device,
+                    geometry: g,
+                    values: match g.device {
+                        brdfd::geometry::Device::MaT12 => {
+                            brdfd::store::ReadingValues::Spectrum(r.ma_t12[g.index])
+                        }
+                        brdfd::geometry::Device::Sra => brdfd::store::ReadingValues::Intensity(
+                            r.sra[g.index - brdfd::geometry::MA_T12_COUNT],
+                        ),
+                    },
+                    raw_frame: &[],
+                })
+                .collect::<Vec<_>>()
+        };
+        let provenance = brdfd::store::Provenance {
+            source: brdfd::store::Source::Imported,
+            source_detail: Some("imported from x.scan.json, brdfd.scan/1 file".into()),
+            ..brdfd::store::Provenance::unknown()
+        };
+        let (r, m) = (readings(&scan.reference.readings), readings(&scan.readings));
+        let store = brdfd::store::Store::open(&db).await.unwrap();
+        let hash = "ab".repeat(32);
+        let imported = store
+            .import_file(
+                &hash,
+                "x.scan.json",
+                None,
+                &[brdfd::store::ImportedScan {
+                    sample_name: &scan.sample,
+                    reference_name: "Munsell N9 (imported)",
+                    provenance: &provenance,
+                    reference_readings: &r,
+                    readings: &m,
+                }],
+            )
+            .await
+            .unwrap();
+        let brdfd::store::FileImport::Imported(file) = imported else {
+            panic!("{imported:?}")
+        };
+        assert!(!file.fits_queued);
+        let scan_id = file.scans[0];
+        assert!(store.fits_for_scan(scan_id).await.unwrap().is_empty());
+        // The same hash again is refused inside the transaction, writing nothing.
+        let again = store
+            .import_file(
+                &hash,
+                "y.scan.json",
+                None,
+                &[brdfd::store::ImportedScan {
+                    sample_name: "other",
+                    reference_name: "Munsell N9 (imported)",
+                    provenance: &provenance,
+                    reference_readings: &r,
+                    readings: &m,
+                }],
+            )
+            .await
+            .unwrap();
+        assert_eq!(
+            again,
+            brdfd::store::FileImport::AlreadyImported(file.clone())
+        );
+        store.close().await;
+
+        let devices = brdfd::service::Devices::simulated(
+            playlist(drivers::Instrument::MaT12),
+            playlist(drivers::Instrument::Sra),
+            &strict_fast(),
+            [None, None],
+        )
+        .unwrap();
+        let store = brdfd::store::Store::open(&db).await.unwrap();
+        let settings = brdfd::service::ServiceSettings {
+            cost_functions: vec![brdfd::cost::CostFunction::Cf2],
+            bootstrap: 0,
+            ingest: Some(brdfd::service::IngestSettings {
+                dir: inbox.clone(),
+                settle: Duration::from_millis(50),
+                poll: Duration::from_millis(20),
+                pair_wait: Duration::from_secs(600),
+                reference: "Munsell N9".into(),
+            }),
+            ..settings()
+        };
+        let service = brdfd::service::Service::start(
+            store.clone(),
+            devices,
+            settings,
+            brdfd::service::ServiceOptions::default(),
+        )
+        .await
+        .unwrap();
+        let deadline = Instant::now() + STEP_TIMEOUT;
+        loop {
+            let files = store.ingested_files().await.unwrap();
+            if files[0].fits_queued {
+                break;
+            }
+            assert!(Instant::now() < deadline, "the fits were never queued");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        let fits = store.fits_for_scan(scan_id).await.unwrap();
+        assert_eq!(fits.len(), 1, "{fits:?}");
+        assert!(service.wait_settled(scan_id, STEP_TIMEOUT).await.unwrap());
+        let fits = store.fits_for_scan(scan_id).await.unwrap();
+        assert_eq!(fits[0].status, brdfd::store::FitStatus::Done, "{fits:?}");
+        // The folders were made, and the status shows the folder.
+        for sub in ["done", "failed", ".importing"] {
+            assert!(inbox.join(sub).is_dir(), "{sub}");
+        }
+        let status = service.status().await.unwrap().ingest.unwrap();
+        assert_eq!(status.dir, inbox.display().to_string());
+        service.shutdown().await;
+    })
+    .await;
+}
+
+#[test]
+fn a_watch_folder_that_does_not_exist_stops_the_start_naming_it() {
+    let lab = Lab::new(100, 1000);
+    std::fs::remove_dir(&lab.inbox).unwrap();
+    let out = run_brdfd(
+        &[
+            "serve",
+            "--config",
+            lab.dir.join("brdfd.toml").to_str().unwrap(),
+        ],
+        None,
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(&format!(
+            "[ingest] watch = {}: no such directory; create it",
+            lab.inbox.display()
+        )),
+        "{err}"
+    );
+}
+
+/// In-process: a store that fails the import (a trigger stands for a full disk) leaves the
+/// file in `.importing/` with the error in the status and no half-imported scan; once the
+/// store works again the next pass imports it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
+    use sqlx::Connection;
+    let _serial = serial();
+    bounded(async {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = tmp.path().join("brdfd.db");
+        let inbox = tmp.path().join("inbox");
+        std::fs::create_dir(&inbox).unwrap();
+        let store = brdfd::store::Store::open(&db).await.unwrap();
+        // A second connection to the same file, as another process would have.
+        let mut raw = sqlx::SqliteConnection::connect(&format!("sqlite://{}", db.display()))
+            .await
+            .unwrap();
+        sqlx::query(
+            "CREATE TRIGGER full_disk BEFORE INSERT ON ingested_files
+             BEGIN SELECT RAISE(ABORT, 'database or disk is full (test)'); END",
+        )
+        .execute(&mut raw)
+        .await
+        .unwrap();
+        let devices = brdfd::service::Devices::simulated(
+            playlist(drivers::Instrument::MaT12),
+            playlist(drivers::Instrument::Sra),
+            &strict_fast(),
+            [None, None],
+        )
+        .unwrap();
+        let settings = brdfd::service::ServiceSettings {
+            cost_functions: vec![brdfd::cost::CostFunction::Cf2],
+            bootstrap: 0,
+            ingest: Some(brdfd::service::IngestSettings {
+                dir: inbox.clone(),
+                settle: Duration::from_millis(50),
+                poll: Duration::from_millis(20),
+                pair_wait: Duration::from_secs(600),
+                reference: "Munsell N9".into(),
+            }),
+            ..settings()
+        };
+        let service = brdfd::service::Service::start(
+            store.clone(),
+            devices,
+            settings,
+            brdfd::service::ServiceOptions::default(),
+        )
+        .await
+        .unwrap();
+        let text = example("t-lavender-blue").to_json_pretty().unwrap();
+        std::fs::write(inbox.join("l.scan.json"), &text).unwrap();
+        let deadline = Instant::now() + STEP_TIMEOUT;
+        let status = loop {
+            let s = service.status().await.unwrap().ingest.unwrap();
+            if s.last_error.is_some() {
+                break s;
+            }
+            assert!(Instant::now() < deadline, "no error reported");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        };
+        let e = status.last_error.unwrap();
+        assert!(e.contains("l.scan.json: the store failed"), "{e}");
+        assert!(e.contains("disk is full (test)"), "{e}");
+        assert!(e.contains("left in .importing/ and tried again"), "{e}");
+        assert!(inbox.join(".importing/l.scan.json").is_file());
+        assert!(!inbox.join("failed/l.scan.json").exists());
+        // The transaction left nothing behind.
+        let all = brdfd::store::ScanFilter {
+            limit: 500,
+            ..Default::default()
+        };
+        assert!(store.list_scans(&all).await.unwrap().is_empty());
+        assert_eq!(status.imported, 0);
+
+        sqlx::query("DROP TRIGGER full_disk")
+            .execute(&mut raw)
+            .await
+            .unwrap();
+        raw.close().await.unwrap();
+        let deadline = Instant::now() + STEP_TIMEOUT;
+        while !inbox.join("done/l.scan.json").is_file() {
+            assert!(
+                Instant::now() < deadline,
+                "never imported after the store recovered"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        assert!(!inbox.join(".importing/l.scan.json").exists());
+        assert_eq!(store.list_scans(&all).await.unwrap().len(), 1);
+        assert_eq!(store.ingested_files().await.unwrap().len(), 1);
+        assert_eq!(service.status().await.unwrap().ingest.unwrap().imported, 1);
+        service.shutdown().await;
+    })
+    .await;
+}
