@@ -785,6 +785,108 @@ async fn processed_scans_and_fit_runs() {
 }
 
 #[tokio::test]
+async fn the_sql_views_decode_every_stored_value_bit_for_bit() {
+    let store = Store::open_in_memory().await.unwrap();
+    let reference = complete_reference(&store).await;
+    let (scan, mut stored) = measuring_scan(&store, reference, "S", 13).await;
+    // The last geometry (sra-60) with an edge value, and edge values in one spectrum: zero,
+    // negative zero, the smallest subnormal, a large and a negative value.
+    let edge = ReadingValues::Intensity(f64::MIN_POSITIVE / 3.0);
+    let g = &GEOMETRIES[13];
+    store
+        .add_reading(scan, g.device, g, &edge, b"")
+        .await
+        .unwrap();
+    stored.push(edge);
+    store.complete_scan(scan).await.unwrap();
+    let (scan2, _) = measuring_scan(&store, reference, "T", 0).await;
+    let mut spectrum = [0.25; BANDS];
+    spectrum[..5].copy_from_slice(&[0.0, -0.0, 5e-324, 1.7e308, -1.5]);
+    let g0 = &GEOMETRIES[0];
+    store
+        .add_reading(
+            scan2,
+            g0.device,
+            g0,
+            &ReadingValues::Spectrum(spectrum),
+            b"",
+        )
+        .await
+        .unwrap();
+
+    let rows: Vec<(i64, String, i64, Option<i64>, f64)> = sqlx::query_as(
+        "SELECT scan_id, geometry, band, nm, value FROM reading_values
+         ORDER BY scan_id, reading_id, band",
+    )
+    .fetch_all(&store.reader)
+    .await
+    .unwrap();
+    let mut expected: Vec<(i64, String, i64, Option<i64>, f64)> = Vec::new();
+    for (g, v) in GEOMETRIES.iter().zip(&stored) {
+        for (band, x) in v.as_slice().iter().enumerate() {
+            let nm = (g.device == Device::MaT12).then_some(400 + 10 * band as i64);
+            expected.push((scan.0, g.name.to_string(), band as i64, nm, *x));
+        }
+    }
+    for (band, x) in spectrum.iter().enumerate() {
+        expected.push((
+            scan2.0,
+            g0.name.to_string(),
+            band as i64,
+            Some(400 + 10 * band as i64),
+            *x,
+        ));
+    }
+    assert_eq!(rows.len(), expected.len());
+    for (got, want) in rows.iter().zip(&expected) {
+        assert_eq!(
+            (&got.0, &got.1, got.2, got.3),
+            (&want.0, &want.1, want.2, want.3)
+        );
+        assert_eq!(got.4.to_bits(), want.4.to_bits(), "{got:?} vs {want:?}");
+    }
+
+    // The reference readings and the processed BRDF, likewise.
+    let refs: Vec<(i64, f64)> = sqlx::query_as(
+        "SELECT band, value FROM reference_reading_values WHERE geometry = '45as45' ORDER BY band",
+    )
+    .fetch_all(&store.reader)
+    .await
+    .unwrap();
+    let detail = store.reference_detail(reference).await.unwrap();
+    let want = detail
+        .readings
+        .iter()
+        .find(|r| r.geometry.name == "45as45")
+        .unwrap();
+    assert_eq!(refs.len(), BANDS);
+    for ((band, v), w) in refs.iter().zip(want.values.as_slice()) {
+        assert_eq!(v.to_bits(), w.to_bits(), "band {band}");
+    }
+    let m = brdf(4);
+    let p = store
+        .add_processed(scan, SpecularStrategy::Ratio, &m)
+        .await
+        .unwrap();
+    let values: Vec<(i64, i64, f64)> = sqlx::query_as(
+        "SELECT geometry_index, band, value FROM processed_values WHERE processed_id = $1
+         ORDER BY geometry_index, band",
+    )
+    .bind(p.0)
+    .fetch_all(&store.reader)
+    .await
+    .unwrap();
+    assert_eq!(values.len(), GEOMETRY_COUNT * BANDS);
+    for (g, b, v) in values {
+        assert_eq!(
+            v.to_bits(),
+            m.values[g as usize][b as usize].to_bits(),
+            "{g} {b}"
+        );
+    }
+}
+
+#[tokio::test]
 async fn the_schema_backs_up_the_verbs() {
     let store = Store::open_in_memory().await.unwrap();
     let reference = complete_reference(&store).await;

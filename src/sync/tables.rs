@@ -232,6 +232,9 @@ mod tests {
         "sync_identity",
         "ingested_files",
         "ingested_scans",
+        // Constants of the SQL views of migration 0013, the same on every station.
+        "view_bands",
+        "view_pow2",
     ];
 
     #[tokio::test]
