@@ -23,14 +23,17 @@ pub enum ExportKind {
     Mitsuba,
     /// glTF 2.0 files, one per finished fit.
     Gltf,
+    /// The tidy CSV tables `spectra.csv` and `fits.csv`.
+    Tidy,
 }
 
 fn parse_export_kind(s: &str) -> Result<ExportKind, String> {
     match s {
         "mitsuba" => Ok(ExportKind::Mitsuba),
         "gltf" => Ok(ExportKind::Gltf),
+        "tidy" => Ok(ExportKind::Tidy),
         _ => s.parse().map(ExportKind::Exchange).map_err(|_| {
-            format!("unknown format \"{s}\"; valid: cgats, cxf3, csv, json, mitsuba, gltf")
+            format!("unknown format \"{s}\"; valid: cgats, cxf3, csv, json, tidy, mitsuba, gltf")
         }),
     }
 }
@@ -38,17 +41,21 @@ fn parse_export_kind(s: &str) -> Result<ExportKind, String> {
 #[derive(Debug, clap::Args)]
 pub struct ExportArgs {
     /// `cgats` (CGATS.17 text), `cxf3` (X-Rite CxF3 XML), `csv`, or `json` (everything,
-    /// including fitted parameters); or, for renderers, one file per finished fit into the
-    /// directory --out: `mitsuba` (Mitsuba 3 scene: spectral material, sphere, camera, the
-    /// preview's D65 light) or `gltf` (glTF 2.0 material on a sphere, RGB approximation).
-    #[arg(long, value_name = "cgats|cxf3|csv|json|mitsuba|gltf", value_parser = parse_export_kind)]
+    /// including fitted parameters); `tidy`: the directory --out gets `spectra.csv` (one row per
+    /// scan × geometry × band: provenance, reading, reference, measured and fitted values) and
+    /// `fits.csv` (one row per fit: parameters, intervals, ΔE00) for pandas or R; or, for
+    /// renderers, one file per finished fit into the directory --out: `mitsuba` (Mitsuba 3
+    /// scene: spectral material, sphere, camera, the preview's D65 light) or `gltf` (glTF 2.0
+    /// material on a sphere, RGB approximation).
+    #[arg(long, value_name = "cgats|cxf3|csv|json|tidy|mitsuba|gltf", value_parser = parse_export_kind)]
     pub format: ExportKind,
 
     #[command(flatten)]
     pub select: StoreSelection,
 
     /// File to write (refused if it exists, unless --force); a directory (created if missing)
-    /// for `mitsuba` and `gltf`, whose files are likewise never replaced without --force.
+    /// for `tidy`, `mitsuba` and `gltf`, whose files are likewise never replaced without
+    /// --force.
     #[arg(long, value_name = "FILE|DIR")]
     pub out: PathBuf,
 
@@ -65,6 +72,10 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
             let opts = ExportOptions::default();
             let files = match kind {
                 ExportKind::Mitsuba => formats::mitsuba::scenes(&study, &opts)?
+                    .into_iter()
+                    .map(|(n, t)| (n, t.into_bytes()))
+                    .collect::<Vec<_>>(),
+                ExportKind::Tidy => formats::tidy::files(&study)?
                     .into_iter()
                     .map(|(n, t)| (n, t.into_bytes()))
                     .collect::<Vec<_>>(),

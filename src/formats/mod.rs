@@ -8,6 +8,7 @@
 //!   `BRDFAngle` per geometry; one `Object` per sample and data kind), valid against the CxF3
 //!   core schema kept in `src/formats/data/`.
 //! - [`json`]: everything, including the fitted parameters, as one JSON document.
+//! - [`tidy`]: two tidy CSV tables for analysis (spectra per scan × geometry × band; fits).
 //! - [`sra`]: the Canon SRA's values as CSV (`sample,geometry,intensity`).
 //! - [`gltf`]: glTF 2.0 materials of fitted BRDFs on a sphere (one per fit; RGB approximation).
 //! - [`mitsuba`]: Mitsuba 3 scenes of fitted materials (one per fit; SCIENCE.md §10).
@@ -39,6 +40,7 @@ pub mod json;
 pub mod mitsuba;
 pub mod sra;
 mod table;
+pub mod tidy;
 
 use std::collections::BTreeMap;
 use std::fmt;
