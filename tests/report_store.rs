@@ -4,6 +4,8 @@
 //! and `brdfd report`, `brdfd export-format` and `brdfd import-format` work on it end to end.
 
 use std::path::Path;
+
+use serde_json::Value;
 use std::process::Command;
 
 use brdfd::cost::CostFunction;
@@ -465,4 +467,43 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
             assert_eq!(&Scan::read_file(&f).unwrap(), scan, "{format}");
         }
     }
+
+    // --json: what was written, as JSON on stdout (the tidy tables and a second report).
+    let tidy = dir.path().join("tidy");
+    let out = brdfd(&[
+        "export-format",
+        "--format",
+        "tidy",
+        "--all",
+        "--db",
+        db_s,
+        "--out",
+        tidy.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["samples"], 3, "{v}");
+    assert_eq!(v["format"], "tidy", "{v}");
+    for f in v["files"].as_array().unwrap() {
+        assert!(std::path::Path::new(f.as_str().unwrap()).exists(), "{f}");
+    }
+    let spectra = std::fs::read_to_string(tidy.join("spectra.csv")).unwrap();
+    assert_eq!(spectra.lines().count(), 1 + 3 * 14 * 31);
+    let second = dir.path().join("rep-json");
+    let out = brdfd(&[
+        "report",
+        "--all",
+        "--db",
+        db_s,
+        "--out",
+        second.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["samples"], 3, "{v}");
+    assert!(
+        std::path::Path::new(v["html"].as_str().unwrap()).exists(),
+        "{v}"
+    );
+    assert_eq!(v["figures"].as_array().unwrap().len(), 3 + 3 + 3 + 4, "{v}");
 }

@@ -62,6 +62,10 @@ pub struct ExportArgs {
     /// Replace files that exist.
     #[arg(long)]
     pub force: bool,
+
+    /// Print `{"samples", "format", "files"}` instead of lines.
+    #[arg(long)]
+    pub json: bool,
 }
 
 pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
@@ -83,16 +87,41 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
             };
             std::fs::create_dir_all(&args.out)
                 .with_context(|| format!("creating {}", args.out.display()))?;
+            let mut written = Vec::new();
             for (name, bytes) in &files {
                 let path = args.out.join(name);
                 super::write_new_file(&path, bytes, args.force)?;
-                println!("{}", path.display());
+                if !args.json {
+                    println!("{}", path.display());
+                }
+                written.push(path);
+            }
+            if args.json {
+                println!(
+                    "{}",
+                    serde_json::json!({
+                        "samples": study.samples.len(),
+                        "format": format!("{kind:?}").to_lowercase(),
+                        "files": written,
+                    })
+                );
             }
             return Ok(());
         }
     };
     let text = formats::export(&study, format, &ExportOptions::default())?;
     super::write_new_file(&args.out, text.as_bytes(), args.force)?;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "samples": study.samples.len(),
+                "format": format.name(),
+                "files": [&args.out],
+            })
+        );
+        return Ok(());
+    }
     println!(
         "{} samples as {} in {}",
         study.samples.len(),
@@ -128,6 +157,10 @@ pub struct ImportArgs {
     /// Replace files that exist in DIR.
     #[arg(long)]
     pub force: bool,
+
+    /// Print one JSON object per scan (`{"sample", "file"}`) instead of lines.
+    #[arg(long)]
+    pub json: bool,
 }
 
 fn format_of(path: &Path) -> Format {
@@ -169,7 +202,14 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
             .to_json_pretty()
             .map_err(|e: ScanError| anyhow::anyhow!(e))?;
         super::write_new_file(&path, text.as_bytes(), args.force)?;
-        println!("{} → {}", scan.sample, path.display());
+        if args.json {
+            println!(
+                "{}",
+                serde_json::json!({ "sample": scan.sample, "file": path })
+            );
+        } else {
+            println!("{} → {}", scan.sample, path.display());
+        }
     }
     Ok(())
 }

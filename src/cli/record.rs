@@ -29,6 +29,10 @@ pub struct RecordArgs {
     /// The configuration naming the instruments (default: simulated).
     #[arg(long, short, value_name = "FILE")]
     pub config: Option<PathBuf>,
+
+    /// Print `{"object", "ma_t12_readings", "sra_readings", "sessions"}` instead of lines.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The session files a recording of `object` writes in `dir`.
@@ -69,6 +73,18 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
     // knows what was measured.
     for (path, instrument) in [(&m_path, Instrument::MaT12), (&s_path, Instrument::Sra)] {
         add_note(path, &note).with_context(|| format!("{instrument}: {}", path.display()))?;
+    }
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "object": object,
+                "ma_t12_readings": readings.0.len(),
+                "sra_readings": readings.1.len(),
+                "sessions": [m_path, s_path],
+            })
+        );
+        return Ok(());
     }
     println!(
         "recorded {} MA-T12 and {} SRA readings of {object}:\n  {}\n  {}",

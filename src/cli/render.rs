@@ -60,6 +60,10 @@ pub struct RenderArgs {
     /// reflectance` (a scan file does not carry the tile's calibration).
     #[arg(long, value_name = "brdfd.toml")]
     pub config: Option<PathBuf>,
+
+    /// Print `{"sample", "costs", "scale", "file"}` instead of the sentence.
+    #[arg(long)]
+    pub json: bool,
 }
 
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
@@ -108,6 +112,18 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     };
     let sample = &study.samples[0];
     crate::render::write_preview(sample, &costs, &args.out)?;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "sample": sample.name,
+                "costs": costs,
+                "scale": sample.scale().name(),
+                "file": args.out,
+            })
+        );
+        return Ok(());
+    }
     println!(
         "{}: {} sphere(s) ({}), {}, in {}",
         sample.name,

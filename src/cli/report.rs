@@ -271,6 +271,10 @@ pub struct ReportArgs {
     /// always cover every selected scan.
     #[arg(long, value_name = "N", default_value_t = crate::report::ReportOptions::MAX_SAMPLE_FIGURES)]
     pub max_sample_figures: usize,
+
+    /// Print `{"samples", "figures", "previews", "html", "markdown"}` instead of lines.
+    #[arg(long)]
+    pub json: bool,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
@@ -291,6 +295,19 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     })
     .with_context(|| format!("writing the report into {}", args.out.display()))?;
     bar.finish_and_clear();
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "samples": study.samples.len(),
+                "figures": files.figures,
+                "previews": files.previews,
+                "html": files.html,
+                "markdown": files.markdown,
+            })
+        );
+        return Ok(());
+    }
     println!(
         "{} samples, {} figures (PNG and SVG) in {}",
         study.samples.len(),

@@ -37,6 +37,10 @@ pub struct SynthArgs {
     /// sample. Replay them with `brdfd replay DIR/n9.*.session DIR/<slug>.*.session`.
     #[arg(long)]
     pub sessions: bool,
+
+    /// Print one JSON object per sample (`{"sample", "scan", "truth", "sessions"}`) instead of lines.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The file names of one sample's scan and truth for a given noise level.
@@ -63,21 +67,40 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         let (scan_name, truth_name) = file_names(truth, args.noise > 0.0);
         scan.write_file(args.out.join(&scan_name))?;
         write_truth(&args.out.join(&truth_name), truth)?;
-        println!("{}  {}  {}", truth.sample, scan_name, truth_name);
+        if !args.json {
+            println!("{}  {}  {}", truth.sample, scan_name, truth_name);
+        }
+        let mut sessions = Vec::new();
         if args.sessions {
             if i == 0 {
                 let pair = generate_reference_session(
                     &device_readings(&scan.reference.readings),
                     &GenerateOptions::default(),
                 )?;
-                write_sessions(&args.out, "n9", &pair)?;
+                sessions.extend(write_sessions(&args.out, "n9", &pair, args.json)?);
             }
             let pair = generate_sample_session(
                 &truth.sample,
                 &device_readings(&scan.readings),
                 &GenerateOptions::default(),
             )?;
-            write_sessions(&args.out, &slug(&truth.sample), &pair)?;
+            sessions.extend(write_sessions(
+                &args.out,
+                &slug(&truth.sample),
+                &pair,
+                args.json,
+            )?);
+        }
+        if args.json {
+            println!(
+                "{}",
+                serde_json::json!({
+                    "sample": truth.sample,
+                    "scan": args.out.join(&scan_name),
+                    "truth": args.out.join(&truth_name),
+                    "sessions": sessions,
+                })
+            );
         }
     }
     Ok(())
@@ -91,14 +114,23 @@ fn device_readings(readings: &DeviceReadings) -> Readings {
     }
 }
 
-fn write_sessions(dir: &Path, stem: &str, pair: &SessionPair) -> anyhow::Result<()> {
+fn write_sessions(
+    dir: &Path,
+    stem: &str,
+    pair: &SessionPair,
+    quiet: bool,
+) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    let mut written = Vec::new();
     for (device, session) in [("ma_t12", &pair.ma_t12), ("sra", &pair.sra)] {
         let path = dir.join(format!("{stem}.{device}.session"));
         std::fs::write(&path, session.to_text())
             .with_context(|| format!("writing {}", path.display()))?;
-        println!("  {}", path.display());
+        if !quiet {
+            println!("  {}", path.display());
+        }
+        written.push(path);
     }
-    Ok(())
+    Ok(written)
 }
 
 fn write_truth(path: &Path, truth: &GroundTruth) -> anyhow::Result<()> {
