@@ -38,6 +38,7 @@ fn main() {
             method: Method::default(),
             seed: Settings::default().seed,
             jobs: None,
+            json: false,
         };
         let started = Instant::now();
         let result = rt.block_on(async {

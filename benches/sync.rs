@@ -190,6 +190,7 @@ fn main() {
                 method: Method::default(),
                 seed: Settings::default().seed,
                 jobs: Some(1),
+                json: false,
             };
             demos.push(tokio::spawn(async move {
                 run_demo(&store, &args).await.unwrap();

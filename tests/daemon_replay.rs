@@ -71,6 +71,22 @@ fn demo_replays_the_recordings_into_a_local_store_and_runs_twice() {
     };
     assert_eq!(table(&out), table(&out2));
 
+    // --json: the fits as one object (in another directory; report.txt is still written).
+    let other = tempfile::tempdir().unwrap();
+    let third = brdfd(&["demo", "--json"], other.path());
+    let (out3, err3) = text(&third);
+    assert!(third.status.success(), "{err3}");
+    let v: serde_json::Value = serde_json::from_str(&out3).unwrap();
+    assert_eq!(v["fits"].as_array().unwrap().len(), 24, "{v}");
+    assert_eq!(v["database_reused"], false, "{v}");
+    assert!(other.path().join("brdfd-demo/report.txt").exists());
+    let fit = &v["fits"][0];
+    assert!(fit["sample"].as_str().unwrap().starts_with("T."), "{fit}");
+    assert!(
+        fit["evaluation"]["all"]["mean"].as_f64().unwrap() > 0.0,
+        "{fit}"
+    );
+
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -148,6 +164,27 @@ fn record_then_replay_strictly_through_the_whole_daemon() {
     assert!(out.contains("scan 1 \"T.Recorded\": complete"), "{out}");
     assert_eq!(out.matches(": mean ΔE00").count(), 3, "{out}");
     assert!(out.contains("(strict, accelerated)"), "{out}");
+    // --json: the same outcome as one object (into a fresh in-memory store).
+    let json_args: Vec<String> = files
+        .iter()
+        .map(|f| f.display().to_string())
+        .chain(["--json".to_string()])
+        .collect();
+    let json_args: Vec<&str> = std::iter::once("replay")
+        .chain(json_args.iter().map(String::as_str))
+        .collect();
+    let replay = brdfd(&json_args, dir.path());
+    let (out, err) = text(&replay);
+    assert!(replay.status.success(), "{out}\n{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["scans"][0]["sample"], "T.Recorded", "{v}");
+    assert_eq!(v["scans"][0]["state"], "complete", "{v}");
+    assert_eq!(v["scans"][0]["fits"].as_array().unwrap().len(), 3, "{v}");
+    assert!(
+        v["scans"][0]["fits"][0]["delta_e00_mean"].as_f64().unwrap() >= 0.0,
+        "{v}"
+    );
+    assert_eq!(v["mode"], "strict", "{v}");
 
     // Sessions given out of pairs are refused with what to do.
     let bad = brdfd(&["replay", &files[0].display().to_string()], dir.path());

@@ -630,6 +630,48 @@ async fn a_bad_url_or_a_wrong_password_is_one_line_and_the_station_keeps_measuri
             assert!(err.contains(says), "{url}: {err}");
             assert!(!err.contains("not-the-password"), "{err}");
         }
+        // With the right password it sends everything; --json says so in NDJSON.
+        let out = run_brdfd(
+            &[
+                "sync",
+                "--db",
+                d.db.to_str().unwrap(),
+                "--to",
+                &cluster.admin_url(),
+                "--station",
+                "bench-w",
+                "--once",
+                "--json",
+            ],
+            None,
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(lines[0]["type"], "start", "{lines:?}");
+        assert_eq!(lines[0]["station"], "bench-w", "{lines:?}");
+        let last = lines.last().unwrap();
+        assert_eq!(last["type"], "drained", "{lines:?}");
+        let batched: u64 = lines
+            .iter()
+            .filter(|l| l["type"] == "batch")
+            .map(|l| {
+                l["rows"]
+                    .as_object()
+                    .unwrap()
+                    .values()
+                    .map(|n| n.as_u64().unwrap())
+                    .sum::<u64>()
+            })
+            .sum();
+        assert!(batched > 0, "{lines:?}");
+        assert_eq!(last["rows"].as_u64(), Some(batched), "{lines:?}");
         d.store.close().await;
     })
     .await;

@@ -42,10 +42,16 @@ pub struct DemoArgs {
     /// Fits running at once (default: one per core).
     #[arg(long, value_name = "N")]
     pub jobs: Option<usize>,
+
+    /// Print one JSON object (`{"database", "report", "scans_dir", "fits": [{"sample", "scan",
+    /// "cost_function", "cost", "wall_ms", "delta_e00": {…}}], "timing": {…}}`) instead of the
+    /// report text (which is still written to report.txt).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// One row of the report: a sample's fit under one cost function.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize)]
 pub struct DemoRow {
     pub sample: String,
     pub scan: i64,
@@ -183,7 +189,31 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         );
         std::fs::write(&report, &text)
             .with_context(|| format!("cannot write {}", report.display()))?;
-        print!("{text}");
+        if args.json {
+            let fits: Vec<&DemoRow> = result.rows.iter().flatten().collect();
+            println!(
+                "{}",
+                serde_json::json!({
+                    "database": db,
+                    "database_reused": existed,
+                    "report": report,
+                    "scans_dir": scans_dir,
+                    "method": result.method.to_string(),
+                    "seed": result.seed,
+                    "fits": fits,
+                    "timing": {
+                        "wall_s": wall.as_secs_f64(),
+                        "replay_s": result.outcome.replay_wall.as_secs_f64(),
+                        "acquire_s": result.timings.acquire_s,
+                        "store_s": result.timings.store_s,
+                        "fit_s": result.timings.fit_s,
+                        "jobs": result.jobs,
+                    },
+                })
+            );
+        } else {
+            print!("{text}");
+        }
         Ok(())
     })
 }

@@ -40,6 +40,12 @@ pub struct ReplayArgs {
     /// Fits running at once (default: one per core).
     #[arg(long, value_name = "N")]
     pub jobs: Option<usize>,
+
+    /// Print one JSON object (`{"scans": [{"scan", "sample", "state", "fits": [{"id",
+    /// "cost_function", "status", "error", "delta_e00_mean", …}]}], "references", "mode",
+    /// "replay_s", "total_s", "store"}`) instead of lines.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// One object measured: its two sessions and what it is.
@@ -315,6 +321,42 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
         };
         let (outcome, timings) = replay_objects(store.clone(), &objects, &setup).await?;
         let fits = fits_of(&store, &outcome.scans).await?;
+        if args.json {
+            let mut scans = Vec::new();
+            for ((sample, scan), fits) in outcome.scans.iter().zip(&fits) {
+                let state = store.scan_detail(*scan).await?.scan.state;
+                let fits: Vec<serde_json::Value> = fits
+                    .iter()
+                    .map(|f| {
+                        serde_json::json!({
+                            "id": f.run.id,
+                            "cost_function": f.run.cost_function,
+                            "status": f.run.status.to_string(),
+                            "error": f.run.error,
+                            "delta_e00_mean": f.evaluation.as_ref().map(|e| e.all.mean),
+                            "delta_e00_diffuse_mean": f.evaluation.as_ref().map(|e| e.diffuse.mean),
+                            "delta_e00_specular_mean": f.evaluation.as_ref().map(|e| e.specular.mean),
+                        })
+                    })
+                    .collect();
+                scans.push(serde_json::json!({
+                    "scan": scan, "sample": sample, "state": state.to_string(), "fits": fits,
+                }));
+            }
+            println!(
+                "{}",
+                serde_json::json!({
+                    "scans": scans,
+                    "references": outcome.references.len(),
+                    "mode": if args.lenient { "lenient" } else { "strict" },
+                    "timing": if args.realtime { "recorded" } else { "accelerated" },
+                    "replay_s": outcome.replay_wall.as_secs_f64(),
+                    "total_s": outcome.total_wall.as_secs_f64(),
+                    "store": args.db,
+                    "problems": outcome.problems.iter().map(|p| p.to_string()).collect::<Vec<_>>(),
+                })
+            );
+        } else {
         for ((sample, scan), fits) in outcome.scans.iter().zip(&fits) {
             let state = store.scan_detail(*scan).await?.scan.state;
             println!("scan {scan} \"{sample}\": {state}");
@@ -363,6 +405,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
         match &args.db {
             Some(path) => println!("store: {}", path.display()),
             None => println!("store: in memory (use --db FILE to keep it)"),
+        }
         }
         store.close().await;
         if !outcome.problems.is_empty() {

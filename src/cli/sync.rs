@@ -46,6 +46,12 @@ pub struct SyncArgs {
     /// Configuration file for the defaults above.
     #[arg(long, value_name = "brdfd.toml")]
     pub config: Option<PathBuf>,
+
+    /// NDJSON on stdout: `{"type":"start","station","store","central"}`, one
+    /// `{"type":"batch","entries","rows":{table: n},"cursor"}` per batch, and
+    /// `{"type":"drained","rows","seconds"}` when nothing is pending.
+    #[arg(long)]
+    pub json: bool,
 }
 
 pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
@@ -74,16 +80,53 @@ pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
             .lock()
             .map(|s| s.central.clone())
             .unwrap_or_default();
-        println!("station {station}: {} → {central}", db.display());
+        let json = args.json;
+        if json {
+            println!(
+                "{}",
+                serde_json::json!({
+                    "type": "start", "station": station, "store": db, "central": central,
+                })
+            );
+        } else {
+            println!("station {station}: {} → {central}", db.display());
+        }
         let started = Instant::now();
-        let mut print = |r: &crate::sync::BatchReport| println!("{r}");
+        let mut print = |r: &crate::sync::BatchReport| {
+            if json {
+                let rows: serde_json::Map<String, serde_json::Value> = r
+                    .rows
+                    .iter()
+                    .map(|(t, n)| (t.to_string(), serde_json::Value::from(*n)))
+                    .collect();
+                println!(
+                    "{}",
+                    serde_json::json!({
+                        "type": "batch", "entries": r.entries, "rows": rows, "cursor": r.cursor,
+                    })
+                );
+            } else {
+                println!("{r}");
+            }
+        };
         let sent = forwarder.drain(&mut print).await?;
-        println!(
-            "{sent} rows sent in {:.2} s; nothing pending",
-            started.elapsed().as_secs_f64()
-        );
+        if json {
+            println!(
+                "{}",
+                serde_json::json!({
+                    "type": "drained", "rows": sent, "seconds": started.elapsed().as_secs_f64(),
+                })
+            );
+        } else {
+            println!(
+                "{sent} rows sent in {:.2} s; nothing pending",
+                started.elapsed().as_secs_f64()
+            );
+        }
         if !args.once {
-            println!("forwarding new rows as they are stored; Ctrl-C to stop");
+            if !json {
+                println!("forwarding new rows as they are stored; Ctrl-C to stop");
+            }
             let stop = async {
                 let _ = tokio::signal::ctrl_c().await;
             };
