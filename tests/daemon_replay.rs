@@ -136,6 +136,25 @@ fn record_then_replay_strictly_through_the_whole_daemon() {
             .0
             .contains("recorded 12 MA-T12 and 2 SRA readings of T.Recorded")
     );
+    // --json: the same as an object naming the session files (into another directory).
+    let j = brdfd(
+        &[
+            "record",
+            "--sample",
+            "T.Json",
+            "--out",
+            &dir.path().join("json-sessions").display().to_string(),
+            "--json",
+        ],
+        dir.path(),
+    );
+    assert!(j.status.success(), "{}", text(&j).1);
+    let v: serde_json::Value = serde_json::from_str(&text(&j).0).unwrap();
+    assert_eq!(v["ma_t12_readings"], 12, "{v}");
+    assert_eq!(v["sra_readings"], 2, "{v}");
+    for f in v["sessions"].as_array().unwrap() {
+        assert!(std::path::Path::new(f.as_str().unwrap()).exists(), "{f}");
+    }
     let files = [
         out_dir.join("reference.ma_t12.session"),
         out_dir.join("reference.sra.session"),
