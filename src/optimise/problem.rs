@@ -306,12 +306,10 @@ impl Problem {
             Criterion::L1 => {
                 let d = self.residuals(&s);
                 let f_at = kinks_lanes(&d, &self.w, f64::abs);
+                let (k, f) = pick_kinks(&d, &f_at, &self.w, lo, hi, f64::abs);
                 for b in 0..BANDS {
-                    let (k, f) = pick_kink(&d, &f_at, b, lo, hi, |x| {
-                        (0..G).map(|g| self.w[g] * (d[g][b] - x).abs()).sum()
-                    });
-                    kd[b] = k;
-                    sum += f;
+                    kd[b] = k[b];
+                    sum += f[b];
                 }
             }
             Criterion::Cf2 => {
@@ -319,12 +317,10 @@ impl Problem {
                 // every band (the SIMD loop), then each band's pick.
                 let d = self.residuals(&s);
                 let f_at = kinks_lanes(&d, &self.w23, pow23);
+                let (k, f) = pick_kinks(&d, &f_at, &self.w23, lo, hi, pow23);
                 for b in 0..BANDS {
-                    let (k, f) = pick_kink(&d, &f_at, b, lo, hi, |x| {
-                        (0..G).map(|g| self.w23[g] * pow23(d[g][b] - x)).sum()
-                    });
-                    kd[b] = k;
-                    sum += f;
+                    kd[b] = k[b];
+                    sum += f[b];
                 }
             }
             Criterion::M2 => {
@@ -418,9 +414,9 @@ impl Problem {
     }
 }
 
-/// L1 or cf2 in band `b`: minimise `F(k) = Σ_g v_g φ(d_g − k)` over k ∈ [lo, hi], with
-/// `d_g = M_g − s_g` (`d[g][b]`), `f_at[g][b] = F(d_g)` from [`kinks_lanes`]
-/// and `at_bound(k) = F(k)`. Returns (k, F(k)).
+/// L1 or cf2 in every band b: minimise `F(k) = Σ_g v_g φ(d_g − k)` over k ∈ [lo, hi], with
+/// `d_g = M_g − s_g` (`d[g][b]`), `v = w`, `φ = term` and `f_at[g][b] = F(d_g)` from
+/// [`kinks_lanes`]. Returns k and F(k) per band.
 ///
 /// - L1 (`v = w`, `φ = |·|`): F is convex and piecewise linear with its kinks at the d_g, so
 ///   its minimum over [lo, hi] is at a kink inside or at a bound (the weighted median,
@@ -432,31 +428,42 @@ impl Problem {
 /// Below every kink F decreases and above every kink it increases, so a bound is a candidate
 /// only when some kink lies beyond it. Enumerating the candidates is exact (no local minimum
 /// to be caught in); ties go to the first kink in geometry order, then lo, then hi.
-fn pick_kink(
+#[inline(always)]
+fn pick_kinks(
     d: &[[f64; BP]; G],
     f_at: &[[f64; BP]; G],
-    b: usize,
+    w: &[f64; G],
     lo: f64,
     hi: f64,
-    at_bound: impl Fn(f64) -> f64,
-) -> (f64, f64) {
-    let (mut best_k, mut best_f) = (f64::NAN, f64::INFINITY);
-    let (mut below, mut above) = (false, false);
+    term: impl Fn(f64) -> f64,
+) -> ([f64; BP], [f64; BP]) {
+    let mut best_k = [f64::NAN; BP];
+    let mut best_f = [f64::INFINITY; BP];
+    let mut below = [false; BP];
+    let mut above = [false; BP];
     for g in 0..G {
-        let dg = d[g][b];
-        if dg < lo {
-            below = true;
-        } else if dg > hi {
-            above = true;
-        } else if f_at[g][b] < best_f {
-            (best_k, best_f) = (dg, f_at[g][b]);
+        for b in 0..BP {
+            let (dg, f) = (d[g][b], f_at[g][b]);
+            let take = dg >= lo && dg <= hi && f < best_f[b];
+            best_k[b] = if take { dg } else { best_k[b] };
+            best_f[b] = if take { f } else { best_f[b] };
+            below[b] |= dg < lo;
+            above[b] |= dg > hi;
         }
     }
     for (beyond, bound) in [(below, lo), (above, hi)] {
-        if beyond {
-            let f = at_bound(bound);
-            if f < best_f {
-                (best_k, best_f) = (bound, f);
+        if beyond[..BANDS].iter().any(|&x| x) {
+            // F at the bound, for every band side by side; taken where a kink lies beyond.
+            let mut f = [0.0; BP];
+            for g in 0..G {
+                for b in 0..BP {
+                    f[b] += w[g] * term(d[g][b] - bound);
+                }
+            }
+            for b in 0..BP {
+                if beyond[b] && f[b] < best_f[b] {
+                    (best_k[b], best_f[b]) = (bound, f[b]);
+                }
             }
         }
     }
