@@ -13,7 +13,15 @@
 //! whose landscapes are smoother than cf2's (see `separable`).
 //!
 //! Both return the cost exactly as [`crate::cost::cost`] defines it (up to rounding: cf2 uses a
-//! fast cube root accurate to a few ulps, see [`pow23`]).
+//! fast cube root accurate to a few ulps, see [`pow23`], and m2 an inline `ln_1p` within 1 ulp
+//! of libm's, see [`ln_1p_recip`]).
+//!
+//! Speed (issue 12): a profile is the inner loop of every fit and of every bootstrap refit, so
+//! its per-band solves are written to run in SIMD lanes — cf2 and L1 over all 31 bands at once
+//! (the band is the innermost loop of the 91 pairwise terms), m2 over the 14 geometries of a
+//! band — and [`Problem::profile`] is compiled a second time for AVX2, chosen at run time. The
+//! arithmetic on each value is the same in both compilations, so fits do not depend on the
+//! CPU. `examples/fit_times.rs` times the fits; the README quotes the figures.
 
 // Numeric loops index parallel per-geometry and per-band arrays; `for g in 0..G` reads
 // closest to the equations.
@@ -698,6 +706,42 @@ mod tests {
                     (f - want).abs() <= 1e-13 * want,
                     "{criterion:?} ({ks}, {alpha}, {ior}): {f} vs {want}"
                 );
+            }
+        }
+    }
+
+    /// The AVX2 compilation of the profile and the baseline one (SSE2) give the same bits:
+    /// the same operations on each value, only more of them at a time.
+    #[test]
+    fn avx2_and_baseline_profiles_agree_bit_for_bit() {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if !std::arch::is_x86_feature_detected!("avx2") {
+                eprintln!("no AVX2 on this CPU: only the baseline compilation runs");
+                return;
+            }
+            let (m, truth) = scan();
+            let m = synthetic::with_noise(&m, 0.01, 9);
+            for cf in CostFunction::ALL {
+                let prob = Problem::new(&m, cf, FresnelCosine::Incidence, Bounds::default());
+                for criterion in CRITERIA {
+                    for (ks, alpha, ior) in [
+                        (truth.ks, truth.alpha, truth.ior),
+                        (truth.ks * 1.4, truth.alpha * 0.6, 2.1),
+                        (8.0, 0.02, 2.9),
+                    ] {
+                        let (mut a, mut b) = ([0.0; BANDS], [0.0; BANDS]);
+                        let fa = prob.profile_lanes(criterion, ks, alpha, ior, &mut a);
+                        // SAFETY: the CPU supports AVX2, checked above.
+                        let fb = unsafe { prob.profile_avx2(criterion, ks, alpha, ior, &mut b) };
+                        assert_eq!(fa.to_bits(), fb.to_bits(), "{cf} {criterion:?}");
+                        assert_eq!(
+                            a.map(f64::to_bits),
+                            b.map(f64::to_bits),
+                            "{cf} {criterion:?}"
+                        );
+                    }
+                }
             }
         }
     }
