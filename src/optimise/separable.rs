@@ -34,10 +34,12 @@
 //! MIT Press 1987), does: minimise a sequence of criteria, from a smooth one to the target,
 //! each started from the last one's optimum. The sequence is the family `Σ |M·w − A·w|^p` that
 //! cf1 (p = 2) and cf2 (p = 2/3) belong to, with the weighted L1 error (p = 1) between them:
-//! - cf1 is a quadratic in kd, solved in closed form (0.6 µs a profile against cf2's 11 µs);
+//! - cf1 is a quadratic in kd, solved in closed form (0.6 µs a profile against cf2's 11 µs
+//!   when this was designed; cf2's solve now runs in SIMD lanes, and cf1 is still the cheaper);
 //!   its landscape is smooth and its optimum is the exact fit of a noise-free scan, i.e. the
 //!   bottom of cf2's cusp.
-//! - L1 is still convex in kd (its minimiser is the weighted median, 1 µs a profile) but, like
+//! - L1 is still convex in kd (its minimiser is the weighted median, found among the kinks as
+//!   cf2's is, in the same SIMD loop without the cube roots) but, like
 //!   cf2, it lets a few large residuals stand rather than spreading them: on T.Freesia pink
 //!   1 %, L1 started from cf1's optimum (which lies in cf2's worse valley) ends in cf2's better
 //!   one, 0.09 % above cf2's best before any cf2 search.
