@@ -453,6 +453,42 @@ async fn refit_cancel_abort_and_every_operator_error_through_http_and_the_cli() 
             "only this scan's events"
         );
 
+        // export, refit and import with --json: one object naming the file; NDJSON ending in
+        // the scan's detail.
+        let file = d.dir.path().join("json.scan.json");
+        let file_s: &'static str = Box::leak(file.display().to_string().into_boxed_str());
+        let scan_s: &'static str = Box::leak(scan.to_string().into_boxed_str());
+        let v: Value = serde_json::from_str(&ok(
+            &run(vec!["export", scan_s, "-o", file_s, "--json"]).await,
+            "export --json",
+        ))
+        .unwrap();
+        assert_eq!(v["scan"].as_i64(), Some(scan), "{v}");
+        assert_eq!(v["file"], file_s, "{v}");
+        let ndjson = |out: String| -> Vec<Value> {
+            out.lines()
+                .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+                .collect()
+        };
+        let refit = ndjson(ok(
+            &run(vec!["refit", scan_s, "--cost", "cf1", "--json"]).await,
+            "refit --json",
+        ));
+        assert_eq!(refit[0]["type"], "accepted", "{refit:?}");
+        assert_eq!(refit.last().unwrap()["type"], "result", "{refit:?}");
+        assert!(refit.iter().any(|e| e["type"] == "fit_done"), "{refit:?}");
+        let import = ndjson(ok(
+            &run(vec!["import", file_s, "--json"]).await,
+            "import --json",
+        ));
+        assert_eq!(import[0]["type"], "accepted", "{import:?}");
+        let result = &import.last().unwrap()["scan"];
+        assert_eq!(result["scan"]["state"], "complete", "{result}");
+        assert_eq!(
+            result["scan"]["provenance"]["source"], "imported",
+            "{result}"
+        );
+
         // Never more fits at once than `[fit] max_concurrent_fits` (2) over everything above.
         assert_eq!(
             probe.most.load(Ordering::SeqCst),
