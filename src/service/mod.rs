@@ -343,10 +343,12 @@ impl Service {
         if !requeued.is_empty() {
             tracing::info!(fits = ?requeued, "fits interrupted by the last run queued again");
         }
-        let reference = match store.latest_reference().await? {
-            Some(r) if !r.name.ends_with(IMPORTED_SUFFIX) => Some(r.id),
-            _ => None,
-        };
+        // The newest measured reference: a newer one that came with an imported scan is never
+        // in force.
+        let reference = store
+            .latest_reference_not_ending(IMPORTED_SUFFIX)
+            .await?
+            .map(|r| r.id);
         let (fit_tx, fit_rx) = tokio::sync::mpsc::unbounded_channel();
         let inner = Arc::new(Inner {
             store,

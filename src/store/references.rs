@@ -301,6 +301,25 @@ impl Store {
         row.map(ReferenceRow::into_summary).transpose()
     }
 
+    /// The most recently completed reference set whose name does not end in `suffix` (the
+    /// daemon passes the suffix it gives the reference sets that came with imported scans, so
+    /// that an import never becomes the reference in force, also across a restart).
+    pub async fn latest_reference_not_ending(
+        &self,
+        suffix: &str,
+    ) -> Result<Option<ReferenceSummary>, StoreError> {
+        let row: Option<ReferenceRow> = sqlx::query_as(&format!(
+            "{} WHERE r.status = 'complete'
+               AND (length(r.name) < length($1) OR substr(r.name, -length($1)) <> $1)
+             ORDER BY r.completed_at_ms DESC, r.id DESC LIMIT 1",
+            *REFERENCE_SUMMARY
+        ))
+        .bind(suffix)
+        .fetch_optional(&self.reader)
+        .await?;
+        row.map(ReferenceRow::into_summary).transpose()
+    }
+
     /// A reference set with its readings in geometry-table order.
     pub async fn reference_detail(
         &self,

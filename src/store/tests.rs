@@ -785,6 +785,49 @@ async fn processed_scans_and_fit_runs() {
 }
 
 #[tokio::test]
+async fn the_newest_measured_reference_skips_imported_ones() {
+    let store = Store::open_in_memory().await.unwrap();
+    let measured = complete_reference(&store).await;
+    // A newer, complete reference set that came with an import.
+    let imported = store
+        .begin_reference("Munsell N9 (imported)", None)
+        .await
+        .unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    for g in &GEOMETRIES {
+        let v = match values_for(g, &mut rng) {
+            ReadingValues::Spectrum(s) => ReadingValues::Spectrum(s.map(|x| 0.7 + x * 0.1)),
+            ReadingValues::Intensity(x) => ReadingValues::Intensity(0.2 + x),
+        };
+        store
+            .add_reference_reading(imported, g.device, g, &v, b"")
+            .await
+            .unwrap();
+    }
+    store.complete_reference(imported).await.unwrap();
+    assert_eq!(
+        store.latest_reference().await.unwrap().unwrap().id,
+        imported
+    );
+    let latest = store
+        .latest_reference_not_ending(" (imported)")
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(latest.id, measured);
+    // A suffix longer than every name excludes nothing.
+    assert_eq!(
+        store
+            .latest_reference_not_ending(&"x".repeat(80))
+            .await
+            .unwrap()
+            .unwrap()
+            .id,
+        imported
+    );
+}
+
+#[tokio::test]
 async fn the_sql_views_decode_every_stored_value_bit_for_bit() {
     let store = Store::open_in_memory().await.unwrap();
     let reference = complete_reference(&store).await;
