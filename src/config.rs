@@ -981,13 +981,13 @@ impl Config {
                 "api.header_timeout_ms",
                 &raw.api.header_timeout_ms,
                 defaults::HEADER_TIMEOUT_MS,
-                |ms| api_timeout(ms),
+                api_timeout,
             )?,
             idle_timeout: c.value(
                 "api.idle_timeout_ms",
                 &raw.api.idle_timeout_ms,
                 defaults::IDLE_TIMEOUT_MS,
-                |ms| api_timeout(ms),
+                api_timeout,
             )?,
         };
 

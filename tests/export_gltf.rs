@@ -37,7 +37,7 @@ fn every_gltf_file_passes_the_khronos_validator() {
     let validator = validator();
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
     let scan =
-        Scan::read_file(&PathBuf::from(format!("{dir}/t-mandarin-orange.scan.json"))).unwrap();
+        Scan::read_file(PathBuf::from(format!("{dir}/t-mandarin-orange.scan.json"))).unwrap();
     // Relative and absolute scale: the scale is named in the asset's extras either way.
     let mut studies = Vec::new();
     for rho in [None, Some([0.77; 31])] {

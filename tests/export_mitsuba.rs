@@ -54,7 +54,7 @@ fn study() -> Study {
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
     let scans: Vec<Scan> = ["t-freesia-pink", "t-pebble-grey"]
         .iter()
-        .map(|n| Scan::read_file(&PathBuf::from(format!("{dir}/{n}.noisy.scan.json"))).unwrap())
+        .map(|n| Scan::read_file(PathBuf::from(format!("{dir}/{n}.noisy.scan.json"))).unwrap())
         .collect();
     let reports: Vec<Vec<_>> = scans
         .iter()

@@ -210,7 +210,7 @@ impl Access {
         {
             return true;
         }
-        self.allowed_hosts.iter().any(|h| *h == host)
+        self.allowed_hosts.contains(&host)
     }
 }
 
@@ -241,7 +241,7 @@ fn refuse(status: StatusCode, message: String) -> Response {
     r
 }
 
-fn header_str<'h>(headers: &'h HeaderMap, name: header::HeaderName) -> Option<&'h str> {
+fn header_str(headers: &HeaderMap, name: header::HeaderName) -> Option<&str> {
     headers.get(name).and_then(|v| v.to_str().ok())
 }
 
