@@ -92,8 +92,24 @@ impl Doctor {
 
 /// Runs `brdfd doctor --config CONFIG` twice (`--json` and text), as `uid` if given.
 fn doctor(config: &Path, uid: Option<u32>) -> Doctor {
+    // Another user may not be able to reach the build directory (a checkout under a 0700
+    // directory): run a copy of the binary from a directory anyone can enter.
+    let copy = uid.map(|_| {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+        let bin = dir.path().join("brdfd");
+        std::fs::copy(env!("CARGO_BIN_EXE_brdfd"), &bin).unwrap();
+        std::fs::set_permissions(&bin, std::fs::Permissions::from_mode(0o755)).unwrap();
+        (dir, bin)
+    });
+    let program = copy
+        .as_ref()
+        .map_or(Path::new(env!("CARGO_BIN_EXE_brdfd")), |(_, bin)| {
+            bin.as_path()
+        });
     let run = |json: bool| {
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_brdfd"));
+        let mut cmd = Command::new(program);
         cmd.arg("doctor").arg("--config").arg(config);
         if json {
             cmd.arg("--json");
