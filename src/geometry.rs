@@ -182,6 +182,20 @@ mod tests {
         assert!(by_name("15as 45").is_none());
     }
 
+    /// The drivers' tables are the wire truth: this table must name the same geometries, in the
+    /// same order, per instrument.
+    #[test]
+    fn names_match_the_drivers_tables() {
+        for (device, instrument) in [
+            (Device::MaT12, drivers::Instrument::MaT12),
+            (Device::Sra, drivers::Instrument::Sra),
+        ] {
+            let ours: Vec<&str> = of_device(device).iter().map(|g| g.name).collect();
+            assert_eq!(ours, instrument.geometries(), "{device}");
+            assert_eq!(device.key(), instrument.key());
+        }
+    }
+
     #[test]
     fn aspecular_matches_the_angles() {
         // Far side: θr − θi; same side: θr + θi (SCIENCE.md §2).

@@ -117,36 +117,51 @@ impl DriverConfig {
 pub enum Event {
     /// A connection is open and the instrument answered IDENTIFY.
     Connected {
+        /// The instrument this event is about.
         instrument: Instrument,
+        /// What the instrument answered to IDENTIFY.
         identity: Identity,
     },
     /// Fetching geometry `k` of `n` (1-based) of a MEASURE-ALL.
     Measuring {
+        /// The instrument this event is about.
         instrument: Instrument,
+        /// 1-based position of the geometry in the MEASURE-ALL.
         k: usize,
+        /// Number of geometries in the MEASURE-ALL.
         n: usize,
+        /// The geometry being fetched.
         geometry: &'static str,
     },
     /// A reading arrived (from MEASURE-ALL or MEASURE-ONE), with the reply frame that carried
     /// it as received.
     Reading {
+        /// The instrument this event is about.
         instrument: Instrument,
+        /// The reading and the reply frame that carried it.
         reading: ReceivedReading,
     },
     /// The link is gone (or could not be opened).
     Disconnected {
+        /// The instrument this event is about.
         instrument: Instrument,
+        /// Why the link is gone.
         reason: String,
     },
     /// About to make connection attempt `attempt` after waiting `delay`.
     Reconnecting {
+        /// The instrument this event is about.
         instrument: Instrument,
+        /// 1-based number of the connection attempt about to start.
         attempt: u32,
+        /// How long the driver waits before it.
         delay: Duration,
     },
     /// A command failed.
     Error {
+        /// The instrument this event is about.
         instrument: Instrument,
+        /// What went wrong.
         error: DriverError,
     },
 }
@@ -162,56 +177,93 @@ fn at(geometry: &Option<&'static str>) -> String {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DriverError {
     #[error("{instrument}: no valid reply to {request}{} after {sends} sends (last problem: {last}); check the cable and that the instrument is switched on", at(.geometry))]
+    /// Every send of the request timed out or drew only damaged or unrelated frames.
     NoValidReply {
+        /// The instrument the command was for.
         instrument: Instrument,
+        /// The request that went unanswered.
         request: RequestKind,
+        /// The geometry the request was about, if any.
         geometry: Option<&'static str>,
+        /// How many times the request was sent.
         sends: u32,
+        /// The last problem seen (timeout, damaged frame, ...).
         last: String,
     },
     #[error("{instrument} refused {request}{}: {code}: {}", at(.geometry), .code.advice())]
+    /// The instrument answered with an error code.
     Refused {
+        /// The instrument the command was for.
         instrument: Instrument,
+        /// The request refused.
         request: RequestKind,
+        /// The geometry the request was about, if any.
         geometry: Option<&'static str>,
+        /// The instrument's reason.
         code: ErrorCode,
     },
     #[error("{instrument}: link lost during {request}{} and {attempts} connection attempt(s) failed (last: {last}); check the cable and power, then retry the scan", at(.geometry))]
+    /// The link dropped during the request and reconnecting failed.
     Disconnected {
+        /// The instrument the command was for.
         instrument: Instrument,
+        /// The request in progress.
         request: RequestKind,
+        /// The geometry the request was about, if any.
         geometry: Option<&'static str>,
+        /// How many connection attempts failed.
         attempts: u32,
+        /// The last connection error.
         last: String,
     },
     #[error("{instrument} has no geometry {geometry:?}; its geometries are {known}")]
+    /// The caller named a geometry the instrument does not have.
     UnknownGeometry {
+        /// The instrument the command was for.
         instrument: Instrument,
+        /// The geometry asked for.
         geometry: String,
+        /// The instrument's geometries, listed for the message.
         known: String,
     },
     #[error(
         "{instrument}: MEASURE-ALL reported {count} geometries, expected {expected}: check the instrument's measurement mode"
     )]
+    /// MEASURE-ALL buffered a number of geometries other than the instrument's.
     WrongCount {
+        /// The instrument the command was for.
         instrument: Instrument,
+        /// The count the instrument reported.
         count: u8,
+        /// The instrument's number of geometries.
         expected: usize,
     },
     #[error("{instrument}: {request}{} aborted", at(.geometry))]
+    /// The command was cut short by an abort.
     Aborted {
+        /// The instrument the command was for.
         instrument: Instrument,
+        /// The request in progress.
         request: RequestKind,
+        /// The geometry the request was about, if any.
         geometry: Option<&'static str>,
     },
     #[error("{instrument}: {request} did not finish within {} ms: the driver thread is stuck; restart brdfd", .after.as_millis())]
+    /// The driver thread did not answer within the command's deadline.
     Timeout {
+        /// The instrument the command was for.
         instrument: Instrument,
+        /// The request that did not finish.
         request: RequestKind,
+        /// The deadline that passed.
         after: Duration,
     },
     #[error("{instrument}: the driver has stopped")]
-    Stopped { instrument: Instrument },
+    /// The driver task has ended; no command can be sent.
+    Stopped {
+        /// The instrument the command was for.
+        instrument: Instrument,
+    },
 }
 
 type Reply<T> = oneshot::Sender<Result<T, DriverError>>;
@@ -315,6 +367,7 @@ fn spawn<C: Codec>(factory: Factory, config: DriverConfig) -> DriverHandle {
 }
 
 impl DriverHandle {
+    /// The instrument this driver talks to.
     pub fn instrument(&self) -> Instrument {
         self.instrument
     }
@@ -354,10 +407,12 @@ impl DriverHandle {
         }
     }
 
+    /// Ask the instrument who it is (IDENTIFY).
     pub async fn identify(&self) -> Result<Identity, DriverError> {
         self.call(RequestKind::Identify, Job::Identify).await
     }
 
+    /// Ask the instrument for its state and battery charge (STATUS).
     pub async fn status(&self) -> Result<Status, DriverError> {
         self.call(RequestKind::Status, Job::Status).await
     }

@@ -4,19 +4,24 @@
 //!
 //! # Layout
 //! - [`protocol`]: what is said, independent of bytes: requests, replies, readings, error codes,
-//!   the [`protocol::Codec`] trait and the commands as small pure types.
-//! - [`mat12::codec`], [`sra::codec`]: the bytes, one replaceable file per instrument.
+//!   the [`protocol::Codec`] trait and the commands as small pure types; the instruments'
+//!   geometry names ([`protocol::MAT12_GEOMETRIES`], [`protocol::SRA_GEOMETRIES`]).
+//! - [`mat12::codec`], [`sra::codec`]: the bytes, one replaceable file per instrument, each
+//!   with its geometry name ↔ wire code map. The codecs import `protocol`, never the reverse.
 //! - [`session`]: the line-oriented session-file format (`brdfd-session 1`) that the recording
 //!   tap writes and the simulated instruments replay, with fault directives.
 //! - [`transport`]: the transport traits [`transport::UsbBulk`] and [`transport::SerialStream`]
-//!   and their errors; real implementations in [`mat12::usb`] (rusb) and [`sra::serial`]
-//!   (serialport); the simulated ones live in `mock-devices`.
+//!   and their errors, and the USB packet size ([`transport::PACKET_SIZE`]); real
+//!   implementations in [`mat12::usb`] (rusb) and [`sra::serial`] (serialport); the simulated
+//!   ones live in `mock-devices`.
 //! - [`driver`]: the async driver tasks ([`driver::spawn_mat12`], [`driver::spawn_sra`]): one
 //!   OS thread per instrument owning the connection, commands in over an mpsc channel, events
 //!   out on a broadcast channel, timeouts, resends and reconnection with backoff. Readings
 //!   come as [`protocol::ReceivedReading`]s: the values and the reply frame exactly as received.
 //! - [`tap`]: the recording tap, [`tap::Tap`] around any transport, writing every frame in both
 //!   directions with timestamps to a session file through a [`tap::Recorder`].
+
+#![warn(missing_docs)]
 
 pub mod driver;
 pub mod mat12;

@@ -19,6 +19,16 @@ pub const BANDS: usize = 31;
 /// no reflection, no final XOR. Check value for ASCII `123456789` is 0x29B1. Both codecs use it.
 pub const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_IBM_3740);
 
+/// The MA-T12's 12 geometry names in SCIENCE.md §2 order (the wire codes are in
+/// `mat12::codec`).
+pub const MAT12_GEOMETRIES: [&str; 12] = [
+    "15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80", "45as-15", "45as15", "45as25",
+    "45as45", "45as75", "45as110",
+];
+
+/// The SRA's 2 geometry names in SCIENCE.md §2 order (the wire codes are in `sra::codec`).
+pub const SRA_GEOMETRIES: [&str; 2] = ["sra-20", "sra-60"];
+
 /// The two instruments brdfd drives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Instrument {
@@ -49,8 +59,8 @@ impl Instrument {
     /// The wire geometry names, in SCIENCE.md §2 order.
     pub fn geometries(self) -> &'static [&'static str] {
         match self {
-            Instrument::MaT12 => &crate::mat12::codec::GEOMETRY_NAMES,
-            Instrument::Sra => &crate::sra::codec::GEOMETRY_NAMES,
+            Instrument::MaT12 => &MAT12_GEOMETRIES,
+            Instrument::Sra => &SRA_GEOMETRIES,
         }
     }
 
@@ -72,8 +82,11 @@ impl fmt::Display for Instrument {
 /// Who the instrument says it is.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Identity {
+    /// Model name as the instrument reports it.
     pub model: String,
+    /// Serial number.
     pub serial: String,
+    /// Firmware version.
     pub firmware: String,
 }
 
@@ -101,6 +114,7 @@ pub enum DeviceState {
 /// Reply to a status request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Status {
+    /// What the instrument is doing: ready, busy, or in need of calibration.
     pub state: DeviceState,
     /// Battery charge, percent (0–100). Both instruments are handheld.
     pub battery_percent: u8,
@@ -125,6 +139,7 @@ pub enum ReadingValue {
 pub struct Reading {
     /// The geometry's wire name (SCIENCE.md §2), e.g. `15as-45` or `sra-20`.
     pub geometry: &'static str,
+    /// The value measured at the geometry.
     pub value: ReadingValue,
 }
 
@@ -150,6 +165,7 @@ impl Reading {
 /// written, a stored frame shows what actually arrived, not what brdfd's codec would have sent.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReceivedReading {
+    /// The reading decoded from [`ReceivedReading::raw`].
     pub reading: Reading,
     /// The whole validated reply frame as it came off the wire: for the MA-T12 the message from
     /// its `MT` magic to its CRC, for the SRA the line from its `!` to its `\r\n`. Bytes dropped
@@ -173,12 +189,19 @@ impl fmt::Display for Reading {
 /// The kinds of request, for error replies that say which request failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RequestKind {
+    /// IDENTIFY: who the instrument is.
     Identify,
+    /// STATUS: state and battery.
     Status,
+    /// CALIBRATE: the white/reference calibration.
     Calibrate,
+    /// MEASURE-ALL: every geometry in one trigger.
     MeasureAll,
+    /// FETCH: one buffered result of MEASURE-ALL.
     Fetch,
+    /// MEASURE-ONE: one geometry now.
     MeasureOne,
+    /// ABORT: stop whatever is running.
     Abort,
 }
 
@@ -207,7 +230,9 @@ impl fmt::Display for RequestKind {
 /// byte-identical resend (PROTOCOL.md, "Retries").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Request {
+    /// Ask who the instrument is (model, serial, firmware).
     Identify,
+    /// Ask for the instrument's state and battery charge.
     Status,
     /// Take the white/reference calibration on the instrument's own tile.
     Calibrate,
@@ -215,10 +240,12 @@ pub enum Request {
     MeasureAll,
     /// Send the buffered result of the last MEASURE-ALL for one geometry.
     Fetch {
+        /// The geometry's wire name.
         geometry: &'static str,
     },
     /// Measure one geometry now and send its result.
     MeasureOne {
+        /// The geometry's wire name.
         geometry: &'static str,
     },
     /// Stop whatever is running; discard buffered results.
@@ -226,6 +253,7 @@ pub enum Request {
 }
 
 impl Request {
+    /// Which kind of request this is (for error replies and messages).
     pub const fn kind(&self) -> RequestKind {
         match self {
             Request::Identify => RequestKind::Identify,
@@ -278,6 +306,7 @@ pub enum ErrorCode {
 }
 
 impl ErrorCode {
+    /// Every error code, in wire-code order.
     pub const ALL: [ErrorCode; 8] = [
         ErrorCode::BadChecksum,
         ErrorCode::UnknownRequest,
@@ -325,22 +354,30 @@ impl fmt::Display for ErrorCode {
 /// readings, the geometry), so a late duplicate is recognised and dropped.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Response {
+    /// Answer to IDENTIFY.
     Identity(Identity),
+    /// Answer to STATUS.
     Status(Status),
+    /// CALIBRATE done.
     Calibrated,
     /// MEASURE-ALL done; `count` geometries are buffered.
     Measured {
+        /// How many geometries the instrument buffered.
         count: u8,
     },
     /// Answer to FETCH.
     Fetched(Reading),
     /// Answer to MEASURE-ONE.
     MeasuredOne(Reading),
+    /// ABORT done: whatever was running has stopped.
     Aborted,
     /// The instrument refused `request` (about `geometry`, if any).
     Error {
+        /// The kind of request refused.
         request: RequestKind,
+        /// Why the instrument refused it.
         code: ErrorCode,
+        /// The geometry the request was about, if any.
         geometry: Option<&'static str>,
     },
 }
@@ -400,23 +437,67 @@ impl fmt::Display for Response {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum FrameError {
     #[error("{skipped} byte(s) of garbage before the next frame start were dropped")]
-    Garbage { skipped: usize },
+    /// Bytes that precede the next frame start.
+    Garbage {
+        /// How many bytes were dropped.
+        skipped: usize,
+    },
     #[error("frame declares a {declared}-byte payload, more than the protocol's {max}: dropped")]
-    BadLength { declared: usize, max: usize },
+    /// An MA-T12 header declares a payload larger than the protocol allows.
+    BadLength {
+        /// The payload length in the header.
+        declared: usize,
+        /// The largest payload the protocol allows.
+        max: usize,
+    },
     #[error("line of {len} bytes without a terminator exceeds the protocol's {max}: dropped")]
-    LineTooLong { len: usize, max: usize },
+    /// An SRA run of bytes without a line end within the protocol's limit.
+    LineTooLong {
+        /// Length of the run, in bytes.
+        len: usize,
+        /// The longest line the protocol allows.
+        max: usize,
+    },
     #[error("{len}-byte line does not end in *XXXX\\r\\n, so it cannot be a frame: dropped")]
-    NotALine { len: usize },
+    /// An SRA line without the `*XXXX\r\n` tail.
+    NotALine {
+        /// Length of the line, in bytes.
+        len: usize,
+    },
     #[error("checksum mismatch (frame says {received:04X}, bytes give {computed:04X}): dropped")]
-    BadChecksum { computed: u16, received: u16 },
+    /// The frame's CRC does not match its bytes.
+    BadChecksum {
+        /// The CRC computed over the received bytes.
+        computed: u16,
+        /// The CRC the frame carries.
+        received: u16,
+    },
     #[error("frame is not well formed: {detail}")]
-    Malformed { detail: String },
+    /// A frame with a valid checksum whose fields do not parse.
+    Malformed {
+        /// What is wrong with it.
+        detail: String,
+    },
     #[error("unknown opcode or mnemonic {what:?}")]
-    UnknownOpcode { what: String },
+    /// An opcode (MA-T12) or mnemonic (SRA) the protocol does not define.
+    UnknownOpcode {
+        /// The opcode or mnemonic as received.
+        what: String,
+    },
     #[error("unknown geometry code {code:?}")]
-    UnknownGeometry { code: String },
+    /// A geometry wire code the instrument does not have.
+    UnknownGeometry {
+        /// The code as received.
+        code: String,
+    },
     #[error("reading for {geometry} has a non-finite value in band {band}")]
-    NonFinite { geometry: &'static str, band: usize },
+    /// A reading with a NaN or infinite value.
+    NonFinite {
+        /// The reading's geometry.
+        geometry: &'static str,
+        /// The first non-finite band (0 for an SRA intensity).
+        band: usize,
+    },
 }
 
 impl FrameError {
@@ -451,27 +532,43 @@ impl FrameError {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum EncodeError {
     #[error("{instrument} has no geometry {geometry:?}; its geometries are {known}")]
+    /// The request names a geometry the instrument does not have.
     UnknownGeometry {
+        /// The instrument the frame is for.
         instrument: Instrument,
+        /// The geometry asked for.
         geometry: String,
+        /// The instrument's geometries, listed for the message.
         known: String,
     },
     #[error("{instrument} readings carry {expected}, not {found}")]
+    /// A reading of the other instrument's kind (spectrum vs. intensity).
     WrongValueKind {
+        /// The instrument the frame is for.
         instrument: Instrument,
+        /// The kind of value the instrument carries.
         expected: &'static str,
+        /// The kind of value given.
         found: &'static str,
     },
     #[error("{instrument} reading for {geometry} has a non-finite value: readings must be finite")]
+    /// A reading with a NaN or infinite value.
     NonFinite {
+        /// The instrument the frame is for.
         instrument: Instrument,
+        /// The reading's geometry.
         geometry: &'static str,
     },
     #[error("{field} {value:?} cannot be sent to the {instrument}: {why}")]
+    /// A field the wire format cannot carry (e.g. a separator inside an SRA identity field).
     BadField {
+        /// The instrument the frame is for.
         instrument: Instrument,
+        /// Which field.
         field: &'static str,
+        /// The value given.
         value: String,
+        /// Why it cannot be sent.
         why: &'static str,
     },
 }
@@ -505,6 +602,7 @@ pub enum Check {
 /// `check_*` and `parse_*` are the two framing steps; `decode_*` combines them on a buffer.
 /// The device-side half (`parse_request`, `encode_response`) is what the simulated instruments use.
 pub trait Codec: Send + Sync + 'static {
+    /// The instrument this codec speaks to.
     const INSTRUMENT: Instrument;
 
     /// Framing verdict on bytes sent by brdfd.
@@ -517,7 +615,9 @@ pub trait Codec: Send + Sync + 'static {
     /// Parse exactly one whole response frame (as delimited by `check_response`). Verifies the
     /// framing and checksum again, so it is safe on any bytes: no reading without a valid checksum.
     fn parse_response(frame: &[u8]) -> Result<Response, FrameError>;
+    /// The bytes brdfd sends for `request`.
     fn encode_request(request: &Request) -> Result<Vec<u8>, EncodeError>;
+    /// The bytes an instrument sends for `response` (used by the simulated instruments).
     fn encode_response(response: &Response) -> Result<Vec<u8>, EncodeError>;
 
     /// Take one request off the front of `buf`. `Ok(None)`: incomplete, read more. `Err`: the
@@ -602,6 +702,7 @@ pub trait Command {
 #[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Answer<T> {
+    /// The reply answers the command: its output.
     Done(T),
     /// The instrument refused the command.
     Refused(ErrorCode),
@@ -624,11 +725,13 @@ pub struct MeasureAll;
 /// FETCH geometry → [`Reading`].
 #[derive(Debug, Clone, Copy)]
 pub struct Fetch {
+    /// The geometry's wire name.
     pub geometry: &'static str,
 }
 /// MEASURE-ONE geometry → [`Reading`].
 #[derive(Debug, Clone, Copy)]
 pub struct MeasureOne {
+    /// The geometry's wire name.
     pub geometry: &'static str,
 }
 /// ABORT → `()`.

@@ -36,6 +36,7 @@ pub enum Direction {
 }
 
 impl Direction {
+    /// The character that marks the direction in a session file: `>` or `<`.
     pub const fn symbol(self) -> char {
         match self {
             Direction::ToDevice => '>',
@@ -49,7 +50,9 @@ impl Direction {
 pub struct Frame {
     /// Milliseconds since the session started.
     pub t_ms: u64,
+    /// Which way the bytes went.
     pub direction: Direction,
+    /// The bytes exactly as on the line.
     pub bytes: Vec<u8>,
     /// The decoded comment, without the `#`. Informative only.
     pub comment: Option<String>,
@@ -77,21 +80,43 @@ impl fmt::Display for Frame {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Fault {
     /// `disconnect after=K`: the instrument drops the connection once frame K has gone by.
-    Disconnect { after: usize },
+    Disconnect {
+        /// The frame after which the link drops.
+        after: usize,
+    },
     /// `no-reply frame=K [times=N]`: device frame K is not sent, the first N times it is due.
-    NoReply { frame: usize, times: u32 },
+    NoReply {
+        /// The device frame withheld.
+        frame: usize,
+        /// How many times it is withheld.
+        times: u32,
+    },
     /// `corrupt frame=K offset=O [xor=XX] [times=N]`: byte O of device frame K is XORed with XX
     /// (hex, default ff) the first N times it is sent.
     Corrupt {
+        /// The device frame to damage.
         frame: usize,
+        /// Offset of the byte to damage.
         offset: usize,
+        /// The mask XORed into the byte.
         xor: u8,
+        /// How many times the frame is damaged.
         times: u32,
     },
     /// `garbage frame=K bytes=HEX`: the bytes are sent just before device frame K.
-    Garbage { frame: usize, bytes: Vec<u8> },
+    Garbage {
+        /// The device frame the garbage precedes.
+        frame: usize,
+        /// The garbage bytes.
+        bytes: Vec<u8>,
+    },
     /// `slow delay_ms=D [frame=K]`: every device frame (or only frame K) is sent D ms late.
-    Slow { delay_ms: u64, frame: Option<usize> },
+    Slow {
+        /// The extra delay, in milliseconds.
+        delay_ms: u64,
+        /// The only frame delayed; `None`: every device frame.
+        frame: Option<usize>,
+    },
 }
 
 impl fmt::Display for Fault {
@@ -130,10 +155,13 @@ impl fmt::Display for Fault {
 /// A whole session file.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Session {
+    /// The instrument recorded (the `device` line).
     pub instrument: Instrument,
     /// `note` lines: provenance (e.g. "synthetic"), sample name, anything a reader needs.
     pub notes: Vec<String>,
+    /// `fault` lines: what a simulated instrument injects when it replays the session.
     pub faults: Vec<Fault>,
+    /// The frames in file order.
     pub frames: Vec<Frame>,
 }
 
@@ -141,27 +169,61 @@ pub struct Session {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SessionError {
     #[error("session file: cannot read it: {detail}")]
-    Io { detail: String },
+    /// The file cannot be read.
+    Io {
+        /// The I/O error.
+        detail: String,
+    },
     #[error("session file does not start with `{HEADER} {FORMAT_VERSION}`: is it a session file?")]
+    /// The first line is not the format header.
     MissingHeader,
     #[error(
         "session file line {line}: format version {found:?} is not supported (this brdfd reads {FORMAT_VERSION})"
     )]
-    UnsupportedVersion { line: usize, found: String },
+    /// The header names a format version this brdfd cannot read.
+    UnsupportedVersion {
+        /// 1-based line number.
+        line: usize,
+        /// The version in the file.
+        found: String,
+    },
     #[error("session file line {line}: unknown device {found:?} (use ma_t12 or sra)")]
-    UnknownDevice { line: usize, found: String },
+    /// The `device` line names no known instrument.
+    UnknownDevice {
+        /// 1-based line number.
+        line: usize,
+        /// The device key in the file.
+        found: String,
+    },
     #[error("session file: no `device` line before the first frame")]
+    /// A frame comes before the `device` line.
     MissingDevice,
     #[error("session file line {line}: {detail}")]
-    BadLine { line: usize, detail: String },
+    /// A line that is not a frame, note, fault, comment or device line.
+    BadLine {
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong with it.
+        detail: String,
+    },
     #[error("session file line {line}: bad fault directive: {detail}")]
-    BadFault { line: usize, detail: String },
+    /// A `fault` line that does not parse.
+    BadFault {
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong with it.
+        detail: String,
+    },
     #[error(
         "session file line {line}: time {t_ms} ms is before the previous frame's {previous} ms"
     )]
+    /// A frame's timestamp is earlier than the frame before it.
     TimeGoesBackwards {
+        /// 1-based line number.
         line: usize,
+        /// The frame's time, ms since the session started.
         t_ms: u64,
+        /// The previous frame's time, ms.
         previous: u64,
     },
 }

@@ -180,6 +180,7 @@ impl Recorder {
         Recorder::new(BufWriter::new(file), instrument, notes)
     }
 
+    /// The instrument whose session is being recorded.
     pub fn instrument(&self) -> Instrument {
         self.lock().instrument
     }
@@ -230,10 +231,12 @@ impl<T> Tap<T> {
         Tap { inner, recorder }
     }
 
+    /// The wrapped connection.
     pub fn get_ref(&self) -> &T {
         &self.inner
     }
 
+    /// The wrapped connection, unwrapped.
     pub fn into_inner(self) -> T {
         self.inner
     }

@@ -21,33 +21,64 @@ pub enum TransportError {
         detail.as_ref().map(|d| format!("; {d}")).unwrap_or_default()
     )]
     UsbNotFound {
+        /// The vendor id searched for.
         vendor_id: u16,
+        /// The product id searched for, if one was set.
         product_id: Option<u16>,
+        /// Why the bus could not be listed, if that was the problem.
         detail: Option<String>,
     },
     #[error(
         "MA-T12 on USB bus {bus} address {address} cannot be opened: no permission; add a udev rule \
          giving the brdfd user access to vendor id 0x{vendor_id:04x} (e.g. MODE=\"0660\", GROUP=\"plugdev\")"
     )]
+    /// The device is there but the brdfd user may not open it.
     UsbPermission {
+        /// USB bus number.
         bus: u8,
+        /// Device address on the bus.
         address: u8,
+        /// The device's vendor id.
         vendor_id: u16,
     },
     #[error("MA-T12 on USB: {detail}: check the cable and udev permissions")]
-    UsbOther { detail: String },
+    /// Any other libusb failure while opening the device.
+    UsbOther {
+        /// libusb's error.
+        detail: String,
+    },
     #[error(
         "MA-T12: cannot claim USB interface {interface} ({detail}): is another program using the instrument?"
     )]
-    UsbClaim { interface: u8, detail: String },
+    /// The interface is claimed by another driver or program.
+    UsbClaim {
+        /// The interface number.
+        interface: u8,
+        /// libusb's error.
+        detail: String,
+    },
     #[error(
         "cannot open serial port {port} for the SRA ({detail}): check the port name, the cable, and that the brdfd user is in the port's group (often dialout)"
     )]
-    SerialOpen { port: String, detail: String },
+    /// The serial port cannot be opened.
+    SerialOpen {
+        /// The port's name.
+        port: String,
+        /// The operating system's error.
+        detail: String,
+    },
     #[error("no data within {} ms", timeout.as_millis())]
-    Timeout { timeout: Duration },
+    /// Nothing arrived within the timeout: the driver resends.
+    Timeout {
+        /// The timeout that passed.
+        timeout: Duration,
+    },
     #[error("link lost: {detail}")]
-    Disconnected { detail: String },
+    /// The link is gone: the driver reconnects.
+    Disconnected {
+        /// What the transport reported.
+        detail: String,
+    },
 }
 
 impl TransportError {
@@ -64,6 +95,10 @@ impl TransportError {
     }
 }
 
+/// USB full-speed bulk packet size (PROTOCOL.md §2): the driver writes frames in chunks of at
+/// most this and reads with a buffer of this size.
+pub const PACKET_SIZE: usize = 64;
+
 /// A USB bulk pipe pair (the MA-T12's transport).
 pub trait UsbBulk: Send + 'static {
     /// Write one bulk transfer. The driver never passes more than 64 bytes.
@@ -79,6 +114,7 @@ pub trait UsbBulk: Send + 'static {
 /// each following read and write. A read that times out returns `io::ErrorKind::TimedOut`; a
 /// read of 0 bytes or any other error means the link is gone.
 pub trait SerialStream: Read + Write + Send + 'static {
+    /// Set the timeout for each following read and write.
     fn set_timeout(&mut self, timeout: Duration) -> Result<(), TransportError>;
 
     /// Drop bytes received but not yet read. Default: nothing to drop.
@@ -112,7 +148,7 @@ pub(crate) struct UsbLink<T: UsbBulk>(pub T);
 
 impl<T: UsbBulk> Link for UsbLink<T> {
     fn send(&mut self, frame: &[u8], timeout: Duration) -> Result<(), TransportError> {
-        for packet in frame.chunks(crate::mat12::codec::PACKET_SIZE) {
+        for packet in frame.chunks(PACKET_SIZE) {
             let mut sent = 0;
             while sent < packet.len() {
                 let n = self.0.write_bulk(&packet[sent..], timeout)?;
@@ -128,7 +164,7 @@ impl<T: UsbBulk> Link for UsbLink<T> {
     }
 
     fn recv(&mut self, buf: &mut Vec<u8>, timeout: Duration) -> Result<(), TransportError> {
-        let mut packet = [0u8; crate::mat12::codec::PACKET_SIZE];
+        let mut packet = [0u8; PACKET_SIZE];
         let n = self.0.read_bulk(&mut packet, timeout)?;
         if n == 0 {
             // A zero-length packet carries nothing; report it as "nothing yet".

@@ -22,8 +22,8 @@ use mock_devices::generate::{GenerateOptions, Readings, SessionPair};
 use mock_devices::{generate_reference_session, generate_sample_session};
 use serde_json::{Value, json};
 
-const MA_T12: [&str; 12] = drivers::mat12::codec::GEOMETRY_NAMES;
-const SRA: [&str; 2] = drivers::sra::codec::GEOMETRY_NAMES;
+const MA_T12: [&str; 12] = drivers::protocol::MAT12_GEOMETRIES;
+const SRA: [&str; 2] = drivers::protocol::SRA_GEOMETRIES;
 
 /// The sample scans, in the order of `mock_devices::recordings::all()`.
 const SLUGS: [&str; 8] = [

@@ -64,7 +64,9 @@ pub enum Timing {
 /// How a simulated instrument replays its script.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ReplayOptions {
+    /// How requests are matched against the script.
     pub mode: Mode,
+    /// How the recorded delays are replayed.
     pub timing: Timing,
     /// Code-only fault: once this frame has gone by, the link drops and the instrument is gone
     /// for good (every later connection attempt fails as if it were unplugged).

@@ -84,7 +84,9 @@ impl Default for GenerateOptions {
 /// One object's sessions, one per instrument.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SessionPair {
+    /// The MA-T12's session.
     pub ma_t12: Session,
+    /// The SRA's session.
     pub sra: Session,
 }
 
@@ -96,6 +98,7 @@ pub enum GenerateError {
     #[error("cannot generate the session: {0}")]
     Encode(#[from] EncodeError),
     #[error("the sample name is empty: give the sample a name (it goes in the session's notes)")]
+    /// The sample has no name.
     EmptySampleName,
 }
 
@@ -148,7 +151,7 @@ fn generate_pair(
         .into_iter()
         .chain(options.notes.iter().cloned())
         .collect();
-    let mat12: Vec<Reading> = drivers::mat12::codec::GEOMETRY_NAMES
+    let mat12: Vec<Reading> = drivers::protocol::MAT12_GEOMETRIES
         .iter()
         .zip(&readings.ma_t12)
         .map(|(&geometry, spectrum)| Reading {
@@ -156,7 +159,7 @@ fn generate_pair(
             value: ReadingValue::Reflectance(*spectrum),
         })
         .collect();
-    let sra: Vec<Reading> = drivers::sra::codec::GEOMETRY_NAMES
+    let sra: Vec<Reading> = drivers::protocol::SRA_GEOMETRIES
         .iter()
         .zip(&readings.sra)
         .map(|(&geometry, v)| Reading {

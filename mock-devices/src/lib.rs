@@ -25,6 +25,8 @@
 //! simulated instrument, faults, the real USB transport without a device), and
 //! `benches/replay.rs` (the accelerated replay of all recordings through both drivers).
 
+#![warn(missing_docs)]
+
 use drivers::Instrument;
 use drivers::session::SessionError;
 
@@ -53,30 +55,49 @@ pub enum MockError {
     #[error(transparent)]
     Session(#[from] SessionError),
     #[error("no session to replay: give the simulated instrument at least one session file")]
+    /// No session was given.
     NoSessions,
     #[error(
         "session {session} ({label}) is for the {found}, but the replay is for the {expected}: \
          replay each instrument's sessions on its own simulated instrument"
     )]
+    /// A session of a multi-session script is for the other instrument.
     WrongInstrument {
+        /// 0-based index of the session.
         session: usize,
+        /// The session's label (file name or description).
         label: String,
+        /// The instrument the session records.
         found: Instrument,
+        /// The instrument being simulated.
         expected: Instrument,
     },
     #[error(
         "the script is a recording of the {script}; it cannot be replayed by the simulated \
          {simulated}: use the other simulated instrument or the other session file"
     )]
+    /// The script records the other instrument.
     NotForThisInstrument {
+        /// The instrument the script records.
         script: Instrument,
+        /// The instrument being simulated.
         simulated: Instrument,
     },
     #[error("fault `{fault}` cannot be applied: {detail}")]
-    BadFault { fault: String, detail: String },
+    /// A fault added in code does not fit the script.
+    BadFault {
+        /// The fault, as written in a session file.
+        fault: String,
+        /// Why it cannot be applied.
+        detail: String,
+    },
     #[error(
         "replay speed factor {speed} must be a positive finite number (1 = recorded timing, \
          10 = ten times faster; use Timing::Immediate for no delays)"
     )]
-    BadSpeed { speed: f64 },
+    /// A replay speed factor that is zero, negative or not finite.
+    BadSpeed {
+        /// The factor given.
+        speed: f64,
+    },
 }

@@ -23,6 +23,7 @@ pub struct Recorded {
     pub index: usize,
     /// Milliseconds since its session started, as recorded.
     pub t_ms: u64,
+    /// The frame's bytes as recorded.
     pub bytes: Vec<u8>,
 }
 
@@ -36,6 +37,7 @@ pub struct Exchange {
     /// The request decoded with the instrument's codec; `None` if the recorded bytes are not a
     /// valid request (a recording of a corrupted write).
     pub parsed: Option<Request>,
+    /// The device frames recorded after the request, in order.
     pub replies: Vec<Recorded>,
 }
 
@@ -195,10 +197,12 @@ impl Script {
         }
     }
 
+    /// The instrument the script records.
     pub fn instrument(&self) -> Instrument {
         self.instrument
     }
 
+    /// The exchanges in script order.
     pub fn exchanges(&self) -> &[Exchange] {
         &self.exchanges
     }

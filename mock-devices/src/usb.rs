@@ -25,7 +25,7 @@ use crate::script::Script;
 const NO_DEVICE: &str = "USB: No such device (it may have been disconnected)";
 
 /// Full-speed bulk packet size (PROTOCOL.md §2).
-const PACKET: usize = drivers::mat12::codec::PACKET_SIZE;
+const PACKET: usize = drivers::transport::PACKET_SIZE;
 
 #[derive(Debug)]
 struct Shared {

@@ -12,8 +12,8 @@ use serde_json::Value;
 
 fn readings_from(truth: &Value, what: &str) -> Readings {
     let r = &truth["readings"];
-    let mat12 = drivers::mat12::codec::GEOMETRY_NAMES;
-    let sra = drivers::sra::codec::GEOMETRY_NAMES;
+    let mat12 = drivers::protocol::MAT12_GEOMETRIES;
+    let sra = drivers::protocol::SRA_GEOMETRIES;
     Readings {
         ma_t12: std::array::from_fn(|g| {
             let v = r["ma_t12"][mat12[g]]

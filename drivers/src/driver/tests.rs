@@ -447,7 +447,7 @@ async fn mat12_measures_all_twelve_bit_for_bit_with_events() {
         // 256-byte frames (four 64-byte USB packets), each reassembled exactly.
         assert!(received.iter().all(|r| r.raw.len() == 256));
         let names: Vec<_> = readings.iter().map(|r| r.geometry).collect();
-        assert_eq!(names, crate::mat12::codec::GEOMETRY_NAMES);
+        assert_eq!(names, crate::protocol::MAT12_GEOMETRIES);
         let events = drain(&mut events);
         let measuring: Vec<_> = events
             .iter()

@@ -17,14 +17,8 @@
 
 use crate::protocol::{
     BANDS, CRC16, Check, Codec, DeviceState, EncodeError, ErrorCode, FrameError, Identity,
-    Instrument, Reading, ReadingValue, Request, RequestKind, Response, Status,
+    Instrument, MAT12_GEOMETRIES, Reading, ReadingValue, Request, RequestKind, Response, Status,
 };
-
-/// The MA-T12's 12 geometries in SCIENCE.md §2 order; wire code = index + 1.
-pub const GEOMETRY_NAMES: [&str; 12] = [
-    "15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80", "45as-15", "45as15", "45as25",
-    "45as45", "45as75", "45as110",
-];
 
 /// Frame start.
 pub const MAGIC: [u8; 2] = *b"MT";
@@ -34,19 +28,24 @@ pub const HEADER_LEN: usize = 5;
 pub const CRC_LEN: usize = 2;
 /// Largest payload accepted; a larger declared length is treated as corruption.
 pub const MAX_PAYLOAD: usize = 1024;
-/// USB full-speed bulk packet size: the driver writes frames in chunks of at most this and
-/// reads with a buffer of this size.
-pub const PACKET_SIZE: usize = 64;
 
+/// Opcode of the IDENTIFY request.
 pub const OP_IDENTIFY: u8 = 0x01;
+/// Opcode of the STATUS request.
 pub const OP_STATUS: u8 = 0x02;
+/// Opcode of the CALIBRATE request.
 pub const OP_CALIBRATE: u8 = 0x03;
+/// Opcode of the MEASURE-ALL request.
 pub const OP_MEASURE_ALL: u8 = 0x04;
+/// Opcode of the FETCH request.
 pub const OP_FETCH: u8 = 0x05;
+/// Opcode of the MEASURE-ONE request.
 pub const OP_MEASURE_ONE: u8 = 0x06;
+/// Opcode of the ABORT request.
 pub const OP_ABORT: u8 = 0x07;
 /// A reply's opcode is its request's opcode with the high bit set.
 pub const REPLY_BIT: u8 = 0x80;
+/// Opcode of an error reply: the instrument refused a request.
 pub const OP_ERROR: u8 = 0xFF;
 
 /// Payload of a reading: geometry code + 31 × f64.
@@ -56,9 +55,9 @@ const READING_PAYLOAD: usize = 1 + 8 * BANDS;
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Mat12Codec;
 
-/// Wire code (1–12) of a geometry name.
+/// Wire code (1–12) of a geometry name: its position in [`MAT12_GEOMETRIES`] plus one.
 pub fn geometry_code(name: &str) -> Option<u8> {
-    GEOMETRY_NAMES
+    MAT12_GEOMETRIES
         .iter()
         .position(|g| *g == name)
         .map(|i| i as u8 + 1)
@@ -66,7 +65,9 @@ pub fn geometry_code(name: &str) -> Option<u8> {
 
 /// Geometry name of a wire code (1–12).
 pub fn geometry_name(code: u8) -> Option<&'static str> {
-    GEOMETRY_NAMES.get((code as usize).checked_sub(1)?).copied()
+    MAT12_GEOMETRIES
+        .get((code as usize).checked_sub(1)?)
+        .copied()
 }
 
 const fn opcode_of(kind: RequestKind) -> u8 {
@@ -455,6 +456,7 @@ mod tests {
     use proptest::prelude::*;
 
     use crate::protocol::golden;
+    use crate::transport::PACKET_SIZE;
 
     /// The ramp used by PROTOCOL.md's golden READING: 0.25 + i/64, exact in binary64.
     fn golden_ramp() -> [f64; BANDS] {
@@ -685,7 +687,7 @@ mod tests {
 
     #[test]
     fn geometry_codes_cover_the_twelve_names() {
-        for (i, name) in GEOMETRY_NAMES.iter().enumerate() {
+        for (i, name) in MAT12_GEOMETRIES.iter().enumerate() {
             assert_eq!(geometry_code(name), Some(i as u8 + 1));
             assert_eq!(geometry_name(i as u8 + 1), Some(*name));
         }

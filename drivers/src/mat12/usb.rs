@@ -18,9 +18,11 @@ pub const XRITE_VENDOR_ID: u16 = 0x0765;
 /// Which USB device and endpoints are the MA-T12.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct UsbIds {
+    /// USB vendor id (X-Rite: [`XRITE_VENDOR_ID`]).
     pub vendor_id: u16,
     /// `None`: the first device of the vendor. Set it when other X-Rite devices are plugged in.
     pub product_id: Option<u16>,
+    /// Number of the interface to claim.
     pub interface: u8,
     /// Bulk OUT endpoint address.
     pub endpoint_out: u8,

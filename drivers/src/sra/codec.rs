@@ -13,12 +13,10 @@
 
 use crate::protocol::{
     CRC16, Check, Codec, DeviceState, EncodeError, ErrorCode, FrameError, Identity, Instrument,
-    Reading, ReadingValue, Request, RequestKind, Response, Status,
+    Reading, ReadingValue, Request, RequestKind, Response, SRA_GEOMETRIES, Status,
 };
 
-/// The SRA's 2 geometries in SCIENCE.md §2 order.
-pub const GEOMETRY_NAMES: [&str; 2] = ["sra-20", "sra-60"];
-/// Wire codes of [`GEOMETRY_NAMES`]: the incidence = viewing angle in degrees.
+/// Wire codes of [`SRA_GEOMETRIES`], index for index: the incidence = viewing angle in degrees.
 pub const GEOMETRY_CODES: [&str; 2] = ["20", "60"];
 
 /// Start of a request line.
@@ -36,7 +34,7 @@ pub struct SraCodec;
 
 /// Wire code (`20`, `60`) of a geometry name.
 pub fn geometry_code(name: &str) -> Option<&'static str> {
-    GEOMETRY_NAMES
+    SRA_GEOMETRIES
         .iter()
         .position(|g| *g == name)
         .map(|i| GEOMETRY_CODES[i])
@@ -47,7 +45,7 @@ pub fn geometry_name(code: &str) -> Option<&'static str> {
     GEOMETRY_CODES
         .iter()
         .position(|c| *c == code)
-        .map(|i| GEOMETRY_NAMES[i])
+        .map(|i| SRA_GEOMETRIES[i])
 }
 
 const fn mnemonic(kind: RequestKind) -> &'static str {
@@ -991,7 +989,7 @@ mod tests {
         ) {
             let v = f64::from_bits(bits);
             prop_assume!(v.is_finite());
-            let r = intensity(GEOMETRY_NAMES[g], v);
+            let r = intensity(SRA_GEOMETRIES[g], v);
             let bytes = SraCodec::encode_response(&Response::Fetched(r)).unwrap();
             prop_assert!(bytes.len() <= MAX_LINE);
             let mut buf = BytesMut::new();
