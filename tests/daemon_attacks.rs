@@ -11,11 +11,9 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use brdfd::client::Client;
@@ -23,73 +21,14 @@ use serde_json::{Value, json};
 
 use common::*;
 
-/// A running `brdfd serve` and what the tests need of it.
-struct Daemon {
-    child: Child,
-    addr: SocketAddr,
-    client: Client,
-    token: String,
-    dir: PathBuf,
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 /// Writes a configuration with simulated instruments, quick connection bounds and `extra`
 /// appended to `[api]`.
 fn config(dir: &Path, api_extra: &str) -> PathBuf {
-    let path = dir.join("brdfd.toml");
-    let text = format!(
-        "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\nheader_timeout_ms = 500\n\
-         idle_timeout_ms = 20000\n{api_extra}\n\n[log]\nlevel = \"warn\"\n\n\
-         [devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n",
-        dir.join("brdfd.db").display()
-    );
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-fn spawn(dir: &Path, config: &Path, extra: &[&str]) -> Daemon {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_brdfd"))
-        .args(["serve", "--config"])
-        .arg(config)
-        .args(extra)
-        .env_remove("BRDFD_TOKEN")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("brdfd serve starts");
-    let stdout = child.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let _ = BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(line);
-    });
-    let line = rx
-        .recv_timeout(STEP_TIMEOUT)
-        .expect("the daemon prints where it listens");
-    let addr: SocketAddr = line
-        .split("http://")
-        .nth(1)
-        .and_then(|rest| rest.split_whitespace().next())
-        .and_then(|a| a.parse().ok())
-        .unwrap_or_else(|| panic!("no address in {line:?}"));
-    let token = std::fs::read_to_string(dir.join("brdfd.token"))
-        .unwrap()
-        .trim()
-        .to_string();
-    Daemon {
-        child,
-        addr,
-        client: client_of_serve(addr, dir),
-        token,
-        dir: dir.to_path_buf(),
-    }
+    write_simulated_config(
+        dir,
+        &format!("header_timeout_ms = 500\nidle_timeout_ms = 20000\n{api_extra}"),
+        "",
+    )
 }
 
 /// One raw HTTP/1.1 request; returns the status code and the body.
@@ -141,14 +80,6 @@ fn counts(dir: &Path) -> Vec<(String, i64)> {
     })
 }
 
-fn wait_until(what: &str, mut done: impl FnMut() -> bool) {
-    let deadline = Instant::now() + STEP_TIMEOUT;
-    while !done() {
-        assert!(Instant::now() < deadline, "timed out waiting for {what}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 fn idle(client: &Client) -> bool {
     client.get("/status").unwrap()["busy"].is_null()
 }
@@ -157,7 +88,7 @@ fn idle(client: &Client) -> bool {
 fn a_web_page_cannot_measure_abort_cancel_or_import() {
     let _serial = serial();
     let dir = tempfile::tempdir().unwrap();
-    let d = spawn(dir.path(), &config(dir.path(), ""), &[]);
+    let d = spawn_serve(&config(dir.path(), ""), &[]);
     let host = d.addr.to_string();
     let bearer = format!("Bearer {}", d.token);
     let before = counts(&d.dir);
@@ -358,7 +289,7 @@ fn a_second_daemon_on_the_same_store_is_refused_and_the_first_scan_completes() {
     let _serial = serial();
     let dir = tempfile::tempdir().unwrap();
     let cfg = config(dir.path(), "");
-    let d = spawn(dir.path(), &cfg, &[]);
+    let d = spawn_serve(&cfg, &[]);
     d.client.post("/reference", None).unwrap();
     wait_until("the reference", || idle(&d.client));
     let scan = d
@@ -420,7 +351,7 @@ fn a_second_daemon_on_the_same_store_is_refused_and_the_first_scan_completes() {
 fn a_refit_naming_one_cost_function_two_thousand_times_queues_it_once() {
     let _serial = serial();
     let dir = tempfile::tempdir().unwrap();
-    let d = spawn(dir.path(), &config(dir.path(), ""), &[]);
+    let d = spawn_serve(&config(dir.path(), ""), &[]);
     d.client.post("/reference", None).unwrap();
     wait_until("the reference", || idle(&d.client));
     let scan = d
@@ -471,8 +402,7 @@ fn a_refit_naming_one_cost_function_two_thousand_times_queues_it_once() {
 fn half_sent_headers_are_closed_and_connections_and_streams_are_capped() {
     let _serial = serial();
     let dir = tempfile::tempdir().unwrap();
-    let d = spawn(
-        dir.path(),
+    let d = spawn_serve(
         &config(
             dir.path(),
             "max_connections = 12\nmax_event_subscribers = 2",
@@ -569,7 +499,7 @@ fn a_recording_named_like_the_store_is_refused_and_old_recordings_are_kept() {
             &format!("[devices.ma_t12]\nrecord = \"{}\"\n", rec.display()),
         );
     std::fs::write(&cfg2, text).unwrap();
-    let d = spawn(dir.path(), &cfg2, &[]);
+    let d = spawn_serve(&cfg2, &[]);
     drop(d);
     let kept: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()

@@ -7,81 +7,15 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
-use std::net::SocketAddr;
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::mpsc;
-use std::time::{Duration, Instant};
 
 use brdfd::client::Client;
 use brdfd::store::{ScanFilter, ScanId, ScanState, Store};
 use serde_json::{Value, json};
 
 use common::*;
-
-/// A running `brdfd serve` and the address it printed.
-struct Daemon {
-    child: Child,
-    client: Client,
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        // A test that failed half-way must not leave a daemon behind.
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn write_config(dir: &Path) -> std::path::PathBuf {
-    let config = dir.join("brdfd.toml");
-    let text = format!(
-        "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\n\n[log]\nlevel = \"warn\"\n\n\
-         [devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n",
-        dir.join("brdfd.db").display()
-    );
-    std::fs::write(&config, text).unwrap();
-    config
-}
-
-fn spawn_daemon(config: &Path) -> Daemon {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_brdfd"))
-        .args(["serve", "--config"])
-        .arg(config)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("brdfd serve starts");
-    let stdout = child.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let _ = BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(line);
-    });
-    let line = rx
-        .recv_timeout(STEP_TIMEOUT)
-        .expect("the daemon prints where it listens");
-    let addr: SocketAddr = line
-        .split("http://")
-        .nth(1)
-        .and_then(|rest| rest.split_whitespace().next())
-        .and_then(|a| a.parse().ok())
-        .unwrap_or_else(|| panic!("no address in {line:?}"));
-    Daemon {
-        child,
-        client: client_of_serve(addr, config.parent().unwrap()),
-    }
-}
-
-fn wait_until(what: &str, mut done: impl FnMut() -> bool) {
-    let deadline = Instant::now() + STEP_TIMEOUT;
-    while !done() {
-        assert!(Instant::now() < deadline, "timed out waiting for {what}");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-}
 
 fn reference(client: &Client) {
     client.post("/reference", None).unwrap();
@@ -130,7 +64,7 @@ async fn open_and_check(db: &Path) -> Store {
 fn sigkill_mid_scan_leaves_a_sound_store_and_sigterm_aborts_the_scan_gracefully() {
     let _serial = serial();
     let dir = tempfile::tempdir().unwrap();
-    let config = write_config(dir.path());
+    let config = write_simulated_config(dir.path(), "", "");
     let db = dir.path().join("brdfd.db");
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -139,7 +73,7 @@ fn sigkill_mid_scan_leaves_a_sound_store_and_sigterm_aborts_the_scan_gracefully(
     let (tx, rx) = mpsc::channel();
     let body = std::thread::spawn(move || {
         // SIGKILL mid-scan.
-        let mut d = spawn_daemon(&config);
+        let mut d = spawn_serve(&config, &[]);
         reference(&d.client);
         let killed = scan_until_some_readings(&d.client, "T.Killed");
         d.child.kill().unwrap(); // SIGKILL on Unix
@@ -154,7 +88,7 @@ fn sigkill_mid_scan_leaves_a_sound_store_and_sigterm_aborts_the_scan_gracefully(
         assert!((1..14).contains(&readings), "{readings} readings");
 
         // The next start marks it failed, keeping its readings, and scans again.
-        let mut d = spawn_daemon(&config);
+        let mut d = spawn_serve(&config, &[]);
         let shown = d.client.get(&format!("/scans/{killed}")).unwrap();
         assert_eq!(shown["scan"]["state"], "failed");
         assert_eq!(shown["scan"]["reason"], "daemon stopped during the scan");

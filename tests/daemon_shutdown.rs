@@ -12,85 +12,13 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
-use std::net::SocketAddr;
-use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
-use std::time::Instant;
+use std::process::Command;
 
 use brdfd::client::Client;
 use brdfd::store::{FitRunId, FitStatus, Store};
 use serde_json::{Value, json};
 
 use common::*;
-
-/// A running `brdfd serve`.
-struct Daemon {
-    child: Child,
-    client: Client,
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        // A test that failed half-way must not leave a daemon behind.
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn write_config(dir: &Path) -> std::path::PathBuf {
-    let config = dir.join("brdfd.toml");
-    let text = format!(
-        "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\n\n[log]\nlevel = \"warn\"\n\n\
-         [devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n",
-        dir.join("brdfd.db").display()
-    );
-    std::fs::write(&config, text).unwrap();
-    config
-}
-
-fn spawn_daemon(config: &Path) -> Daemon {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_brdfd"))
-        .args(["serve", "--config"])
-        .arg(config)
-        .env_remove("BRDFD_TOKEN")
-        .env_remove("BRDFD_CONFIG")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("brdfd serve starts");
-    let stdout = child.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let _ = BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(line);
-    });
-    let line = rx
-        .recv_timeout(STEP_TIMEOUT)
-        .expect("the daemon prints where it listens");
-    let addr: SocketAddr = line
-        .split("http://")
-        .nth(1)
-        .and_then(|rest| rest.split_whitespace().next())
-        .and_then(|a| a.parse().ok())
-        .unwrap_or_else(|| panic!("no address in {line:?}"));
-    Daemon {
-        child,
-        client: client_of_serve(addr, config.parent().unwrap()),
-    }
-}
-
-/// Polls the daemon until `done`, failing after `STEP_TIMEOUT`.
-fn wait_until(what: &str, mut done: impl FnMut() -> bool) {
-    let deadline = Instant::now() + STEP_TIMEOUT;
-    while !done() {
-        assert!(Instant::now() < deadline, "timed out waiting for {what}");
-        // A polling interval, not a synchronisation: the state is checked again after it.
-        std::thread::sleep(std::time::Duration::from_millis(10));
-    }
-}
 
 fn fit_status(client: &Client, fit: i64) -> String {
     let v: Value = client.get(&format!("/fits/{fit}")).unwrap();
@@ -141,9 +69,9 @@ fn start_a_long_fit(client: &Client) -> (i64, i64) {
 
 fn signal_stops_a_long_fit_which_runs_again_at_the_next_start(signal: &str) {
     let dir = tempfile::tempdir().unwrap();
-    let config = write_config(dir.path());
+    let config = write_simulated_config(dir.path(), "", "");
     let db = dir.path().join("brdfd.db");
-    let mut d = spawn_daemon(&config);
+    let mut d = spawn_serve(&config, &[]);
     let (_scan, fit) = start_a_long_fit(&d.client);
 
     let pid = d.child.id().to_string();
@@ -178,7 +106,7 @@ fn signal_stops_a_long_fit_which_runs_again_at_the_next_start(signal: &str) {
     });
 
     // The next start queues it again, and it finishes with the same method and seed.
-    let d = spawn_daemon(&config);
+    let d = spawn_serve(&config, &[]);
     wait_until("the interrupted fit to finish", || {
         fit_status(&d.client, fit) == "done"
     });

@@ -11,11 +11,8 @@
 mod common;
 
 use std::collections::BTreeSet;
-use std::io::{BufRead, BufReader, Write};
-use std::net::SocketAddr;
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use brdfd::client::Client;
@@ -24,20 +21,8 @@ use serde_json::Value;
 
 use common::*;
 
-struct Daemon {
-    child: Child,
-    addr: SocketAddr,
-    client: Client,
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Daemon {
+/// The tests stop the daemon in two ways and read its watch-folder status.
+impl ServeChild {
     /// SIGTERM, and the exit status must be success.
     fn stop(mut self) {
         // SAFETY: kill(2) on our own child's pid.
@@ -70,15 +55,15 @@ impl Lab {
         let dir = tmp.path().to_path_buf();
         let inbox = dir.join("inbox");
         std::fs::create_dir(&inbox).unwrap();
-        let text = format!(
-            "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\n\n[log]\nlevel = \"warn\"\n\n\
-             [fit]\ncost_functions = [\"cf2\"]\nbootstrap = 0\n\n\
-             [ingest]\nwatch = \"{}\"\nsettle_ms = {settle_ms}\npoll_ms = 20\npair_wait_ms = {pair_wait_ms}\n\n\
-             [devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n",
-            dir.join("brdfd.db").display(),
-            inbox.display()
+        write_simulated_config(
+            &dir,
+            "",
+            &format!(
+                "[fit]\ncost_functions = [\"cf2\"]\nbootstrap = 0\n\n\
+                 [ingest]\nwatch = \"{}\"\nsettle_ms = {settle_ms}\npoll_ms = 20\npair_wait_ms = {pair_wait_ms}\n\n",
+                inbox.display()
+            ),
         );
-        std::fs::write(dir.join("brdfd.toml"), text).unwrap();
         Lab {
             _tmp: tmp,
             dir,
@@ -86,37 +71,8 @@ impl Lab {
         }
     }
 
-    fn serve(&self) -> Daemon {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_brdfd"))
-            .args(["serve", "--config"])
-            .arg(self.dir.join("brdfd.toml"))
-            .env_remove("BRDFD_TOKEN")
-            .env_remove("BRDFD_CONFIG")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("brdfd serve starts");
-        let stdout = child.stdout.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            let mut line = String::new();
-            let _ = BufReader::new(stdout).read_line(&mut line);
-            let _ = tx.send(line);
-        });
-        let line = rx
-            .recv_timeout(STEP_TIMEOUT)
-            .expect("the daemon prints where it listens");
-        let addr: SocketAddr = line
-            .split("http://")
-            .nth(1)
-            .and_then(|rest| rest.split_whitespace().next())
-            .and_then(|a| a.parse().ok())
-            .unwrap_or_else(|| panic!("no address in {line:?}"));
-        Daemon {
-            child,
-            addr,
-            client: client_of_serve(addr, &self.dir),
-        }
+    fn serve(&self) -> ServeChild {
+        spawn_serve(&self.dir.join("brdfd.toml"), &[])
     }
 
     fn sub(&self, name: &str) -> PathBuf {

@@ -5,6 +5,11 @@
 
 #![allow(dead_code)] // each test binary uses a different subset
 
+pub mod serve;
+
+#[allow(unused_imports)] // each test binary uses a different subset
+pub use serve::{ServeChild, spawn_serve, wait_until, write_simulated_config};
+
 use std::future::Future;
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
