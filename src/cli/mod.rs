@@ -1,8 +1,12 @@
 //! The `brdfd` command line: one clap-derived [`Cli`] with a subcommand per job, and [`run`].
 //!
-//! Each subcommand lives in its own file with its `Args` struct and a `run` function; adding
-//! one (serve, scan, reference, replay, …) is a variant in [`Command`], a file here, and an arm in
-//! [`run`]. Errors go up as `anyhow` chains with context; the binary prints them on one line.
+//! Each subcommand lives in its own file with its `Args` struct and a `run` function (a pair
+//! that belongs together shares one: `reference` and `scan` in [`measure`], `status` and
+//! `abort` in [`status`], `export` and `import` in [`scan_file`]); adding one (serve, scan,
+//! reference, replay, …) is a variant in [`Command`], a file here, and an arm in [`run`]. The
+//! operator subcommands that talk to a running daemon share [`operator`] (where the daemon is,
+//! its JSON for the terminal) and [`follow`] (progress on the event stream). Errors go up as
+//! `anyhow` chains with context; the binary prints them on one line.
 
 use clap::{Parser, Subcommand};
 
@@ -10,13 +14,20 @@ pub mod demo;
 pub mod doctor;
 pub mod exchange;
 pub mod fit;
-pub mod ops;
+pub mod follow;
+pub mod measure;
+pub mod operator;
 pub mod record;
+pub mod refit;
 pub mod render;
 pub mod replay;
 pub mod report;
+pub mod scan_file;
+pub mod scans;
 pub mod serve;
 pub mod shell;
+pub mod show;
+pub mod status;
 pub mod sync;
 pub mod synth;
 
@@ -54,23 +65,23 @@ pub enum Command {
     /// Run the daemon: instruments, scan orchestrator, fit worker and the local HTTP API.
     Serve(serve::ServeArgs),
     /// Ask the running daemon to measure the white reference tile (Munsell N9).
-    Reference(ops::ReferenceArgs),
+    Reference(measure::ReferenceArgs),
     /// Ask the running daemon to scan a sample, with live progress per reading and per fit.
-    Scan(ops::ScanArgs),
+    Scan(measure::ScanArgs),
     /// List the scans in the running daemon's store, newest first.
-    Scans(ops::ScansArgs),
+    Scans(scans::ScansArgs),
     /// Show one scan: its state, readings, reference and fits with their ΔE00.
-    Show(ops::ShowArgs),
+    Show(show::ShowArgs),
     /// Fit a stored scan again (other cost functions, method or seed).
-    Refit(ops::RefitArgs),
+    Refit(refit::RefitArgs),
     /// Stop the reference or scan in progress (its readings are kept).
-    Abort(ops::StatusArgs),
+    Abort(status::StatusArgs),
     /// The running daemon's state: what it is doing, the reference in force, fits pending.
-    Status(ops::StatusArgs),
+    Status(status::StatusArgs),
     /// Write a stored scan as a brdfd.scan/1 file.
-    Export(ops::ExportArgs),
+    Export(scan_file::ExportArgs),
     /// Import a brdfd.scan/1 file into the store; the daemon fits it.
-    Import(ops::ImportArgs),
+    Import(scan_file::ImportArgs),
     /// Replay recorded session files against the whole daemon in-process (simulated devices →
     /// store → fits).
     Replay(replay::ReplayArgs),
@@ -143,15 +154,15 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::ExportFormat(args) => exchange::export(&args),
         Command::ImportFormat(args) => exchange::import(&args),
         Command::Serve(args) => serve::run(&args),
-        Command::Reference(args) => ops::reference(&args),
-        Command::Scan(args) => ops::scan(&args),
-        Command::Scans(args) => ops::scans(&args),
-        Command::Show(args) => ops::show(&args),
-        Command::Refit(args) => ops::refit(&args),
-        Command::Abort(args) => ops::abort(&args),
-        Command::Status(args) => ops::status(&args),
-        Command::Export(args) => ops::export(&args),
-        Command::Import(args) => ops::import(&args),
+        Command::Reference(args) => measure::reference(&args),
+        Command::Scan(args) => measure::scan(&args),
+        Command::Scans(args) => scans::scans(&args),
+        Command::Show(args) => show::show(&args),
+        Command::Refit(args) => refit::refit(&args),
+        Command::Abort(args) => status::abort(&args),
+        Command::Status(args) => status::status(&args),
+        Command::Export(args) => scan_file::export(&args),
+        Command::Import(args) => scan_file::import(&args),
         Command::Replay(args) => replay::run(&args),
         Command::Record(args) => record::run(&args),
         Command::Sync(args) => sync::run(&args),

@@ -1,0 +1,79 @@
+//! `brdfd reference` and `brdfd scan`: ask the daemon to measure the white reference tile or a
+//! sample, then follow the measurement (and a scan's fits) on the event stream.
+
+use serde_json::json;
+
+use super::follow::{follow, print_scan_result};
+use super::operator::{DaemonArgs, id, tagged};
+
+#[derive(Debug, clap::Args)]
+pub struct ReferenceArgs {
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+    /// Return once the daemon has accepted the request, without following progress.
+    #[arg(long)]
+    pub detach: bool,
+    /// NDJSON on stdout: the daemon's answer, then each of its events about this reference
+    /// (`GET /events` objects), one per line.
+    #[arg(long)]
+    pub json: bool,
+}
+#[derive(Debug, clap::Args)]
+pub struct ScanArgs {
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+    /// The sample's name, e.g. "T.Sky blue".
+    #[arg(long, value_name = "NAME")]
+    pub sample: String,
+    /// Return once the daemon has accepted the request, without following progress.
+    #[arg(long)]
+    pub detach: bool,
+    /// NDJSON on stdout: the daemon's answer, each of its events about this scan and its fits
+    /// (`GET /events` objects), then `{"type":"result","scan":…}` with the scan's detail.
+    #[arg(long)]
+    pub json: bool,
+}
+pub fn reference(args: &ReferenceArgs) -> anyhow::Result<()> {
+    let client = args.daemon.client()?;
+    let events = (!args.detach).then(|| client.events()).transpose()?;
+    let v = client.post("/reference", None)?;
+    let reference = id(&v, "reference");
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    } else {
+        println!(
+            "reference {reference} started: measuring the Munsell N9 tile on both instruments"
+        );
+    }
+    match events {
+        Some(events) => follow(
+            &client,
+            events,
+            Some(reference),
+            None,
+            Vec::new(),
+            args.json,
+        ),
+        None => Ok(()),
+    }
+}
+
+pub fn scan(args: &ScanArgs) -> anyhow::Result<()> {
+    let client = args.daemon.client()?;
+    let events = (!args.detach).then(|| client.events()).transpose()?;
+    let v = client.post("/scans", Some(&json!({ "sample": args.sample })))?;
+    let scan = id(&v, "scan");
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    } else {
+        println!("scan {scan} started: sample \"{}\"", args.sample);
+    }
+    match events {
+        Some(events) => {
+            follow(&client, events, None, Some(scan), Vec::new(), args.json)?;
+            print_scan_result(&client.get(&format!("/scans/{scan}"))?, args.json);
+            Ok(())
+        }
+        None => Ok(()),
+    }
+}

@@ -1,0 +1,167 @@
+//! What the operator subcommands (`reference`, `scan`, `scans`, `show`, `refit`, `abort`,
+//! `status`, `export`, `import`) share: where the daemon is and its token ([`DaemonArgs`]),
+//! times as the operator reads them, and fields of the daemon's JSON made safe for the terminal.
+//!
+//! Each subcommand talks to a running daemon over its HTTP API ([`crate::client`]). Refusals
+//! print the daemon's message as it is ("the instruments are busy: scan 12 is in progress …");
+//! no daemon gives "no brdfd daemon is listening on … — start one with `brdfd serve`".
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use anyhow::bail;
+use serde_json::Value;
+
+use crate::client::Client;
+
+/// Where the daemon is, and its API token.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DaemonArgs {
+    /// The daemon's API address [default: [api] listen of the configuration, else
+    /// 127.0.0.1:7878].
+    #[arg(long, value_name = "IP:PORT")]
+    pub addr: Option<SocketAddr>,
+    /// The file holding the daemon's API token [default: [api] token_file of the
+    /// configuration, else brdfd.token beside its store (./brdfd.token without one)]. The
+    /// BRDFD_TOKEN environment variable, when set, is used instead of any file.
+    #[arg(long, value_name = "FILE")]
+    pub token_file: Option<PathBuf>,
+    /// The daemon's configuration file, for its address and token file.
+    #[arg(long, short, value_name = "FILE", env = "BRDFD_CONFIG")]
+    pub config: Option<PathBuf>,
+}
+
+impl DaemonArgs {
+    fn config(&self) -> anyhow::Result<crate::config::Config> {
+        Ok(crate::config::Config::load_or_default(
+            self.config.as_deref(),
+        )?)
+    }
+
+    /// The address asked for: `--addr`, else the configuration's.
+    pub fn addr(&self) -> anyhow::Result<SocketAddr> {
+        match self.addr {
+            Some(a) => Ok(a),
+            None => Ok(self.config()?.api.listen),
+        }
+    }
+
+    /// A client with the token from BRDFD_TOKEN, `--token-file` or the configuration. A token
+    /// that cannot be read is not an error yet: the daemon's 401, if it comes, says why.
+    pub fn client(&self) -> anyhow::Result<Client> {
+        let config = self.config()?;
+        let addr = self.addr.unwrap_or(config.api.listen);
+        let client = Client::new(addr);
+        if let Ok(text) = std::env::var("BRDFD_TOKEN") {
+            return match crate::api::Token::parse(&text) {
+                Some(t) => Ok(client.with_token(&t, "sent the token of BRDFD_TOKEN")),
+                None => bail!(
+                    "BRDFD_TOKEN does not hold an API token (64 hex digits); unset it to use the token file"
+                ),
+            };
+        }
+        let path = self
+            .token_file
+            .clone()
+            .unwrap_or_else(|| config.api.token_path(&config.store.path));
+        Ok(match crate::api::Token::read(&path) {
+            Ok(t) => client.with_token(&t, format!("sent the token of {}", path.display())),
+            Err(e) => client.without_token(format!(
+                "sent no token: {e}; pass --token-file, --config or BRDFD_TOKEN"
+            )),
+        })
+    }
+}
+/// A date and time in UTC from milliseconds since the Unix epoch, e.g. `2026-11-24 19:14:14Z`.
+pub fn utc(ms: i64) -> String {
+    crate::formats::rfc3339_utc(ms.div_euclid(1000)).replacen('T', " ", 1)
+}
+
+/// A date and time in the machine's time zone (`TZ`, else `/etc/localtime`) with its UTC
+/// offset, e.g. `2026-11-24 20:14:14 +01:00`, as the operator's clock shows it; UTC (`Z`) when
+/// the zone cannot be read.
+pub fn local_time(ms: i64) -> String {
+    local_time_in(
+        ms,
+        &jiff::tz::TimeZone::try_system().unwrap_or(jiff::tz::TimeZone::UTC),
+    )
+}
+
+/// [`local_time`] in zone `tz`.
+pub fn local_time_in(ms: i64, tz: &jiff::tz::TimeZone) -> String {
+    match jiff::Timestamp::from_millisecond(ms) {
+        Ok(t) => t
+            .to_zoned_datetime(tz.clone())
+            .strftime("%Y-%m-%d %H:%M:%S %:z")
+            .to_string(),
+        Err(_) => utc(ms),
+    }
+}
+pub(super) fn id(v: &Value, key: &str) -> i64 {
+    v.get(key).and_then(Value::as_i64).unwrap_or(-1)
+}
+
+pub(super) fn f(v: &Value, key: &str) -> f64 {
+    v.get(key).and_then(Value::as_f64).unwrap_or(f64::NAN)
+}
+
+/// A text field for the terminal: control characters (an escape sequence in a name stored
+/// before names were checked) are shown escaped, never sent to the terminal.
+pub(super) fn s(v: &Value, key: &str) -> String {
+    terminal_safe(v.get(key).and_then(Value::as_str).unwrap_or(""))
+}
+/// `text` with every control character escaped (`\u{1b}`), as it is printed.
+pub fn terminal_safe(text: &str) -> String {
+    if text.chars().any(char::is_control) {
+        text.chars()
+            .map(|c| {
+                if c.is_control() {
+                    c.escape_unicode().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect()
+    } else {
+        text.to_string()
+    }
+}
+/// `value` (a JSON object) with `"type": kind` in front, as one NDJSON line.
+pub(super) fn tagged(kind: &str, value: &Value) -> Value {
+    let mut out = serde_json::Map::new();
+    out.insert("type".into(), Value::from(kind));
+    if let Some(fields) = value.as_object() {
+        out.extend(fields.clone());
+    }
+    Value::Object(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_formats_known_instants() {
+        assert_eq!(utc(0), "1970-01-01 00:00:00Z");
+        // 2000-02-29 12:34:56 UTC = 951827696 s.
+        assert_eq!(utc(951_827_696_000), "2000-02-29 12:34:56Z");
+        // 2026-11-24 19:14:14 UTC = 1795547654 s.
+        assert_eq!(utc(1_795_547_654_000), "2026-11-24 19:14:14Z");
+    }
+
+    #[test]
+    fn local_times_carry_their_offset() {
+        use jiff::tz::{Offset, TimeZone};
+        let oslo = TimeZone::fixed(Offset::from_hours(1).unwrap());
+        assert_eq!(
+            local_time_in(1_795_547_654_000, &oslo),
+            "2026-11-24 20:14:14 +01:00"
+        );
+        let west = TimeZone::fixed(Offset::from_seconds(-(5 * 3600 + 1800)).unwrap());
+        assert_eq!(local_time_in(0, &west), "1969-12-31 18:30:00 -05:30");
+        assert_eq!(
+            local_time_in(0, &TimeZone::UTC),
+            "1970-01-01 00:00:00 +00:00"
+        );
+    }
+}

@@ -1,0 +1,62 @@
+//! `brdfd refit`: fit a stored scan again, then follow the new fits.
+
+use serde_json::{Value, json};
+
+use super::follow::{follow, print_scan_result};
+use super::operator::{DaemonArgs, tagged};
+use crate::cost::CostFunction;
+use crate::optimise::Method;
+
+#[derive(Debug, clap::Args)]
+pub struct RefitArgs {
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+    /// The scan's id.
+    #[arg(value_name = "SCAN")]
+    pub scan: i64,
+    /// Cost functions to fit (repeat or separate with commas); default: the configured ones.
+    #[arg(long, value_name = "cf1|cf2|m2", value_delimiter = ',')]
+    pub cost: Vec<CostFunction>,
+    /// Optimiser; default: the configured one.
+    #[arg(long, value_name = "NAME")]
+    pub method: Option<Method>,
+    /// Seed; default: the configured one.
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// Fit even though the scan's reference is older than the configured limit.
+    #[arg(long)]
+    pub allow_stale_reference: bool,
+    /// Return once queued, without following progress.
+    #[arg(long)]
+    pub detach: bool,
+    /// NDJSON on stdout, as for `brdfd scan --json`.
+    #[arg(long)]
+    pub json: bool,
+}
+pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
+    let client = args.daemon.client()?;
+    let events = (!args.detach).then(|| client.events()).transpose()?;
+    let body = json!({
+        "cost_functions": args.cost,
+        "method": args.method,
+        "seed": args.seed,
+        "allow_stale_reference": args.allow_stale_reference,
+    });
+    let v = client.post(&format!("/scans/{}/refit", args.scan), Some(&body))?;
+    let fits: Vec<i64> = v["fits"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_i64)
+        .collect();
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    } else {
+        println!("scan {}: fits {fits:?} queued", args.scan);
+    }
+    if let Some(events) = events.filter(|_| !fits.is_empty()) {
+        follow(&client, events, None, Some(args.scan), fits, args.json)?;
+        print_scan_result(&client.get(&format!("/scans/{}", args.scan))?, args.json);
+    }
+    Ok(())
+}

@@ -1,0 +1,109 @@
+//! `brdfd export` and `brdfd import`: a stored scan as a brdfd.scan/1 file, and such a file
+//! into the store (then following its fits).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use serde_json::{Value, json};
+
+use super::follow::{follow, print_scan_result};
+use super::operator::{DaemonArgs, id, tagged};
+use crate::client::Client;
+
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+    /// The scan's id.
+    #[arg(value_name = "SCAN")]
+    pub scan: i64,
+    /// Write here instead of stdout (refused if it exists, unless --force).
+    #[arg(long, short, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Replace FILE if it exists.
+    #[arg(long)]
+    pub force: bool,
+    /// With --output: print `{"scan":…,"file":…}` instead of the sentence.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ImportArgs {
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+    /// A brdfd.scan/1 file.
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+    /// Return once imported, without following the fits.
+    #[arg(long)]
+    pub detach: bool,
+    /// NDJSON on stdout, as for `brdfd scan --json`.
+    #[arg(long)]
+    pub json: bool,
+}
+pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
+    let text = args
+        .daemon
+        .client()?
+        .get_text(&format!("/scans/{}/export", args.scan))?;
+    match &args.output {
+        Some(path) => {
+            super::write_new_file(path, text.as_bytes(), args.force)?;
+            if args.json {
+                println!("{}", json!({ "scan": args.scan, "file": path }));
+            } else {
+                eprintln!("scan {} written to {}", args.scan, path.display());
+            }
+        }
+        None => println!("{text}"),
+    }
+    Ok(())
+}
+
+pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&args.file)
+        .with_context(|| format!("cannot read {}", args.file.display()))?;
+    // Checked here too, so a bad file is named with its path before anything is sent.
+    crate::scan::Scan::from_json(text.as_bytes())
+        .with_context(|| format!("{}", args.file.display()))?;
+    let client = args.daemon.client()?;
+    let events = (!args.detach).then(|| client.events()).transpose()?;
+    let v = client.post_text("/scans/import", &text)?;
+    let scan = id(&v, "scan");
+    let fits: Vec<i64> = v["fits"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_i64)
+        .collect();
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    } else {
+        println!(
+            "{} imported as scan {scan}; fits {fits:?} queued",
+            args.file.display()
+        );
+    }
+    if let Some(events) = events {
+        if !fits.is_empty() {
+            // Fits may already have finished before the stream saw them: check first.
+            let pending = pending_fits(&client, scan)?;
+            if !pending.is_empty() {
+                follow(&client, events, None, Some(scan), pending, args.json)?;
+            }
+        }
+        print_scan_result(&client.get(&format!("/scans/{scan}"))?, args.json);
+    }
+    Ok(())
+}
+fn pending_fits(client: &Client, scan: i64) -> anyhow::Result<Vec<i64>> {
+    let detail = client.get(&format!("/scans/{scan}"))?;
+    Ok(detail["fits"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|f| matches!(f["run"]["status"].as_str(), Some("queued" | "running")))
+        .map(|f| id(&f["run"], "id"))
+        .collect())
+}

@@ -1,0 +1,182 @@
+//! `brdfd show`: one scan with its provenance, reference, readings and fits, and the fits'
+//! sphere previews on request. The fits table is also what a followed scan ends with.
+
+use anyhow::Context;
+use serde_json::Value;
+
+use super::operator::{DaemonArgs, f, id, local_time, s, terminal_safe};
+
+#[derive(Debug, clap::Args)]
+pub struct ShowArgs {
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+    /// The scan's id (see `brdfd scans`).
+    #[arg(value_name = "SCAN")]
+    pub scan: i64,
+    /// Print the daemon's JSON (every reading, raw frames in hex, every fit).
+    #[arg(long)]
+    pub json: bool,
+    /// Also write each finished fit's sphere preview (`GET /fits/{id}/preview.png`) into DIR
+    /// as `fit-<id>-<cost>.png` (see `brdfd render --help` for what the picture shows).
+    #[arg(long, value_name = "DIR")]
+    pub preview: Option<std::path::PathBuf>,
+}
+pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
+    let client = args.daemon.client()?;
+    let v = client.get(&format!("/scans/{}", args.scan))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    let scan = &v["scan"];
+    println!(
+        "scan {}: sample \"{}\", {}{}",
+        id(scan, "id"),
+        s(scan, "sample"),
+        s(scan, "state"),
+        scan["reason"]
+            .as_str()
+            .map(|r| format!(" ({r})"))
+            .unwrap_or_default()
+    );
+    println!(
+        "requested {}, {} of 14 readings",
+        local_time(scan["requested_at_ms"].as_i64().unwrap_or(0)),
+        scan["reading_count"]
+    );
+    let provenance = &scan["provenance"];
+    println!(
+        "measured by: MA-T12 {}; SRA {}",
+        instrument_line(&provenance["ma_t12"]),
+        instrument_line(&provenance["sra"])
+    );
+    println!(
+        "source: {}{}",
+        s(provenance, "source"),
+        provenance["source_detail"]
+            .as_str()
+            .map(|d| format!(" ({})", terminal_safe(d)))
+            .unwrap_or_default()
+    );
+    let reference = &v["reference"]["reference"];
+    println!(
+        "reference {} ({}), measured {:.1} h before the scan{}",
+        id(reference, "id"),
+        s(reference, "name"),
+        f(&v, "reference_age_hours"),
+        if v["reference_stale"].as_bool() == Some(true) {
+            " — older than the configured limit: not fitted automatically"
+        } else {
+            ""
+        }
+    );
+    for r in v["readings"].as_array().into_iter().flatten() {
+        let values = &r["values"];
+        let text = match values.as_array() {
+            Some(a) => format!(
+                "reflectance 400 nm {:.4}, 550 nm {:.4}, 700 nm {:.4}",
+                a.first().and_then(Value::as_f64).unwrap_or(f64::NAN),
+                a.get(15).and_then(Value::as_f64).unwrap_or(f64::NAN),
+                a.get(30).and_then(Value::as_f64).unwrap_or(f64::NAN)
+            ),
+            None => format!("intensity {:.4}", values.as_f64().unwrap_or(f64::NAN)),
+        };
+        println!("  {:<7} {:<9} {text}", s(r, "device"), s(r, "geometry"));
+    }
+    print_fits(&v);
+    if let Some(dir) = &args.preview {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        for fit in v["fits"].as_array().into_iter().flatten() {
+            let run = &fit["run"];
+            if run["status"] != "done" {
+                continue;
+            }
+            let path = dir.join(format!(
+                "fit-{}-{}.png",
+                id(run, "id"),
+                s(run, "cost_function")
+            ));
+            let png = client.get_bytes(&format!("/fits/{}/preview.png", id(run, "id")))?;
+            std::fs::write(&path, png).with_context(|| format!("writing {}", path.display()))?;
+            println!("preview {}", path.display());
+        }
+    }
+    Ok(())
+}
+/// One instrument's provenance as `show` prints it.
+fn instrument_line(p: &Value) -> String {
+    let simulated = match p["simulated"].as_bool() {
+        Some(true) => " — SIMULATED",
+        Some(false) => "",
+        None => " — simulated or real: not recorded",
+    };
+    format!(
+        "{} serial {} firmware {}{simulated}",
+        s(p, "model"),
+        s(p, "serial"),
+        s(p, "firmware")
+    )
+}
+pub(super) fn print_fits(detail: &Value) {
+    let fits = detail["fits"].as_array().cloned().unwrap_or_default();
+    if fits.is_empty() {
+        println!("no fits");
+        return;
+    }
+    println!(
+        "{:>5}  {:<4} {:<9} {:<9} {:>11} {:>8} {:>8} {:>8} {:>9}",
+        "fit", "cost", "method", "status", "cost value", "ΔE00", "diffuse", "specular", "wall ms"
+    );
+    for fit in fits {
+        let run = &fit["run"];
+        let e = &fit["evaluation"];
+        let result = &run["result"];
+        println!(
+            "{:>5}  {:<4} {:<9} {:<9} {:>11.4e} {:>8.3} {:>8.3} {:>8.3} {:>9.1}{}",
+            id(run, "id"),
+            s(run, "cost_function"),
+            s(run, "method"),
+            s(run, "status"),
+            f(result, "cost"),
+            f(&e["all"], "mean"),
+            f(&e["diffuse"], "mean"),
+            f(&e["specular"], "mean"),
+            f(result, "wall_ms"),
+            run["error"]
+                .as_str()
+                .map(|e| format!("  {e}"))
+                .unwrap_or_default()
+        );
+        print_fit_extras(&fit);
+    }
+}
+/// Under a fit's row: the colorimetry of its ΔE00 and, once the bootstrap has run, the 95 %
+/// intervals of the lobe parameters (SCIENCE.md §7.1, §10).
+fn print_fit_extras(fit: &Value) {
+    let c = &fit["colorimetry"];
+    if c.is_object() {
+        println!(
+            "       ΔE00 under D65/{}° {}",
+            s(c, "observer"),
+            s(c, "weighting")
+        );
+    }
+    let u = &fit["uncertainty"];
+    if u.is_object() {
+        let iv = |k: &str| {
+            format!(
+                "[{:.4}, {:.4}]",
+                u[k][0].as_f64().unwrap_or(f64::NAN),
+                u[k][1].as_f64().unwrap_or(f64::NAN)
+            )
+        };
+        println!(
+            "       95 % intervals ({} resamples): ks {}  alpha {}  ior {}  ΔE00 mean {}",
+            u["resamples"],
+            iv("ks"),
+            iv("alpha"),
+            iv("ior"),
+            iv("delta_e00_mean")
+        );
+    }
+}
