@@ -3,14 +3,18 @@
 //! terminal, one line per step otherwise), or the events themselves as NDJSON with `--json`.
 //! Used by `reference`, `scan`, `refit` and `import`.
 
+use std::collections::HashMap;
 use std::io::IsTerminal;
 
 use anyhow::bail;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Deserialize;
 use serde_json::{Value, json};
 
-use super::operator::{f, id, s};
-use crate::client::Client;
+use super::operator::{id, terminal_safe};
+use crate::client::{Client, EventStream};
+use crate::service::Event;
+use crate::store::{FitRunId, ReferenceId, ScanId};
 
 /// Progress display: bars on a terminal, plain lines otherwise.
 struct Progress {
@@ -53,191 +57,312 @@ impl Progress {
         bar
     }
 }
-/// Follows a reference (`reference`) or a scan (`scan`) and its fits on the event stream
-/// until everything has ended; fails if the measurement failed.
-pub(super) fn follow(
-    client: &Client,
-    events: crate::client::EventStream,
-    reference: Option<i64>,
-    scan: Option<i64>,
-    mut fits_pending: Vec<i64>,
-    json: bool,
-) -> anyhow::Result<()> {
-    let p = Progress::new(json);
-    let readings = p.bar(14, "readings".into());
-    if scan.is_none() && reference.is_none() {
-        readings.finish_and_clear();
-    }
-    let mut fit_bars: std::collections::HashMap<i64, ProgressBar> = Default::default();
-    // Fits named up front mean a refit or an import: nothing is measured, and following ends
-    // when they have. Otherwise a reference or scan is being measured.
-    let mut measuring = reference.is_some() || (scan.is_some() && fits_pending.is_empty());
-    let mut failed: Option<String> = None;
-    // Set when what was followed has ended; an event stream that closes before is a lost
-    // daemon (restarted, killed, or the connection cut), not a success.
-    let mut finished = false;
-    for ev in events {
-        let ty = s(&ev, "type");
-        let mine_scan = scan.is_some_and(|id_| id(&ev, "scan") == id_);
-        let mine_ref = reference.is_some_and(|id_| id(&ev, "reference") == id_);
-        if p.json && (mine_scan || mine_ref || ty == "shutting_down") {
-            println!("{ev}");
+/// What is followed: a reference being measured, or a scan (being measured, or only its fits
+/// after a refit or an import).
+#[derive(Debug, Clone, Copy)]
+enum Followed {
+    Reference(ReferenceId),
+    Scan(ScanId),
+}
+
+/// What one event did to the following.
+enum Step {
+    /// Keep reading events.
+    Continue,
+    /// Everything followed has ended well.
+    Finished,
+    /// The measurement failed or the daemon is going away: the reason.
+    Failed(String),
+}
+
+/// The state of a following: what is followed, what is still running, the display.
+struct Follower<'a> {
+    client: &'a Client,
+    followed: Followed,
+    progress: Progress,
+    readings: ProgressBar,
+    fit_bars: HashMap<FitRunId, ProgressBar>,
+    fits_pending: Vec<FitRunId>,
+    /// A reference or scan is being measured; false once it is complete, or from the start
+    /// when only fits are followed.
+    measuring: bool,
+}
+
+impl Follower<'_> {
+    /// Whether `event` is about what is followed (and so is printed in NDJSON mode).
+    fn concerns(&self, event: &Event) -> bool {
+        match self.followed {
+            Followed::Scan(scan) => event.scan() == Some(scan),
+            Followed::Reference(reference) => event.reference() == Some(reference),
         }
-        match ty.as_str() {
-            "scan_reading" if mine_scan => {
-                readings.set_position(ev["k"].as_u64().unwrap_or(0));
-                readings.set_message(format!("{} {}", s(&ev, "device"), s(&ev, "geometry")));
+    }
+
+    fn on_event(&mut self, event: &Event) -> Step {
+        let (p, readings) = (&self.progress, &self.readings);
+        let mine = self.concerns(event);
+        match event {
+            Event::ScanReading {
+                device,
+                geometry,
+                k,
+                ..
+            } if mine => {
+                let (device, geometry) = (terminal_safe(device), terminal_safe(geometry));
+                readings.set_position(*k as u64);
+                readings.set_message(format!("{device} {geometry}"));
                 if !p.tty {
-                    p.line(&format!(
-                        "reading {}/14: {} {}",
-                        ev["k"],
-                        s(&ev, "device"),
-                        s(&ev, "geometry")
-                    ));
+                    p.line(&format!("reading {k}/14: {device} {geometry}"));
                 }
             }
-            "reference_reading" if mine_ref => {
-                readings.set_position(ev["k"].as_u64().unwrap_or(0));
-                readings.set_message(format!("{} {}", s(&ev, "device"), s(&ev, "geometry")));
+            Event::ReferenceReading {
+                device,
+                geometry,
+                k,
+                ..
+            } if mine => {
+                let (device, geometry) = (terminal_safe(device), terminal_safe(geometry));
+                readings.set_position(*k as u64);
+                readings.set_message(format!("{device} {geometry}"));
                 if !p.tty {
-                    p.line(&format!(
-                        "reference reading {}/14: {} {}",
-                        ev["k"],
-                        s(&ev, "device"),
-                        s(&ev, "geometry")
-                    ));
+                    p.line(&format!("reference reading {k}/14: {device} {geometry}"));
                 }
             }
-            "scan_complete" if mine_scan => {
+            Event::ScanComplete { scan } if mine => {
                 readings.finish_with_message("complete");
-                p.line(&format!(
-                    "scan {} complete: 14 readings stored",
-                    id(&ev, "scan")
-                ));
-                measuring = false;
+                p.line(&format!("scan {scan} complete: 14 readings stored"));
+                self.measuring = false;
                 // The fits are queued right after; their events follow.
-                if let Ok(detail) = client.get(&format!("/scans/{}", id(&ev, "scan"))) {
-                    for fit in detail["fits"].as_array().into_iter().flatten() {
-                        let status = fit["run"]["status"].as_str().unwrap_or("");
-                        if matches!(status, "queued" | "running") {
-                            fits_pending.push(id(&fit["run"], "id"));
-                        }
-                    }
+                if let Ok(pending) = pending_fits(self.client, scan.0) {
+                    self.fits_pending.extend(pending.into_iter().map(FitRunId));
                 }
             }
-            "reference_complete" if mine_ref => {
+            Event::ReferenceComplete { reference } if mine => {
                 readings.finish_with_message("complete");
                 p.line(&format!(
-                    "reference {} complete: in force for new scans",
-                    id(&ev, "reference")
+                    "reference {reference} complete: in force for new scans"
                 ));
-                return Ok(());
+                return Step::Finished;
             }
-            "scan_failed" | "scan_aborted" if mine_scan => {
-                readings.abandon_with_message(ty.replace("scan_", ""));
-                failed = Some(format!(
-                    "scan {} {}: {}",
-                    id(&ev, "scan"),
-                    ty.trim_start_matches("scan_"),
-                    s(&ev, "reason")
-                ));
-                break;
-            }
-            "reference_failed" if mine_ref => {
+            Event::ScanFailed { scan, reason } if mine => {
                 readings.abandon_with_message("failed");
-                failed = Some(format!(
-                    "reference {} failed: {}",
-                    id(&ev, "reference"),
-                    s(&ev, "reason")
+                let reason = terminal_safe(reason);
+                return Step::Failed(format!("scan {scan} failed: {reason}"));
+            }
+            Event::ScanAborted { scan, reason } if mine => {
+                readings.abandon_with_message("aborted");
+                let reason = terminal_safe(reason);
+                return Step::Failed(format!("scan {scan} aborted: {reason}"));
+            }
+            Event::ReferenceFailed { reference, reason } if mine => {
+                readings.abandon_with_message("failed");
+                let reason = terminal_safe(reason);
+                return Step::Failed(format!("reference {reference} failed: {reason}"));
+            }
+            Event::ReferenceStale {
+                scan,
+                age_hours,
+                max_age_hours,
+                ..
+            } if self.follows_scan(*scan) => {
+                p.line(&format!(
+                    "scan {scan} not fitted: its reference is {age_hours:.1} h old (limit \
+                     {max_age_hours} h); measure a new reference (`brdfd reference`) and scan \
+                     again, or `brdfd refit {scan} --allow-stale-reference`"
                 ));
-                break;
+                return self.not_fitted();
             }
-            "reference_stale" | "processing_failed" if mine_scan => {
-                let text = if ty == "reference_stale" {
-                    format!(
-                        "scan {} not fitted: its reference is {:.1} h old (limit {} h); measure a \
-                         new reference (`brdfd reference`) and scan again, or `brdfd refit {} \
-                         --allow-stale-reference`",
-                        id(&ev, "scan"),
-                        f(&ev, "age_hours"),
-                        f(&ev, "max_age_hours"),
-                        id(&ev, "scan")
-                    )
-                } else {
-                    format!("scan {} not fitted: {}", id(&ev, "scan"), s(&ev, "reason"))
-                };
-                p.line(&text);
-                if fits_pending.is_empty() {
-                    finished = true;
-                    break;
+            Event::ProcessingFailed { scan, reason } if self.follows_scan(*scan) => {
+                let reason = terminal_safe(reason);
+                p.line(&format!("scan {scan} not fitted: {reason}"));
+                return self.not_fitted();
+            }
+            Event::FitQueued { fit, .. } if mine => {
+                if !self.fits_pending.contains(fit) {
+                    self.fits_pending.push(*fit);
                 }
             }
-            "fit_queued" if mine_scan => {
-                let fit = id(&ev, "fit");
-                if !fits_pending.contains(&fit) {
-                    fits_pending.push(fit);
+            Event::FitStarted {
+                fit, cost_function, ..
+            } if mine => {
+                let cost = terminal_safe(cost_function.name());
+                self.fit_bars
+                    .entry(*fit)
+                    .or_insert_with(|| p.bar(1, format!("fit {fit} {cost}")));
+                if !p.tty {
+                    p.line(&format!("fit {fit} ({cost}) started"));
                 }
             }
-            "fit_started" | "fit_progress" if mine_scan => {
-                let fit = id(&ev, "fit");
-                let bar = fit_bars.entry(fit).or_insert_with(|| {
-                    let cost = s(&ev, "cost_function");
-                    p.bar(1, format!("fit {fit} {cost}"))
-                });
-                if ty == "fit_progress" {
-                    bar.set_length(ev["generations_total"].as_u64().unwrap_or(1));
-                    bar.set_position(ev["generation"].as_u64().unwrap_or(0));
-                    bar.set_message(format!("best cost {:.4e}", f(&ev, "best_cost")));
-                } else if !p.tty {
-                    p.line(&format!("fit {fit} ({}) started", s(&ev, "cost_function")));
-                }
+            Event::FitProgress {
+                fit,
+                generation,
+                generations_total,
+                best_cost,
+                ..
+            } if mine => {
+                // A progress event before the start event names no cost function: the bar's
+                // prefix then has an empty one, as the stream gave nothing better.
+                let bar = self
+                    .fit_bars
+                    .entry(*fit)
+                    .or_insert_with(|| p.bar(1, format!("fit {fit} ")));
+                bar.set_length(u64::from(*generations_total));
+                bar.set_position(u64::from(*generation));
+                bar.set_message(format!("best cost {best_cost:.4e}"));
             }
-            "fit_done" | "fit_failed" | "fit_cancelled" if mine_scan => {
-                let fit = id(&ev, "fit");
-                let text = match ty.as_str() {
-                    "fit_done" => format!(
-                        "fit {fit} ({}) done: mean ΔE00 {:.3} (diffuse {:.3}, specular {:.3}), \
-                         cost {:.4e}, {:.0} ms",
-                        s(&ev, "cost_function"),
-                        f(&ev, "delta_e00_mean"),
-                        f(&ev, "delta_e00_diffuse_mean"),
-                        f(&ev, "delta_e00_specular_mean"),
-                        f(&ev, "cost"),
-                        f(&ev, "wall_ms")
-                    ),
-                    "fit_failed" => format!("fit {fit} failed: {}", s(&ev, "error")),
-                    _ => format!("fit {fit} cancelled"),
-                };
-                if let Some(bar) = fit_bars.remove(&fit) {
-                    bar.finish_and_clear();
-                }
-                p.line(&text);
-                fits_pending.retain(|&x| x != fit);
-                if !measuring && fits_pending.is_empty() {
-                    finished = true;
-                    break;
-                }
+            Event::FitDone {
+                fit,
+                cost_function,
+                cost,
+                delta_e00_mean,
+                delta_e00_diffuse_mean,
+                delta_e00_specular_mean,
+                wall_ms,
+                ..
+            } if mine => {
+                let text = format!(
+                    "fit {fit} ({}) done: mean ΔE00 {delta_e00_mean:.3} (diffuse \
+                     {delta_e00_diffuse_mean:.3}, specular {delta_e00_specular_mean:.3}), cost \
+                     {cost:.4e}, {wall_ms:.0} ms",
+                    terminal_safe(cost_function.name())
+                );
+                return self.fit_ended(*fit, &text);
             }
-            "shutting_down" => {
-                failed = Some("the daemon is shutting down".into());
-                break;
+            Event::FitFailed { fit, error, .. } if mine => {
+                let text = format!("fit {fit} failed: {}", terminal_safe(error));
+                return self.fit_ended(*fit, &text);
+            }
+            Event::FitCancelled { fit, .. } if mine => {
+                return self.fit_ended(*fit, &format!("fit {fit} cancelled"));
+            }
+            Event::ShuttingDown => {
+                return Step::Failed("the daemon is shutting down".into());
             }
             _ => {}
         }
+        Step::Continue
     }
-    match failed {
-        Some(reason) => bail!(reason),
-        None if finished => Ok(()),
-        None => {
-            let what = match (scan, reference) {
-                (Some(scan), _) => format!("the scan goes on: `brdfd show {scan}`"),
-                (None, Some(r)) => format!("reference {r} may go on: `brdfd status`"),
-                (None, None) => "`brdfd status` says what the daemon is doing".into(),
-            };
-            bail!("lost the daemon's event stream; {what}")
+
+    /// Whether a scan is followed and it is `scan`.
+    fn follows_scan(&self, scan: ScanId) -> bool {
+        matches!(self.followed, Followed::Scan(followed) if followed == scan)
+    }
+
+    /// The followed scan will not be fitted: done, unless fits named up front still run.
+    fn not_fitted(&self) -> Step {
+        if self.fits_pending.is_empty() {
+            Step::Finished
+        } else {
+            Step::Continue
+        }
+    }
+
+    /// Fit `fit` has ended with `text`: done when nothing is measured and no fit is pending.
+    fn fit_ended(&mut self, fit: FitRunId, text: &str) -> Step {
+        if let Some(bar) = self.fit_bars.remove(&fit) {
+            bar.finish_and_clear();
+        }
+        self.progress.line(text);
+        self.fits_pending.retain(|&x| x != fit);
+        if !self.measuring && self.fits_pending.is_empty() {
+            Step::Finished
+        } else {
+            Step::Continue
+        }
+    }
+
+    /// Where to look when the event stream closed before the end.
+    fn lost_stream_advice(&self) -> String {
+        match self.followed {
+            Followed::Scan(scan) => format!("the scan goes on: `brdfd show {scan}`"),
+            Followed::Reference(r) => format!("reference {r} may go on: `brdfd status`"),
         }
     }
 }
+
+/// Follows reference `reference` on the event stream until it has ended; fails if the
+/// measurement failed.
+pub(super) fn follow_reference(
+    client: &Client,
+    events: EventStream,
+    reference: i64,
+    json: bool,
+) -> anyhow::Result<()> {
+    follow(
+        client,
+        events,
+        Followed::Reference(ReferenceId(reference)),
+        Vec::new(),
+        json,
+    )
+}
+
+/// Follows scan `scan` on the event stream: its measurement and then its fits when `fits` is
+/// empty, else only the fits `fits` (a refit or an import). Fails if the measurement failed.
+pub(super) fn follow_scan(
+    client: &Client,
+    events: EventStream,
+    scan: i64,
+    fits: Vec<i64>,
+    json: bool,
+) -> anyhow::Result<()> {
+    let fits = fits.into_iter().map(FitRunId).collect();
+    follow(client, events, Followed::Scan(ScanId(scan)), fits, json)
+}
+
+/// Feeds every event to one [`Follower`] until it says the following is over. In NDJSON mode
+/// the events about what is followed (and `shutting_down`) go to stdout as the daemon sent them.
+fn follow(
+    client: &Client,
+    events: EventStream,
+    followed: Followed,
+    fits_pending: Vec<FitRunId>,
+    json: bool,
+) -> anyhow::Result<()> {
+    let progress = Progress::new(json);
+    let readings = progress.bar(14, "readings".into());
+    // Fits named up front mean a refit or an import: nothing is measured, and following ends
+    // when they have. Otherwise a reference or scan is being measured.
+    let measuring = fits_pending.is_empty();
+    let mut follower = Follower {
+        client,
+        followed,
+        progress,
+        readings,
+        fit_bars: HashMap::new(),
+        fits_pending,
+        measuring,
+    };
+    for raw in events {
+        let event = Event::deserialize(&raw).unwrap_or(Event::Unknown);
+        if json && (follower.concerns(&event) || event == Event::ShuttingDown) {
+            println!("{raw}");
+        }
+        match follower.on_event(&event) {
+            Step::Continue => {}
+            Step::Finished => return Ok(()),
+            Step::Failed(reason) => bail!(reason),
+        }
+    }
+    // An event stream that closes before the end is a lost daemon (restarted, killed, or the
+    // connection cut), not a success.
+    bail!(
+        "lost the daemon's event stream; {}",
+        follower.lost_stream_advice()
+    )
+}
+
+/// The fits of scan `scan` still queued or running, from its detail.
+pub(super) fn pending_fits(client: &Client, scan: i64) -> anyhow::Result<Vec<i64>> {
+    let detail = client.get(&format!("/scans/{scan}"))?;
+    Ok(detail["fits"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|f| matches!(f["run"]["status"].as_str(), Some("queued" | "running")))
+        .map(|f| id(&f["run"], "id"))
+        .collect())
+}
+
 /// The end of a followed scan: its fits as a table, or `{"type":"result","scan":…}`.
 pub(super) fn print_scan_result(detail: &Value, json: bool) {
     if json {

@@ -3,7 +3,7 @@
 
 use serde_json::json;
 
-use super::follow::{follow, print_scan_result};
+use super::follow::{follow_reference, follow_scan, print_scan_result};
 use super::operator::{DaemonArgs, id, tagged};
 
 #[derive(Debug, clap::Args)]
@@ -46,14 +46,7 @@ pub fn reference(args: &ReferenceArgs) -> anyhow::Result<()> {
         );
     }
     match events {
-        Some(events) => follow(
-            &client,
-            events,
-            Some(reference),
-            None,
-            Vec::new(),
-            args.json,
-        ),
+        Some(events) => follow_reference(&client, events, reference, args.json),
         None => Ok(()),
     }
 }
@@ -70,7 +63,7 @@ pub fn scan(args: &ScanArgs) -> anyhow::Result<()> {
     }
     match events {
         Some(events) => {
-            follow(&client, events, None, Some(scan), Vec::new(), args.json)?;
+            follow_scan(&client, events, scan, Vec::new(), args.json)?;
             print_scan_result(&client.get(&format!("/scans/{scan}"))?, args.json);
             Ok(())
         }

@@ -2,7 +2,7 @@
 
 use serde_json::{Value, json};
 
-use super::follow::{follow, print_scan_result};
+use super::follow::{follow_scan, print_scan_result};
 use super::operator::{DaemonArgs, tagged};
 use crate::cost::CostFunction;
 use crate::optimise::Method;
@@ -55,7 +55,7 @@ pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
         println!("scan {}: fits {fits:?} queued", args.scan);
     }
     if let Some(events) = events.filter(|_| !fits.is_empty()) {
-        follow(&client, events, None, Some(args.scan), fits, args.json)?;
+        follow_scan(&client, events, args.scan, fits, args.json)?;
         print_scan_result(&client.get(&format!("/scans/{}", args.scan))?, args.json);
     }
     Ok(())

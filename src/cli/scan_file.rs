@@ -6,9 +6,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use serde_json::{Value, json};
 
-use super::follow::{follow, print_scan_result};
+use super::follow::{follow_scan, pending_fits, print_scan_result};
 use super::operator::{DaemonArgs, id, tagged};
-use crate::client::Client;
 
 #[derive(Debug, clap::Args)]
 pub struct ExportArgs {
@@ -90,20 +89,10 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
             // Fits may already have finished before the stream saw them: check first.
             let pending = pending_fits(&client, scan)?;
             if !pending.is_empty() {
-                follow(&client, events, None, Some(scan), pending, args.json)?;
+                follow_scan(&client, events, scan, pending, args.json)?;
             }
         }
         print_scan_result(&client.get(&format!("/scans/{scan}"))?, args.json);
     }
     Ok(())
-}
-fn pending_fits(client: &Client, scan: i64) -> anyhow::Result<Vec<i64>> {
-    let detail = client.get(&format!("/scans/{scan}"))?;
-    Ok(detail["fits"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|f| matches!(f["run"]["status"].as_str(), Some("queued" | "running")))
-        .map(|f| id(&f["run"], "id"))
-        .collect())
 }

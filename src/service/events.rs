@@ -5,8 +5,13 @@
 //! [`CAPACITY`] events behind loses the oldest (it is told how many), which suits progress: the
 //! store, not the event stream, is the record. Every event is also logged through `tracing`
 //! when it is sent, so the logs need no subscriber of their own.
+//!
+//! The same [`Event`] type reads the stream on the client (`brdfd scan`, `brdfd reference`, …
+//! follow it through [`crate::client::EventStream`]): it deserialises from the JSON it
+//! serialises to, and an event a newer daemon sends that this build does not know becomes
+//! [`Event::Unknown`].
 
-use serde::Serialize;
+use serde::{Deserialize, Deserializer, Serialize};
 use tokio::sync::broadcast;
 
 use crate::cost::CostFunction;
@@ -17,8 +22,8 @@ use crate::store::{FitRunId, ReferenceId, ScanId};
 pub const CAPACITY: usize = 4096;
 
 /// One thing that happened. Serialised as JSON with a `"type"` tag (the SSE event name is the
-/// same tag).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// same tag); deserialised from the same JSON on the client.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Event {
     /// A reference measurement (the Munsell N9 tile) started.
@@ -26,8 +31,8 @@ pub enum Event {
     /// One reference reading was stored (`k` of 14).
     ReferenceReading {
         reference: ReferenceId,
-        device: &'static str,
-        geometry: &'static str,
+        device: String,
+        geometry: String,
         k: usize,
         n: usize,
     },
@@ -47,8 +52,8 @@ pub enum Event {
     /// One reading of a scan was stored (`k` of 14).
     ScanReading {
         scan: ScanId,
-        device: &'static str,
-        geometry: &'static str,
+        device: String,
+        geometry: String,
         k: usize,
         n: usize,
     },
@@ -62,7 +67,9 @@ pub enum Event {
     ReferenceStale {
         scan: ScanId,
         reference: ReferenceId,
+        #[serde(deserialize_with = "f64_or_nan")]
         age_hours: f64,
+        #[serde(deserialize_with = "f64_or_nan")]
         max_age_hours: f64,
     },
     /// A complete scan could not be processed into a measured BRDF: it was not fitted.
@@ -85,6 +92,7 @@ pub enum Event {
         scan: ScanId,
         generation: u32,
         generations_total: u32,
+        #[serde(deserialize_with = "f64_or_nan")]
         best_cost: f64,
     },
     /// A fit finished; its result and ΔE00 are stored.
@@ -92,10 +100,15 @@ pub enum Event {
         fit: FitRunId,
         scan: ScanId,
         cost_function: CostFunction,
+        #[serde(deserialize_with = "f64_or_nan")]
         cost: f64,
+        #[serde(deserialize_with = "f64_or_nan")]
         delta_e00_mean: f64,
+        #[serde(deserialize_with = "f64_or_nan")]
         delta_e00_diffuse_mean: f64,
+        #[serde(deserialize_with = "f64_or_nan")]
         delta_e00_specular_mean: f64,
+        #[serde(deserialize_with = "f64_or_nan")]
         wall_ms: f64,
     },
     /// A fit failed (an optimiser error or a panic inside the fit); the daemon goes on.
@@ -108,8 +121,8 @@ pub enum Event {
     FitCancelled { fit: FitRunId, scan: ScanId },
     /// An instrument's driver reported a state change.
     Device {
-        device: &'static str,
-        state: &'static str,
+        device: String,
+        state: String,
         detail: String,
     },
     /// A file of the watch folder (`[ingest] watch`) was imported and moved to `done/`.
@@ -125,6 +138,16 @@ pub enum Event {
     FileRejected { file: String, reason: String },
     /// The daemon is shutting down.
     ShuttingDown,
+    /// On the client: an event of a newer daemon that this build does not know. The daemon
+    /// never sends it.
+    #[serde(other)]
+    Unknown,
+}
+
+/// A number of an event as serialised: `serde_json` writes a non-finite `f64` as `null`, so a
+/// `null` reads back as NaN (what was sent) instead of failing the whole event.
+fn f64_or_nan<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(deserializer)?.unwrap_or(f64::NAN))
 }
 
 impl Event {
@@ -152,6 +175,49 @@ impl Event {
             Event::FileImported { .. } => "file_imported",
             Event::FileRejected { .. } => "file_rejected",
             Event::ShuttingDown => "shutting_down",
+            Event::Unknown => "unknown",
+        }
+    }
+
+    /// The scan the event is about (its `scan` field), if it has one.
+    pub fn scan(&self) -> Option<ScanId> {
+        match self {
+            Event::ScanStarted { scan, .. }
+            | Event::ScanReading { scan, .. }
+            | Event::ScanComplete { scan }
+            | Event::ScanFailed { scan, .. }
+            | Event::ScanAborted { scan, .. }
+            | Event::ReferenceStale { scan, .. }
+            | Event::ProcessingFailed { scan, .. }
+            | Event::FitQueued { scan, .. }
+            | Event::FitStarted { scan, .. }
+            | Event::FitProgress { scan, .. }
+            | Event::FitDone { scan, .. }
+            | Event::FitFailed { scan, .. }
+            | Event::FitCancelled { scan, .. } => Some(*scan),
+            Event::ReferenceStarted { .. }
+            | Event::ReferenceReading { .. }
+            | Event::ReferenceComplete { .. }
+            | Event::ReferenceFailed { .. }
+            | Event::Device { .. }
+            | Event::FileImported { .. }
+            | Event::FileRejected { .. }
+            | Event::ShuttingDown
+            | Event::Unknown => None,
+        }
+    }
+
+    /// The reference the event names (its `reference` field), if it has one: a reference's
+    /// own events, and a scan's start and stale reference.
+    pub fn reference(&self) -> Option<ReferenceId> {
+        match self {
+            Event::ReferenceStarted { reference }
+            | Event::ReferenceReading { reference, .. }
+            | Event::ReferenceComplete { reference }
+            | Event::ReferenceFailed { reference, .. }
+            | Event::ScanStarted { reference, .. }
+            | Event::ReferenceStale { reference, .. } => Some(*reference),
+            _ => None,
         }
     }
 
@@ -218,8 +284,8 @@ mod tests {
     fn events_serialise_with_their_tag_and_fields() {
         let e = Event::ScanReading {
             scan: ScanId(4),
-            device: "sra",
-            geometry: "sra-20",
+            device: "sra".into(),
+            geometry: "sra-20".into(),
             k: 13,
             n: 14,
         };
@@ -230,6 +296,74 @@ mod tests {
         assert_eq!(e.kind(), "scan_reading");
         let v: serde_json::Value = serde_json::from_str(&Event::ShuttingDown.to_json()).unwrap();
         assert_eq!(v["type"], Event::ShuttingDown.kind());
+    }
+
+    #[test]
+    fn events_read_back_from_their_json() {
+        let events = [
+            Event::ScanReading {
+                scan: ScanId(4),
+                device: "sra".into(),
+                geometry: "sra-20".into(),
+                k: 13,
+                n: 14,
+            },
+            Event::ReferenceStale {
+                scan: ScanId(2),
+                reference: ReferenceId(1),
+                age_hours: 30.5,
+                max_age_hours: 24.0,
+            },
+            Event::FitCancelled {
+                fit: FitRunId(9),
+                scan: ScanId(2),
+            },
+            Event::FileImported {
+                file: "a.cxf".into(),
+                scans: vec![ScanId(3), ScanId(4)],
+                sha256: "00".into(),
+            },
+            Event::ShuttingDown,
+        ];
+        for event in events {
+            let back: Event = serde_json::from_str(&event.to_json()).unwrap();
+            assert_eq!(back, event);
+        }
+        // A non-finite number travels as null and reads back as NaN.
+        let progress = Event::FitProgress {
+            fit: FitRunId(1),
+            scan: ScanId(1),
+            generation: 3,
+            generations_total: 10,
+            best_cost: f64::NAN,
+        };
+        let Event::FitProgress { best_cost, .. } =
+            serde_json::from_str(&progress.to_json()).unwrap()
+        else {
+            panic!("not a fit_progress event")
+        };
+        assert!(best_cost.is_nan());
+        // A newer daemon's event is kept as unknown, not an error.
+        let unknown: Event = serde_json::from_str(r#"{"type":"scan_renamed","scan":1}"#).unwrap();
+        assert_eq!(unknown, Event::Unknown);
+        assert_eq!(unknown.scan(), None);
+    }
+
+    #[test]
+    fn events_name_their_scan_and_reference() {
+        let stale = Event::ReferenceStale {
+            scan: ScanId(2),
+            reference: ReferenceId(1),
+            age_hours: 30.0,
+            max_age_hours: 24.0,
+        };
+        assert_eq!(stale.scan(), Some(ScanId(2)));
+        assert_eq!(stale.reference(), Some(ReferenceId(1)));
+        let done = Event::ReferenceComplete {
+            reference: ReferenceId(5),
+        };
+        assert_eq!(done.scan(), None);
+        assert_eq!(done.reference(), Some(ReferenceId(5)));
     }
 
     #[tokio::test]

@@ -542,19 +542,20 @@ impl Service {
             Ok(_) => {
                 acquired.stored.insert(geometry.name);
                 let (k, n) = (acquired.stored.len(), GEOMETRY_COUNT);
-                let device = device.key();
+                let device = device.key().to_string();
+                let geometry = geometry.name.to_string();
                 self.inner.events.send(match target {
                     Target::Scan(scan) => Event::ScanReading {
                         scan,
                         device,
-                        geometry: geometry.name,
+                        geometry,
                         k,
                         n,
                     },
                     Target::Reference(reference) => Event::ReferenceReading {
                         reference,
                         device,
-                        geometry: geometry.name,
+                        geometry,
                         k,
                         n,
                     },
@@ -780,8 +781,8 @@ impl Service {
         };
         self.count_transition(instrument, state);
         self.inner.events.send(Event::Device {
-            device: instrument.key(),
-            state,
+            device: instrument.key().to_string(),
+            state: state.to_string(),
             detail,
         });
     }
