@@ -203,10 +203,11 @@ pub struct DevicesConfig {
     pub sra: SraConfig,
 }
 
-/// `[devices.ma_t12]`
+/// One `[devices.*]` section: how the instrument is reached (`T`) and the settings every
+/// instrument has.
 #[derive(Debug, Clone, PartialEq)]
-pub struct MaT12Config {
-    pub transport: MaT12Transport,
+pub struct DeviceConfig<T> {
+    pub transport: T,
     /// Reply timeout of a measuring command.
     pub timeout: Duration,
     /// Resends of a request after a timeout or a corrupt reply.
@@ -214,6 +215,9 @@ pub struct MaT12Config {
     /// Where the recording tap writes this instrument's traffic; `None` = no recording.
     pub record: Option<PathBuf>,
 }
+
+/// `[devices.ma_t12]`
+pub type MaT12Config = DeviceConfig<MaT12Transport>;
 
 /// How brdfd reaches the MA-T12.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -225,16 +229,7 @@ pub enum MaT12Transport {
 }
 
 /// `[devices.sra]`
-#[derive(Debug, Clone, PartialEq)]
-pub struct SraConfig {
-    pub transport: SraTransport,
-    /// Reply timeout of a measuring command.
-    pub timeout: Duration,
-    /// Resends of a request after a timeout or a corrupt reply.
-    pub retries: u32,
-    /// Where the recording tap writes this instrument's traffic; `None` = no recording.
-    pub record: Option<PathBuf>,
-}
+pub type SraConfig = DeviceConfig<SraTransport>;
 
 /// How brdfd reaches the SRA.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -915,39 +910,78 @@ impl Config {
         };
         let raw: RawConfig = toml::from_str(text).map_err(|e| c.syntax(e))?;
 
-        let store = StoreConfig {
-            path: c.value(
-                "store.path",
-                &raw.store.path,
-                defaults::STORE_PATH.into(),
-                |p| {
-                    if p.trim().is_empty() {
-                        Err("must name the SQLite file, e.g. \"brdfd.db\"".into())
-                    } else {
-                        Ok(PathBuf::from(p))
-                    }
-                },
-            )?,
-        };
+        Ok(Config {
+            store: c.store(&raw.store)?,
+            api: c.api(&raw.api)?,
+            devices: DevicesConfig {
+                ma_t12: c.ma_t12(&raw.devices.ma_t12)?,
+                sra: c.sra(&raw.devices.sra)?,
+            },
+            scan: c.scan(&raw.scan)?,
+            fit: c.fit(&raw.fit)?,
+            colour: c.colour(&raw.colour)?,
+            log: c.log(&raw.log)?,
+            station: c.station(&raw.station)?,
+            sync: c.sync(&raw.sync)?,
+            reference: c.reference(&raw.reference)?,
+            ingest: c.ingest(&raw.ingest)?,
+        })
+    }
+}
 
-        let allow_remote = raw.api.allow_remote.unwrap_or(false);
-        let api = ApiConfig {
-            listen: c.value(
-                "api.listen",
-                &raw.api.listen,
-                defaults::LISTEN.into(),
-                |s| {
-                    let addr: SocketAddr = s.parse().map_err(|_| {
-                        format!("\"{s}\" is not an IP address and port, e.g. \"127.0.0.1:7878\"")
-                    })?;
-                    check_listen(addr, allow_remote)
-                },
-            )?,
+// ---- Stage 2, per section: each `[section]` of the raw file checked into its settings ------
+
+/// The full names of the keys every `[devices.*]` section has, for messages.
+struct DeviceKeys {
+    transport: &'static str,
+    session: &'static str,
+    timeout_ms: &'static str,
+    retries: &'static str,
+    record: &'static str,
+}
+
+/// The [`DeviceKeys`] of section `$section` (e.g. `"devices.sra"`).
+macro_rules! device_keys {
+    ($section:literal) => {
+        DeviceKeys {
+            transport: concat!($section, ".transport"),
+            session: concat!($section, ".session"),
+            timeout_ms: concat!($section, ".timeout_ms"),
+            retries: concat!($section, ".retries"),
+            record: concat!($section, ".record"),
+        }
+    };
+}
+
+impl Checker<'_> {
+    /// `[store]`
+    fn store(&self, raw: &RawStore) -> Result<StoreConfig, ConfigError> {
+        Ok(StoreConfig {
+            path: self.value("store.path", &raw.path, defaults::STORE_PATH.into(), |p| {
+                if p.trim().is_empty() {
+                    Err("must name the SQLite file, e.g. \"brdfd.db\"".into())
+                } else {
+                    Ok(PathBuf::from(p))
+                }
+            })?,
+        })
+    }
+
+    /// `[api]`
+    fn api(&self, raw: &RawApi) -> Result<ApiConfig, ConfigError> {
+        let allow_remote = raw.allow_remote.unwrap_or(false);
+        Ok(ApiConfig {
+            listen: self.value("api.listen", &raw.listen, defaults::LISTEN.into(), |s| {
+                let addr: SocketAddr = s.parse().map_err(|_| {
+                    format!("\"{s}\" is not an IP address and port, e.g. \"127.0.0.1:7878\"")
+                })?;
+                check_listen(addr, allow_remote)
+            })?,
             allow_remote,
-            token_file: c.path("api.token_file", &raw.api.token_file)?,
-            allowed_hosts: c.value(
+            token_file: self.path("api.token_file", &raw.token_file)?,
+            allowed_hosts: self.value(
                 "api.allowed_hosts",
-                &raw.api.allowed_hosts,
+                &raw.allowed_hosts,
                 Vec::new(),
                 |hosts| {
                     for h in &hosts {
@@ -965,133 +999,39 @@ impl Config {
                     Ok(hosts.into_iter().map(|h| h.to_ascii_lowercase()).collect())
                 },
             )?,
-            max_connections: c.value(
+            max_connections: self.value(
                 "api.max_connections",
-                &raw.api.max_connections,
+                &raw.max_connections,
                 defaults::MAX_CONNECTIONS as u64,
                 |n| bounded_count(n, 1, 10_000),
             )?,
-            max_event_subscribers: c.value(
+            max_event_subscribers: self.value(
                 "api.max_event_subscribers",
-                &raw.api.max_event_subscribers,
+                &raw.max_event_subscribers,
                 defaults::MAX_EVENT_SUBSCRIBERS as u64,
                 |n| bounded_count(n, 1, 1_000),
             )?,
-            header_timeout: c.value(
+            header_timeout: self.value(
                 "api.header_timeout_ms",
-                &raw.api.header_timeout_ms,
+                &raw.header_timeout_ms,
                 defaults::HEADER_TIMEOUT_MS,
                 api_timeout,
             )?,
-            idle_timeout: c.value(
+            idle_timeout: self.value(
                 "api.idle_timeout_ms",
-                &raw.api.idle_timeout_ms,
+                &raw.idle_timeout_ms,
                 defaults::IDLE_TIMEOUT_MS,
                 api_timeout,
             )?,
-        };
+        })
+    }
 
-        let m = &raw.devices.ma_t12;
-        let usb = c.value(
-            "devices.ma_t12.transport",
-            &m.transport,
-            String::new(),
-            |t| match t.as_str() {
-                "" if c.require_transport => Err(REQUIRED_TRANSPORT_MA_T12.into()),
-                "" => Ok(false),
-                "simulated" => Ok(false),
-                "usb" => Ok(true),
-                other => Err(format!(
-                    "unknown transport \"{other}\": expected \"simulated\" or \"usb\""
-                )),
-            },
-        )?;
-        let ma_t12 = MaT12Config {
-            transport: if usb {
-                MaT12Transport::Usb {
-                    product_id: m.product_id.as_ref().map(|p| *p.get_ref()),
-                }
-            } else {
-                MaT12Transport::Simulated {
-                    session: c.path("devices.ma_t12.session", &m.session)?,
-                }
-            },
-            timeout: c.value(
-                "devices.ma_t12.timeout_ms",
-                &m.timeout_ms,
-                defaults::TIMEOUT_MS,
-                timeout,
-            )?,
-            retries: c.value(
-                "devices.ma_t12.retries",
-                &m.retries,
-                defaults::RETRIES,
-                retries,
-            )?,
-            record: c.path("devices.ma_t12.record", &m.record)?,
-        };
-
-        let s = &raw.devices.sra;
-        let serial = c.value(
-            "devices.sra.transport",
-            &s.transport,
-            String::new(),
-            |t| match t.as_str() {
-                "" if c.require_transport => Err(REQUIRED_TRANSPORT_SRA.into()),
-                "" => Ok(false),
-                "simulated" => Ok(false),
-                "serial" => Ok(true),
-                other => Err(format!(
-                    "unknown transport \"{other}\": expected \"simulated\" or \"serial\""
-                )),
-            },
-        )?;
-        let port = c.value(
-            "devices.sra.port",
-            &s.port,
-            defaults::SRA_PORT.into(),
-            |p| {
-                if p.trim().is_empty() {
-                    Err("must name the serial device, e.g. \"/dev/ttyUSB0\"".into())
-                } else {
-                    Ok(p)
-                }
-            },
-        )?;
-        let baud = c.value("devices.sra.baud", &s.baud, defaults::SRA_BAUD, |b| {
-            if (50..=4_000_000).contains(&b) {
-                Ok(b)
-            } else {
-                Err(format!("{b} is not a serial speed: 50 to 4000000 baud"))
-            }
-        })?;
-        let sra = SraConfig {
-            transport: if serial {
-                SraTransport::Serial { port, baud }
-            } else {
-                SraTransport::Simulated {
-                    session: c.path("devices.sra.session", &s.session)?,
-                }
-            },
-            timeout: c.value(
-                "devices.sra.timeout_ms",
-                &s.timeout_ms,
-                defaults::TIMEOUT_MS,
-                timeout,
-            )?,
-            retries: c.value(
-                "devices.sra.retries",
-                &s.retries,
-                defaults::RETRIES,
-                retries,
-            )?,
-            record: c.path("devices.sra.record", &s.record)?,
-        };
-
-        let scan = ScanConfig {
-            reference_max_age: c.value(
+    /// `[scan]`
+    fn scan(&self, raw: &RawScan) -> Result<ScanConfig, ConfigError> {
+        Ok(ScanConfig {
+            reference_max_age: self.value(
                 "scan.reference_max_age_hours",
-                &raw.scan.reference_max_age_hours,
+                &raw.reference_max_age_hours,
                 defaults::REFERENCE_MAX_AGE_HOURS,
                 |h| {
                     // A year bounds it so that a typo cannot switch the check off silently.
@@ -1104,13 +1044,15 @@ impl Config {
                     }
                 },
             )?,
-        };
+        })
+    }
 
-        let f = &raw.fit;
-        let fit = FitConfig {
-            cost_functions: c.value(
+    /// `[fit]`
+    fn fit(&self, raw: &RawFit) -> Result<FitConfig, ConfigError> {
+        Ok(FitConfig {
+            cost_functions: self.value(
                 "fit.cost_functions",
-                &f.cost_functions,
+                &raw.cost_functions,
                 CostFunction::ALL
                     .iter()
                     .map(|cf| cf.name().to_string())
@@ -1130,29 +1072,29 @@ impl Config {
                     Ok(out)
                 },
             )?,
-            method: c.value(
+            method: self.value(
                 "fit.method",
-                &f.method,
+                &raw.method,
                 Method::default().name().into(),
                 |m| m.parse::<Method>().map_err(|e| e.to_string()),
             )?,
-            seed: c.value("fit.seed", &f.seed, defaults::SEED, Ok)?,
-            max_concurrent_fits: c.value(
+            seed: self.value("fit.seed", &raw.seed, defaults::SEED, Ok)?,
+            max_concurrent_fits: self.value(
                 "fit.max_concurrent_fits",
-                &f.max_concurrent_fits,
+                &raw.max_concurrent_fits,
                 1,
                 |n| match usize::try_from(n).ok().and_then(NonZeroUsize::new) {
                     Some(n) if n.get() <= 256 => Ok(n),
                     _ => Err(format!("{n} is out of range: 1 to 256 fits at once")),
                 },
             )?,
-            specular: c.value(
+            specular: self.value(
                 "fit.specular",
-                &f.specular,
+                &raw.specular,
                 SpecularStrategy::default().name().into(),
                 |s| s.parse::<SpecularStrategy>().map_err(|e| e.to_string()),
             )?,
-            bootstrap: c.value("fit.bootstrap", &f.bootstrap, defaults::BOOTSTRAP, |n| {
+            bootstrap: self.value("fit.bootstrap", &raw.bootstrap, defaults::BOOTSTRAP, |n| {
                 if n <= 10_000 {
                     Ok(n)
                 } else {
@@ -1161,50 +1103,63 @@ impl Config {
                     ))
                 }
             })?,
-        };
+        })
+    }
 
-        let colour = crate::colour::Colorimetry {
-            observer: c.value(
+    /// `[colour]`
+    fn colour(&self, raw: &RawColour) -> Result<crate::colour::Colorimetry, ConfigError> {
+        Ok(crate::colour::Colorimetry {
+            observer: self.value(
                 "colour.observer",
-                &raw.colour.observer,
+                &raw.observer,
                 crate::colour::Observer::default().to_string(),
                 |o| {
                     o.parse()
                         .map_err(|e: crate::colour::ColorimetryError| e.to_string())
                 },
             )?,
-            weighting: c.value(
+            weighting: self.value(
                 "colour.weighting",
-                &raw.colour.weighting,
+                &raw.weighting,
                 crate::colour::Weighting::default().to_string(),
                 |w| {
                     w.parse()
                         .map_err(|e: crate::colour::ColorimetryError| e.to_string())
                 },
             )?,
-        };
+        })
+    }
 
-        let log = LogConfig {
-            json: raw.log.json.unwrap_or(false),
-            level: c.value("log.level", &raw.log.level, defaults::LEVEL.into(), |l| {
+    /// `[log]`
+    fn log(&self, raw: &RawLog) -> Result<LogConfig, ConfigError> {
+        Ok(LogConfig {
+            json: raw.json.unwrap_or(false),
+            level: self.value("log.level", &raw.level, defaults::LEVEL.into(), |l| {
                 l.parse::<LogLevel>()
             })?,
-        };
+        })
+    }
 
-        let station = StationConfig {
-            id: c.value(
+    /// `[station]`
+    fn station(&self, raw: &RawStation) -> Result<StationConfig, ConfigError> {
+        Ok(StationConfig {
+            id: self.value(
                 "station.id",
-                &raw.station.id,
+                &raw.id,
                 crate::sync::default_station_id(),
                 station_id,
             )?,
-        };
-        let sync = SyncConfig {
-            url: match &raw.sync.url {
+        })
+    }
+
+    /// `[sync]`
+    fn sync(&self, raw: &RawSync) -> Result<SyncConfig, ConfigError> {
+        Ok(SyncConfig {
+            url: match &raw.url {
                 None => None,
-                Some(v) => Some(sync_url(v.get_ref()).map_err(|m| c.invalid("sync.url", v, m))?),
+                Some(v) => Some(sync_url(v.get_ref()).map_err(|m| self.invalid("sync.url", v, m))?),
             },
-            batch: c.value("sync.batch", &raw.sync.batch, defaults::SYNC_BATCH, |n| {
+            batch: self.value("sync.batch", &raw.batch, defaults::SYNC_BATCH, |n| {
                 if (1..=10_000).contains(&n) {
                     Ok(n as usize)
                 } else {
@@ -1213,20 +1168,26 @@ impl Config {
                     ))
                 }
             })?,
-        };
-        let reference = match &raw.reference.reflectance {
+        })
+    }
+
+    /// `[reference]`
+    fn reference(&self, raw: &RawReference) -> Result<ReferenceConfig, ConfigError> {
+        Ok(match &raw.reflectance {
             None => ReferenceConfig::default(),
             Some(v) => {
-                let (rho, source) = reference_reflectance(v.get_ref(), origin)
-                    .map_err(|m| c.invalid("reference.reflectance", v, m))?;
+                let (rho, source) = reference_reflectance(v.get_ref(), self.origin)
+                    .map_err(|m| self.invalid("reference.reflectance", v, m))?;
                 ReferenceConfig {
                     reflectance: Some(rho),
                     source: Some(source),
                 }
             }
-        };
+        })
+    }
 
-        let g = &raw.ingest;
+    /// `[ingest]`
+    fn ingest(&self, raw: &RawIngest) -> Result<IngestConfig, ConfigError> {
         let ms_in = |lo: u64, hi: u64| {
             move |ms: u64| {
                 if (lo..=hi).contains(&ms) {
@@ -1236,29 +1197,29 @@ impl Config {
                 }
             }
         };
-        let ingest = IngestConfig {
-            watch: c.path("ingest.watch", &g.watch)?,
-            settle: c.value(
+        Ok(IngestConfig {
+            watch: self.path("ingest.watch", &raw.watch)?,
+            settle: self.value(
                 "ingest.settle_ms",
-                &g.settle_ms,
+                &raw.settle_ms,
                 defaults::INGEST_SETTLE_MS,
                 ms_in(10, 3_600_000),
             )?,
-            poll: c.value(
+            poll: self.value(
                 "ingest.poll_ms",
-                &g.poll_ms,
+                &raw.poll_ms,
                 defaults::INGEST_POLL_MS,
                 ms_in(10, 60_000),
             )?,
-            pair_wait: c.value(
+            pair_wait: self.value(
                 "ingest.pair_wait_ms",
-                &g.pair_wait_ms,
+                &raw.pair_wait_ms,
                 defaults::INGEST_PAIR_WAIT_MS,
                 ms_in(0, 86_400_000),
             )?,
-            reference: c.value(
+            reference: self.value(
                 "ingest.reference",
-                &g.reference,
+                &raw.reference,
                 crate::formats::DEFAULT_REFERENCE.to_string(),
                 |r| {
                     if r.trim().is_empty() {
@@ -1268,20 +1229,95 @@ impl Config {
                     }
                 },
             )?,
-        };
+        })
+    }
 
-        Ok(Config {
-            store,
-            api,
-            devices: DevicesConfig { ma_t12, sra },
-            scan,
-            fit,
-            colour,
-            log,
-            station,
-            sync,
-            reference,
-            ingest,
+    /// `[devices.ma_t12]`: the transport, then the keys every instrument has.
+    fn ma_t12(&self, raw: &RawMaT12) -> Result<MaT12Config, ConfigError> {
+        const KEYS: DeviceKeys = device_keys!("devices.ma_t12");
+        let usb = self.real_transport(&KEYS, &raw.transport, "usb", REQUIRED_TRANSPORT_MA_T12)?;
+        let transport = if usb {
+            MaT12Transport::Usb {
+                product_id: raw.product_id.as_ref().map(|p| *p.get_ref()),
+            }
+        } else {
+            MaT12Transport::Simulated {
+                session: self.path(KEYS.session, &raw.session)?,
+            }
+        };
+        self.device(&KEYS, transport, &raw.timeout_ms, &raw.retries, &raw.record)
+    }
+
+    /// `[devices.sra]`: the transport and the serial settings (checked whichever transport is
+    /// chosen), then the keys every instrument has.
+    fn sra(&self, raw: &RawSra) -> Result<SraConfig, ConfigError> {
+        const KEYS: DeviceKeys = device_keys!("devices.sra");
+        let serial =
+            self.real_transport(&KEYS, &raw.transport, "serial", REQUIRED_TRANSPORT_SRA)?;
+        let port = self.value(
+            "devices.sra.port",
+            &raw.port,
+            defaults::SRA_PORT.into(),
+            |p| {
+                if p.trim().is_empty() {
+                    Err("must name the serial device, e.g. \"/dev/ttyUSB0\"".into())
+                } else {
+                    Ok(p)
+                }
+            },
+        )?;
+        let baud = self.value("devices.sra.baud", &raw.baud, defaults::SRA_BAUD, |b| {
+            if (50..=4_000_000).contains(&b) {
+                Ok(b)
+            } else {
+                Err(format!("{b} is not a serial speed: 50 to 4000000 baud"))
+            }
+        })?;
+        let transport = if serial {
+            SraTransport::Serial { port, baud }
+        } else {
+            SraTransport::Simulated {
+                session: self.path(KEYS.session, &raw.session)?,
+            }
+        };
+        self.device(&KEYS, transport, &raw.timeout_ms, &raw.retries, &raw.record)
+    }
+
+    /// A section's `transport`: `true` for the real one (`real`, e.g. "usb"), `false` for
+    /// "simulated" (or, when the file need not choose, nothing).
+    fn real_transport(
+        &self,
+        keys: &DeviceKeys,
+        raw: &S<String>,
+        real: &str,
+        required: &'static str,
+    ) -> Result<bool, ConfigError> {
+        self.value(keys.transport, raw, String::new(), |t| match t.as_str() {
+            "" if self.require_transport => Err(required.into()),
+            "" => Ok(false),
+            "simulated" => Ok(false),
+            t if t == real => Ok(true),
+            other => Err(format!(
+                "unknown transport \"{other}\": expected \"simulated\" or \"{real}\""
+            )),
+        })
+    }
+
+    /// The device block every `[devices.*]` section shares: `timeout_ms`, `retries` and
+    /// `record`, around the section's checked `transport`.
+    fn device<T>(
+        &self,
+        keys: &DeviceKeys,
+        transport: T,
+        timeout_ms: &S<u64>,
+        retries_raw: &S<u32>,
+        record: &S<String>,
+    ) -> Result<DeviceConfig<T>, ConfigError> {
+        Ok(DeviceConfig {
+            transport,
+            timeout: self.value(keys.timeout_ms, timeout_ms, defaults::TIMEOUT_MS, timeout)?,
+            retries: self.value(keys.retries, retries_raw, defaults::RETRIES, retries)?,
+            record: self.path(keys.record, record)?,
         })
     }
 }
