@@ -4,7 +4,7 @@
 
 use crate::processing::ProcessingError;
 use crate::scan::ScanError;
-use crate::store::{ScanId, ScanState, StoreError};
+use crate::store::{ReferenceId, ScanId, ScanState, StoreError};
 
 /// Why a service request was refused or failed.
 #[derive(Debug, thiserror::Error)]
@@ -47,6 +47,8 @@ pub enum ServiceError {
     )]
     StaleReference {
         scan: ScanId,
+        /// The scan's reference set.
+        reference: ReferenceId,
         age_hours: f64,
         max_age_hours: f64,
     },

@@ -62,6 +62,13 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "a panic without a message".into())
 }
 
+/// Why a queued fit could not start, and its scan when the fit could be read far enough to
+/// know it.
+struct PrepareError {
+    scan: Option<ScanId>,
+    error: ServiceError,
+}
+
 /// How a fit computation ended.
 enum Ended {
     Done(Box<FitReport>),
@@ -168,21 +175,24 @@ impl Service {
                 self.forget(fit);
                 return;
             }
-            Err((scan, e)) => {
+            Err(PrepareError { scan, error: e }) => {
                 let error = format!("cannot start the fit: {e}");
-                let _ = self
-                    .timed_store(self.inner.store.fail_fit(fit, &error))
-                    .await;
-                self.inner
-                    .events
-                    .send(Event::FitFailed { fit, scan, error });
+                self.mark_failed(fit, &error).await;
+                match scan {
+                    Some(scan) => self
+                        .inner
+                        .events
+                        .send(Event::FitFailed { fit, scan, error }),
+                    // The fit could not even be read: there is no scan to name in an event.
+                    None => tracing::warn!(%fit, %error, "fit failed before its scan was known"),
+                }
                 self.forget(fit);
                 return;
             }
         };
         let scan = job.scan;
         if cancel.load(Ordering::SeqCst) {
-            let _ = self.timed_store(self.inner.store.cancel_fit(fit)).await;
+            self.mark_cancelled(fit).await;
             self.inner.events.send(Event::FitCancelled { fit, scan });
             self.forget(fit);
             return;
@@ -318,23 +328,47 @@ impl Service {
             .remove(&fit);
     }
 
+    /// Stores that `fit` failed with `error`; a store that refuses is logged, as the fit's
+    /// event still goes out.
+    async fn mark_failed(&self, fit: FitRunId, error: &str) {
+        if let Err(e) = self
+            .timed_store(self.inner.store.fail_fit(fit, error))
+            .await
+        {
+            tracing::warn!(error = %e, %fit, reason = %error, "cannot mark the fit failed");
+        }
+    }
+
+    /// Stores that `fit` was cancelled; a store that refuses is logged, as the fit's event
+    /// still goes out.
+    async fn mark_cancelled(&self, fit: FitRunId) {
+        if let Err(e) = self.timed_store(self.inner.store.cancel_fit(fit)).await {
+            tracing::warn!(error = %e, %fit, "cannot mark the fit cancelled");
+        }
+    }
+
     /// Loads what a queued fit needs. `Ok(None)`: it is no longer queued (cancelled meanwhile).
-    #[allow(clippy::type_complexity)]
     async fn prepare_fit(
         &self,
         fit: FitRunId,
-    ) -> Result<Option<(FitJob, CostFunction)>, (ScanId, ServiceError)> {
+    ) -> Result<Option<(FitJob, CostFunction)>, PrepareError> {
         let store = &self.inner.store;
         let detail = self
             .timed_store(store.fit_detail(fit))
             .await
-            .map_err(|e| (ScanId(0), e.into()))?;
+            .map_err(|e| PrepareError {
+                scan: None,
+                error: e.into(),
+            })?;
         let run = detail.run;
         if run.status != FitStatus::Queued {
             return Ok(None);
         }
         let scan = run.scan;
-        let fail = |e: ServiceError| (scan, e);
+        let fail = |error: ServiceError| PrepareError {
+            scan: Some(scan),
+            error,
+        };
         let processed = self
             .timed_store(store.processed(run.processed))
             .await
@@ -416,7 +450,7 @@ impl Service {
                     }
                     Err(err) => {
                         let error = format!("cannot store the result: {err}");
-                        let _ = self.timed_store(store.fail_fit(fit, &error)).await;
+                        self.mark_failed(fit, &error).await;
                         self.inner
                             .events
                             .send(Event::FitFailed { fit, scan, error });
@@ -432,7 +466,7 @@ impl Service {
                     .send(Event::FitFailed { fit, scan, error });
             }
             Ended::Cancelled => {
-                let _ = self.timed_store(store.cancel_fit(fit)).await;
+                self.mark_cancelled(fit).await;
                 self.inner.events.send(Event::FitCancelled { fit, scan });
             }
             Ended::Stopped => {

@@ -369,6 +369,7 @@ impl Service {
             last_file: None,
             last_error: None,
         }));
+        // A OnceLock: if the task was started before, the status it set stays in use.
         let _ = self.inner.ingest_status.set(status);
         let (guard, mut stop) = self.task_slot().await?;
         tracing::info!(dir = %dir.display(), "watching the folder for exports and scan files");
@@ -540,7 +541,10 @@ impl Service {
             if let Some(e) = failed {
                 // Put back what moved, to be tried again at the next pass.
                 for name in moved {
-                    let _ = std::fs::rename(importing.join(name), dir.join(name));
+                    if let Err(e) = std::fs::rename(importing.join(name), dir.join(name)) {
+                        tracing::warn!(error = %e, file = %name,
+                            "cannot put the file back from .importing/ after a failed import");
+                    }
                 }
                 self.note_error(e);
                 continue;

@@ -401,6 +401,7 @@ impl Service {
         let forwarder = crate::sync::Forwarder::for_store(&self.inner.store, options)
             .await
             .map_err(|e| crate::store::StoreError::from(sqlx::Error::Protocol(e.to_string())))?;
+        // A OnceLock: if the task was started before, the status it set stays in use.
         let _ = self.inner.sync_status.set(forwarder.status());
         let (mut stop, guard) = {
             let c = self.inner.coordinator.lock().await;

@@ -174,22 +174,26 @@ impl Service {
             )
             .await
         {
-            let _ = self
-                .inner
-                .store
-                .fail_reference(reference, &e.to_string())
-                .await;
+            let reason = e.to_string();
+            if let Err(fail) = self.inner.store.fail_reference(reference, &reason).await {
+                tracing::warn!(error = %fail, %reference, %reason,
+                    "cannot mark the reference failed after its provenance was refused");
+            }
             return Err(e.into());
         }
         let abort = match self.claim(Operation::Reference { reference }) {
             Ok(a) => a,
             Err(e) => {
                 // Another request won the race between the check and the claim.
-                let _ = self
+                if let Err(fail) = self
                     .inner
                     .store
                     .fail_reference(reference, "the instruments were busy")
-                    .await;
+                    .await
+                {
+                    tracing::warn!(error = %fail, %reference,
+                        "cannot mark the reference failed after losing the instruments to another request");
+                }
                 return Err(e);
             }
         };
@@ -236,17 +240,25 @@ impl Service {
             .timed_store(self.inner.store.set_scan_provenance(scan, &provenance))
             .await
         {
-            let _ = self.inner.store.fail_scan(scan, &e.to_string()).await;
+            let reason = e.to_string();
+            if let Err(fail) = self.inner.store.fail_scan(scan, &reason).await {
+                tracing::warn!(error = %fail, %scan, %reason,
+                    "cannot mark the scan failed after its provenance was refused");
+            }
             return Err(e.into());
         }
         let abort = match self.claim(Operation::Scan { scan }) {
             Ok(a) => a,
             Err(e) => {
-                let _ = self
+                if let Err(fail) = self
                     .inner
                     .store
                     .fail_scan(scan, "refused: the instruments were busy with another scan")
-                    .await;
+                    .await
+                {
+                    tracing::warn!(error = %fail, %scan,
+                        "cannot mark the scan failed after losing the instruments to another request");
+                }
                 return Err(e);
             }
         };
@@ -380,17 +392,11 @@ impl Service {
         match self.process_and_queue(scan, &RefitRequest::default()).await {
             Ok(_) => {}
             Err(ServiceError::StaleReference {
+                reference,
                 age_hours,
                 max_age_hours,
                 ..
             }) => {
-                let reference = self
-                    .inner
-                    .store
-                    .scan_detail(scan)
-                    .await
-                    .map(|d| d.scan.reference_id)
-                    .unwrap_or(ReferenceId(0));
                 self.inner.events.send(Event::ReferenceStale {
                     scan,
                     reference,
@@ -589,6 +595,7 @@ impl Service {
         if age_ms as u128 > max.as_millis() && !request.allow_stale_reference {
             return Err(ServiceError::StaleReference {
                 scan,
+                reference: reference.id,
                 age_hours: age_ms as f64 / 3.6e6,
                 max_age_hours: max.as_secs_f64() / 3600.0,
             });
