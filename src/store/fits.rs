@@ -8,8 +8,8 @@ use crate::colour::Colorimetry;
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
 use crate::uncertainty::Uncertainty;
 
-use super::backend::Db;
 use super::codec;
+use super::guarded::refused;
 use super::ids::{FitRunId, ProcessedId, ScanId};
 use super::records::{
     DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, NewFit,
@@ -113,14 +113,6 @@ impl FitRow {
     }
 }
 
-/// The status of fit run `id`, or `NotFound`.
-async fn fit_status<'e, E>(ex: E, id: FitRunId) -> Result<FitStatus, StoreError>
-where
-    E: sqlx::Executor<'e, Database = Db>,
-{
-    super::lifecycle(ex, "fit_runs", "status", FitRunId::WHAT, id.0).await
-}
-
 fn to_json(field: &'static str, value: &impl serde::Serialize) -> Result<String, StoreError> {
     serde_json::to_string(value).map_err(|source| StoreError::Json { field, source })
 }
@@ -168,7 +160,7 @@ impl Store {
         .bind(now_ms())
         .execute(&self.writer)
         .await?;
-        self.explain_fit(fit, done.rows_affected(), "queued", "start it")
+        self.changed(fit, done.rows_affected(), "queued", "start it")
             .await
     }
 
@@ -233,12 +225,7 @@ impl Store {
         .execute(&mut *tx)
         .await?;
         if done.rows_affected() != 1 {
-            return Err(StoreError::FitState {
-                fit,
-                status: fit_status(&mut *tx, fit).await?,
-                expected: "running",
-                action: "finish it",
-            });
+            return Err(refused(&mut *tx, fit, "running", "finish it").await);
         }
         for (g, de) in GEOMETRIES.iter().zip(delta_e00) {
             sqlx::query(
@@ -298,7 +285,7 @@ impl Store {
         .bind(json)
         .execute(&self.writer)
         .await?;
-        self.explain_fit(fit, done.rows_affected(), "done", "store its uncertainty")
+        self.changed(fit, done.rows_affected(), "done", "store its uncertainty")
             .await
     }
 
@@ -318,7 +305,7 @@ impl Store {
         .bind(now_ms())
         .execute(&self.writer)
         .await?;
-        self.explain_fit(fit, done.rows_affected(), "queued or running", "fail it")
+        self.changed(fit, done.rows_affected(), "queued or running", "fail it")
             .await
     }
 
@@ -332,7 +319,7 @@ impl Store {
         .bind(now_ms())
         .execute(&self.writer)
         .await?;
-        self.explain_fit(fit, done.rows_affected(), "queued or running", "cancel it")
+        self.changed(fit, done.rows_affected(), "queued or running", "cancel it")
             .await
     }
 
@@ -468,25 +455,6 @@ impl Store {
             evaluation,
             colorimetry,
             uncertainty,
-        })
-    }
-
-    /// Like `explain_scan`, for fit runs.
-    async fn explain_fit(
-        &self,
-        fit: FitRunId,
-        rows: u64,
-        expected: &'static str,
-        action: &'static str,
-    ) -> Result<(), StoreError> {
-        if rows == 1 {
-            return Ok(());
-        }
-        Err(StoreError::FitState {
-            fit,
-            status: fit_status(&self.writer, fit).await?,
-            expected,
-            action,
         })
     }
 }

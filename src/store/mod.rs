@@ -30,6 +30,7 @@ pub mod central;
 mod codec;
 mod error;
 mod fits;
+mod guarded;
 pub mod ids;
 mod ingest;
 pub mod lock;

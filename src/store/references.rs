@@ -1,15 +1,14 @@
 //! Store verbs for instruments and reference sets (readings of the white reference tile that
 //! scans are normalised by).
 
-use crate::geometry::{Device, GEOMETRY_COUNT, Geometry};
+use crate::geometry::{Device, Geometry};
 use crate::spectral::{Spectrum, wavelengths_nm};
 
-use super::backend::{self, Db};
+use super::backend;
 use super::codec::{self, ReadingRow};
 use super::ids::{InstrumentId, ReadingId, ReferenceId};
 use super::records::{
-    Instrument, ProvenanceRow, ReadingValues, ReferenceDetail, ReferenceStatus, ReferenceSummary,
-    provenance_columns,
+    Instrument, ProvenanceRow, ReadingValues, ReferenceDetail, ReferenceSummary, provenance_columns,
 };
 use super::{Store, StoreError, now_ms};
 
@@ -76,17 +75,6 @@ impl ReferenceRow {
             provenance: self.provenance.into_provenance().map_err(corrupt)?,
         })
     }
-}
-
-/// The status of reference set `id`, or `NotFound`.
-pub(crate) async fn reference_status<'e, E>(
-    ex: E,
-    id: ReferenceId,
-) -> Result<ReferenceStatus, StoreError>
-where
-    E: sqlx::Executor<'e, Database = Db>,
-{
-    super::lifecycle(ex, "reference_sets", "status", ReferenceId::WHAT, id.0).await
 }
 
 impl Store {
@@ -188,74 +176,13 @@ impl Store {
         values: &ReadingValues,
         raw_frame: &[u8],
     ) -> Result<ReadingId, StoreError> {
-        let owner = || format!("reference {reference}");
-        let geometry = codec::check_reading(&owner, device, geometry, values, true)?;
-        // The state test and the insert are one statement, so no verb can slip in between.
-        let inserted: Result<Option<i64>, sqlx::Error> = sqlx::query_scalar(
-            "INSERT INTO reference_readings
-                 (reference_id, device, geometry, values_f64le, raw_frame, taken_at_ms)
-             SELECT $1, $2, $3, $4, $5, $6
-             WHERE EXISTS (SELECT 1 FROM reference_sets WHERE id = $1 AND status = 'measuring')
-             RETURNING id",
-        )
-        .bind(reference.0)
-        .bind(device.key())
-        .bind(geometry.name)
-        .bind(codec::encode_f64s(values.as_slice()))
-        .bind(raw_frame)
-        .bind(now_ms())
-        .fetch_optional(&self.writer)
-        .await;
-        match inserted {
-            Ok(Some(id)) => Ok(ReadingId(id)),
-            Ok(None) => Err(StoreError::ReferenceState {
-                reference,
-                status: reference_status(&self.writer, reference).await?,
-                expected: "measuring",
-                action: "add a reading to it",
-            }),
-            Err(e) if backend::is_unique_violation(&e) => Err(StoreError::DuplicateReading {
-                owner: owner(),
-                geometry: geometry.name,
-            }),
-            Err(e) => Err(e.into()),
-        }
+        self.insert_reading(reference, device, geometry, values, raw_frame)
+            .await
     }
 
     /// Marks a reference set `complete`. It must be `measuring` and hold all 14 readings.
     pub async fn complete_reference(&self, reference: ReferenceId) -> Result<(), StoreError> {
-        let done = sqlx::query(
-            "UPDATE reference_sets SET status = 'complete', completed_at_ms = $2
-             WHERE id = $1 AND status = 'measuring'
-               AND (SELECT COUNT(*) FROM reference_readings WHERE reference_id = $1) = $3",
-        )
-        .bind(reference.0)
-        .bind(now_ms())
-        .bind(GEOMETRY_COUNT as i64)
-        .execute(&self.writer)
-        .await?;
-        if done.rows_affected() == 1 {
-            return Ok(());
-        }
-        let status = reference_status(&self.writer, reference).await?;
-        if status != ReferenceStatus::Measuring {
-            return Err(StoreError::ReferenceState {
-                reference,
-                status,
-                expected: "measuring",
-                action: "complete it",
-            });
-        }
-        let present: Vec<String> =
-            sqlx::query_scalar("SELECT geometry FROM reference_readings WHERE reference_id = $1")
-                .bind(reference.0)
-                .fetch_all(&self.writer)
-                .await?;
-        Err(StoreError::ReferenceIncomplete {
-            reference,
-            have: present.len(),
-            missing: codec::missing_geometries(&present),
-        })
+        self.complete_owner(reference).await
     }
 
     /// Marks a `measuring` reference set `failed`, keeping its readings.
@@ -277,15 +204,8 @@ impl Store {
         .bind(reason)
         .execute(&self.writer)
         .await?;
-        if done.rows_affected() == 1 {
-            return Ok(());
-        }
-        Err(StoreError::ReferenceState {
-            reference,
-            status: reference_status(&self.writer, reference).await?,
-            expected: "measuring",
-            action: "fail it",
-        })
+        self.changed(reference, done.rows_affected(), "measuring", "fail it")
+            .await
     }
 
     /// The most recently completed reference set, the one new scans use; `None` before the

@@ -10,12 +10,12 @@ use crate::spectral::wavelengths_nm;
 
 use super::backend::{self, Db};
 use super::codec::{self, ReadingRow};
+use super::guarded::{refused, state_of};
 use super::ids::{ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
 use super::records::{
     NewReading, Processed, Provenance, ProvenanceRow, ReadingValues, ReferenceStatus, ScanDetail,
     ScanFilter, ScanState, ScanSummary, provenance_columns,
 };
-use super::references::reference_status;
 use super::{Store, StoreError, now_ms};
 
 /// The reason [`Store::mark_interrupted_scans_failed`] records.
@@ -110,14 +110,6 @@ impl ProcessedRow {
     }
 }
 
-/// The state of scan `id`, or `NotFound`.
-async fn scan_state<'e, E>(ex: E, id: ScanId) -> Result<ScanState, StoreError>
-where
-    E: sqlx::Executor<'e, Database = Db>,
-{
-    super::lifecycle(ex, "scans", "state", ScanId::WHAT, id.0).await
-}
-
 impl Store {
     /// Asks for a scan of the sample `sample_name` (created on first use), to be normalised by
     /// reference set `reference`, which must be complete. The scan starts `requested`.
@@ -132,7 +124,7 @@ impl Store {
             });
         }
         let mut tx = self.writer.begin().await?;
-        let status = reference_status(&mut *tx, reference).await?;
+        let status = state_of(&mut *tx, reference).await?;
         if status != ReferenceStatus::Complete {
             return Err(StoreError::ReferenceState {
                 reference,
@@ -170,7 +162,7 @@ impl Store {
         .bind(now_ms())
         .execute(&self.writer)
         .await?;
-        self.explain_scan(
+        self.changed(
             scan,
             done.rows_affected(),
             "requested",
@@ -189,39 +181,8 @@ impl Store {
         values: &ReadingValues,
         raw_frame: &[u8],
     ) -> Result<ReadingId, StoreError> {
-        let owner = || format!("scan {scan}");
-        let geometry = codec::check_reading(&owner, device, geometry, values, false)?;
-        // The state test and the insert are one statement, so a scan failed or aborted by
-        // another task cannot gain a reading afterwards.
-        let inserted: Result<Option<i64>, sqlx::Error> = sqlx::query_scalar(
-            "INSERT INTO readings
-                 (scan_id, device, geometry, values_f64le, raw_frame, received_at_ms)
-             SELECT $1, $2, $3, $4, $5, $6
-             WHERE EXISTS (SELECT 1 FROM scans WHERE id = $1 AND state = 'measuring')
-             RETURNING id",
-        )
-        .bind(scan.0)
-        .bind(device.key())
-        .bind(geometry.name)
-        .bind(codec::encode_f64s(values.as_slice()))
-        .bind(raw_frame)
-        .bind(now_ms())
-        .fetch_optional(&self.writer)
-        .await;
-        match inserted {
-            Ok(Some(id)) => Ok(ReadingId(id)),
-            Ok(None) => Err(StoreError::ScanState {
-                scan,
-                state: scan_state(&self.writer, scan).await?,
-                expected: "measuring",
-                action: "add a reading to it",
-            }),
-            Err(e) if backend::is_unique_violation(&e) => Err(StoreError::DuplicateReading {
-                owner: owner(),
-                geometry: geometry.name,
-            }),
-            Err(e) => Err(e.into()),
-        }
+        self.insert_reading(scan, device, geometry, values, raw_frame)
+            .await
     }
 
     /// Stores several readings of a `measuring` scan in one transaction: all or none (imports,
@@ -239,7 +200,7 @@ impl Store {
             )?);
         }
         let mut tx = self.writer.begin().await?;
-        let state = scan_state(&mut *tx, scan).await?;
+        let state = state_of(&mut *tx, scan).await?;
         if state != ScanState::Measuring {
             return Err(StoreError::ScanState {
                 scan,
@@ -310,40 +271,7 @@ impl Store {
 
     /// measuring → complete. Refused unless the scan is `measuring` and holds all 14 readings.
     pub async fn complete_scan(&self, scan: ScanId) -> Result<(), StoreError> {
-        // The CHECKs of `readings` pin each row to a distinct one of the 14 geometries, so a
-        // count of 14 means every geometry is present.
-        let done = sqlx::query(
-            "UPDATE scans SET state = 'complete', finished_at_ms = $2
-             WHERE id = $1 AND state = 'measuring'
-               AND (SELECT COUNT(*) FROM readings WHERE scan_id = $1) = $3",
-        )
-        .bind(scan.0)
-        .bind(now_ms())
-        .bind(GEOMETRY_COUNT as i64)
-        .execute(&self.writer)
-        .await?;
-        if done.rows_affected() == 1 {
-            return Ok(());
-        }
-        let state = scan_state(&self.writer, scan).await?;
-        if state != ScanState::Measuring {
-            return Err(StoreError::ScanState {
-                scan,
-                state,
-                expected: "measuring",
-                action: "complete it",
-            });
-        }
-        let present: Vec<String> =
-            sqlx::query_scalar("SELECT geometry FROM readings WHERE scan_id = $1")
-                .bind(scan.0)
-                .fetch_all(&self.writer)
-                .await?;
-        Err(StoreError::ScanIncomplete {
-            scan,
-            have: present.len(),
-            missing: codec::missing_geometries(&present),
-        })
+        self.complete_owner(scan).await
     }
 
     /// requested | measuring → failed, with the reason (e.g. "MA-T12 timed out at 45as25").
@@ -363,7 +291,7 @@ impl Store {
         .bind(now_ms())
         .execute(&self.writer)
         .await?;
-        self.explain_scan(
+        self.changed(
             scan,
             done.rows_affected(),
             "requested or measuring",
@@ -395,7 +323,7 @@ impl Store {
         .bind(reason)
         .execute(&self.writer)
         .await?;
-        self.explain_scan(
+        self.changed(
             scan,
             done.rows_affected(),
             "requested or measuring",
@@ -503,12 +431,9 @@ impl Store {
         .await;
         match inserted {
             Ok(Some(id)) => Ok(ProcessedId(id)),
-            Ok(None) => Err(StoreError::ScanState {
-                scan,
-                state: scan_state(&self.writer, scan).await?,
-                expected: "complete",
-                action: "store its processed BRDF",
-            }),
+            Ok(None) => {
+                Err(refused(&self.writer, scan, "complete", "store its processed BRDF").await)
+            }
             Err(e) if backend::is_unique_violation(&e) => {
                 Err(StoreError::AlreadyProcessed { scan, specular })
             }
@@ -541,26 +466,6 @@ impl Store {
         .fetch_all(&self.reader)
         .await?;
         rows.into_iter().map(ProcessedRow::into_processed).collect()
-    }
-
-    /// Turns a conditional UPDATE that touched `rows` rows into Ok, or into the error that says
-    /// why it touched none (no such scan, or a state other than `expected`).
-    async fn explain_scan(
-        &self,
-        scan: ScanId,
-        rows: u64,
-        expected: &'static str,
-        action: &'static str,
-    ) -> Result<(), StoreError> {
-        if rows == 1 {
-            return Ok(());
-        }
-        Err(StoreError::ScanState {
-            scan,
-            state: scan_state(&self.writer, scan).await?,
-            expected,
-            action,
-        })
     }
 }
 
