@@ -106,27 +106,13 @@ impl Follower<'_> {
                 geometry,
                 k,
                 ..
-            } if mine => {
-                let (device, geometry) = (terminal_safe(device), terminal_safe(geometry));
-                readings.set_position(*k as u64);
-                readings.set_message(format!("{device} {geometry}"));
-                if !p.tty {
-                    p.line(&format!("reading {k}/14: {device} {geometry}"));
-                }
-            }
+            } if mine => self.reading("reading", device, geometry, *k),
             Event::ReferenceReading {
                 device,
                 geometry,
                 k,
                 ..
-            } if mine => {
-                let (device, geometry) = (terminal_safe(device), terminal_safe(geometry));
-                readings.set_position(*k as u64);
-                readings.set_message(format!("{device} {geometry}"));
-                if !p.tty {
-                    p.line(&format!("reference reading {k}/14: {device} {geometry}"));
-                }
-            }
+            } if mine => self.reading("reference reading", device, geometry, *k),
             Event::ScanComplete { scan } if mine => {
                 readings.finish_with_message("complete");
                 p.line(&format!("scan {scan} complete: 14 readings stored"));
@@ -164,11 +150,7 @@ impl Follower<'_> {
                 max_age_hours,
                 ..
             } if self.follows_scan(*scan) => {
-                p.line(&format!(
-                    "scan {scan} not fitted: its reference is {age_hours:.1} h old (limit \
-                     {max_age_hours} h); measure a new reference (`brdfd reference`) and scan \
-                     again, or `brdfd refit {scan} --allow-stale-reference`"
-                ));
+                p.line(&stale_reference_line(*scan, *age_hours, *max_age_hours));
                 return self.not_fitted();
             }
             Event::ProcessingFailed { scan, reason } if self.follows_scan(*scan) => {
@@ -242,6 +224,17 @@ impl Follower<'_> {
         Step::Continue
     }
 
+    /// Reading `k` of 14 stored: the bar moves, and without a terminal a line says so.
+    fn reading(&self, label: &str, device: &str, geometry: &str, k: usize) {
+        let (device, geometry) = (terminal_safe(device), terminal_safe(geometry));
+        self.readings.set_position(k as u64);
+        self.readings.set_message(format!("{device} {geometry}"));
+        if !self.progress.tty {
+            self.progress
+                .line(&format!("{label} {k}/14: {device} {geometry}"));
+        }
+    }
+
     /// Whether a scan is followed and it is `scan`.
     fn follows_scan(&self, scan: ScanId) -> bool {
         matches!(self.followed, Followed::Scan(followed) if followed == scan)
@@ -277,6 +270,15 @@ impl Follower<'_> {
             Followed::Reference(r) => format!("reference {r} may go on: `brdfd status`"),
         }
     }
+}
+
+/// Why scan `scan` was not fitted: its reference is too old, and what to do.
+fn stale_reference_line(scan: ScanId, age_hours: f64, max_age_hours: f64) -> String {
+    format!(
+        "scan {scan} not fitted: its reference is {age_hours:.1} h old (limit {max_age_hours} \
+         h); measure a new reference (`brdfd reference`) and scan again, or `brdfd refit \
+         {scan} --allow-stale-reference`"
+    )
 }
 
 /// Follows reference `reference` on the event stream until it has ended; fails if the
