@@ -126,6 +126,16 @@ pub fn terminal_safe(text: &str) -> String {
         text.to_string()
     }
 }
+/// The fit ids of the daemon's answer to a refit or an import (its `"fits"` array).
+pub(super) fn queued_fits(answer: &Value) -> Vec<i64> {
+    answer["fits"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_i64)
+        .collect()
+}
+
 /// `value` (a JSON object) with `"type": kind` in front, as one NDJSON line.
 pub(super) fn tagged(kind: &str, value: &Value) -> Value {
     let mut out = serde_json::Map::new();

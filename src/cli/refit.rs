@@ -1,9 +1,9 @@
 //! `brdfd refit`: fit a stored scan again, then follow the new fits.
 
-use serde_json::{Value, json};
+use serde_json::json;
 
 use super::follow::{follow_scan, print_scan_result};
-use super::operator::{DaemonArgs, tagged};
+use super::operator::{DaemonArgs, queued_fits, tagged};
 use crate::cost::CostFunction;
 use crate::optimise::Method;
 
@@ -43,12 +43,7 @@ pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
         "allow_stale_reference": args.allow_stale_reference,
     });
     let v = client.post(&format!("/scans/{}/refit", args.scan), Some(&body))?;
-    let fits: Vec<i64> = v["fits"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_i64)
-        .collect();
+    let fits = queued_fits(&v);
     if args.json {
         println!("{}", tagged("accepted", &v));
     } else {

@@ -4,10 +4,10 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use serde_json::{Value, json};
+use serde_json::json;
 
 use super::follow::{follow_scan, pending_fits, print_scan_result};
-use super::operator::{DaemonArgs, id, tagged};
+use super::operator::{DaemonArgs, id, queued_fits, tagged};
 
 #[derive(Debug, clap::Args)]
 pub struct ExportArgs {
@@ -70,12 +70,7 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     let events = (!args.detach).then(|| client.events()).transpose()?;
     let v = client.post_text("/scans/import", &text)?;
     let scan = id(&v, "scan");
-    let fits: Vec<i64> = v["fits"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_i64)
-        .collect();
+    let fits = queued_fits(&v);
     if args.json {
         println!("{}", tagged("accepted", &v));
     } else {
