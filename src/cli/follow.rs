@@ -57,6 +57,7 @@ impl Progress {
         bar
     }
 }
+
 /// What is followed: a reference being measured, or a scan (being measured, or only its fits
 /// after a refit or an import).
 #[derive(Debug, Clone, Copy)]
@@ -97,6 +98,8 @@ impl Follower<'_> {
         }
     }
 
+    /// The one transition: moves the display and the state on by `event`, and says whether
+    /// the following goes on.
     fn on_event(&mut self, event: &Event) -> Step {
         let (p, readings) = (&self.progress, &self.readings);
         let mine = self.concerns(event);
