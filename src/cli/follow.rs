@@ -161,10 +161,8 @@ impl Follower<'_> {
                 p.line(&format!("scan {scan} not fitted: {reason}"));
                 return self.not_fitted();
             }
-            Event::FitQueued { fit, .. } if mine => {
-                if !self.fits_pending.contains(fit) {
-                    self.fits_pending.push(*fit);
-                }
+            Event::FitQueued { fit, .. } if mine && !self.fits_pending.contains(fit) => {
+                self.fits_pending.push(*fit);
             }
             Event::FitStarted {
                 fit, cost_function, ..
