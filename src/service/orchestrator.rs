@@ -32,7 +32,7 @@ use crate::store::{
     ScanDetail, ScanId, ScanState, Source, StoreError,
 };
 
-use super::events::Event;
+use super::events::{Event, ReadingShown};
 use super::shutdown::Shutdown;
 use super::{Operation, RefitRequest, Service, ServiceError, Timings};
 
@@ -193,6 +193,7 @@ impl Service {
                 return Err(e);
             }
         };
+        self.inner.devices.cue_simulators(None);
         self.inner
             .events
             .send(Event::ReferenceStarted { reference });
@@ -250,6 +251,7 @@ impl Service {
                 return Err(e);
             }
         };
+        self.inner.devices.cue_simulators(Some(sample));
         self.inner.events.send(Event::ScanStarted {
             scan,
             sample: sample.to_string(),
@@ -543,6 +545,7 @@ impl Service {
                 acquired.stored.insert(geometry.name);
                 let (k, n) = (acquired.stored.len(), GEOMETRY_COUNT);
                 let device = device.key();
+                let reading = ReadingShown::of(&values, crate::store::now_ms());
                 self.inner.events.send(match target {
                     Target::Scan(scan) => Event::ScanReading {
                         scan,
@@ -550,6 +553,7 @@ impl Service {
                         geometry: geometry.name,
                         k,
                         n,
+                        reading,
                     },
                     Target::Reference(reference) => Event::ReferenceReading {
                         reference,
@@ -557,6 +561,7 @@ impl Service {
                         geometry: geometry.name,
                         k,
                         n,
+                        reading,
                     },
                 });
             }
@@ -714,7 +719,7 @@ impl Service {
                 tokio::spawn(async move {
                     match h.identify().await {
                         Ok(identity) => {
-                            s.count_transition(h.instrument(), "connected");
+                            s.count_transition(h.instrument(), "connected", identity.to_string());
                             s.record_instrument(h.instrument(), &identity).await
                         }
                         Err(e) => tracing::warn!(error = %e, "instrument not available at start"),
@@ -743,8 +748,17 @@ impl Service {
         });
     }
 
-    /// Counts one connection change of `instrument` for `GET /metrics`.
-    fn count_transition(&self, instrument: Instrument, state: &'static str) {
+    /// Counts one connection change of `instrument` for `GET /metrics` and keeps it as the
+    /// instrument's state for `status`.
+    fn count_transition(&self, instrument: Instrument, state: &'static str, detail: String) {
+        let slot = match instrument {
+            Instrument::MaT12 => 0,
+            Instrument::Sra => 1,
+        };
+        self.inner
+            .device_states
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())[slot] = (state, detail, crate::store::now_ms());
         *self
             .inner
             .device_transitions
@@ -778,7 +792,7 @@ impl Service {
             drivers::Event::Error { instrument, error } => (instrument, "error", error.to_string()),
             drivers::Event::Measuring { .. } | drivers::Event::Reading { .. } => return,
         };
-        self.count_transition(instrument, state);
+        self.count_transition(instrument, state, detail.clone());
         self.inner.events.send(Event::Device {
             device: instrument.key(),
             state,
