@@ -456,12 +456,21 @@ pub async fn guard(State(access): State<Arc<Access>>, request: Request, next: Ne
     next.run(request).await
 }
 
-/// Paths a GET may fetch with no credential: the health probe, the web page's own files and
-/// the login link (which needs its one-time ticket instead).
-pub const OPEN_PATHS: [&str; 5] = ["/healthz", "/", "/app.js", "/app.css", "/login"];
+/// Paths a GET may fetch with no credential: the health probe, the web page's own files, the
+/// login link (which needs its one-time ticket instead) and `/session`, which answers whether
+/// the request carries a session (and only then its CSRF value).
+pub const OPEN_PATHS: [&str; 6] = ["/healthz", "/", "/app.js", "/app.css", "/login", "/session"];
 
 /// Minting login tickets needs the token itself: a page's session cannot make new sessions.
 pub const TICKET_PATH: &str = "/session/ticket";
+
+/// Whether a request's fetch metadata says it comes from the daemon's own page (or from no
+/// page: a typed address, a tool that sends no `Sec-Fetch-Site`).
+pub fn from_own_page(headers: &HeaderMap) -> bool {
+    header_str(headers, header::HeaderName::from_static("sec-fetch-site")).is_none_or(|site| {
+        site.eq_ignore_ascii_case("same-origin") || site.eq_ignore_ascii_case("none")
+    })
+}
 
 /// The checks on a request that carries a valid session cookie instead of the token: it comes
 /// from the page itself (fetch metadata), and a POST carries the session's CSRF value.
@@ -471,16 +480,12 @@ fn check_page_request(
     headers: &HeaderMap,
     cookie: &str,
 ) -> Result<(), Response> {
-    if let Some(site) = header_str(headers, header::HeaderName::from_static("sec-fetch-site"))
-        && !site.eq_ignore_ascii_case("same-origin")
-        && !site.eq_ignore_ascii_case("none")
-    {
+    if !from_own_page(headers) {
         return Err(refuse(
             StatusCode::FORBIDDEN,
-            format!(
-                "the session cookie is accepted only from brdfd's own page (this request is \
-                 {site:?})"
-            ),
+            "the session cookie is accepted only from brdfd's own page (this request is \
+             cross-origin)"
+                .into(),
         ));
     }
     if method != Method::GET && method != Method::HEAD {

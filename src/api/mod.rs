@@ -524,6 +524,7 @@ async fn events(State(s): State<Service>, Extension(permits): Extension<EventPer
         );
     };
     let keep_alive = permits.1;
+    tracing::debug!(open = permits.0.available_permits(), "event stream opened");
     let stream = BroadcastStream::new(s.subscribe()).map(move |r| {
         // The permit lives as long as the stream: dropped with it when the client goes.
         let _held = &permit;

@@ -8,10 +8,11 @@
 //! | `GET /`, `/app.js`, `/app.css` | the page | nothing (it holds no secret) |
 //! | `POST /session/ticket` | a one-time login ticket, for `brdfd open` | the token |
 //! | `GET /login?ticket=…` | spends the ticket, sets the session cookie, redirects to `/` | the ticket |
-//! | `GET /session` | the session's CSRF value and expiry, for the page's script | the cookie |
+//! | `GET /session` | whether signed in; the session's CSRF value and expiry, for the page's script | nothing |
 //! | `POST /session/logout` | ends the session | the cookie |
 //! | `GET /scans/{id}/export/{format}` | the scan (and its fits) as CGATS, CxF3, CSV or JSON | token or cookie |
 //! | `GET /report.html?scans=1,2` | the study report of those scans, figures inlined | token or cookie |
+//! | `GET /scans/{id}/swatches` | measured and fitted colour per geometry ([`Swatches`]) | token or cookie |
 //!
 //! Every response of the server carries the page's security headers ([`security_headers`]):
 //! a Content-Security-Policy that allows scripts, styles and connections from the daemon
@@ -61,6 +62,7 @@ pub fn routes() -> Router<Service> {
         .route("/session/logout", post(logout))
         .route("/scans/{id}/export/{format}", get(export_format))
         .route("/report.html", get(report_html))
+        .route("/scans/{id}/swatches", get(swatches))
 }
 
 /// Adds the page's security headers to a response.
@@ -181,12 +183,21 @@ fn no_session() -> Response {
         .into_response()
 }
 
-/// `GET /session`: what the page's script needs to send POSTs.
+/// `GET /session` (open): whether the request carries a session of this daemon, from its own
+/// page; if so, what the page's script needs to send POSTs.
 async fn session(Extension(access): Extension<Arc<Access>>, headers: HeaderMap) -> Response {
-    let Some(cookie) = verified_cookie(access.sessions(), &headers) else {
-        return no_session();
+    let cookie =
+        verified_cookie(access.sessions(), &headers).filter(|_| access::from_own_page(&headers));
+    let Some(cookie) = cookie else {
+        let message = if access::session_cookie(&headers).is_some() {
+            "the page's session has expired or was ended"
+        } else {
+            "this browser has no session"
+        };
+        return Json(serde_json::json!({ "signed_in": false, "message": message })).into_response();
     };
     Json(serde_json::json!({
+        "signed_in": true,
         "csrf": access.sessions().csrf(cookie),
         "csrf_header": access::CSRF_HEADER,
         "expires_at_ms": Sessions::expires_at_ms(cookie),
@@ -273,6 +284,102 @@ async fn export_format(
         )
             .into_response(),
     }
+}
+
+/// One colour as the page shows it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Swatch {
+    /// `#rrggbb`, clipped to the sRGB gamut.
+    pub srgb: String,
+    /// Whether the colour was outside the sRGB gamut (the swatch shows the nearest).
+    pub clipped: bool,
+    /// CIELAB (D65, 2°), two decimals.
+    pub lab: [f64; 3],
+}
+
+impl Swatch {
+    /// The colour of a BRDF value (sr⁻¹) seen as a reflectance factor, as the report's swatch
+    /// figures draw it.
+    pub fn of_brdf(f: &crate::spectral::Spectrum) -> Swatch {
+        let r = crate::colour::brdf_to_reflectance(f);
+        let c = crate::colour::xyz_to_srgb8(crate::colour::reflectance_to_xyz(&r));
+        let lab = crate::colour::reflectance_to_lab(&r);
+        let round = |v: f64| (v * 100.0).round() / 100.0;
+        Swatch {
+            srgb: c.hex(),
+            clipped: c.clipped,
+            lab: [round(lab.l), round(lab.a), round(lab.b)],
+        }
+    }
+}
+
+/// The latest finished fit of one cost function, as the page's result view shows it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct FittedSwatches {
+    pub cost_function: crate::cost::CostFunction,
+    pub method: String,
+    /// The fitted model's colour at each geometry.
+    pub estimated: Vec<Swatch>,
+    /// ΔE00 at each geometry, and means over the diffuse, specular and all geometries.
+    pub delta_e00: Vec<f64>,
+    pub delta_e00_diffuse: f64,
+    pub delta_e00_specular: f64,
+    pub delta_e00_all: f64,
+}
+
+/// `GET /scans/{id}/swatches`: measured and fitted colour per geometry (as the report's
+/// Fig. 4 and 7).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Swatches {
+    pub scan: ScanId,
+    pub sample: String,
+    /// The 14 geometries, MA-T12 then SRA.
+    pub geometries: Vec<&'static str>,
+    pub measured: Vec<Swatch>,
+    /// One entry per cost function with a finished fit.
+    pub fits: Vec<FittedSwatches>,
+}
+
+async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response {
+    let scan: ScanId = match parse_id("scan", &id) {
+        Ok(s) => s,
+        Err(e) => return e.into_response(),
+    };
+    let study =
+        match crate::report::load::from_store(s.store(), &Selection::Scans(vec![scan])).await {
+            Ok(study) => study,
+            Err(e) => return load_refusal(e),
+        };
+    let Some(sample) = study.samples.into_iter().next() else {
+        return ApiError(ServiceError::BadRequest(format!(
+            "scan {scan} has no study"
+        )))
+        .into_response();
+    };
+    let fits = crate::cost::CostFunction::ALL
+        .into_iter()
+        .filter_map(|c| {
+            let fit = sample.fit(c)?;
+            let done = fit.done()?;
+            Some(FittedSwatches {
+                cost_function: c,
+                method: fit.method.clone(),
+                estimated: done.estimated.iter().map(Swatch::of_brdf).collect(),
+                delta_e00: done.evaluation.per_geometry.to_vec(),
+                delta_e00_diffuse: done.evaluation.diffuse.mean,
+                delta_e00_specular: done.evaluation.specular.mean,
+                delta_e00_all: done.evaluation.all.mean,
+            })
+        })
+        .collect();
+    Json(Swatches {
+        scan,
+        sample: sample.name.clone(),
+        geometries: crate::geometry::GEOMETRIES.iter().map(|g| g.name).collect(),
+        measured: sample.measured.values.iter().map(Swatch::of_brdf).collect(),
+        fits,
+    })
+    .into_response()
 }
 
 #[derive(Debug, Deserialize)]
@@ -406,6 +513,16 @@ mod tests {
             "<p><img src=\"data:image/png;base64,iVBORw==\" alt=\"x\"><img src=\"../etc/passwd.png\"><img src=\"b.gif\"></p>"
         );
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_page_lists_the_geometries_in_the_daemons_order() {
+        let names: Vec<&str> = crate::geometry::GEOMETRIES.iter().map(|g| g.name).collect();
+        let line = format!(
+            "const GEOMETRIES = {};",
+            serde_json::to_string(&names).unwrap()
+        );
+        assert!(APP_JS.contains(&line), "app.js must hold {line}");
     }
 
     #[test]
