@@ -809,4 +809,166 @@ mod tests {
             StatusCode::UNAUTHORIZED
         );
     }
+
+    #[test]
+    fn a_ticket_opens_one_session_once_and_sessions_are_signed() {
+        let token = Token::generate();
+        let sessions = Sessions::new(&token);
+        let ticket = sessions.issue_ticket();
+        assert_eq!(ticket.len(), 64);
+        assert!(sessions.redeem("not-a-ticket").is_none());
+        let cookie = sessions
+            .redeem(&ticket)
+            .expect("a fresh ticket opens a session");
+        assert!(sessions.redeem(&ticket).is_none(), "a ticket works once");
+        assert!(sessions.verify(&cookie));
+        // Another daemon's token (or a replaced one) does not accept it.
+        assert!(!Sessions::new(&Token::generate()).verify(&cookie));
+        // Any change breaks the signature; a later expiry cannot be forged.
+        let (body, mac) = cookie.rsplit_once('.').unwrap();
+        let mut flipped = mac.to_string().into_bytes();
+        flipped[0] = if flipped[0] == b'0' { b'1' } else { b'0' };
+        assert!(!sessions.verify(&format!("{body}.{}", String::from_utf8(flipped).unwrap())));
+        let parts: Vec<&str> = body.split('.').collect();
+        let later = format!(
+            "v1.{}.{}.{mac}",
+            parts[1].parse::<u64>().unwrap() + 1,
+            parts[2]
+        );
+        assert!(!sessions.verify(&later));
+        assert!(!sessions.verify(""));
+        assert!(!sessions.verify("v1.1.2.3.4"));
+        // It expires.
+        let expiry: u64 = parts[1].parse().unwrap();
+        assert!(sessions.verify_at(&cookie, expiry - 1));
+        assert!(!sessions.verify_at(&cookie, expiry));
+        // The CSRF value is the session's own, and logging out ends the session.
+        let other = sessions.redeem(&sessions.issue_ticket()).unwrap();
+        assert_ne!(sessions.csrf(&cookie), sessions.csrf(&other));
+        sessions.revoke(&cookie);
+        assert!(!sessions.verify(&cookie));
+        assert!(sessions.verify(&other));
+    }
+
+    #[test]
+    fn a_session_cookie_is_accepted_only_from_the_page_and_with_its_csrf_value() {
+        let (a, token) = access();
+        let cookie = a.sessions().redeem(&a.sessions().issue_ticket()).unwrap();
+        let jar = format!("other=1; {SESSION_COOKIE}={cookie}");
+        let csrf = a.sessions().csrf(&cookie);
+        let host = ("host", "127.0.0.1:7878");
+        let json = ("content-type", "application/json");
+        let own = ("sec-fetch-site", "same-origin");
+        let run = |method: &Method, path: &str, h: &[(&str, &str)]| {
+            check_for_test(&a, method, path, &headers(h))
+        };
+        assert_eq!(
+            run(&Method::GET, "/status", &[host, ("cookie", &jar), own]),
+            StatusCode::OK
+        );
+        assert_eq!(
+            run(&Method::GET, "/status", &[host, ("cookie", &jar)]),
+            StatusCode::OK
+        );
+        // From another site or another origin of the same site (another loopback port).
+        for site in ["same-site", "cross-site"] {
+            assert_eq!(
+                run(
+                    &Method::GET,
+                    "/status",
+                    &[host, ("cookie", &jar), ("sec-fetch-site", site)]
+                ),
+                StatusCode::FORBIDDEN,
+                "{site}"
+            );
+        }
+        // A POST needs the CSRF header with the session's value.
+        assert_eq!(
+            run(
+                &Method::POST,
+                "/reference",
+                &[host, ("cookie", &jar), own, json]
+            ),
+            StatusCode::FORBIDDEN
+        );
+        assert_eq!(
+            run(
+                &Method::POST,
+                "/reference",
+                &[
+                    host,
+                    ("cookie", &jar),
+                    own,
+                    json,
+                    (CSRF_HEADER, "0".repeat(64).as_str())
+                ]
+            ),
+            StatusCode::FORBIDDEN
+        );
+        assert_eq!(
+            run(
+                &Method::POST,
+                "/reference",
+                &[
+                    host,
+                    ("cookie", &jar),
+                    own,
+                    json,
+                    (CSRF_HEADER, csrf.as_str())
+                ]
+            ),
+            StatusCode::OK
+        );
+        // A form post (no JSON) is still refused even with the CSRF value.
+        assert_eq!(
+            run(
+                &Method::POST,
+                "/reference",
+                &[host, ("cookie", &jar), own, (CSRF_HEADER, csrf.as_str())]
+            ),
+            StatusCode::UNSUPPORTED_MEDIA_TYPE
+        );
+        // A session cannot mint login tickets; the token can.
+        assert_eq!(
+            run(
+                &Method::POST,
+                TICKET_PATH,
+                &[
+                    host,
+                    ("cookie", &jar),
+                    own,
+                    json,
+                    (CSRF_HEADER, csrf.as_str())
+                ]
+            ),
+            StatusCode::UNAUTHORIZED
+        );
+        let bearer = format!("Bearer {token}");
+        assert_eq!(
+            run(
+                &Method::POST,
+                TICKET_PATH,
+                &[host, ("authorization", &bearer), json]
+            ),
+            StatusCode::OK
+        );
+        // A forged or ended session is a 401; the page's files and /session stay open.
+        let forged = format!(
+            "{SESSION_COOKIE}=v1.99999999999.{}.{}",
+            "0".repeat(32),
+            "0".repeat(64)
+        );
+        assert_eq!(
+            run(&Method::GET, "/status", &[host, ("cookie", &forged)]),
+            StatusCode::UNAUTHORIZED
+        );
+        for path in ["/", "/app.js", "/app.css", "/login", "/session"] {
+            assert_eq!(run(&Method::GET, path, &[host]), StatusCode::OK, "{path}");
+        }
+        // The Host check still applies to them (DNS rebinding).
+        assert_eq!(
+            run(&Method::GET, "/", &[("host", "evil.example")]),
+            StatusCode::MISDIRECTED_REQUEST
+        );
+    }
 }

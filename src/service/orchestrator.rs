@@ -748,6 +748,26 @@ impl Service {
         });
     }
 
+    /// After a failed command (`error`), the instrument's next answer shows it is connected.
+    fn clear_device_error(&self, instrument: Instrument) {
+        let slot = match instrument {
+            Instrument::MaT12 => 0,
+            Instrument::Sra => 1,
+        };
+        let mut states = self
+            .inner
+            .device_states
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        if states[slot].0 == "error" {
+            states[slot] = (
+                "connected",
+                "answering again".into(),
+                crate::store::now_ms(),
+            );
+        }
+    }
+
     /// Counts one connection change of `instrument` for `GET /metrics` and keeps it as the
     /// instrument's state for `status`.
     fn count_transition(&self, instrument: Instrument, state: &'static str, detail: String) {
@@ -790,7 +810,12 @@ impl Service {
                 format!("attempt {attempt} after {} ms", delay.as_millis()),
             ),
             drivers::Event::Error { instrument, error } => (instrument, "error", error.to_string()),
-            drivers::Event::Measuring { .. } | drivers::Event::Reading { .. } => return,
+            drivers::Event::Measuring { instrument, .. }
+            | drivers::Event::Reading { instrument, .. } => {
+                // An instrument that answers again after a failed command is connected.
+                self.clear_device_error(instrument);
+                return;
+            }
         };
         self.count_transition(instrument, state, detail.clone());
         self.inner.events.send(Event::Device {

@@ -45,6 +45,11 @@ function h(tag, attrs = {}, ...children) {
   return el;
 }
 
+/** Replaces an element's children (nulls and falses skipped, arrays flattened). */
+function fill(el, ...children) {
+  el.replaceChildren(...h("div", {}, ...children).childNodes);
+}
+
 const $ = (id) => document.getElementById(id);
 const fmt = (v, d = 2) => (typeof v === "number" && isFinite(v) ? v.toFixed(d) : "—");
 const when = (ms) => (ms ? new Date(ms).toLocaleString() : "—");
@@ -288,7 +293,7 @@ function deviceBanner() {
 
 function renderBench() {
   const main = $("main");
-  main.replaceChildren(
+  fill(main, 
     h("div", { class: "grid" },
       h("section", { class: "panel", "aria-labelledby": "h-instruments" },
         h("h2", { id: "h-instruments" }, "Instruments"), h("div", { id: "instruments" })),
@@ -443,7 +448,7 @@ async function renderScans(params) {
   let list;
   try { list = await api(`/scans?${q}`); } catch (e) {
     if (e.status === 401) return showLogin(e.message);
-    main.replaceChildren(h("p", { class: "stale" }, e.message));
+    fill(main, h("p", { class: "stale" }, e.message));
     return;
   }
   const selected = new Set();
@@ -475,7 +480,7 @@ async function renderScans(params) {
   const last = list.length ? list[list.length - 1].id : null;
   const older = new URLSearchParams(params); if (last) older.set("before", String(last));
   const newest = new URLSearchParams(params); newest.delete("before");
-  main.replaceChildren(
+  fill(main, 
     h("h2", {}, "Scans, newest first"), form,
     list.length ? h("div", { class: "scroll" }, h("table", { class: "data", id: "scan-list" },
       h("thead", {}, h("tr", {}, ["", "scan", "sample", "state", "requested", "readings"].map((c) => h("th", { scope: "col" }, c)))),
@@ -490,11 +495,11 @@ async function renderScans(params) {
 
 async function renderResult(id) {
   const main = $("main");
-  main.replaceChildren(h("p", {}, `Loading scan ${id}…`));
+  fill(main, h("p", {}, `Loading scan ${id}…`));
   let view;
   try { view = await api(`/scans/${id}`); } catch (e) {
     if (e.status === 401) return showLogin(e.message);
-    main.replaceChildren(h("p", { class: "stale" }, e.message));
+    fill(main, h("p", { class: "stale" }, e.message));
     return;
   }
   let sw = null;
@@ -509,7 +514,7 @@ async function renderResult(id) {
   const best = fitsDone.length ? fitsDone.reduce((a, b) => (b.delta_e00_all < a.delta_e00_all ? b : a)) : null;
   const latest = new Map();
   for (const f of view.fits) latest.set(f.run.cost_function, f);
-  main.replaceChildren(
+  fill(main, 
     h("h2", {}, `Scan ${scan.id}: ${scan.sample}`),
     h("p", { id: "result-state" }, `${scan.state}${scan.reason ? ` — ${scan.reason}` : ""} · requested ${when(scan.requested_at_ms)} · ${scan.reading_count}/14 readings`),
     sw && sw.error ? h("p", { class: "stale" }, sw.error) : null,
