@@ -492,6 +492,31 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         &cxf[..cxf.len().min(400)]
     );
 
+    // The study report of this scan, as the page's link downloads it: one HTML file with its
+    // figures inlined.
+    let report = c
+        .execute_async(
+            "const done = arguments[arguments.length - 1];
+             fetch(document.getElementById('dl-report').href).then(async (r) =>
+               done([r.status, r.headers.get('content-disposition'), await r.text()]));",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert_eq!(report[0], json!(200), "{}", report[2]);
+    assert!(report[1].as_str().unwrap().contains("brdfd-report.html"));
+    let html = report[2].as_str().unwrap();
+    assert!(html.contains("T.Sky blue") && html.contains("<img src=\"data:image/png;base64,"));
+    assert!(!html.contains("<img src=\"fig"), "every figure is inlined");
+
+    // Refit with other settings: cf1 alone, another seed.
+    for cf in ["cf2", "m2"] {
+        click(&c, &format!("#refit-{cf}")).await;
+    }
+    c.find(Locator::Css("#refit-seed")).await.unwrap().send_keys("7").await.unwrap();
+    click(&c, "#refit-go").await;
+    wait_js(&c, "the refit's answer", "const b = document.getElementById('banner'); return !b.hidden && /^Fits \\d+ queued/.test(b.textContent)").await;
+
     // The scan list.
     c.goto(&format!("http://{addr}/#/scans")).await.unwrap();
     wait_js(

@@ -38,7 +38,7 @@ function h(tag, attrs = {}, ...children) {
     else if (k === "class") el.className = v;
     else el.setAttribute(k, v === true ? "" : String(v));
   }
-  for (const c of children.flat()) {
+  for (const c of children.flat(Infinity)) {
     if (c === null || c === undefined || c === false) continue;
     el.append(c instanceof Node ? c : document.createTextNode(String(c)));
   }
@@ -619,6 +619,9 @@ function showLogin(message) {
 
 function route() {
   const hash = location.hash || "#/";
+  // A message belongs to the view it was shown on; an instrument's trouble stays.
+  setBanner(null);
+  deviceBanner();
   for (const a of document.querySelectorAll("nav a")) a.removeAttribute("aria-current");
   const m = hash.match(/^#\/scans\/(\d+)$/);
   if (m) { $("nav-scans").setAttribute("aria-current", "page"); return renderResult(m[1]); }
