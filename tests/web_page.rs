@@ -513,7 +513,12 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     for cf in ["cf2", "m2"] {
         click(&c, &format!("#refit-{cf}")).await;
     }
-    c.find(Locator::Css("#refit-seed")).await.unwrap().send_keys("7").await.unwrap();
+    c.find(Locator::Css("#refit-seed"))
+        .await
+        .unwrap()
+        .send_keys("7")
+        .await
+        .unwrap();
     click(&c, "#refit-go").await;
     wait_js(&c, "the refit's answer", "const b = document.getElementById('banner'); return !b.hidden && /^Fits \\d+ queued/.test(b.textContent)").await;
 
