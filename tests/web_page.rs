@@ -227,6 +227,16 @@ async fn click(c: &Client, css: &str) {
         .unwrap_or_else(|e| panic!("click {css}: {e}"));
 }
 
+/// Types `text` into the field `css` (WebDriver key codes such as Enter, `\u{E007}`, work).
+async fn type_into(c: &Client, css: &str, text: &str) {
+    c.find(Locator::Css(css))
+        .await
+        .unwrap_or_else(|e| panic!("{css}: {e}"))
+        .send_keys(text)
+        .await
+        .unwrap_or_else(|e| panic!("typing into {css}: {e}"));
+}
+
 /// The page's swatch colour of a cell, as `#rrggbb`.
 async fn cell_colour(c: &Client, geometry: &str) -> String {
     let v = c
@@ -393,12 +403,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
 
     // Scan T.Sky blue: it is answered from T.Sky blue's recording (not the playlist's next,
     // Freesia pink), 14 cells and 3 fits appear without a reload.
-    c.find(Locator::Css("#sample"))
-        .await
-        .unwrap()
-        .send_keys("T.Sky blue")
-        .await
-        .unwrap();
+    type_into(&c, "#sample", "T.Sky blue").await;
     click(&c, "#scan:not([disabled])").await;
     wait_js(&c, "the scan's readings", "const op = document.getElementById('op'); return op.dataset.readings === '14' && op.dataset.state === 'complete'").await;
     wait_js(
@@ -551,12 +556,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         "return !!document.querySelector('#scan:not([disabled])')",
     )
     .await;
-    c.find(Locator::Css("#sample"))
-        .await
-        .unwrap()
-        .send_keys("T.Lavender blue\u{E007}")
-        .await
-        .unwrap();
+    type_into(&c, "#sample", "T.Lavender blue\u{E007}").await;
     // Enter in the sample field submits it: no mouse needed.
     wait_js(
         &c,
@@ -596,12 +596,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         "return !!document.querySelector('#scan:not([disabled])')",
     )
     .await;
-    c.find(Locator::Css("#sample"))
-        .await
-        .unwrap()
-        .send_keys("T.Pebble grey")
-        .await
-        .unwrap();
+    type_into(&c, "#sample", "T.Pebble grey").await;
     click(&c, "#scan:not([disabled])").await;
     wait_js(&c, "the SRA's state on the page", "const d = document.querySelector('[data-device=sra] .badge'); return !!d && d.dataset.state !== 'connected' && d.dataset.state !== 'unknown'").await;
     wait_js(&c, "the banner", "const b = document.getElementById('banner'); return !b.hidden && b.textContent.includes('RA-532H')").await;

@@ -750,10 +750,7 @@ impl Service {
 
     /// After a failed command (`error`), the instrument's next answer shows it is connected.
     fn clear_device_error(&self, instrument: Instrument) {
-        let slot = match instrument {
-            Instrument::MaT12 => 0,
-            Instrument::Sra => 1,
-        };
+        let slot = instrument_slot(instrument);
         let mut states = self
             .inner
             .device_states
@@ -771,10 +768,7 @@ impl Service {
     /// Counts one connection change of `instrument` for `GET /metrics` and keeps it as the
     /// instrument's state for `status`.
     fn count_transition(&self, instrument: Instrument, state: &'static str, detail: String) {
-        let slot = match instrument {
-            Instrument::MaT12 => 0,
-            Instrument::Sra => 1,
-        };
+        let slot = instrument_slot(instrument);
         self.inner
             .device_states
             .lock()
@@ -860,10 +854,7 @@ impl Service {
                 .identities
                 .lock()
                 .unwrap_or_else(|p| p.into_inner());
-            let slot = match instrument {
-                Instrument::MaT12 => 0,
-                Instrument::Sra => 1,
-            };
+            let slot = instrument_slot(instrument);
             ids[slot] = Some(identity.clone());
         }
         let text = format!("{} firmware {}", identity.model, identity.firmware);
@@ -875,6 +866,15 @@ impl Service {
         {
             tracing::warn!(error = %e, "cannot record the instrument");
         }
+    }
+}
+
+/// Where an instrument's entry is in the per-instrument arrays of the service (identities,
+/// connection states): MA-T12 first, then the SRA.
+pub(crate) fn instrument_slot(instrument: Instrument) -> usize {
+    match instrument {
+        Instrument::MaT12 => 0,
+        Instrument::Sra => 1,
     }
 }
 
