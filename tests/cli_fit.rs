@@ -166,7 +166,7 @@ fn bad_cost_fails_with_one_line() {
 }
 
 /// Every subcommand of `brdfd`, as `--help` lists them (README.md teaches each one).
-const SUBCOMMANDS: [&str; 23] = [
+const SUBCOMMANDS: [&str; 24] = [
     "fit",
     "synth",
     "demo",
@@ -187,6 +187,7 @@ const SUBCOMMANDS: [&str; 23] = [
     "replay",
     "record",
     "sync",
+    "open",
     "doctor",
     "completions",
     "man",

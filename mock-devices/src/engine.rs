@@ -174,6 +174,24 @@ pub(crate) enum Out {
     Drop { delay: Duration, unplug: bool },
 }
 
+/// What [`crate::SimMat12::cue`] / [`crate::SimSra::cue`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cue {
+    /// The next measurement is answered from this session.
+    Cued {
+        /// The session's number in the script (0-based).
+        session: usize,
+    },
+    /// The script (of this many sessions) has no recording of the object: the next recording
+    /// answers, as without a cue.
+    NoRecording {
+        /// How many sessions the script holds.
+        sessions: usize,
+    },
+    /// Strict replay follows the recording's order: no jump.
+    Strict,
+}
+
 /// The replay state of one simulated instrument; it survives reconnections (the instrument
 /// keeps its buffer when the cable is re-plugged).
 #[derive(Debug)]
@@ -240,6 +258,34 @@ impl Engine {
 
     pub(crate) fn report(&self) -> ReplayReport {
         self.report.clone()
+    }
+
+    /// Lenient replay only: moves the replay position to the start of the first session of
+    /// this sample (`None`: of the reference tile), so that the next measurement is answered
+    /// from it (the operator asked for that sample). Strict replay never jumps.
+    pub(crate) fn cue_object(&mut self, sample: Option<&str>) -> Cue {
+        if self.options.mode != Mode::Lenient {
+            return Cue::Strict;
+        }
+        let Some(session) = self.script.session_of(sample) else {
+            return Cue::NoRecording {
+                sessions: self.script.session_count(),
+            };
+        };
+        let Some(i) = self
+            .script
+            .exchanges()
+            .iter()
+            .position(|e| e.session == session && e.request.is_some())
+        else {
+            return Cue::NoRecording {
+                sessions: self.script.session_count(),
+            };
+        };
+        self.cursor = i;
+        self.last = None;
+        self.update_remaining();
+        Cue::Cued { session }
     }
 
     /// The instrument was unplugged for good by [`ReplayOptions::unplug_after`].
@@ -554,6 +600,31 @@ impl Engine {
 mod tests {
     use super::*;
     use drivers::protocol::Request;
+
+    #[test]
+    fn a_cue_moves_lenient_replay_to_the_sample_asked_for() {
+        let playlist = crate::recordings::playlist(Instrument::MaT12).unwrap();
+        let sky = playlist.session_of(Some("t.sky BLUE")).unwrap();
+        assert_eq!(
+            playlist.object(sky),
+            &crate::script::ScriptObject::Sample("T.Sky blue".into())
+        );
+        let mut e = Engine::new(playlist.clone(), ReplayOptions::lenient()).unwrap();
+        assert_eq!(e.cue_object(Some("T.Sky blue")), Cue::Cued { session: sky });
+        let first = &e.script.exchanges()[e.cursor];
+        assert_eq!(first.session, sky);
+        assert!(first.request.is_some());
+        assert_eq!(e.cue_object(None), Cue::Cued { session: 0 });
+        assert_eq!(e.cursor, 0);
+        assert_eq!(
+            e.cue_object(Some("T.Unknown")),
+            Cue::NoRecording { sessions: 9 }
+        );
+        assert_eq!(e.cursor, 0, "no recording: the position does not move");
+        let mut strict = Engine::new(playlist, ReplayOptions::strict()).unwrap();
+        assert_eq!(strict.cue_object(Some("T.Sky blue")), Cue::Strict);
+        assert_eq!(strict.cursor, 0);
+    }
 
     /// SRA golden frames (PROTOCOL.md §3) as a small session: IDENTIFY, MEASURE-ALL, two FETCHes.
     const SESSION: &str = "\

@@ -38,13 +38,13 @@ pub mod script;
 pub mod usb;
 mod wire;
 
-pub use engine::{Mismatch, Mode, ReplayOptions, ReplayReport, Timing};
+pub use engine::{Cue, Mismatch, Mode, ReplayOptions, ReplayReport, Timing};
 pub use generate::{
     GenerateError, GenerateOptions, Readings, SessionPair, generate_reference_session,
     generate_sample_session,
 };
 pub use pty::SimSra;
-pub use script::Script;
+pub use script::{Script, ScriptObject};
 pub use usb::{SimMat12, SimUsb};
 
 /// Why a simulated instrument cannot be set up. Connection failures at run time are

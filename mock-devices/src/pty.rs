@@ -111,6 +111,12 @@ impl SimSra {
         lock(&self.shared).engine.report()
     }
 
+    /// Lenient replay: answer the next measurement from the recorded session of this sample
+    /// (`None`: of the reference tile). See [`Cue`].
+    pub fn cue(&self, sample: Option<&str>) -> crate::Cue {
+        lock(&self.shared).engine.cue_object(sample)
+    }
+
     /// The script being replayed.
     pub fn script(&self) -> Script {
         lock(&self.shared).engine.script().clone()

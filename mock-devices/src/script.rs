@@ -58,6 +58,19 @@ pub struct Script {
     directions: Vec<(Direction, usize)>,
     /// The sessions' first `note` line or "session N", for messages.
     labels: Vec<String>,
+    /// What each session measured, from its notes (`note sample …`, `note reference …`).
+    objects: Vec<ScriptObject>,
+}
+
+/// What one session of a script measured, as its notes say.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ScriptObject {
+    /// The white reference tile (`note reference …`).
+    Reference,
+    /// A sample (`note sample NAME`).
+    Sample(String),
+    /// The notes do not say.
+    Unknown,
 }
 
 impl Script {
@@ -86,6 +99,7 @@ impl Script {
                 faults: Vec::new(),
                 directions: Vec::new(),
                 labels: Vec::new(),
+                objects: Vec::new(),
             });
             if session.instrument != s.instrument {
                 return Err(MockError::WrongInstrument {
@@ -128,6 +142,14 @@ impl Script {
                 s.faults.push(shift(fault, offset));
             }
             s.labels.push(label);
+            s.objects.push(if crate::generate::is_reference(&session) {
+                ScriptObject::Reference
+            } else {
+                match crate::generate::sample_of(&session) {
+                    Some(name) => ScriptObject::Sample(name.to_string()),
+                    None => ScriptObject::Unknown,
+                }
+            });
         }
         script.ok_or(MockError::NoSessions)
     }
@@ -220,6 +242,21 @@ impl Script {
     /// Number of sessions in the script.
     pub fn session_count(&self) -> usize {
         self.labels.len()
+    }
+
+    /// What session `n` measured.
+    pub fn object(&self, n: usize) -> &ScriptObject {
+        self.objects.get(n).unwrap_or(&ScriptObject::Unknown)
+    }
+
+    /// The first session of the reference tile (`sample` `None`) or of the sample of that name
+    /// (ignoring case), if the script holds one.
+    pub fn session_of(&self, sample: Option<&str>) -> Option<usize> {
+        self.objects.iter().position(|o| match (o, sample) {
+            (ScriptObject::Reference, None) => true,
+            (ScriptObject::Sample(name), Some(wanted)) => name.eq_ignore_ascii_case(wanted),
+            _ => false,
+        })
     }
 
     /// The label of session `n` (its first note), for messages.

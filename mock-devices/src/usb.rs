@@ -100,6 +100,12 @@ impl SimMat12 {
         self.lock().engine.report()
     }
 
+    /// Lenient replay: answer the next measurement from the recorded session of this sample
+    /// (`None`: of the reference tile). See [`Cue`].
+    pub fn cue(&self, sample: Option<&str>) -> crate::Cue {
+        self.lock().engine.cue_object(sample)
+    }
+
     /// The script being replayed.
     pub fn script(&self) -> Script {
         self.lock().engine.script().clone()

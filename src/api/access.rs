@@ -15,18 +15,33 @@
 //! `GET /healthz` needs no token (monitoring probes); the Host check still applies to it.
 //! The token is 256 random bits as 64 hex digits, created at the first start and compared in
 //! constant time; it is never logged.
+//!
+//! **The operator's web page** ([`super::web`]) cannot hold the token: a page's script could
+//! leak it. `brdfd open` (which has the token) asks for a one-time login ticket
+//! (`POST /session/ticket`, bearer only) and prints `http://…/login?ticket=…`; opening it sets
+//! a session cookie (`HttpOnly; SameSite=Strict`, [`Sessions`]) and the ticket is spent. A
+//! request with that cookie and no `Authorization` header is let through like one with the
+//! token, with two more checks: its `Sec-Fetch-Site` must be `same-origin` (or `none`, a typed
+//! address), and a POST must carry the session's CSRF value in [`CSRF_HEADER`] — a custom
+//! header, which no cross-origin page can add without a CORS preflight that brdfd never
+//! grants. The page's own files (`/`, `/app.js`, `/app.css`) and `/login` need no credential;
+//! they hold nothing secret.
 
+use std::collections::{HashMap, HashSet};
 use std::fs::OpenOptions;
 use std::io::Write;
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
+use hmac::{Hmac, Mac};
 use rand::RngCore;
+use sha2::{Digest, Sha256};
 
 use super::ErrorBody;
 
@@ -155,18 +170,194 @@ impl Token {
 
     /// Constant-time comparison with what a request sent.
     fn matches(&self, sent: &[u8]) -> bool {
-        let mine = self.0.as_bytes();
-        if mine.len() != sent.len() {
+        constant_time_eq(self.0.as_bytes(), sent)
+    }
+}
+
+/// Whether two byte strings are equal, in time that depends only on their lengths.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// `n` random bytes as hex (names of temporary files).
+pub fn random_hex(n: usize) -> String {
+    let mut bytes = vec![0u8; n];
+    rand::rng().fill_bytes(&mut bytes);
+    hex(&bytes)
+}
+
+/// The web page's session cookie.
+pub const SESSION_COOKIE: &str = "brdfd_session";
+/// The header in which the page sends its session's CSRF value with every POST.
+pub const CSRF_HEADER: &str = "x-brdfd-csrf";
+/// How long a login ticket from `brdfd open` can be used (once).
+pub const TICKET_LIFETIME: Duration = Duration::from_secs(120);
+/// How long a session lasts before `brdfd open` is needed again.
+pub const SESSION_LIFETIME: Duration = Duration::from_secs(12 * 3600);
+/// Login tickets outstanding at once; the oldest is dropped beyond this.
+const MAX_TICKETS: usize = 64;
+
+/// The web page's sessions: one-time login tickets (in memory, spent when used) and session
+/// cookies. A cookie is `v1.EXPIRY.NONCE.MAC`, signed with HMAC-SHA-256 under a key derived
+/// from the API token, so sessions outlive a daemon restart (the page reconnects by itself)
+/// and end when the token is replaced. Logging out revokes the cookie until it would have
+/// expired anyway (the list is in memory: a restart forgets it, the expiry still holds).
+pub struct Sessions {
+    key: [u8; 32],
+    tickets: Mutex<HashMap<String, Instant>>,
+    revoked: Mutex<HashSet<String>>,
+}
+
+impl std::fmt::Debug for Sessions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Sessions(…)")
+    }
+}
+
+fn unix_seconds() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
+}
+
+impl Sessions {
+    /// Sessions signed under a key derived from `token`.
+    pub fn new(token: &Token) -> Sessions {
+        let mut h = Sha256::new();
+        h.update(b"brdfd web session key v1\0");
+        h.update(token.as_str().as_bytes());
+        Sessions {
+            key: h.finalize().into(),
+            tickets: Mutex::new(HashMap::new()),
+            revoked: Mutex::new(HashSet::new()),
+        }
+    }
+
+    fn mac(&self, what: &[u8]) -> String {
+        let mut m = <Hmac<Sha256> as Mac>::new_from_slice(&self.key)
+            .expect("HMAC takes a key of any length");
+        m.update(what);
+        hex(&m.finalize().into_bytes())
+    }
+
+    /// A new one-time login ticket (256 random bits in hex), valid for [`TICKET_LIFETIME`].
+    pub fn issue_ticket(&self) -> String {
+        let mut bytes = [0u8; 32];
+        rand::rng().fill_bytes(&mut bytes);
+        let ticket = hex(&bytes);
+        let now = Instant::now();
+        let mut tickets = self.tickets.lock().unwrap_or_else(|p| p.into_inner());
+        tickets.retain(|_, expires| *expires > now);
+        if tickets.len() >= MAX_TICKETS
+            && let Some(oldest) = tickets
+                .iter()
+                .min_by_key(|(_, e)| **e)
+                .map(|(t, _)| t.clone())
+        {
+            tickets.remove(&oldest);
+        }
+        tickets.insert(ticket.clone(), now + TICKET_LIFETIME);
+        ticket
+    }
+
+    /// Spends a ticket: a new session cookie value if the ticket was issued, unused and
+    /// unexpired; `None` otherwise.
+    pub fn redeem(&self, ticket: &str) -> Option<String> {
+        let mut tickets = self.tickets.lock().unwrap_or_else(|p| p.into_inner());
+        // Look the ticket up by constant-time comparison: no timing hint about its digits.
+        let key = tickets
+            .keys()
+            .find(|t| constant_time_eq(t.as_bytes(), ticket.as_bytes()))
+            .cloned()?;
+        let expires = tickets.remove(&key)?;
+        (expires > Instant::now()).then(|| self.new_session(unix_seconds()))
+    }
+
+    fn new_session(&self, now: u64) -> String {
+        let mut nonce = [0u8; 16];
+        rand::rng().fill_bytes(&mut nonce);
+        let body = format!("v1.{}.{}", now + SESSION_LIFETIME.as_secs(), hex(&nonce));
+        let mac = self.mac(body.as_bytes());
+        format!("{body}.{mac}")
+    }
+
+    /// Whether a cookie value is a session this daemon signed, unexpired and not logged out.
+    pub fn verify(&self, cookie: &str) -> bool {
+        self.verify_at(cookie, unix_seconds())
+    }
+
+    fn verify_at(&self, cookie: &str, now: u64) -> bool {
+        let Some((body, mac)) = cookie.rsplit_once('.') else {
+            return false;
+        };
+        let mut parts = body.split('.');
+        let (Some("v1"), Some(expiry), Some(nonce), None) =
+            (parts.next(), parts.next(), parts.next(), parts.next())
+        else {
+            return false;
+        };
+        if nonce.len() != 32
+            || !constant_time_eq(self.mac(body.as_bytes()).as_bytes(), mac.as_bytes())
+        {
             return false;
         }
-        mine.iter().zip(sent).fold(0u8, |acc, (a, b)| acc | (a ^ b)) == 0
+        let unexpired = expiry.parse::<u64>().is_ok_and(|e| e > now);
+        unexpired
+            && !self
+                .revoked
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .contains(cookie)
     }
+
+    /// When a (verified) session ends, in Unix milliseconds.
+    pub fn expires_at_ms(cookie: &str) -> Option<u64> {
+        cookie
+            .split('.')
+            .nth(1)?
+            .parse::<u64>()
+            .ok()
+            .map(|s| s * 1000)
+    }
+
+    /// The CSRF value of a session: the page sends it in [`CSRF_HEADER`] with every POST.
+    pub fn csrf(&self, cookie: &str) -> String {
+        self.mac(format!("csrf:{cookie}").as_bytes())
+    }
+
+    /// Ends a session (logout).
+    pub fn revoke(&self, cookie: &str) {
+        let now = unix_seconds();
+        let mut revoked = self.revoked.lock().unwrap_or_else(|p| p.into_inner());
+        // Expired cookies are refused anyway: forget them.
+        revoked.retain(|c| Sessions::expires_at_ms(c).is_some_and(|e| e / 1000 > now));
+        revoked.insert(cookie.to_string());
+    }
+}
+
+/// The value of the session cookie in a request, if it sent one.
+pub fn session_cookie(headers: &HeaderMap) -> Option<&str> {
+    headers
+        .get_all(header::COOKIE)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(';'))
+        .find_map(|pair| {
+            let (name, value) = pair.trim().split_once('=')?;
+            (name == SESSION_COOKIE).then_some(value.trim())
+        })
 }
 
 /// What the guard lets through.
 #[derive(Debug, Clone)]
 pub struct Access {
     token: Token,
+    /// The web page's sessions, signed under a key derived from the token.
+    sessions: Arc<Sessions>,
     /// Where the token is, for the 401 message.
     token_file: Option<PathBuf>,
     /// Lower-case host names (no port) answered besides the loopback ones.
@@ -176,6 +367,7 @@ pub struct Access {
 impl Access {
     pub fn new(token: Token) -> Access {
         Access {
+            sessions: Arc::new(Sessions::new(&token)),
             token,
             token_file: None,
             allowed_hosts: Vec::new(),
@@ -196,6 +388,11 @@ impl Access {
 
     pub fn token(&self) -> &Token {
         &self.token
+    }
+
+    /// The web page's sessions.
+    pub fn sessions(&self) -> &Sessions {
+        &self.sessions
     }
 
     /// Whether `host` (a Host header's host part, or an Origin's) is one the API answers to.
@@ -259,6 +456,55 @@ pub async fn guard(State(access): State<Arc<Access>>, request: Request, next: Ne
     next.run(request).await
 }
 
+/// Paths a GET may fetch with no credential: the health probe, the web page's own files, the
+/// login link (which needs its one-time ticket instead) and `/session`, which answers whether
+/// the request carries a session (and only then its CSRF value).
+pub const OPEN_PATHS: [&str; 6] = ["/healthz", "/", "/app.js", "/app.css", "/login", "/session"];
+
+/// Minting login tickets needs the token itself: a page's session cannot make new sessions.
+pub const TICKET_PATH: &str = "/session/ticket";
+
+/// Whether a request's fetch metadata says it comes from the daemon's own page (or from no
+/// page: a typed address, a tool that sends no `Sec-Fetch-Site`).
+pub fn from_own_page(headers: &HeaderMap) -> bool {
+    header_str(headers, header::HeaderName::from_static("sec-fetch-site")).is_none_or(|site| {
+        site.eq_ignore_ascii_case("same-origin") || site.eq_ignore_ascii_case("none")
+    })
+}
+
+/// The checks on a request that carries a valid session cookie instead of the token: it comes
+/// from the page itself (fetch metadata), and a POST carries the session's CSRF value.
+fn check_page_request(
+    access: &Access,
+    method: &Method,
+    headers: &HeaderMap,
+    cookie: &str,
+) -> Result<(), Response> {
+    if !from_own_page(headers) {
+        return Err(refuse(
+            StatusCode::FORBIDDEN,
+            "the session cookie is accepted only from brdfd's own page (this request is \
+             cross-origin)"
+                .into(),
+        ));
+    }
+    if method != Method::GET && method != Method::HEAD {
+        let sent = header_str(headers, header::HeaderName::from_static(CSRF_HEADER));
+        if !sent.is_some_and(|c| {
+            constant_time_eq(c.as_bytes(), access.sessions.csrf(cookie).as_bytes())
+        }) {
+            return Err(refuse(
+                StatusCode::FORBIDDEN,
+                format!(
+                    "a request from the web page must carry its {CSRF_HEADER} header: reload \
+                     the page"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn check(
     access: &Access,
     method: &Method,
@@ -313,17 +559,31 @@ fn check(
             "cross-site requests are not accepted".into(),
         ));
     }
-    let open = method == Method::GET && path == "/healthz";
+    let open = method == Method::GET && OPEN_PATHS.contains(&path);
     if !open {
         let sent = header_str(headers, header::AUTHORIZATION)
             .and_then(|v| v.strip_prefix("Bearer "))
             .map(str::trim);
-        if !sent.is_some_and(|t| access.token.matches(t.as_bytes())) {
+        let cookie = session_cookie(headers).filter(|_| sent.is_none());
+        if let Some(cookie) = cookie
+            && path != TICKET_PATH
+            && access.sessions.verify(cookie)
+        {
+            check_page_request(access, method, headers, cookie)?;
+        } else if !sent.is_some_and(|t| access.token.matches(t.as_bytes())) {
             let where_ = access
                 .token_file
                 .as_ref()
                 .map(|p| format!(" (the token is in {})", p.display()))
                 .unwrap_or_default();
+            if cookie.is_some() && path != TICKET_PATH {
+                return Err(refuse(
+                    StatusCode::UNAUTHORIZED,
+                    "the web page's session has expired or was ended: run `brdfd open` on the \
+                     lab PC for a new login link"
+                        .into(),
+                ));
+            }
             let what = if sent.is_some() {
                 "the API token sent is not this daemon's"
             } else {
@@ -333,7 +593,8 @@ fn check(
                 StatusCode::UNAUTHORIZED,
                 format!(
                     "{what}: send `Authorization: Bearer <token>`{where_}; the operator \
-                     commands read it from --token-file, BRDFD_TOKEN or the configuration"
+                     commands read it from --token-file, BRDFD_TOKEN or the configuration \
+                     (for the web page, run `brdfd open`)"
                 ),
             ));
         }
@@ -546,6 +807,168 @@ mod tests {
         assert_eq!(
             post(&[ok[0], ("content-type", "text/plain")]),
             StatusCode::UNAUTHORIZED
+        );
+    }
+
+    #[test]
+    fn a_ticket_opens_one_session_once_and_sessions_are_signed() {
+        let token = Token::generate();
+        let sessions = Sessions::new(&token);
+        let ticket = sessions.issue_ticket();
+        assert_eq!(ticket.len(), 64);
+        assert!(sessions.redeem("not-a-ticket").is_none());
+        let cookie = sessions
+            .redeem(&ticket)
+            .expect("a fresh ticket opens a session");
+        assert!(sessions.redeem(&ticket).is_none(), "a ticket works once");
+        assert!(sessions.verify(&cookie));
+        // Another daemon's token (or a replaced one) does not accept it.
+        assert!(!Sessions::new(&Token::generate()).verify(&cookie));
+        // Any change breaks the signature; a later expiry cannot be forged.
+        let (body, mac) = cookie.rsplit_once('.').unwrap();
+        let mut flipped = mac.to_string().into_bytes();
+        flipped[0] = if flipped[0] == b'0' { b'1' } else { b'0' };
+        assert!(!sessions.verify(&format!("{body}.{}", String::from_utf8(flipped).unwrap())));
+        let parts: Vec<&str> = body.split('.').collect();
+        let later = format!(
+            "v1.{}.{}.{mac}",
+            parts[1].parse::<u64>().unwrap() + 1,
+            parts[2]
+        );
+        assert!(!sessions.verify(&later));
+        assert!(!sessions.verify(""));
+        assert!(!sessions.verify("v1.1.2.3.4"));
+        // It expires.
+        let expiry: u64 = parts[1].parse().unwrap();
+        assert!(sessions.verify_at(&cookie, expiry - 1));
+        assert!(!sessions.verify_at(&cookie, expiry));
+        // The CSRF value is the session's own, and logging out ends the session.
+        let other = sessions.redeem(&sessions.issue_ticket()).unwrap();
+        assert_ne!(sessions.csrf(&cookie), sessions.csrf(&other));
+        sessions.revoke(&cookie);
+        assert!(!sessions.verify(&cookie));
+        assert!(sessions.verify(&other));
+    }
+
+    #[test]
+    fn a_session_cookie_is_accepted_only_from_the_page_and_with_its_csrf_value() {
+        let (a, token) = access();
+        let cookie = a.sessions().redeem(&a.sessions().issue_ticket()).unwrap();
+        let jar = format!("other=1; {SESSION_COOKIE}={cookie}");
+        let csrf = a.sessions().csrf(&cookie);
+        let host = ("host", "127.0.0.1:7878");
+        let json = ("content-type", "application/json");
+        let own = ("sec-fetch-site", "same-origin");
+        let run = |method: &Method, path: &str, h: &[(&str, &str)]| {
+            check_for_test(&a, method, path, &headers(h))
+        };
+        assert_eq!(
+            run(&Method::GET, "/status", &[host, ("cookie", &jar), own]),
+            StatusCode::OK
+        );
+        assert_eq!(
+            run(&Method::GET, "/status", &[host, ("cookie", &jar)]),
+            StatusCode::OK
+        );
+        // From another site or another origin of the same site (another loopback port).
+        for site in ["same-site", "cross-site"] {
+            assert_eq!(
+                run(
+                    &Method::GET,
+                    "/status",
+                    &[host, ("cookie", &jar), ("sec-fetch-site", site)]
+                ),
+                StatusCode::FORBIDDEN,
+                "{site}"
+            );
+        }
+        // A POST needs the CSRF header with the session's value.
+        assert_eq!(
+            run(
+                &Method::POST,
+                "/reference",
+                &[host, ("cookie", &jar), own, json]
+            ),
+            StatusCode::FORBIDDEN
+        );
+        assert_eq!(
+            run(
+                &Method::POST,
+                "/reference",
+                &[
+                    host,
+                    ("cookie", &jar),
+                    own,
+                    json,
+                    (CSRF_HEADER, "0".repeat(64).as_str())
+                ]
+            ),
+            StatusCode::FORBIDDEN
+        );
+        assert_eq!(
+            run(
+                &Method::POST,
+                "/reference",
+                &[
+                    host,
+                    ("cookie", &jar),
+                    own,
+                    json,
+                    (CSRF_HEADER, csrf.as_str())
+                ]
+            ),
+            StatusCode::OK
+        );
+        // A form post (no JSON) is still refused even with the CSRF value.
+        assert_eq!(
+            run(
+                &Method::POST,
+                "/reference",
+                &[host, ("cookie", &jar), own, (CSRF_HEADER, csrf.as_str())]
+            ),
+            StatusCode::UNSUPPORTED_MEDIA_TYPE
+        );
+        // A session cannot mint login tickets; the token can.
+        assert_eq!(
+            run(
+                &Method::POST,
+                TICKET_PATH,
+                &[
+                    host,
+                    ("cookie", &jar),
+                    own,
+                    json,
+                    (CSRF_HEADER, csrf.as_str())
+                ]
+            ),
+            StatusCode::UNAUTHORIZED
+        );
+        let bearer = format!("Bearer {token}");
+        assert_eq!(
+            run(
+                &Method::POST,
+                TICKET_PATH,
+                &[host, ("authorization", &bearer), json]
+            ),
+            StatusCode::OK
+        );
+        // A forged or ended session is a 401; the page's files and /session stay open.
+        let forged = format!(
+            "{SESSION_COOKIE}=v1.99999999999.{}.{}",
+            "0".repeat(32),
+            "0".repeat(64)
+        );
+        assert_eq!(
+            run(&Method::GET, "/status", &[host, ("cookie", &forged)]),
+            StatusCode::UNAUTHORIZED
+        );
+        for path in ["/", "/app.js", "/app.css", "/login", "/session"] {
+            assert_eq!(run(&Method::GET, path, &[host]), StatusCode::OK, "{path}");
+        }
+        // The Host check still applies to them (DNS rebinding).
+        assert_eq!(
+            run(&Method::GET, "/", &[("host", "evil.example")]),
+            StatusCode::MISDIRECTED_REQUEST
         );
     }
 }

@@ -16,8 +16,10 @@
 //! | `POST /fits/{id}/cancel` | cancel a queued or running fit | 202 |
 //! | `GET /fits/{id}/preview.png` | the fitted material on a sphere ([`crate::render`]) | 200 `image/png` |
 //! | `GET /events` | server-sent events, one per [`crate::service::Event`] | `text/event-stream` |
+//! | `GET /`, `/login`, `/session`, … | the operator's web page and its session ([`web`]) | |
 //!
-//! Every request but `GET /healthz` needs `Authorization: Bearer <token>`; Host, Origin and
+//! Every request but `GET /healthz` and the page's own files needs `Authorization: Bearer
+//! <token>` (or the web page's session cookie, see [`access`]); Host, Origin and
 //! body type are checked before any route runs ([`access`]); connections, header reads, idle
 //! connections, bodies (1 MiB) and event streams are bounded ([`server`], [`MAX_BODY_BYTES`]).
 //!
@@ -30,6 +32,7 @@
 pub mod access;
 pub mod metrics;
 pub mod server;
+pub mod web;
 
 use std::convert::Infallible;
 use std::net::SocketAddr;
@@ -253,12 +256,15 @@ pub fn router(service: Service, options: &ApiOptions) -> Router {
         .route("/fits/{id}/cancel", post(cancel_fit))
         .route("/fits/{id}/preview.png", get(fit_preview))
         .route("/events", get(events))
+        .merge(web::routes())
+        .layer(Extension(access.clone()))
         .layer(Extension(EventPermits(
             Arc::new(Semaphore::new(options.max_event_subscribers)),
             Duration::from_secs(15).min(options.connections.idle_timeout / 3),
         )))
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
         .layer(axum::middleware::from_fn_with_state(access, access::guard))
+        .layer(axum::middleware::map_response(web::security_headers))
         .with_state(service)
 }
 
@@ -518,6 +524,7 @@ async fn events(State(s): State<Service>, Extension(permits): Extension<EventPer
         );
     };
     let keep_alive = permits.1;
+    tracing::debug!(open = permits.0.available_permits(), "event stream opened");
     let stream = BroadcastStream::new(s.subscribe()).map(move |r| {
         // The permit lives as long as the stream: dropped with it when the client goes.
         let _held = &permit;

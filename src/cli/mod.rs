@@ -16,6 +16,7 @@ pub mod exchange;
 pub mod fit;
 pub mod follow;
 pub mod measure;
+pub mod open;
 pub mod operator;
 pub mod record;
 pub mod refit;
@@ -90,6 +91,8 @@ pub enum Command {
     /// Forward a station's store to the lab's central PostgreSQL database (what `[sync] url`
     /// makes the daemon do continuously), e.g. from a stopped station.
     Sync(sync::SyncArgs),
+    /// Print a one-time login link to the operator's web page (and open it on a desktop).
+    Open(open::OpenArgs),
     /// Check the whole set-up at once (configuration, store and its lock, daemon and token,
     /// MA-T12 on USB, the SRA's serial port, the clock), each failure with its fix.
     Doctor(doctor::DoctorArgs),
@@ -169,6 +172,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Completions(args) => shell::completions(&args),
         Command::Man(args) => shell::man(&args),
         Command::Doctor(args) => doctor::run(&args),
+        Command::Open(args) => open::run(&args),
     }
 }
 

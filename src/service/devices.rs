@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use drivers::mat12::usb::{RusbBulk, UsbIds};
 use drivers::sra::serial::open_serial;
 use drivers::{DriverConfig, DriverHandle, Instrument, Recorder, Tap};
-use mock_devices::{MockError, ReplayOptions, ReplayReport, Script, SimMat12, SimSra};
+use mock_devices::{Cue, MockError, ReplayOptions, ReplayReport, Script, SimMat12, SimSra};
 
 use crate::config::{DevicesConfig, MaT12Transport, SraTransport};
 
@@ -193,6 +193,43 @@ impl Devices {
         match instrument {
             Instrument::MaT12 => &self.ma_t12,
             Instrument::Sra => &self.sra,
+        }
+    }
+
+    /// Simulated instruments replaying leniently (as under `brdfd serve`) answer the next
+    /// measurement from their recording of this sample (`None`: of the reference tile), so
+    /// that what the operator scans is what they see. A sample with no recording gets the
+    /// next recording in the playlist, as before, and the log says so. Real instruments are
+    /// not touched.
+    pub fn cue_simulators(&self, sample: Option<&str>) {
+        let what = sample.map_or_else(
+            || "the reference tile".to_string(),
+            |s| format!("sample \"{s}\""),
+        );
+        let cued = [
+            (
+                Instrument::MaT12,
+                self.simulators.ma_t12.as_ref().map(|s| s.cue(sample)),
+            ),
+            (
+                Instrument::Sra,
+                self.simulators.sra.as_ref().map(|s| s.cue(sample)),
+            ),
+        ];
+        for (instrument, cue) in cued {
+            match cue {
+                Some(Cue::Cued { session }) => tracing::debug!(
+                    %instrument,
+                    session,
+                    "the simulated instrument answers {what} from its recording"
+                ),
+                Some(Cue::NoRecording { sessions }) => tracing::info!(
+                    %instrument,
+                    "the simulated instrument has no recording of {what}: it answers with the \
+                     next recording of its playlist ({sessions} sessions)"
+                ),
+                Some(Cue::Strict) | None => {}
+            }
         }
     }
 

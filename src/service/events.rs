@@ -21,6 +21,50 @@ use crate::store::{FitRunId, ReferenceId, ScanId};
 /// the paper GA (up to 1000): enough for a client that reads at human speed.
 pub const CAPACITY: usize = 4096;
 
+/// A stored reading as a live display shows it: when it was committed, and its colour (an
+/// MA-T12 spectrum, under D65 and the 2° observer) or its intensity (an SRA reading, which is
+/// achromatic).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ReadingShown {
+    /// When the store committed the reading (Unix milliseconds).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub at_ms: Option<i64>,
+    /// `#rrggbb` (clipped to the sRGB gamut) and CIELAB, of an MA-T12 spectrum.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub srgb: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lab: Option<[f64; 3]>,
+    /// An SRA reading: its 1D-BRDF intensity in the device's unit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub intensity: Option<f64>,
+}
+
+impl ReadingShown {
+    /// What to show of a reading committed at `at_ms`.
+    pub fn of(values: &crate::store::ReadingValues, at_ms: i64) -> ReadingShown {
+        match values {
+            crate::store::ReadingValues::Spectrum(s) => {
+                let lab = crate::colour::reflectance_to_lab(s);
+                let srgb = crate::colour::srgb::xyz_to_srgb8(crate::colour::reflectance_to_xyz(s));
+                // Two decimals are plenty for a display and keep the event short.
+                let round = |v: f64| (v * 100.0).round() / 100.0;
+                ReadingShown {
+                    at_ms: Some(at_ms),
+                    srgb: Some(srgb.hex()),
+                    lab: Some([round(lab.l), round(lab.a), round(lab.b)]),
+                    intensity: None,
+                }
+            }
+            crate::store::ReadingValues::Intensity(v) => ReadingShown {
+                at_ms: Some(at_ms),
+                intensity: Some(*v),
+                ..ReadingShown::default()
+            },
+        }
+    }
+}
+
 /// One thing that happened. Serialised as JSON with a `"type"` tag (the SSE event name is the
 /// same tag); deserialised from the same JSON on the client.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,6 +79,9 @@ pub enum Event {
         geometry: String,
         k: usize,
         n: usize,
+        /// What was read, for a live display (`None` when the event is not about one value).
+        #[serde(flatten)]
+        reading: ReadingShown,
     },
     /// The reference set is complete and in force for new scans.
     ReferenceComplete { reference: ReferenceId },
@@ -56,6 +103,9 @@ pub enum Event {
         geometry: String,
         k: usize,
         n: usize,
+        /// What was read, for a live display (`None` when the event is not about one value).
+        #[serde(flatten)]
+        reading: ReadingShown,
     },
     /// All 14 readings are in; the scan is complete.
     ScanComplete { scan: ScanId },
@@ -288,6 +338,7 @@ mod tests {
             geometry: "sra-20".into(),
             k: 13,
             n: 14,
+            reading: ReadingShown::default(),
         };
         assert_eq!(
             e.to_json(),
@@ -307,6 +358,24 @@ mod tests {
                 geometry: "sra-20".into(),
                 k: 13,
                 n: 14,
+                reading: ReadingShown {
+                    at_ms: Some(5),
+                    intensity: Some(0.25),
+                    ..ReadingShown::default()
+                },
+            },
+            Event::ScanReading {
+                scan: ScanId(4),
+                device: "ma_t12".into(),
+                geometry: "15as15".into(),
+                k: 1,
+                n: 14,
+                reading: ReadingShown {
+                    at_ms: Some(6),
+                    srgb: Some("#102030".into()),
+                    lab: Some([50.0, 1.5, -2.25]),
+                    intensity: None,
+                },
             },
             Event::ReferenceStale {
                 scan: ScanId(2),

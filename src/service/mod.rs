@@ -43,11 +43,12 @@ use crate::cost::CostFunction;
 use crate::optimise::{Method, Settings};
 use crate::processing::SpecularStrategy;
 use crate::scan::Scan;
-use crate::store::{FitRunId, ReferenceId, ReferenceSummary, ScanId, ScanState, Store};
+use crate::store::{FitRunId, ReferenceId, ReferenceSummary, ScanId, ScanState, Store, now_ms};
+use drivers::Instrument;
 
 pub use devices::{DeviceSetupError, Devices};
 pub use error::ServiceError;
-pub use events::{Event, EventBus};
+pub use events::{Event, EventBus, ReadingShown};
 pub use fit_worker::{FitFn, FitJob, default_fit_fn};
 pub use ingest::{IngestSettings, IngestStatus};
 pub use orchestrator::{IMPORTED_SUFFIX, scan_from_detail};
@@ -235,6 +236,8 @@ pub struct Status {
     pub fits_running: usize,
     /// Whether each instrument is simulated.
     pub simulated: SimulatedStatus,
+    /// Each instrument: its connection state and identity (MA-T12 first, then the SRA).
+    pub devices: Vec<DeviceStatus>,
     pub timings: TimingSplit,
     /// Forwarding to the central database (backlog, last error), when configured.
     pub sync: Option<crate::sync::SyncStatus>,
@@ -256,6 +259,27 @@ pub struct ReferenceInForce {
     pub age_hours: f64,
     /// Older than `[scan] reference_max_age_hours`: scans will not be fitted.
     pub stale: bool,
+}
+
+/// One instrument as `status` shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DeviceStatus {
+    /// `ma_t12` or `sra`.
+    pub device: &'static str,
+    /// The instrument's name for people.
+    pub instrument: String,
+    /// `unknown` (not heard from since start), `connected`, `disconnected`, `reconnecting` or
+    /// `error`.
+    pub state: &'static str,
+    /// What the driver said with the state (identity, reason, attempt).
+    pub detail: String,
+    /// When the state began (Unix milliseconds).
+    pub since_ms: i64,
+    pub simulated: bool,
+    /// As the instrument last identified itself; `None` if it never answered.
+    pub model: Option<String>,
+    pub serial: Option<String>,
+    pub firmware: Option<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -309,6 +333,8 @@ struct Inner {
     sync_status: std::sync::OnceLock<Arc<Mutex<crate::sync::SyncStatus>>>,
     /// How often each instrument changed connection state: (instrument, state) → count.
     device_transitions: Mutex<std::collections::BTreeMap<(&'static str, &'static str), u64>>,
+    /// Each instrument's last connection state (MA-T12, SRA): state, detail, since (Unix ms).
+    device_states: Mutex<[(&'static str, String, i64); 2]>,
     /// The watch folder's status, once it started.
     ingest_status: std::sync::OnceLock<Arc<Mutex<IngestStatus>>>,
 }
@@ -369,6 +395,9 @@ impl Service {
             timings: Timings::default(),
             sync_status: std::sync::OnceLock::new(),
             device_transitions: Mutex::new(Default::default()),
+            device_states: Mutex::new(
+                [0, 1].map(|_| ("unknown", "not heard from yet".to_string(), now_ms())),
+            ),
             ingest_status: std::sync::OnceLock::new(),
         });
         let service = Service { inner };
@@ -552,6 +581,7 @@ impl Service {
                 ma_t12: self.inner.devices.simulators.ma_t12.is_some(),
                 sra: self.inner.devices.simulators.sra.is_some(),
             },
+            devices: self.device_statuses(),
             timings: self.timings(),
             sync: self
                 .inner
@@ -560,6 +590,45 @@ impl Service {
                 .map(|s| s.lock().unwrap_or_else(|p| p.into_inner()).clone()),
             ingest: self.ingest_status(),
         })
+    }
+
+    /// Each instrument's connection state and identity, MA-T12 first.
+    pub fn device_statuses(&self) -> Vec<DeviceStatus> {
+        let states = self
+            .inner
+            .device_states
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
+        let ids = self
+            .inner
+            .identities
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
+        let simulated = [
+            self.inner.devices.simulators.ma_t12.is_some(),
+            self.inner.devices.simulators.sra.is_some(),
+        ];
+        [Instrument::MaT12, Instrument::Sra]
+            .into_iter()
+            .enumerate()
+            .map(|(i, instrument)| {
+                let (state, detail, since_ms) = states[i].clone();
+                let id = ids[i].as_ref();
+                DeviceStatus {
+                    device: instrument.key(),
+                    instrument: instrument.to_string(),
+                    state,
+                    detail,
+                    since_ms,
+                    simulated: simulated[i],
+                    model: id.map(|i| i.model.clone()),
+                    serial: id.map(|i| i.serial.clone()),
+                    firmware: id.map(|i| i.firmware.clone()),
+                }
+            })
+            .collect()
     }
 
     /// How often each instrument has been connected, disconnected, reconnecting or in error

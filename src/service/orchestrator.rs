@@ -32,7 +32,7 @@ use crate::store::{
     ScanDetail, ScanId, ScanState, Source, StoreError,
 };
 
-use super::events::Event;
+use super::events::{Event, ReadingShown};
 use super::shutdown::Shutdown;
 use super::{Operation, RefitRequest, Service, ServiceError, Timings};
 
@@ -197,6 +197,7 @@ impl Service {
                 return Err(e);
             }
         };
+        self.inner.devices.cue_simulators(None);
         self.inner
             .events
             .send(Event::ReferenceStarted { reference });
@@ -262,6 +263,7 @@ impl Service {
                 return Err(e);
             }
         };
+        self.inner.devices.cue_simulators(Some(sample));
         self.inner.events.send(Event::ScanStarted {
             scan,
             sample: sample.to_string(),
@@ -550,6 +552,7 @@ impl Service {
                 let (k, n) = (acquired.stored.len(), GEOMETRY_COUNT);
                 let device = device.key().to_string();
                 let geometry = geometry.name.to_string();
+                let reading = ReadingShown::of(&values, crate::store::now_ms());
                 self.inner.events.send(match target {
                     Target::Scan(scan) => Event::ScanReading {
                         scan,
@@ -557,6 +560,7 @@ impl Service {
                         geometry,
                         k,
                         n,
+                        reading,
                     },
                     Target::Reference(reference) => Event::ReferenceReading {
                         reference,
@@ -564,6 +568,7 @@ impl Service {
                         geometry,
                         k,
                         n,
+                        reading,
                     },
                 });
             }
@@ -722,7 +727,7 @@ impl Service {
                 tokio::spawn(async move {
                     match h.identify().await {
                         Ok(identity) => {
-                            s.count_transition(h.instrument(), "connected");
+                            s.count_transition(h.instrument(), "connected", identity.to_string());
                             s.record_instrument(h.instrument(), &identity).await
                         }
                         Err(e) => tracing::warn!(error = %e, "instrument not available at start"),
@@ -751,8 +756,31 @@ impl Service {
         });
     }
 
-    /// Counts one connection change of `instrument` for `GET /metrics`.
-    fn count_transition(&self, instrument: Instrument, state: &'static str) {
+    /// After a failed command (`error`), the instrument's next answer shows it is connected.
+    fn clear_device_error(&self, instrument: Instrument) {
+        let slot = instrument_slot(instrument);
+        let mut states = self
+            .inner
+            .device_states
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        if states[slot].0 == "error" {
+            states[slot] = (
+                "connected",
+                "answering again".into(),
+                crate::store::now_ms(),
+            );
+        }
+    }
+
+    /// Counts one connection change of `instrument` for `GET /metrics` and keeps it as the
+    /// instrument's state for `status`.
+    fn count_transition(&self, instrument: Instrument, state: &'static str, detail: String) {
+        let slot = instrument_slot(instrument);
+        self.inner
+            .device_states
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())[slot] = (state, detail, crate::store::now_ms());
         *self
             .inner
             .device_transitions
@@ -784,9 +812,14 @@ impl Service {
                 format!("attempt {attempt} after {} ms", delay.as_millis()),
             ),
             drivers::Event::Error { instrument, error } => (instrument, "error", error.to_string()),
-            drivers::Event::Measuring { .. } | drivers::Event::Reading { .. } => return,
+            drivers::Event::Measuring { instrument, .. }
+            | drivers::Event::Reading { instrument, .. } => {
+                // An instrument that answers again after a failed command is connected.
+                self.clear_device_error(instrument);
+                return;
+            }
         };
-        self.count_transition(instrument, state);
+        self.count_transition(instrument, state, detail.clone());
         self.inner.events.send(Event::Device {
             device: instrument.key().to_string(),
             state: state.to_string(),
@@ -829,10 +862,7 @@ impl Service {
                 .identities
                 .lock()
                 .unwrap_or_else(|p| p.into_inner());
-            let slot = match instrument {
-                Instrument::MaT12 => 0,
-                Instrument::Sra => 1,
-            };
+            let slot = instrument_slot(instrument);
             ids[slot] = Some(identity.clone());
         }
         let text = format!("{} firmware {}", identity.model, identity.firmware);
@@ -844,6 +874,15 @@ impl Service {
         {
             tracing::warn!(error = %e, "cannot record the instrument");
         }
+    }
+}
+
+/// Where an instrument's entry is in the per-instrument arrays of the service (identities,
+/// connection states): MA-T12 first, then the SRA.
+pub(crate) fn instrument_slot(instrument: Instrument) -> usize {
+    match instrument {
+        Instrument::MaT12 => 0,
+        Instrument::Sra => 1,
     }
 }
 

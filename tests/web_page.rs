@@ -1,0 +1,724 @@
+//! The operator's web page in a real headless Chromium, driven through chromedriver
+//! (`fantoccini`), against the daemon's service and HTTP API on loopback with simulated
+//! instruments at recorded timing.
+//!
+//! One browser session walks through what an operator does: log in through `brdfd open`'s link,
+//! measure the reference, scan a sample (the 14 cells and the 3 fits appear without a reload,
+//! coloured as the sample's own recording), open the result, download a CxF3 export, list the
+//! scans, abort a scan midway, pull the SRA's cable (fault injection) and see the page say so,
+//! restart the daemon and see the page reconnect. A page on another loopback port, in the same
+//! browser with the session cookie set, tries every way it has to trigger the daemon and
+//! fails. The browser's console must hold no error. Screenshots of each view are saved under
+//! `target/tmp/web-screenshots/`; the page's own figures (committed → painted latency, first
+//! render, page weight) are printed.
+//!
+//! Needs Debian's `chromium` and `chromium-driver` (`.ci/run` installs them); without them the
+//! test fails and says so.
+
+mod common;
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use brdfd::api::{Access, ApiOptions, ApiServer, Token};
+use brdfd::service::{Devices, ReadingShown, Service, ServiceOptions, devices::Simulators};
+use brdfd::store::{ReadingValues, ScanState, Store};
+use drivers::protocol::ReadingValue;
+use drivers::{DriverConfig, Instrument};
+use fantoccini::{Client, ClientBuilder, Locator};
+use mock_devices::{ReplayOptions, SimMat12, SimSra};
+use serde_json::{Value, json};
+
+const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
+const CHROMIUM: &str = "/usr/bin/chromium";
+const WAIT: Duration = Duration::from_secs(60);
+
+fn screenshots_dir() -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-screenshots");
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// chromedriver on a free loopback port, killed when dropped.
+struct Driver {
+    child: Child,
+    port: u16,
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn start_chromedriver() -> Driver {
+    for tool in [CHROMEDRIVER, CHROMIUM] {
+        assert!(
+            Path::new(tool).exists(),
+            "{tool} is missing: install Debian's chromium and chromium-driver (`.ci/run` does)"
+        );
+    }
+    let port = free_port();
+    let child = Command::new(CHROMEDRIVER)
+        .arg(format!("--port={port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("chromedriver starts");
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(Instant::now() < deadline, "chromedriver did not listen");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Driver { child, port }
+}
+
+async fn browser(driver: &Driver, downloads: &Path) -> Client {
+    let mut caps = serde_json::Map::new();
+    caps.insert(
+        "goog:chromeOptions".into(),
+        json!({
+            "binary": CHROMIUM,
+            "args": ["--headless=new", "--no-sandbox", "--disable-gpu",
+                     "--disable-dev-shm-usage", "--window-size=1280,800",
+                     "--no-first-run", "--disable-extensions"],
+            "prefs": {
+                "download.default_directory": downloads.to_str().unwrap(),
+                "download.prompt_for_download": false,
+            },
+        }),
+    );
+    caps.insert("goog:loggingPrefs".into(), json!({ "browser": "ALL" }));
+    ClientBuilder::new(hyper_util::client::legacy::connect::HttpConnector::new())
+        .capabilities(caps)
+        .connect(&format!("http://127.0.0.1:{}", driver.port))
+        .await
+        .expect("a Chromium session")
+}
+
+/// The browser's console messages at level SEVERE since the last call (chromedriver's log
+/// endpoint, which fantoccini does not wrap).
+fn console_errors(driver: &Driver, session: &str) -> Vec<String> {
+    let url = format!("http://127.0.0.1:{}/session/{session}/se/log", driver.port);
+    let answer: Value = ureq::post(&url)
+        .send_json(json!({ "type": "browser" }))
+        .expect("chromedriver's log")
+        .body_mut()
+        .read_json()
+        .expect("JSON");
+    answer["value"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|e| e["level"] == "SEVERE")
+        .map(|e| e["message"].as_str().unwrap_or("").to_string())
+        .collect()
+}
+
+/// The simulated instruments of the embedded recordings at recorded timing (lenient, as
+/// `brdfd serve`), the SRA's cable pulled for good after frame `sra_unplug_after`.
+fn instruments(sra_unplug_after: Option<usize>) -> Devices {
+    let options = ReplayOptions::lenient();
+    let m = SimMat12::new(common::playlist(Instrument::MaT12), options.clone()).unwrap();
+    let s = SimSra::new(
+        common::playlist(Instrument::Sra),
+        ReplayOptions {
+            unplug_after: sra_unplug_after,
+            ..options
+        },
+    )
+    .unwrap();
+    let config = DriverConfig {
+        reconnect_attempts: 2,
+        backoff_initial: Duration::from_millis(200),
+        ..DriverConfig::default()
+    };
+    Devices {
+        ma_t12: brdfd::service::devices::spawn_mat12_with(m.factory(), config.clone(), None),
+        sra: brdfd::service::devices::spawn_sra_with(s.factory(), config, None),
+        simulators: Simulators {
+            ma_t12: Some(m),
+            sra: Some(s),
+        },
+        recorders: Vec::new(),
+    }
+}
+
+/// A daemon: the service on the store in `dir` and the API on `addr`.
+struct Daemon {
+    service: Service,
+    api: ApiServer,
+}
+
+async fn start_daemon(dir: &Path, addr: SocketAddr, devices: Devices) -> Daemon {
+    let store = Store::open(&dir.join("brdfd.db")).await.unwrap();
+    let service = Service::start(
+        store,
+        devices,
+        common::settings(),
+        ServiceOptions::default(),
+    )
+    .await
+    .unwrap();
+    let token_file = dir.join("brdfd.token");
+    let (token, _) = Token::load_or_create(&token_file).unwrap();
+    let options = ApiOptions::new(Access::new(token).with_token_file(&token_file));
+    let api = ApiServer::start(service.clone(), addr, options)
+        .await
+        .expect("the API starts");
+    Daemon { service, api }
+}
+
+impl Daemon {
+    async fn stop(self) {
+        self.api.stop(Duration::from_secs(1)).await;
+        self.service.shutdown().await;
+    }
+}
+
+/// Polls a script until it returns true.
+async fn wait_js(c: &Client, what: &str, script: &str) {
+    let deadline = Instant::now() + WAIT;
+    loop {
+        let v = c.execute(script, vec![]).await.unwrap();
+        if v == Value::Bool(true) {
+            return;
+        }
+        if Instant::now() > deadline {
+            let body = c
+                .execute("return document.body.innerText", vec![])
+                .await
+                .unwrap();
+            panic!(
+                "timed out waiting for {what}; the page says:\n{}",
+                body.as_str().unwrap_or("")
+            );
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+async fn shot(c: &Client, name: &str) {
+    let png = c.screenshot().await.unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    std::fs::write(screenshots_dir().join(format!("{name}.png")), png).unwrap();
+}
+
+async fn click(c: &Client, css: &str) {
+    c.wait()
+        .at_most(WAIT)
+        .for_element(Locator::Css(css))
+        .await
+        .unwrap_or_else(|e| panic!("{css}: {e}"))
+        .click()
+        .await
+        .unwrap_or_else(|e| panic!("click {css}: {e}"));
+}
+
+/// Types `text` into the field `css` (WebDriver key codes such as Enter, `\u{E007}`, work).
+async fn type_into(c: &Client, css: &str, text: &str) {
+    c.find(Locator::Css(css))
+        .await
+        .unwrap_or_else(|e| panic!("{css}: {e}"))
+        .send_keys(text)
+        .await
+        .unwrap_or_else(|e| panic!("typing into {css}: {e}"));
+}
+
+/// The page's swatch colour of a cell, as `#rrggbb`.
+async fn cell_colour(c: &Client, geometry: &str) -> String {
+    let v = c
+        .execute(
+            "const el = document.querySelector(`#cell-${arguments[0]} .sw`);
+             const m = getComputedStyle(el).backgroundColor.match(/\\d+/g).map(Number);
+             return '#' + m.slice(0, 3).map((x) => x.toString(16).padStart(2, '0')).join('');",
+            vec![json!(geometry)],
+        )
+        .await
+        .unwrap();
+    v.as_str().unwrap().to_string()
+}
+
+/// What the page must paint for a recording's MA-T12 reading at `geometry`.
+fn recorded_colour(sample: &str, geometry: &str) -> String {
+    let r = mock_devices::recordings::by_name(sample).unwrap();
+    let reading = r
+        .script(Instrument::MaT12)
+        .unwrap()
+        .readings()
+        .into_iter()
+        .find(|x| x.geometry == geometry)
+        .unwrap();
+    let ReadingValue::Reflectance(s) = reading.value else {
+        panic!("an MA-T12 reading is a spectrum")
+    };
+    ReadingShown::of(&ReadingValues::Spectrum(s), 0)
+        .srgb
+        .unwrap()
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
+    sorted[i]
+}
+
+/// The hostile page: on another loopback port, it tries to make the daemon at `target`
+/// measure a reference, by every means a page has, and to read its status; it writes what
+/// happened into `#result`.
+async fn serve_hostile_page(target: SocketAddr) -> (SocketAddr, tokio::task::JoinHandle<()>) {
+    let page = format!(
+        r#"<!doctype html><html><body><p id="result">running</p>
+<form id="f" method="POST" action="http://{target}/reference" enctype="text/plain" target="sink">
+<input name='{{"a":"' value='"}}'></form><iframe name="sink"></iframe>
+<script>
+const T = "http://{target}";
+const out = [];
+async function attempt(name, f) {{
+  try {{ const r = await f(); out.push(name + ":" + (r && r.type ? r.type + "/" + r.status : "ok")); }}
+  catch (e) {{ out.push(name + ":blocked"); }}
+}}
+(async () => {{
+  await attempt("no-cors-json", () => fetch(T + "/reference", {{method: "POST", mode: "no-cors", credentials: "include", headers: {{"Content-Type": "application/json"}}, body: "{{}}"}}));
+  await attempt("no-cors-text", () => fetch(T + "/reference", {{method: "POST", mode: "no-cors", credentials: "include", headers: {{"Content-Type": "text/plain"}}, body: "{{}}"}}));
+  await attempt("cors-csrf", () => fetch(T + "/reference", {{method: "POST", credentials: "include", headers: {{"Content-Type": "application/json", "X-Brdfd-Csrf": "guess"}}, body: "{{}}"}}));
+  await attempt("read-status", async () => {{ const r = await fetch(T + "/status", {{credentials: "include"}}); return {{type: "read", status: (await r.text()).length}}; }});
+  await attempt("read-session", async () => {{ const r = await fetch(T + "/session", {{credentials: "include"}}); return {{type: "read", status: (await r.text()).length}}; }});
+  await attempt("beacon", async () => {{ navigator.sendBeacon(T + "/scans", JSON.stringify({{sample: "x"}})); }});
+  document.getElementById("f").submit();
+  await new Promise((r) => setTimeout(r, 1500));
+  document.getElementById("result").textContent = out.join(" ");
+}})();
+</script></body></html>"#
+    );
+    let app = axum::Router::new().route(
+        "/",
+        axum::routing::get(move || {
+            let page = page.clone();
+            async move { axum::response::Html(page) }
+        }),
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let task = tokio::spawn(async move {
+        axum::serve(listener, app).await.unwrap();
+    });
+    (addr, task)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
+    let _one = common::serial();
+    let dir = tempfile::tempdir().unwrap();
+    let downloads = tempfile::tempdir().unwrap();
+    let addr: SocketAddr = format!("127.0.0.1:{}", free_port()).parse().unwrap();
+    // The SRA's cable comes out during the scan of the last recording (T.Pebble grey): after
+    // the first reply of that session.
+    let sra = common::playlist(Instrument::Sra);
+    let pebble = sra.session_of(Some("T.Pebble grey")).unwrap();
+    let unplug_frame = sra
+        .exchanges()
+        .iter()
+        .filter(|e| e.session == pebble && e.request.is_some())
+        .flat_map(|e| e.replies.iter().map(|r| r.index))
+        .nth(1)
+        .unwrap();
+    let daemon = start_daemon(dir.path(), addr, instruments(Some(unplug_frame))).await;
+    let driver = start_chromedriver();
+    let c = browser(&driver, downloads.path()).await;
+    let session_id = c.session_id().await.unwrap().unwrap();
+
+    // Not signed in: the page says how to sign in.
+    c.goto(&format!("http://{addr}/")).await.unwrap();
+    wait_js(
+        &c,
+        "the sign-in prompt",
+        "return document.body.innerText.includes('brdfd open')",
+    )
+    .await;
+
+    // Log in through `brdfd open`'s link.
+    let token = std::fs::read_to_string(dir.path().join("brdfd.token")).unwrap();
+    let out = common::run_brdfd_env(
+        &["open", "--addr", &addr.to_string(), "--no-browser"],
+        None,
+        &[("BRDFD_TOKEN", token.trim())],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let url = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    assert!(
+        url.starts_with(&format!("http://{addr}/login?ticket=")),
+        "{url}"
+    );
+    c.goto(&url).await.unwrap();
+    wait_js(&c, "the bench", "return !!document.getElementById('measure-reference') && document.querySelectorAll('[data-device]').length === 2").await;
+    assert_eq!(c.current_url().await.unwrap().path(), "/");
+    // The link was spent: a second use is refused.
+    let again = ureq::get(&url).call();
+    assert!(
+        matches!(again, Err(ureq::Error::StatusCode(401))),
+        "{again:?}"
+    );
+    // The cookie is HttpOnly: the page's script cannot see it.
+    let cookie = c.execute("return document.cookie", vec![]).await.unwrap();
+    assert_eq!(cookie, json!(""));
+    let simulated = c
+        .execute(
+            "return [...document.querySelectorAll('.badge.sim')].length",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert_eq!(
+        simulated,
+        json!(2),
+        "both instruments carry the SIMULATED badge"
+    );
+    shot(&c, "1-bench-signed-in").await;
+
+    // Measure the reference: 14 cells fill in, then the reference is in force.
+    click(&c, "#measure-reference:not([disabled])").await;
+    wait_js(&c, "the reference", "const op = document.getElementById('op'); return op.dataset.state === 'complete' && op.dataset.readings === '14'").await;
+    wait_js(
+        &c,
+        "the reference in force",
+        "return !!document.getElementById('reference-age')",
+    )
+    .await;
+
+    // Scan T.Sky blue: it is answered from T.Sky blue's recording (not the playlist's next,
+    // Freesia pink), 14 cells and 3 fits appear without a reload.
+    type_into(&c, "#sample", "T.Sky blue").await;
+    click(&c, "#scan:not([disabled])").await;
+    wait_js(&c, "the scan's readings", "const op = document.getElementById('op'); return op.dataset.readings === '14' && op.dataset.state === 'complete'").await;
+    wait_js(
+        &c,
+        "three finished fits",
+        "return document.querySelectorAll('#fits tr[data-status=done]').length === 3",
+    )
+    .await;
+    for g in ["15as15", "45as45", "15as-45"] {
+        assert_eq!(
+            cell_colour(&c, g).await,
+            recorded_colour("T.Sky blue", g),
+            "{g}: the cell shows T.Sky blue's own recording"
+        );
+    }
+    let sra_text = c
+        .find(Locator::Css("#cell-sra-20 .num"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(sra_text.contains("intensity"), "{sra_text}");
+    shot(&c, "2-bench-scan-done").await;
+    let metrics = c
+        .execute("return window.brdfdMetrics", vec![])
+        .await
+        .unwrap();
+    let mut latency: Vec<f64> = metrics["readingLatencyMs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        latency.len() >= 28,
+        "reference and scan readings: {latency:?}"
+    );
+    latency.sort_by(f64::total_cmp);
+    let weight = brdfd::api::web::INDEX_HTML.len()
+        + brdfd::api::web::APP_JS.len()
+        + brdfd::api::web::APP_CSS.len();
+    println!(
+        "web page figures: reading committed → cell painted p50 {:.0} ms, p99 {:.0} ms over {} readings; first render {:.0} ms; page weight {} bytes (HTML + CSS + JS, uncompressed)",
+        percentile(&latency, 0.5),
+        percentile(&latency, 0.99),
+        latency.len(),
+        metrics["firstRenderMs"].as_f64().unwrap_or(f64::NAN),
+        weight
+    );
+    assert!(
+        metrics["errors"].as_array().unwrap().is_empty(),
+        "{metrics}"
+    );
+
+    // The result view: swatches per geometry and cost function, ΔE00 with the best marked.
+    let scan_id = c
+        .execute(
+            "return document.querySelector('#op a').getAttribute('href')",
+            vec![],
+        )
+        .await
+        .unwrap();
+    let href = scan_id.as_str().unwrap().to_string();
+    click(&c, "#op a").await;
+    wait_js(&c, "the result view", "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')").await;
+    wait_js(&c, "measured and fitted swatches", "return document.querySelectorAll('#swatches tbody tr').length === 4 && [...document.querySelectorAll('#swatches .sw')].every((s) => s.style.background !== '')").await;
+    shot(&c, "3-result-1280").await;
+    c.set_window_size(800, 1100).await.unwrap();
+    shot(&c, "4-result-tablet-800").await;
+    c.set_window_size(1280, 800).await.unwrap();
+
+    // Download the CxF3 export.
+    click(&c, "#dl-cxf3").await;
+    let deadline = Instant::now() + WAIT;
+    let cxf = loop {
+        let done = std::fs::read_dir(downloads.path())
+            .unwrap()
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|e| e == "cxf"));
+        if let Some(p) = done {
+            break std::fs::read_to_string(p).unwrap();
+        }
+        assert!(Instant::now() < deadline, "no CxF3 file was downloaded");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    assert!(
+        cxf.contains("CxF") && cxf.contains("T.Sky blue"),
+        "{}",
+        &cxf[..cxf.len().min(400)]
+    );
+
+    // The study report of this scan, as the page's link downloads it: one HTML file with its
+    // figures inlined.
+    let report = c
+        .execute_async(
+            "const done = arguments[arguments.length - 1];
+             fetch(document.getElementById('dl-report').href).then(async (r) =>
+               done([r.status, r.headers.get('content-disposition'), await r.text()]));",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert_eq!(report[0], json!(200), "{}", report[2]);
+    assert!(report[1].as_str().unwrap().contains("brdfd-report.html"));
+    let html = report[2].as_str().unwrap();
+    assert!(html.contains("T.Sky blue") && html.contains("<img src=\"data:image/png;base64,"));
+    assert!(!html.contains("<img src=\"fig"), "every figure is inlined");
+
+    // Refit with other settings: cf1 alone, another seed.
+    for cf in ["cf2", "m2"] {
+        click(&c, &format!("#refit-{cf}")).await;
+    }
+    c.find(Locator::Css("#refit-seed"))
+        .await
+        .unwrap()
+        .send_keys("7")
+        .await
+        .unwrap();
+    click(&c, "#refit-go").await;
+    wait_js(&c, "the refit's answer", "const b = document.getElementById('banner'); return !b.hidden && /^Fits \\d+ queued/.test(b.textContent)").await;
+
+    // The scan list.
+    c.goto(&format!("http://{addr}/#/scans")).await.unwrap();
+    wait_js(
+        &c,
+        "the scan list",
+        "return document.querySelectorAll('#scan-list tbody tr').length >= 1",
+    )
+    .await;
+    let row = c
+        .find(Locator::Css("#scan-list tbody tr"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        row.contains("T.Sky blue") && row.contains("complete"),
+        "{row}"
+    );
+    shot(&c, "5-scan-list").await;
+
+    // Abort a scan midway: some cells filled, then the scan is aborted and keeps them.
+    c.goto(&format!("http://{addr}/#/")).await.unwrap();
+    wait_js(
+        &c,
+        "the bench",
+        "return !!document.querySelector('#scan:not([disabled])')",
+    )
+    .await;
+    type_into(&c, "#sample", "T.Lavender blue\u{E007}").await;
+    // Enter in the sample field submits it: no mouse needed.
+    wait_js(
+        &c,
+        "a first reading",
+        "return Number(document.getElementById('op').dataset.readings || 0) >= 1",
+    )
+    .await;
+    click(&c, "#abort:not([disabled])").await;
+    wait_js(
+        &c,
+        "the abort",
+        "return document.getElementById('op').dataset.state === 'aborted'",
+    )
+    .await;
+    let aborted = daemon
+        .service
+        .store()
+        .list_scans(&Default::default())
+        .await
+        .unwrap()
+        .into_iter()
+        .find(|s| s.sample == "T.Lavender blue")
+        .unwrap();
+    assert_eq!(aborted.state, ScanState::Aborted);
+    assert!(
+        aborted.reading_count < 14,
+        "aborted midway: {}",
+        aborted.reading_count
+    );
+    shot(&c, "6-bench-aborted").await;
+
+    // Pull the SRA's cable: the scan of T.Pebble grey fails and the page says the SRA is gone.
+    c.goto(&format!("http://{addr}/#/")).await.unwrap();
+    wait_js(
+        &c,
+        "the bench",
+        "return !!document.querySelector('#scan:not([disabled])')",
+    )
+    .await;
+    type_into(&c, "#sample", "T.Pebble grey").await;
+    click(&c, "#scan:not([disabled])").await;
+    wait_js(&c, "the SRA's state on the page", "const d = document.querySelector('[data-device=sra] .badge'); return !!d && d.dataset.state !== 'connected' && d.dataset.state !== 'unknown'").await;
+    wait_js(&c, "the banner", "const b = document.getElementById('banner'); return !b.hidden && b.textContent.includes('RA-532H')").await;
+    wait_js(
+        &c,
+        "the failed scan",
+        "return document.getElementById('op').dataset.state === 'failed'",
+    )
+    .await;
+    shot(&c, "7-bench-sra-unplugged").await;
+
+    // Restart the daemon (same store, token and port): the page notices, then reconnects.
+    daemon.stop().await;
+    wait_js(
+        &c,
+        "the lost connection",
+        "return document.getElementById('stream').classList.contains('down')",
+    )
+    .await;
+    shot(&c, "8-bench-daemon-gone").await;
+    let daemon = start_daemon(dir.path(), addr, instruments(None)).await;
+    wait_js(&c, "the reconnection", "return document.getElementById('stream').textContent === 'live' && document.getElementById('banner').textContent.includes('Reconnected')").await;
+    wait_js(&c, "both instruments connected again", "return [...document.querySelectorAll('[data-device] .badge[data-state]')].every((b) => b.dataset.state === 'connected')").await;
+    shot(&c, "9-bench-reconnected").await;
+    // The console, read once (chromedriver's log command itself can make Chromium drop an
+    // open event stream, so it is not read while the page runs): no error but the other
+    // event stream's, while the daemon was down.
+    let errors: Vec<String> = console_errors(&driver, &session_id)
+        .into_iter()
+        .filter(|e| {
+            !(e.contains(&format!("{addr}/events"))
+                && (e.contains("ERR_CONNECTION_REFUSED")
+                    || e.contains("ERR_INCOMPLETE_CHUNKED_ENCODING")))
+        })
+        .collect();
+    assert_eq!(errors, Vec::<String>::new());
+
+    // A page on another loopback port, in this browser (the session cookie is set), tries
+    // to make the daemon measure.
+    let refs_before = daemon
+        .service
+        .store()
+        .latest_reference()
+        .await
+        .unwrap()
+        .map(|r| r.id);
+    let scans_before = daemon
+        .service
+        .store()
+        .list_scans(&Default::default())
+        .await
+        .unwrap()
+        .len();
+    let (hostile, hostile_task) = serve_hostile_page(addr).await;
+    c.goto(&format!("http://{hostile}/")).await.unwrap();
+    wait_js(
+        &c,
+        "the hostile page's attempts",
+        "return document.getElementById('result').textContent !== 'running'",
+    )
+    .await;
+    let result = c
+        .find(Locator::Id("result"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    println!("the other page's attempts: {result}");
+    assert!(result.contains("cors-csrf:blocked"), "{result}");
+    assert!(result.contains("read-status:blocked"), "{result}");
+    assert!(result.contains("read-session:blocked"), "{result}");
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert_eq!(
+        daemon
+            .service
+            .store()
+            .latest_reference()
+            .await
+            .unwrap()
+            .map(|r| r.id),
+        refs_before,
+        "no reference was started from the other page ({result})"
+    );
+    assert_eq!(
+        daemon
+            .service
+            .store()
+            .list_scans(&Default::default())
+            .await
+            .unwrap()
+            .len(),
+        scans_before,
+        "no scan was started from the other page"
+    );
+    assert!(daemon.service.status().await.unwrap().busy.is_none());
+    hostile_task.abort();
+
+    // Log out: the session is over, the page asks for a new link.
+    c.goto(&format!("http://{addr}/#/")).await.unwrap();
+    wait_js(
+        &c,
+        "the bench",
+        "return !!document.getElementById('measure-reference')",
+    )
+    .await;
+    click(&c, "#logout").await;
+    wait_js(
+        &c,
+        "the sign-in prompt",
+        "return document.body.innerText.includes('You logged out')",
+    )
+    .await;
+    c.refresh().await.unwrap();
+    wait_js(
+        &c,
+        "the sign-in prompt after reload",
+        "return document.body.innerText.includes('brdfd open')",
+    )
+    .await;
+
+    c.close().await.unwrap();
+    daemon.stop().await;
+    let _ = href;
+}
