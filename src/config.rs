@@ -265,6 +265,9 @@ pub struct FitConfig {
     pub max_concurrent_fits: NonZeroUsize,
     /// How SRA readings become spectra (SCIENCE.md §3).
     pub specular: SpecularStrategy,
+    /// How an SRA reading enters the cost: the paper's flat grey spectrum or the luminance
+    /// (SCIENCE.md §5.1).
+    pub sra: crate::sra_reading::SraModel,
     /// Bootstrap resamples per fit for the parameter intervals (SCIENCE.md §10); 0 turns the
     /// intervals off.
     pub bootstrap: u32,
@@ -405,6 +408,7 @@ impl Default for Config {
                 seed: defaults::SEED,
                 max_concurrent_fits: NonZeroUsize::MIN,
                 specular: SpecularStrategy::default(),
+                sra: crate::sra_reading::SraModel::default(),
                 bootstrap: defaults::BOOTSTRAP,
             },
             colour: crate::colour::Colorimetry::default(),
@@ -544,6 +548,7 @@ struct RawFit {
     seed: S<u64>,
     max_concurrent_fits: S<u64>,
     specular: S<String>,
+    sra: S<String>,
     bootstrap: S<u32>,
 }
 
@@ -1152,6 +1157,15 @@ impl Config {
                 SpecularStrategy::default().name().into(),
                 |s| s.parse::<SpecularStrategy>().map_err(|e| e.to_string()),
             )?,
+            sra: c.value(
+                "fit.sra",
+                &f.sra,
+                crate::sra_reading::SraModel::default().name().into(),
+                |s| {
+                    s.parse::<crate::sra_reading::SraModel>()
+                        .map_err(|e| e.to_string())
+                },
+            )?,
             bootstrap: c.value("fit.bootstrap", &f.bootstrap, defaults::BOOTSTRAP, |n| {
                 if n <= 10_000 {
                     Ok(n)
@@ -1453,7 +1467,7 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 31] = [
+        const KEYS: [&str; 32] = [
             "path",
             "listen",
             "allow_remote",
@@ -1477,6 +1491,7 @@ mod tests {
             "seed",
             "max_concurrent_fits",
             "specular",
+            "sra",
             "json",
             "level",
             "reflectance",
@@ -1791,6 +1806,16 @@ mod tests {
             );
             assert!(shown.contains(says), "{shown}");
         }
+    }
+
+    #[test]
+    fn sra_setting() {
+        use crate::sra_reading::SraModel;
+        assert_eq!(parse("").unwrap().fit.sra, SraModel::Flat);
+        let c = parse("[fit]\nsra = \"luminance\"\n").unwrap();
+        assert_eq!(c.fit.sra, SraModel::Luminance);
+        let e = parse("[fit]\nsra = \"grey\"\n").unwrap_err().to_string();
+        assert!(e.contains("fit.sra") && e.contains("luminance"), "{e}");
     }
 
     #[test]

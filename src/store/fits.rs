@@ -139,8 +139,8 @@ impl Store {
         }
         let id: Option<i64> = sqlx::query_scalar(
             "INSERT INTO fit_runs (scan_id, processed_id, method, cost_function, settings_json,
-                                   seed, status, queued_at_ms)
-             SELECT p.scan_id, p.id, $2, $3, $4, $5, 'queued', $6
+                                   seed, status, queued_at_ms, sra)
+             SELECT p.scan_id, p.id, $2, $3, $4, $5, 'queued', $6, $7
              FROM processed p WHERE p.id = $1
              RETURNING id",
         )
@@ -150,6 +150,7 @@ impl Store {
         .bind(to_json("fit settings", &fit.settings)?)
         .bind(fit.seed.to_string())
         .bind(now_ms())
+        .bind(fit.sra_model()?.name())
         .fetch_optional(&self.writer)
         .await?;
         id.map(FitRunId).ok_or(StoreError::NotFound {

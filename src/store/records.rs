@@ -423,6 +423,22 @@ pub struct NewFit {
     pub seed: u64,
 }
 
+impl NewFit {
+    /// The SRA reading model its settings ask for (key `sra.model`; the paper's flat model when
+    /// absent), recorded in `fit_runs.sra` (migration 0015).
+    pub fn sra_model(&self) -> Result<crate::sra_reading::SraModel, super::StoreError> {
+        match self.settings.get("sra") {
+            None => Ok(crate::sra_reading::SraModel::default()),
+            Some(v) => serde_json::from_value::<crate::sra_reading::SraReading>(v.clone())
+                .map(|r| r.model)
+                .map_err(|source| super::StoreError::Json {
+                    field: "fit settings: sra",
+                    source,
+                }),
+        }
+    }
+}
+
 /// What a finished fit produced.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FitResult {
