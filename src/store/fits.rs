@@ -6,6 +6,8 @@
 
 use crate::colour::Colorimetry;
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
+use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
+use crate::sra_reading::{SpecularDeltaL, SraReading, specular_delta_l};
 use crate::uncertainty::Uncertainty;
 
 use super::backend::Db;
@@ -464,12 +466,49 @@ impl Store {
                 },
             })
         };
+        let (sra, specular_delta_l) = self.specular_luminance(&run).await?;
         Ok(FitDetail {
             run,
             evaluation,
             colorimetry,
             uncertainty,
+            sra,
+            specular_delta_l,
         })
+    }
+
+    /// A fit's SRA reading model (its settings' `sra`, the paper's flat model when absent) and,
+    /// when it is done, the |ΔL*| of its model against its processed BRDF at the SRA geometries.
+    async fn specular_luminance(
+        &self,
+        run: &FitRun,
+    ) -> Result<(SraReading, Option<SpecularDeltaL>), StoreError> {
+        let sra: SraReading = match run.settings.get("sra") {
+            None => SraReading::default(),
+            Some(v) => serde_json::from_value(v.clone()).map_err(|e| StoreError::Corrupt {
+                table: "fit_runs",
+                id: run.id.0,
+                detail: format!("settings_json: sra: {e}"),
+            })?,
+        };
+        let Some(params) = run
+            .result
+            .as_ref()
+            .and_then(|r| serde_json::from_value::<Params>(r.params.clone()).ok())
+        else {
+            return Ok((sra, None));
+        };
+        let fresnel: FresnelCosine = run
+            .settings
+            .get("fresnel")
+            .and_then(|v| serde_json::from_value(v.clone()).ok())
+            .unwrap_or_default();
+        let measured = self.processed(run.processed).await?.brdf;
+        let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
+        Ok((
+            sra,
+            Some(specular_delta_l(&measured.values, &estimated, sra)),
+        ))
     }
 
     /// Like `explain_scan`, for fit runs.

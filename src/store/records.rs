@@ -525,6 +525,11 @@ pub struct FitDetail {
     pub colorimetry: Option<crate::colour::Colorimetry>,
     /// The bootstrap intervals, once computed (SCIENCE.md §10).
     pub uncertainty: Option<crate::uncertainty::Uncertainty>,
+    /// The SRA reading model of the fit's cost, from its settings (SCIENCE.md §5.1).
+    pub sra: crate::sra_reading::SraReading,
+    /// Specular |ΔL*| between model and measured luminance (SCIENCE.md §7.2), for a done fit;
+    /// derived from the stored processed BRDF and parameters, as the report derives it.
+    pub specular_delta_l: Option<crate::sra_reading::SpecularDeltaL>,
 }
 
 #[cfg(test)]
