@@ -475,10 +475,8 @@ mod tests {
         let m = process(&scan, &ProcessingOptions::default()).unwrap();
         let mut want = truth.brdf(FresnelCosine::Incidence);
         crate::sra_reading::luminance_sra(&mut want, SraReading::LUMINANCE);
-        for g in 0..GEOMETRY_COUNT {
-            for b in 0..BANDS {
-                assert!((m.values[g][b] - want[g][b]).abs() <= 1e-14 * want[g][b]);
-            }
+        for (got, want) in m.values.iter().flatten().zip(want.iter().flatten()) {
+            assert!((got - want).abs() <= 1e-14 * want, "{got} vs {want}");
         }
         // The prairie green's spectrum is not flat: its luminance is not its band mean, so
         // the two responses give different SRA readings, and the same MA-T12 readings.
