@@ -206,7 +206,7 @@ pub fn figures(study: &Study) -> Vec<Figure> {
     out.push(Figure {
         stem: "fig11-delta-e-boxplots".into(),
         caption: format!(
-            "Fig. 11. ΔE00 between measured and estimated colour over the 14 geometries, per sample and cost function ({cost_list}), method {method}: box from first to third quartile, line at the median, whiskers to the smallest and largest value."
+            "Fig. 11. ΔE00 between measured and estimated colour over the 14 geometries, per sample and cost function ({cost_list}), method {method}: box from first to third quartile, line at the median, whiskers to the smallest and largest value. At the 2 SRA geometries this is the paper's metric, ΔE00 against the grey spectrum the reading is spread into; Fig. 11b shows the luminance metric."
         ),
         kind: Kind::BoxPlots,
         size: (1300, 700),
@@ -223,7 +223,7 @@ pub fn figures(study: &Study) -> Vec<Figure> {
     out.push(Figure {
         stem: "fig12-mean-delta-e".into(),
         caption: format!(
-            "Fig. 12. Mean ΔE00 over the samples that take part in the comparison, per cost function ({cost_list}), method {method}, over all 14 geometries and split into diffuse and specular; error bars are 95 % confidence intervals (Student t)."
+            "Fig. 12. Mean ΔE00 over the samples that take part in the comparison, per cost function ({cost_list}), method {method}, over all 14 geometries and split into diffuse and specular (the paper's specular metric, ΔE00 against the grey spectrum; Fig. 12b shows the luminance metric); error bars are 95 % confidence intervals (Student t)."
         ),
         kind: Kind::MeanCi,
         size: (1000, 700),
