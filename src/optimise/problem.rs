@@ -13,8 +13,8 @@
 //! whose landscapes are smoother than cf2's (see `separable`).
 //!
 //! Both return the cost exactly as [`crate::cost::cost_with`] defines it for the problem's SRA
-//! reading model ([`Problem::with_sra`]; [`crate::cost::cost`] for the paper's flat one) (up to rounding: cf2 uses a
-//! fast cube root accurate to a few ulps, see [`pow23`], and m2 an inline `ln_1p` within 1 ulp
+//! reading model ([`Problem::with_sra`]; [`crate::cost::cost`] for the paper's flat one), up to
+//! rounding (cf2 uses a fast cube root accurate to a few ulps, see [`pow23`], and m2 an inline `ln_1p` within 1 ulp
 //! of libm's, see [`ln_1p_recip`]).
 //!
 //! Speed (issue 12): a profile is the inner loop of every fit and of every bootstrap refit, so
@@ -680,6 +680,49 @@ mod tests {
             let got = prob.full_cost(&p.kd, p.ks, p.alpha, p.ior);
             let want = cost(cf, &m, &a);
             assert!(((got - want) / want).abs() < 1e-13, "{cf}: {got} vs {want}");
+        }
+    }
+
+    /// Under the luminance SRA model the full cost and the profile are `cost_with`'s cost, and
+    /// the profile's kd is what the 12 MA-T12 geometries ask for band by band (the SRA
+    /// geometries carry no spectral terms any more: changing their measured spectrum at equal
+    /// luminance changes nothing).
+    #[test]
+    fn luminance_costs_agree_with_cost_with() {
+        use crate::cost::cost_with;
+        use crate::sra_reading::SraReading;
+        let (m, truth) = scan();
+        let m = synthetic::with_noise(&m, 0.02, 7);
+        let geos = SpecularGeometry::all();
+        let mut p = truth;
+        p.ks *= 1.2;
+        p.alpha *= 0.9;
+        let a = evaluate(&p, FresnelCosine::Incidence, &geos);
+        for cf in CostFunction::ALL {
+            let prob = Problem::new(&m, cf, FresnelCosine::Incidence, Bounds::default())
+                .with_sra(&m, SraReading::LUMINANCE);
+            let got = prob.full_cost(&p.kd, p.ks, p.alpha, p.ior);
+            let want = cost_with(cf, SraReading::LUMINANCE, &m, &a);
+            assert!(((got - want) / want).abs() < 1e-12, "{cf}: {got} vs {want}");
+            let mut kd = [0.0; BANDS];
+            let f = prob.profile(cf.into(), p.ks, p.alpha, p.ior, &mut kd);
+            let full = prob.full_cost(&kd, p.ks, p.alpha, p.ior);
+            assert!((f - full).abs() <= 1e-12 * f, "{cf}: {f} vs {full}");
+            // A coloured spectrum of the same luminance at the SRA geometries: same problem.
+            let mut m2 = m;
+            let c = SraReading::LUMINANCE.weights();
+            for g in MA_T12_COUNT..G {
+                let y = luminance_with(&c, &m.values[g]);
+                let tilt: Spectrum = std::array::from_fn(|b| 0.5 + b as f64 / 30.0);
+                let k = y / luminance_with(&c, &tilt);
+                m2.values[g] = tilt.map(|x| x * k);
+            }
+            let prob2 = Problem::new(&m2, cf, FresnelCosine::Incidence, Bounds::default())
+                .with_sra(&m2, SraReading::LUMINANCE);
+            let mut kd2 = [0.0; BANDS];
+            let f2 = prob2.profile(cf.into(), p.ks, p.alpha, p.ior, &mut kd2);
+            assert_eq!(kd, kd2, "{cf}");
+            assert!((f - f2).abs() <= 1e-12 * f, "{cf}: {f} vs {f2}");
         }
     }
 
