@@ -97,6 +97,19 @@ impl fmt::Display for SraIlluminant {
     }
 }
 
+impl FromStr for SraIlluminant {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim() {
+            "C" | "c" => Ok(SraIlluminant::C),
+            "D65" | "d65" => Ok(SraIlluminant::D65),
+            _ => Err(format!(
+                "unknown SRA illuminant \"{s}\": expected C (ISO 2813, the default) or D65"
+            )),
+        }
+    }
+}
+
 /// The SRA reading model of a fit and the instrument's illuminant and observer. The default is
 /// the paper's flat model (the illuminant and observer then only serve the |ΔL*| evaluation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
@@ -334,5 +347,9 @@ mod tests {
         assert_eq!(r, SraReading::LUMINANCE);
         assert_eq!(r.to_string(), "luminance (C/2°)");
         assert!(serde_json::from_str::<SraReading>(r#"{"modle": "flat"}"#).is_err());
+        for i in [SraIlluminant::C, SraIlluminant::D65] {
+            assert_eq!(i.to_string().parse::<SraIlluminant>(), Ok(i));
+        }
+        assert!("A".parse::<SraIlluminant>().unwrap_err().contains("D65"));
     }
 }

@@ -14,7 +14,7 @@ use crate::optimise::{Method, Settings};
 use crate::processing::{ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::wavelengths_nm;
-use crate::sra_reading::{SraModel, SraReading};
+use crate::sra_reading::{SraIlluminant, SraModel, SraReading};
 use crate::uncertainty::BootstrapOptions;
 use std::sync::atomic::AtomicBool;
 
@@ -69,6 +69,15 @@ pub struct FitArgs {
     #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::default())]
     pub sra: SraModel,
 
+    /// Illuminant of the SRA's luminance (the `luminance` model's cost and the specular |ΔL*|
+    /// of every fit): `C` (ISO 2813) or `D65`.
+    #[arg(long, value_name = "C|D65", default_value_t = SraIlluminant::default())]
+    pub sra_illuminant: SraIlluminant,
+
+    /// Observer whose ȳ is the SRA's luminous efficiency function: `2` (V(λ), ISO 2813) or `10`.
+    #[arg(long, value_name = "2|10", default_value_t = Observer::default())]
+    pub sra_observer: Observer,
+
     /// Bootstrap resamples for 95 % intervals of ks, alpha, ior and kd per band (and the spread
     /// of the ΔE00 summaries): each resample perturbs the measured BRDF with the noise the scan
     /// itself shows and refits from this fit (SCIENCE.md §10). 200 is a good number; 0 (the
@@ -107,7 +116,11 @@ impl FitArgs {
                 cost: self.cost,
                 seed: self.seed,
                 fresnel: self.fresnel,
-                sra: SraReading::default().with_model(self.sra),
+                sra: SraReading {
+                    model: self.sra,
+                    illuminant: self.sra_illuminant,
+                    observer: self.sra_observer,
+                },
                 ..Settings::default()
             },
             colorimetry: Colorimetry {
