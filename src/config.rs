@@ -260,6 +260,9 @@ pub struct FitConfig {
     pub max_concurrent_fits: NonZeroUsize,
     /// How SRA readings become spectra (SCIENCE.md §3).
     pub specular: SpecularStrategy,
+    /// How an SRA reading enters the cost: the paper's flat grey spectrum or the luminance
+    /// (SCIENCE.md §5.1).
+    pub sra: crate::sra_reading::SraModel,
     /// Bootstrap resamples per fit for the parameter intervals (SCIENCE.md §10); 0 turns the
     /// intervals off.
     pub bootstrap: u32,
@@ -400,6 +403,7 @@ impl Default for Config {
                 seed: defaults::SEED,
                 max_concurrent_fits: NonZeroUsize::MIN,
                 specular: SpecularStrategy::default(),
+                sra: crate::sra_reading::SraModel::default(),
                 bootstrap: defaults::BOOTSTRAP,
             },
             colour: crate::colour::Colorimetry::default(),
@@ -539,6 +543,7 @@ struct RawFit {
     seed: S<u64>,
     max_concurrent_fits: S<u64>,
     specular: S<String>,
+    sra: S<String>,
     bootstrap: S<u32>,
 }
 
@@ -1094,6 +1099,15 @@ impl Checker<'_> {
                 SpecularStrategy::default().name().into(),
                 |s| s.parse::<SpecularStrategy>().map_err(|e| e.to_string()),
             )?,
+            sra: self.value(
+                "fit.sra",
+                &raw.sra,
+                crate::sra_reading::SraModel::default().name().into(),
+                |s| {
+                    s.parse::<crate::sra_reading::SraModel>()
+                        .map_err(|e| e.to_string())
+                },
+            )?,
             bootstrap: self.value("fit.bootstrap", &raw.bootstrap, defaults::BOOTSTRAP, |n| {
                 if n <= 10_000 {
                     Ok(n)
@@ -1489,7 +1503,7 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 31] = [
+        const KEYS: [&str; 32] = [
             "path",
             "listen",
             "allow_remote",
@@ -1513,6 +1527,7 @@ mod tests {
             "seed",
             "max_concurrent_fits",
             "specular",
+            "sra",
             "json",
             "level",
             "reflectance",
@@ -1827,6 +1842,16 @@ mod tests {
             );
             assert!(shown.contains(says), "{shown}");
         }
+    }
+
+    #[test]
+    fn sra_setting() {
+        use crate::sra_reading::SraModel;
+        assert_eq!(parse("").unwrap().fit.sra, SraModel::Flat);
+        let c = parse("[fit]\nsra = \"luminance\"\n").unwrap();
+        assert_eq!(c.fit.sra, SraModel::Luminance);
+        let e = parse("[fit]\nsra = \"grey\"\n").unwrap_err().to_string();
+        assert!(e.contains("fit.sra") && e.contains("luminance"), "{e}");
     }
 
     #[test]

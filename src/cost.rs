@@ -11,6 +11,11 @@
 //!   Löw, Kronander, Ynnerman & Unger, "BRDF models for accurate and efficient rendering of
 //!   glossy surfaces", ACM Transactions on Graphics 31(1), 2012.
 //!
+//! With the `luminance` SRA reading model ([`cost_with`], SCIENCE.md §5.1) the two SRA
+//! geometries contribute one luminance residual each, `w·(Y(M) − Y(A))`, counted `BANDS` = 31
+//! times (the 31 flat-model terms it replaces), so N stays 434 and the SRA geometries keep
+//! their paper share of 2 in 14.
+//!
 //! [`cost`] is the reference implementation, written to read like the equations; the optimiser
 //! (`crate::optimise`) uses allocation-free equivalents and reports every final cost through
 //! this function.
@@ -24,9 +29,10 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, Spectrum};
+use crate::sra_reading::{SraModel, SraReading, luminance_with};
 
 /// Number of (geometry, band) terms in every cost: 14 · 31.
 pub const TERMS: usize = GEOMETRY_COUNT * BANDS;
@@ -110,6 +116,49 @@ pub fn cost(cf: CostFunction, measured: &MeasuredBrdf, model: &[Spectrum; GEOMET
                 }
             };
         }
+    }
+    (sum / TERMS as f64).sqrt()
+}
+
+/// One term of cost function `cf` for weighted measured and model values `m = w·M`, `a = w·A`.
+fn term(cf: CostFunction, m: f64, a: f64) -> f64 {
+    match cf {
+        CostFunction::Cf1 => (m - a) * (m - a),
+        CostFunction::Cf2 => ((m - a) * (m - a)).cbrt(),
+        CostFunction::M2 => {
+            let d = m.ln_1p() - a.ln_1p();
+            d * d
+        }
+    }
+}
+
+/// The cost of `model` against `measured` under the SRA reading model `sra`: [`cost`] itself
+/// for the paper's flat model; for `luminance`, the 12 × 31 MA-T12 terms as in [`cost`] and at
+/// each SRA geometry the term of the luminance residual, `BANDS · φ(w·Y(M), w·Y(A))` with `Y`
+/// under the instrument's illuminant and observer. N = 434 either way.
+pub fn cost_with(
+    cf: CostFunction,
+    sra: SraReading,
+    measured: &MeasuredBrdf,
+    model: &[Spectrum; GEOMETRY_COUNT],
+) -> f64 {
+    if sra.model == SraModel::Flat {
+        return cost(cf, measured, model);
+    }
+    let w = weights();
+    let c = sra.weights();
+    let mut sum = 0.0;
+    for g in 0..MA_T12_COUNT {
+        for b in 0..BANDS {
+            sum += term(cf, measured.values[g][b] * w[g], model[g][b] * w[g]);
+        }
+    }
+    for g in MA_T12_COUNT..GEOMETRY_COUNT {
+        let (m, a) = (
+            luminance_with(&c, &measured.values[g]) * w[g],
+            luminance_with(&c, &model[g]) * w[g],
+        );
+        sum += BANDS as f64 * term(cf, m, a);
     }
     (sum / TERMS as f64).sqrt()
 }
@@ -208,6 +257,68 @@ mod tests {
             0.007610010860885858,
             1e-14,
         );
+    }
+
+    #[test]
+    fn flat_cost_with_is_cost_bit_for_bit() {
+        let mut m = zeros();
+        let mut a = zeros();
+        for g in 0..GEOMETRY_COUNT {
+            for b in 0..BANDS {
+                m[g][b] = 0.05 + 0.013 * g as f64 + 0.001 * (b as f64).sin();
+                a[g][b] = 0.06 + 0.011 * g as f64 - 0.002 * (b as f64).cos();
+            }
+        }
+        let m = MeasuredBrdf { values: m };
+        for cf in CostFunction::ALL {
+            assert_eq!(
+                cost_with(cf, SraReading::FLAT, &m, &a).to_bits(),
+                cost(cf, &m, &a).to_bits()
+            );
+        }
+    }
+
+    /// Luminance model, by hand: measured flat 0.3 sr⁻¹ at sra-60 (w = 0.5), model a spectrum
+    /// whose luminance is 0.1 but which is far from flat; zero elsewhere. The flat model sees
+    /// 31 band differences, the luminance model one difference of 0.2 counted 31 times.
+    #[test]
+    fn luminance_cost_by_hand() {
+        let g = by_name("sra-60").unwrap().index;
+        let mut mv = zeros();
+        mv[g] = [0.3; BANDS];
+        let m = MeasuredBrdf { values: mv };
+        let c = SraReading::LUMINANCE.weights();
+        let mut a = zeros();
+        let shape: Spectrum = std::array::from_fn(|b| 1.0 + (b as f64 / 5.0).sin());
+        let k = 0.1 / luminance_with(&c, &shape);
+        a[g] = shape.map(|x| x * k);
+        // w·ΔY = 0.5 · 0.2 = 0.1: cf1 sqrt(31 · 0.01 / 434), cf2 sqrt(31 · 0.01^(1/3) / 434),
+        // m2 sqrt(31 · (ln 1.15 − ln 1.05)² / 434).
+        let lum = SraReading::LUMINANCE;
+        close(
+            cost_with(CostFunction::Cf1, lum, &m, &a),
+            (31.0 * 0.01 / N).sqrt(),
+            1e-12,
+        );
+        close(
+            cost_with(CostFunction::Cf2, lum, &m, &a),
+            (31.0 * 0.01f64.cbrt() / N).sqrt(),
+            1e-12,
+        );
+        let d = 1.15f64.ln() - 1.05f64.ln();
+        close(
+            cost_with(CostFunction::M2, lum, &m, &a),
+            (31.0 * d * d / N).sqrt(),
+            1e-12,
+        );
+        // A model with the right luminance at the SRA geometries costs nothing there, however
+        // coloured; the flat model charges its colour.
+        let k = 0.3 / luminance_with(&c, &shape);
+        a[g] = shape.map(|x| x * k);
+        for cf in CostFunction::ALL {
+            assert!(cost_with(cf, lum, &m, &a) < 1e-6, "{cf}");
+            assert!(cost(cf, &m, &a) > 1e-3, "{cf}");
+        }
     }
 
     #[test]

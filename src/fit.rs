@@ -21,6 +21,7 @@ use crate::optimise::{self, FitError, FitOutcome, Progress, Settings};
 use crate::processing::{self, MeasuredBrdf, ProcessingError, ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
+use crate::sra_reading::{SpecularDeltaL, SraReading, specular_delta_l};
 use crate::uncertainty::{BootstrapOptions, Uncertainty, UncertaintyError, bootstrap};
 
 /// Everything that decides a fit besides the scan itself.
@@ -48,8 +49,12 @@ pub struct FitReport {
     pub estimated: [Spectrum; GEOMETRY_COUNT],
     /// The optimiser's result: parameters, cost, effort, best cost per generation, method, seed.
     pub outcome: FitOutcome,
-    /// ΔE00 between measured and estimated colour.
+    /// ΔE00 between measured and estimated colour (at the SRA geometries against the grey
+    /// spectrum the reading is spread into: the paper's specular metric).
     pub evaluation: Evaluation,
+    /// |ΔL*| between measured and model luminance at the SRA geometries, under the instrument
+    /// of `request.settings.sra` (SCIENCE.md §7.2).
+    pub specular_delta_l: SpecularDeltaL,
     /// The bootstrap intervals, when asked for ([`FitReport::with_uncertainty`]).
     pub uncertainty: Option<Uncertainty>,
 }
@@ -106,6 +111,7 @@ pub fn fit_measured(
         &SpecularGeometry::all(),
     );
     let evaluation = evaluate_with(&measured.values, &estimated, request.colorimetry);
+    let specular_delta_l = specular_delta_l(&measured.values, &estimated, request.settings.sra);
     Ok(FitReport {
         sample: sample.to_string(),
         request: request.clone(),
@@ -113,6 +119,7 @@ pub fn fit_measured(
         estimated,
         outcome,
         evaluation,
+        specular_delta_l,
         uncertainty: None,
     })
 }
@@ -161,6 +168,8 @@ impl FitReport {
             specular_strategy: self.request.processing.specular,
             fresnel: self.request.settings.fresnel,
             colorimetry: self.request.colorimetry,
+            sra: self.request.settings.sra,
+            specular_delta_l: self.specular_delta_l.into(),
             uncertainty: self.uncertainty.clone(),
         }
     }
@@ -205,9 +214,39 @@ pub struct FitDocument {
     /// "summation"}` unless configured otherwise).
     #[serde(default)]
     pub colorimetry: Colorimetry,
+    /// How the SRA readings entered the cost (`{"model": "flat", "illuminant": "C",
+    /// "observer": "2"}` unless `--sra luminance`); the illuminant and observer are those of
+    /// `specular_delta_l`.
+    #[serde(default)]
+    pub sra: SraReading,
+    /// |ΔL*| between model and measured luminance at the two SRA geometries and their mean
+    /// (`delta_e00_specular_mean` is the paper's metric, ΔE00 against the grey spectrum).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub specular_delta_l: Option<SpecularDeltaLDocument>,
     /// The bootstrap intervals (`brdfd fit --bootstrap N`); absent without them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<Uncertainty>,
+}
+
+/// `{"sra-20": x, "sra-60": y, "mean": m}`: |ΔL*| at the SRA geometries.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpecularDeltaLDocument {
+    #[serde(rename = "sra-20")]
+    pub sra_20: f64,
+    #[serde(rename = "sra-60")]
+    pub sra_60: f64,
+    pub mean: f64,
+}
+
+impl From<SpecularDeltaL> for Option<SpecularDeltaLDocument> {
+    fn from(d: SpecularDeltaL) -> Self {
+        Some(SpecularDeltaLDocument {
+            sra_20: d.per_geometry[0],
+            sra_60: d.per_geometry[1],
+            mean: d.mean,
+        })
+    }
 }
 
 /// The fitted parameters as the contract writes them.
@@ -302,6 +341,8 @@ mod tests {
             "specular_strategy",
             "fresnel",
             "colorimetry",
+            "sra",
+            "specular_delta_l",
         ];
         let mut got = keys.clone();
         got.sort();
@@ -349,6 +390,90 @@ mod tests {
             "{cost}"
         );
         assert!(!report.outcome.best_cost_per_generation.is_empty());
+    }
+
+    /// Issue 16's check: scans whose SRA reads the luminance (illuminant C, 2° V(λ)), fitted
+    /// with the luminance model under cf2, recover ks, α, μ and kd to 1e-6 and match the
+    /// measured luminance at the SRA geometries to |ΔL*| < 0.01, while the paper's ΔE00 against
+    /// the grey spectrum calls the same exact fits poor. Under cf1 the flat model on the same
+    /// scans misses the lobe (it takes the luminance for a grey spectrum); the luminance model
+    /// does not.
+    #[test]
+    fn luminance_model_recovers_luminance_scans_exactly() {
+        use crate::synth::SraResponse;
+        let opts = SynthOptions {
+            sra_response: SraResponse::Luminance,
+            ..SynthOptions::default()
+        };
+        let (mut flat_worst, mut paper_worst) = (0.0f64, 0.0f64);
+        for truth in paper_samples() {
+            let scan = synth_scan(&truth, &opts).unwrap();
+            let mut request = quick_request(CostFunction::Cf2);
+            request.settings.seed = Settings::default().seed;
+            request.settings.sra = SraReading::LUMINANCE;
+            let r = fit_scan(&scan, &request).unwrap();
+            let (p, t) = (&r.outcome.params, &truth.params);
+            let rel = |a: f64, b: f64| (a - b).abs() / b.abs();
+            for (name, got, want) in [
+                ("ks", p.ks, t.ks),
+                ("alpha", p.alpha, t.alpha),
+                ("ior", p.ior, t.ior),
+            ] {
+                assert!(
+                    rel(got, want) < 1e-6,
+                    "{} {name}: {got} vs {want}",
+                    truth.sample
+                );
+            }
+            for b in 0..crate::spectral::BANDS {
+                assert!(
+                    rel(p.kd[b], t.kd[b]) < 1e-6,
+                    "{} kd[{b}]: {} vs {}",
+                    truth.sample,
+                    p.kd[b],
+                    t.kd[b]
+                );
+            }
+            assert!(
+                r.specular_delta_l.mean < 0.01,
+                "{}: {:?}",
+                truth.sample,
+                r.specular_delta_l
+            );
+            assert_eq!(r.document().sra, SraReading::LUMINANCE);
+
+            // The paper's specular metric (ΔE00 against the grey spectrum the reading is
+            // spread into) charges this exact fit with the spreading.
+            paper_worst = paper_worst.max(r.evaluation.specular.mean);
+
+            // cf1 spreads the SRA residuals over the lobe: the flat model, which takes the
+            // luminance for a grey spectrum, then misses the truth; the luminance model not.
+            request.settings.cost = CostFunction::Cf1;
+            let lum1 = fit_scan(&scan, &request).unwrap();
+            request.settings.sra = SraReading::FLAT;
+            let flat1 = fit_scan(&scan, &request).unwrap();
+            let lobe_error = |r: &FitReport| {
+                let p = &r.outcome.params;
+                [rel(p.ks, t.ks), rel(p.alpha, t.alpha), rel(p.ior, t.ior)]
+                    .into_iter()
+                    .fold(0.0, f64::max)
+            };
+            assert!(
+                lobe_error(&lum1) < 1e-4,
+                "{}: {}",
+                truth.sample,
+                lobe_error(&lum1)
+            );
+            flat_worst = flat_worst.max(lobe_error(&flat1));
+        }
+        assert!(
+            flat_worst > 1e-2,
+            "flat model, cf1: worst lobe error {flat_worst}"
+        );
+        assert!(
+            paper_worst > 1.0,
+            "paper's specular ΔE00 at most {paper_worst}"
+        );
     }
 
     #[test]

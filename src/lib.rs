@@ -50,6 +50,7 @@ pub mod report;
 pub mod scan;
 pub mod service;
 pub mod spectral;
+pub mod sra_reading;
 pub mod stats;
 pub mod store;
 pub mod sync;

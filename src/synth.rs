@@ -9,7 +9,10 @@
 //! - MA-T12 reference `W_g(λ) = gain_g · ρ_N9`, sample `S_g(λ) = gain_g · ρ_N9 · π · f(λ; g)`,
 //!   so that `S/W / π = f`.
 //! - SRA (one achromatic value): reference `I_ref,g = gain_g · c`, sample
-//!   `I_g = gain_g · c · π · mean_λ f(λ; g)`, with `c` = [`SRA_REFERENCE_INTENSITY`].
+//!   `I_g = gain_g · c · π · Y(f(·; g))`, with `c` = [`SRA_REFERENCE_INTENSITY`] and `Y` the
+//!   SRA's response ([`SraResponse`]): the band mean `mean_λ f(λ; g)` (the default, what the
+//!   paper's flat model assumes) or the luminance under CIE illuminant C and the 2° V(λ)
+//!   (what a gloss meter reads, what the `luminance` SRA model assumes; SCIENCE.md §5.1).
 //! - Optional noise: every reported value (sample and reference) is multiplied by an independent
 //!   draw of N(1, σ), from a ChaCha8 stream seeded by [`SynthOptions::seed`].
 //!
@@ -28,6 +31,7 @@ use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
 use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
 use crate::scan::{DeviceReadings, Reference, Scan};
 use crate::spectral::{BANDS, Spectrum, wavelengths_nm};
+use crate::sra_reading::SraReading;
 
 /// The ColorChecker table, as shipped (source in its first line).
 const COLORCHECKER_CSV: &str = include_str!("synth/colorchecker_babelcolor_avg_10nm.csv");
@@ -207,6 +211,57 @@ pub struct SynthOptions {
     pub seed: u64,
     /// Fresnel cosine of the true model.
     pub fresnel: FresnelCosine,
+    /// What the simulated SRA reads: the band mean (default) or the luminance.
+    #[serde(default)]
+    pub sra_response: SraResponse,
+}
+
+/// What one reading of the simulated SRA is, given the true spectral BRDF at its geometry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SraResponse {
+    /// The mean over the 31 bands (the paper's assumption; the default).
+    #[default]
+    BandMean,
+    /// The luminance under CIE illuminant C and the 2° V(λ) ([`SraReading::LUMINANCE`]).
+    Luminance,
+}
+
+impl SraResponse {
+    /// Both, the default first.
+    pub const ALL: [SraResponse; 2] = [SraResponse::BandMean, SraResponse::Luminance];
+
+    /// The name used on the command line.
+    pub const fn name(self) -> &'static str {
+        match self {
+            SraResponse::BandMean => "band-mean",
+            SraResponse::Luminance => "luminance",
+        }
+    }
+
+    /// The reading of a true spectral BRDF `f` (sr⁻¹), in sr⁻¹.
+    pub fn read(self, f: &Spectrum) -> f64 {
+        match self {
+            SraResponse::BandMean => f.iter().sum::<f64>() / BANDS as f64,
+            SraResponse::Luminance => SraReading::LUMINANCE.luminance(f),
+        }
+    }
+}
+
+impl std::fmt::Display for SraResponse {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for SraResponse {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        SraResponse::ALL
+            .into_iter()
+            .find(|r| r.name() == s.trim())
+            .ok_or_else(|| format!("unknown SRA response \"{s}\"; valid: band-mean, luminance"))
+    }
 }
 
 impl Default for SynthOptions {
@@ -217,6 +272,7 @@ impl Default for SynthOptions {
             noise: 0.0,
             seed: 0,
             fresnel: FresnelCosine::Incidence,
+            sra_response: SraResponse::BandMean,
         }
     }
 }
@@ -325,7 +381,7 @@ pub fn synth_scan(truth: &GroundTruth, opts: &SynthOptions) -> Result<Scan, Synt
     }
     for (k, v) in readings.sra.iter_mut().enumerate() {
         let gi = MA_T12_COUNT + k;
-        let mean = f[gi].iter().sum::<f64>() / BANDS as f64;
+        let mean = opts.sra_response.read(&f[gi]);
         *v = g[gi] * c * PI * mean * noise.factor();
     }
 
@@ -406,6 +462,40 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn luminance_response_processes_back_to_the_true_luminance() {
+        let truth = &paper_samples()[1];
+        let opts = SynthOptions {
+            sra_response: SraResponse::Luminance,
+            ..SynthOptions::default()
+        };
+        let scan = synth_scan(truth, &opts).unwrap();
+        let m = process(&scan, &ProcessingOptions::default()).unwrap();
+        let mut want = truth.brdf(FresnelCosine::Incidence);
+        crate::sra_reading::luminance_sra(&mut want, SraReading::LUMINANCE);
+        for (got, want) in m.values.iter().flatten().zip(want.iter().flatten()) {
+            assert!((got - want).abs() <= 1e-14 * want, "{got} vs {want}");
+        }
+        // The prairie green's spectrum is not flat: its luminance is not its band mean, so
+        // the two responses give different SRA readings, and the same MA-T12 readings.
+        let band_mean = synth_scan(truth, &SynthOptions::default()).unwrap();
+        assert_eq!(band_mean.readings.ma_t12, scan.readings.ma_t12);
+        for k in 0..2 {
+            let (a, b) = (band_mean.readings.sra[k], scan.readings.sra[k]);
+            assert!((a - b).abs() > 1e-3 * a, "{a} vs {b}");
+        }
+        assert_eq!(
+            "luminance".parse::<SraResponse>(),
+            Ok(SraResponse::Luminance)
+        );
+        assert!(
+            "mean"
+                .parse::<SraResponse>()
+                .unwrap_err()
+                .contains("band-mean")
+        );
     }
 
     #[test]

@@ -346,13 +346,14 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
     ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("3 samples, 13 figures (PNG and SVG)"),
+        stdout.contains("3 samples, 16 figures (PNG and SVG)"),
         "{stdout}"
     );
     for stem in [
         "fig04-measured-swatches",
         "fig05-lightness-diffuse",
         "fig06-lightness-specular",
+        "fig06b-luminance-specular",
         "fig07-swatches-cf1",
         "fig07-swatches-cf2",
         "fig07-swatches-m2",
@@ -360,7 +361,9 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
         "fig09-lightness-15deg",
         "fig10-lightness-45deg",
         "fig11-delta-e-boxplots",
+        "fig11b-specular-delta-l",
         "fig12-mean-delta-e",
+        "fig12b-mean-specular-delta-l",
     ] {
         for ext in ["png", "svg"] {
             let p = out_dir.join(format!("{stem}.{ext}"));
@@ -505,5 +508,5 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
         std::path::Path::new(v["html"].as_str().unwrap()).exists(),
         "{v}"
     );
-    assert_eq!(v["figures"].as_array().unwrap().len(), 3 + 3 + 3 + 4, "{v}");
+    assert_eq!(v["figures"].as_array().unwrap().len(), 4 + 3 + 3 + 6, "{v}");
 }

@@ -10,7 +10,7 @@
 //! | `GET /scans/{id}` | a scan, its readings, reference and fits | 200 |
 //! | `GET /scans/{id}/export` | the scan as `brdfd.scan/1` | 200 |
 //! | `POST /scans/import` (a `brdfd.scan/1` body) | import a scan, fit it | 201 `{"scan", "fits"}` |
-//! | `POST /scans/{id}/refit` [`RefitRequest`] | queue fits again | 202 `{"fits": [id]}` |
+//! | `POST /scans/{id}/refit` [`RefitRequest`] (`sra`: `"flat"`/`"luminance"`) | queue fits again | 202 `{"fits": [id]}` |
 //! | `POST /abort` | stop the reference or scan in progress | 200 `{"aborted": …}` |
 //! | `GET /fits/{id}` | a fit run and its evaluation | 200 |
 //! | `POST /fits/{id}/cancel` | cancel a queued or running fit | 202 |

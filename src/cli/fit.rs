@@ -14,6 +14,7 @@ use crate::optimise::{Method, Settings};
 use crate::processing::{ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::wavelengths_nm;
+use crate::sra_reading::{SraIlluminant, SraModel, SraReading};
 use crate::uncertainty::BootstrapOptions;
 use std::sync::atomic::AtomicBool;
 
@@ -61,6 +62,22 @@ pub struct FitArgs {
     #[arg(long, value_name = "summation|astm-e308", default_value_t = Weighting::default())]
     pub weighting: Weighting,
 
+    /// How the SRA's one achromatic reading per geometry enters the cost: `flat` (the paper's:
+    /// a grey spectrum, compared band by band) or `luminance` (the sample's luminous
+    /// reflectance Y under CIE illuminant C and the 2° V(λ), as ISO 2813 specifies; compared
+    /// with the model's Y). SCIENCE.md §5.1.
+    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::default())]
+    pub sra: SraModel,
+
+    /// Illuminant of the SRA's luminance (the `luminance` model's cost and the specular |ΔL*|
+    /// of every fit): `C` (ISO 2813) or `D65`.
+    #[arg(long, value_name = "C|D65", default_value_t = SraIlluminant::default())]
+    pub sra_illuminant: SraIlluminant,
+
+    /// Observer whose ȳ is the SRA's luminous efficiency function: `2` (V(λ), ISO 2813) or `10`.
+    #[arg(long, value_name = "2|10", default_value_t = Observer::default())]
+    pub sra_observer: Observer,
+
     /// Bootstrap resamples for 95 % intervals of ks, alpha, ior and kd per band (and the spread
     /// of the ΔE00 summaries): each resample perturbs the measured BRDF with the noise the scan
     /// itself shows and refits from this fit (SCIENCE.md §10). 200 is a good number; 0 (the
@@ -99,6 +116,11 @@ impl FitArgs {
                 cost: self.cost,
                 seed: self.seed,
                 fresnel: self.fresnel,
+                sra: SraReading {
+                    model: self.sra,
+                    illuminant: self.sra_illuminant,
+                    observer: self.sra_observer,
+                },
                 ..Settings::default()
             },
             colorimetry: Colorimetry {
@@ -141,12 +163,13 @@ pub fn table(r: &FitReport) -> String {
     let _ = writeln!(t, "sample           {}", r.sample);
     let _ = writeln!(
         t,
-        "fit              cost function {}, method {}, seed {}, specular {}, fresnel {}",
+        "fit              cost function {}, method {}, seed {}, specular {}, fresnel {}, sra {}",
         s.cost,
         o.method,
         o.seed,
         r.request.processing.specular,
-        parse_name(s.fresnel)
+        parse_name(s.fresnel),
+        s.sra
     );
     let _ = writeln!(
         t,
@@ -205,8 +228,14 @@ pub fn table(r: &FitReport) -> String {
     );
     let _ = writeln!(
         t,
-        "  specular (2)   {:.4}  (max {:.4})",
+        "  specular (2)   {:.4}  (max {:.4})  the paper's: against the grey spectrum",
         e.specular.mean, e.specular.max
+    );
+    let d = &r.specular_delta_l;
+    let _ = writeln!(
+        t,
+        "specular |ΔL*|   {:.4}  (sra-20 {:.4}, sra-60 {:.4}; luminance under {}/{}°)",
+        d.mean, d.per_geometry[0], d.per_geometry[1], s.sra.illuminant, s.sra.observer
     );
     t
 }

@@ -14,7 +14,7 @@ use mock_devices::generate::{GenerateOptions, Readings, SessionPair};
 use mock_devices::{generate_reference_session, generate_sample_session};
 
 use crate::scan::DeviceReadings;
-use crate::synth::{GroundTruth, SynthOptions, paper_samples, slug, synth_scan};
+use crate::synth::{GroundTruth, SraResponse, SynthOptions, paper_samples, slug, synth_scan};
 
 #[derive(Debug, clap::Args)]
 pub struct SynthArgs {
@@ -27,6 +27,12 @@ pub struct SynthArgs {
     /// reference alike (0.01 = 1 %); 0 writes noise-free scans.
     #[arg(long, value_name = "σ", default_value_t = 0.0)]
     pub noise: f64,
+
+    /// What the simulated SRA reads: `band-mean` (the mean of the true spectral BRDF over the
+    /// 31 bands, the paper's assumption) or `luminance` (its luminance under CIE illuminant C
+    /// and the 2° V(λ), what a gloss meter reads; fit such scans with `--sra luminance`).
+    #[arg(long, value_name = "band-mean|luminance", default_value_t = SraResponse::BandMean)]
+    pub sra_response: SraResponse,
 
     /// Seed of the noise; sample i (0–7, in the listed order) uses seed + i.
     #[arg(long, value_name = "N", default_value_t = 0)]
@@ -61,6 +67,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         let opts = SynthOptions {
             noise: args.noise,
             seed: args.seed.wrapping_add(i as u64),
+            sra_response: args.sra_response,
             ..SynthOptions::default()
         };
         let scan = synth_scan(truth, &opts)?;

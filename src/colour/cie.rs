@@ -2,7 +2,8 @@
 //! and sampled once at the 31 band centres of [`crate::spectral`]:
 //! the CIE 1931 2° observer x̄ȳz̄ (CIE 018:2019 / CIE 15:2018) and illuminant D65
 //! (CIE S 014-2 / ISO 11664-2), and the CIE 1964 10° observer (CIE 15:2018) for the `[colour]
-//! observer = "10"` option. Sources are cited in `src/colour/data/README.md`.
+//! observer = "10"` option, and CIE illuminant C (CIE 15:2004) for the SRA's luminance reading.
+//! Sources are cited in `src/colour/data/README.md`.
 //! The whole 1 nm tables are also available, for the ASTM E308 weights of [`super::e308`].
 //!
 //! Both tables list every band centre (400, 410, …, 700 nm) exactly, so sampling is a lookup,
@@ -18,6 +19,9 @@ const CMF_CSV: &str = include_str!("data/cie1931_2deg_cmf_1nm.csv");
 const CMF10_CSV: &str = include_str!("data/cie1964_10deg_cmf_1nm.csv");
 /// CIE D65 relative SPD, 300–780 nm every 5 nm: `nm,d65`.
 const D65_CSV: &str = include_str!("data/cie_d65_spd_5nm.csv");
+/// CIE illuminant C relative SPD, 300–780 nm every 5 nm: `nm,c` (ISO 2813's gloss illuminant,
+/// for the SRA's luminance reading, [`crate::sra_reading`]).
+const ILLUMINANT_C_CSV: &str = include_str!("data/cie_illuminant_c_spd_5nm.csv");
 
 /// A CIE table that cannot be used. The embedded copies are checked by the tests, so these
 /// only appear if a table file under `src/colour/data/` has been edited or replaced.
@@ -96,6 +100,12 @@ static D65: LazyLock<Spectrum> = LazyLock::new(|| {
     rows.map(|[s]| s)
 });
 
+static ILLUMINANT_C: LazyLock<Spectrum> = LazyLock::new(|| {
+    let rows = sample_table::<1>("cie_illuminant_c_spd_5nm.csv", ILLUMINANT_C_CSV)
+        .unwrap_or_else(|e| panic!("embedded table is damaged: {e}"));
+    rows.map(|[s]| s)
+});
+
 static CMF10: LazyLock<[[f64; 3]; BANDS]> = LazyLock::new(|| {
     sample_table::<3>("cie1964_10deg_cmf_1nm.csv", CMF10_CSV)
         .unwrap_or_else(|e| panic!("embedded table is damaged: {e}"))
@@ -161,6 +171,11 @@ pub fn d65_rows() -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// CIE illuminant C relative spectral power at each band centre (CIE 15, 105.30 at 560 nm).
+pub fn illuminant_c() -> &'static Spectrum {
+    &ILLUMINANT_C
+}
+
 /// CIE 1964 10° x̄₁₀, ȳ₁₀, z̄₁₀ at each band centre (dimensionless).
 pub fn cmf10() -> &'static [[f64; 3]; BANDS] {
     &CMF10
@@ -200,6 +215,28 @@ mod tests {
         assert_eq!(cmf_1nm(true).len(), 471);
         assert_eq!(cmf_1nm(false)[200], cmf()[16]);
         assert_eq!(d65_rows().len(), 97);
+    }
+
+    #[test]
+    fn illuminant_c_samples_to_the_cie_values() {
+        // CIE 15:2004 Table T.1, illuminant C at 400, 560 and 700 nm.
+        assert_eq!(illuminant_c()[0], 63.30);
+        assert_eq!(illuminant_c()[16], 105.30);
+        assert_eq!(illuminant_c()[BANDS - 1], 76.30);
+        // Its chromaticity with the 2° observer over the whole 5 nm table, 380–780 nm, is the
+        // CIE's (x, y) = (0.31006, 0.31616) of illuminant C.
+        let rows = all_rows::<1>("c", ILLUMINANT_C_CSV).unwrap();
+        let cmf = cmf_1nm(false);
+        let mut xyz = [0.0; 3];
+        for (nm, [s]) in rows.into_iter().filter(|(nm, _)| *nm >= 360.0) {
+            let c = cmf[(nm - 360.0) as usize];
+            for (acc, ck) in xyz.iter_mut().zip(c) {
+                *acc += s * ck;
+            }
+        }
+        let sum: f64 = xyz.iter().sum();
+        assert!((xyz[0] / sum - 0.31006).abs() < 5e-5, "{}", xyz[0] / sum);
+        assert!((xyz[1] / sum - 0.31616).abs() < 5e-5, "{}", xyz[1] / sum);
     }
 
     #[test]

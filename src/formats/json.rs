@@ -90,6 +90,12 @@ struct FitDoc<'a> {
     /// The bootstrap intervals, as in `brdfd fit --json` (SCIENCE.md §10).
     #[serde(skip_serializing_if = "Option::is_none")]
     uncertainty: Option<&'a crate::uncertainty::Uncertainty>,
+    /// The SRA reading model of the fit's cost (SCIENCE.md §5.1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sra: Option<crate::sra_reading::SraReading>,
+    /// Specular |ΔL*| at the SRA geometries, as in `brdfd fit --json` (SCIENCE.md §7.2).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    specular_delta_l: Option<crate::fit::SpecularDeltaLDocument>,
 }
 
 /// The study as a `brdfd.study/1` document.
@@ -143,6 +149,8 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
                     delta_e00_mean: d.map(|d| d.evaluation.all.mean),
                     colorimetry: d.map(|d| d.colorimetry),
                     uncertainty: d.and_then(|d| d.uncertainty.as_ref()),
+                    sra: d.map(|d| d.sra),
+                    specular_delta_l: d.and_then(|d| d.specular_delta_l.into()),
                 }
             })
             .collect();

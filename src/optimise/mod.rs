@@ -35,11 +35,12 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::cost::{CostFunction, cost};
+use crate::cost::{CostFunction, cost_with};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
 use crate::model::{Bounds, FresnelCosine, Params, SpecularGeometry, evaluate};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, wavelengths_nm};
+use crate::sra_reading::SraReading;
 
 use problem::Problem;
 
@@ -225,6 +226,10 @@ pub struct Settings {
     pub paper: GaSettings,
     /// The separable method's settings (used when `method` is `separable`).
     pub separable: SeparableSettings,
+    /// How the SRA readings enter the cost (SCIENCE.md §5.1). Default: the paper's flat model,
+    /// left out of the serialised settings so that they read as before the option existed.
+    #[serde(skip_serializing_if = "SraReading::is_default")]
+    pub sra: SraReading,
 }
 
 impl Default for Settings {
@@ -237,6 +242,7 @@ impl Default for Settings {
             seed: 1,
             paper: GaSettings::default(),
             separable: SeparableSettings::default(),
+            sra: SraReading::default(),
         }
     }
 }
@@ -390,7 +396,7 @@ pub struct Progress {
 pub struct FitOutcome {
     /// The fitted parameters, within the bounds.
     pub params: Params,
-    /// Their cost, as [`crate::cost::cost`] computes it.
+    /// Their cost, as [`crate::cost::cost_with`] computes it.
     pub cost: f64,
     /// Cost evaluations. For the paper GA one evaluation is a full 34-parameter model; for the
     /// separable method it is one (ks, α, μ) point with its exact per-band kd solve, for the
@@ -463,7 +469,8 @@ pub fn fit_with_observer(
     let started = Instant::now();
     settings.validate()?;
     check_input(measured, settings.cost)?;
-    let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds);
+    let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds)
+        .with_sra(measured, settings.sra);
     let run = match settings.method {
         Method::Paper => ga::run(&problem, &settings.paper, settings.seed, observer)?,
         Method::Separable => {
@@ -473,7 +480,7 @@ pub fn fit_with_observer(
     let model = evaluate(&run.params, settings.fresnel, &SpecularGeometry::all());
     Ok(FitOutcome {
         params: run.params,
-        cost: cost(settings.cost, measured, &model),
+        cost: cost_with(settings.cost, settings.sra, measured, &model),
         evaluations: run.tracker.evaluations,
         generations: run.tracker.history.len() as u32,
         wall_ms: started.elapsed().as_secs_f64() * 1e3,
@@ -494,12 +501,13 @@ pub fn refit_local(
     let started = Instant::now();
     settings.validate()?;
     check_input(measured, settings.cost)?;
-    let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds);
+    let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds)
+        .with_sra(measured, settings.sra);
     let run = separable::run_local(&problem, &settings.separable, start);
     let model = evaluate(&run.params, settings.fresnel, &SpecularGeometry::all());
     Ok(FitOutcome {
         params: run.params,
-        cost: cost(settings.cost, measured, &model),
+        cost: cost_with(settings.cost, settings.sra, measured, &model),
         evaluations: run.tracker.evaluations,
         generations: run.tracker.history.len() as u32,
         wall_ms: started.elapsed().as_secs_f64() * 1e3,

@@ -12,8 +12,9 @@
 //! separable method's warm starts come from the profiles of cf1 and of the weighted L1 error,
 //! whose landscapes are smoother than cf2's (see `separable`).
 //!
-//! Both return the cost exactly as [`crate::cost::cost`] defines it (up to rounding: cf2 uses a
-//! fast cube root accurate to a few ulps, see [`pow23`], and m2 an inline `ln_1p` within 1 ulp
+//! Both return the cost exactly as [`crate::cost::cost_with`] defines it for the problem's SRA
+//! reading model ([`Problem::with_sra`]; [`crate::cost::cost`] for the paper's flat one), up to
+//! rounding (cf2 uses a fast cube root accurate to a few ulps, see [`pow23`], and m2 an inline `ln_1p` within 1 ulp
 //! of libm's, see [`ln_1p_recip`]).
 //!
 //! Speed (issue 12): a profile is the inner loop of every fit and of every bootstrap refit, so
@@ -29,9 +30,11 @@
 
 use crate::cost::{CostFunction, TERMS, weights};
 use crate::geometry::GEOMETRY_COUNT as G;
+use crate::geometry::{MA_T12_COUNT, SRA_COUNT};
 use crate::model::{Bounds, FresnelCosine, SpecularGeometry, specular_term};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, Spectrum};
+use crate::sra_reading::{SraModel, SraReading, luminance_with};
 
 /// `|x|^(2/3) = (x²)^(1/3)`, the cf2 term, without a libm call.
 ///
@@ -167,6 +170,47 @@ pub(crate) struct Problem {
     c: [[f64; G]; BANDS],
     sum_c: [f64; BANDS],
     sum_cm: [f64; BANDS],
+    /// The SRA luminance residuals of the `luminance` reading model; `None` for the paper's
+    /// flat model.
+    lum: Option<Lum>,
+}
+
+/// The luminance model's SRA terms (SCIENCE.md §5.1): at SRA geometry k the residual
+/// `r = w·Y(M) − w·(K + s)`, with `K = Σ c_b kd_b` the luminance of kd and `s` the specular
+/// term (flat, so its luminance is itself), enters [`BANDS`] times.
+#[derive(Debug, Clone)]
+struct Lum {
+    /// Normalised luminance weights `S ȳ / Σ S ȳ`.
+    c: Spectrum,
+    /// Cosine weights of the SRA geometries.
+    w: [f64; SRA_COUNT],
+    /// `w · Y(M)` per SRA geometry.
+    wy: [f64; SRA_COUNT],
+    /// `ln(1 + w · Y(M))` (m2).
+    ly: [f64; SRA_COUNT],
+}
+
+impl Lum {
+    /// The sum of the SRA terms for `criterion` at kd and the specular terms `s` (all 14).
+    #[inline]
+    fn terms(&self, criterion: Criterion, kd: &Spectrum, s: &[f64; G]) -> f64 {
+        let k = luminance_with(&self.c, kd);
+        let mut sum = 0.0;
+        for j in 0..SRA_COUNT {
+            let wa = self.w[j] * (k + s[MA_T12_COUNT + j]);
+            let r = self.wy[j] - wa;
+            sum += match criterion {
+                Criterion::Cf1 => r * r,
+                Criterion::L1 => r.abs(),
+                Criterion::Cf2 => pow23(r),
+                Criterion::M2 => {
+                    let e = ln_1p_recip(wa).0 - self.ly[j];
+                    e * e
+                }
+            };
+        }
+        BANDS as f64 * sum
+    }
 }
 
 impl Problem {
@@ -177,7 +221,49 @@ impl Problem {
         fresnel: FresnelCosine,
         bounds: Bounds,
     ) -> Self {
+        Self::build(measured, cf, fresnel, bounds, weights(), None)
+    }
+
+    /// The same problem under the SRA reading model `sra` (SCIENCE.md §5.1). The paper's flat
+    /// model leaves it as it is. The luminance model takes the SRA geometries out of the
+    /// per-band arrays (their weight there becomes 0, so every per-band solve runs over the 12
+    /// MA-T12 geometries only) and adds their luminance residuals, counted 31 times each, to
+    /// every cost ([`Lum`]).
+    pub fn with_sra(self, measured: &MeasuredBrdf, sra: SraReading) -> Self {
+        if sra.model == SraModel::Flat {
+            return self;
+        }
         let w = weights();
+        let spectral: [f64; G] = std::array::from_fn(|g| if g < MA_T12_COUNT { w[g] } else { 0.0 });
+        let c = sra.weights();
+        let ws: [f64; SRA_COUNT] = std::array::from_fn(|k| w[MA_T12_COUNT + k]);
+        let wy: [f64; SRA_COUNT] =
+            std::array::from_fn(|k| ws[k] * luminance_with(&c, &measured.values[MA_T12_COUNT + k]));
+        let lum = Lum {
+            c,
+            w: ws,
+            wy,
+            ly: wy.map(|x| ln_1p_recip(x).0),
+        };
+        Self::build(
+            measured,
+            self.cf,
+            self.fresnel,
+            self.bounds,
+            spectral,
+            Some(lum),
+        )
+    }
+
+    /// [`Problem::new`] with the weights `w` of the per-band (spectral) terms.
+    fn build(
+        measured: &MeasuredBrdf,
+        cf: CostFunction,
+        fresnel: FresnelCosine,
+        bounds: Bounds,
+        w: [f64; G],
+        lum: Option<Lum>,
+    ) -> Self {
         let w2 = w.map(|x| x * x);
         let mut p = Problem {
             cf,
@@ -195,6 +281,7 @@ impl Problem {
             c: [[0.0; G]; BANDS],
             sum_c: [0.0; BANDS],
             sum_cm: [0.0; BANDS],
+            lum,
         };
         for b in 0..BANDS {
             for g in 0..G {
@@ -242,12 +329,20 @@ impl Problem {
                 };
             }
         }
+        if let Some(lum) = &self.lum {
+            sum += lum.terms(self.cf.into(), kd, &s);
+        }
         (sum / TERMS as f64).sqrt()
     }
 
     /// The least value of `criterion` over kd for fixed (ks, α, μ); writes that kd (sr⁻¹,
     /// within the kd bounds) into `kd` and returns the value. With `self.cf.into()` as the
     /// criterion this is the fit's own cost.
+    ///
+    /// Under the luminance SRA model ([`Problem::with_sra`]) each band's kd is the exact
+    /// minimiser of that band's 12 MA-T12 terms, and the SRA luminance terms are added at that
+    /// kd: they couple all 31 bands through `K = Σ c_b kd_b`, which would end the band-by-band
+    /// solve, and they are 2 residuals against 372 that pin kd (SCIENCE.md §5.1).
     ///
     /// Where the CPU has AVX2 the same code is compiled for it (4 doubles a SIMD lane instead
     /// of 2): the per-band and per-geometry loops vectorise, the operations on each value are
@@ -339,6 +434,9 @@ impl Problem {
                     sum += f;
                 }
             }
+        }
+        if let Some(lum) = &self.lum {
+            sum += lum.terms(criterion, kd, &s);
         }
         (sum / TERMS as f64).sqrt()
     }
@@ -582,6 +680,49 @@ mod tests {
             let got = prob.full_cost(&p.kd, p.ks, p.alpha, p.ior);
             let want = cost(cf, &m, &a);
             assert!(((got - want) / want).abs() < 1e-13, "{cf}: {got} vs {want}");
+        }
+    }
+
+    /// Under the luminance SRA model the full cost and the profile are `cost_with`'s cost, and
+    /// the profile's kd is what the 12 MA-T12 geometries ask for band by band (the SRA
+    /// geometries carry no spectral terms any more: changing their measured spectrum at equal
+    /// luminance changes nothing).
+    #[test]
+    fn luminance_costs_agree_with_cost_with() {
+        use crate::cost::cost_with;
+        use crate::sra_reading::SraReading;
+        let (m, truth) = scan();
+        let m = synthetic::with_noise(&m, 0.02, 7);
+        let geos = SpecularGeometry::all();
+        let mut p = truth;
+        p.ks *= 1.2;
+        p.alpha *= 0.9;
+        let a = evaluate(&p, FresnelCosine::Incidence, &geos);
+        for cf in CostFunction::ALL {
+            let prob = Problem::new(&m, cf, FresnelCosine::Incidence, Bounds::default())
+                .with_sra(&m, SraReading::LUMINANCE);
+            let got = prob.full_cost(&p.kd, p.ks, p.alpha, p.ior);
+            let want = cost_with(cf, SraReading::LUMINANCE, &m, &a);
+            assert!(((got - want) / want).abs() < 1e-12, "{cf}: {got} vs {want}");
+            let mut kd = [0.0; BANDS];
+            let f = prob.profile(cf.into(), p.ks, p.alpha, p.ior, &mut kd);
+            let full = prob.full_cost(&kd, p.ks, p.alpha, p.ior);
+            assert!((f - full).abs() <= 1e-12 * f, "{cf}: {f} vs {full}");
+            // A coloured spectrum of the same luminance at the SRA geometries: same problem.
+            let mut m2 = m;
+            let c = SraReading::LUMINANCE.weights();
+            for g in MA_T12_COUNT..G {
+                let y = luminance_with(&c, &m.values[g]);
+                let tilt: Spectrum = std::array::from_fn(|b| 0.5 + b as f64 / 30.0);
+                let k = y / luminance_with(&c, &tilt);
+                m2.values[g] = tilt.map(|x| x * k);
+            }
+            let prob2 = Problem::new(&m2, cf, FresnelCosine::Incidence, Bounds::default())
+                .with_sra(&m2, SraReading::LUMINANCE);
+            let mut kd2 = [0.0; BANDS];
+            let f2 = prob2.profile(cf.into(), p.ks, p.alpha, p.ior, &mut kd2);
+            assert_eq!(kd, kd2, "{cf}");
+            assert!((f - f2).abs() <= 1e-12 * f, "{cf}: {f} vs {f2}");
         }
     }
 

@@ -3,6 +3,7 @@
 //! is its always-run miniature.
 
 use super::*;
+use crate::cost::cost;
 use crate::geometry::by_name;
 use crate::optimise::synthetic::{self, SyntheticCase};
 

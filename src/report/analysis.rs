@@ -8,12 +8,14 @@
 //! - The sign test pairs the ΔE00 of two cost functions per (sample, geometry): 14 pairs per
 //!   sample, ties dropped. `plus` counts pairs where the first cost function has the larger
 //!   ΔE00 (fits worse).
+//! - The specular luminance metric (SCIENCE.md §7.2) gets its own mean per cost function and
+//!   its own sign tests, on the paired |ΔL*| per (sample, SRA geometry): 2 pairs per sample.
 
 use crate::cost::CostFunction;
 use crate::evaluation::Evaluation;
 use crate::stats::{MeanCi, SignTest, mean_ci95, sign_test};
 
-use super::study::Study;
+use super::study::{DoneFit, Study};
 
 /// A sample left out of the comparison, and why.
 #[derive(Debug, Clone, PartialEq)]
@@ -32,7 +34,11 @@ pub struct CostSummary {
     /// Over all 14 geometries; `None` with fewer than two samples.
     pub all: Option<MeanCi>,
     pub diffuse: Option<MeanCi>,
+    /// The paper's specular metric: ΔE00 against the grey spectrum the SRA reading is spread
+    /// into.
     pub specular: Option<MeanCi>,
+    /// Each sample's mean specular |ΔL*| between model and measured luminance (SCIENCE.md §7.2).
+    pub specular_delta_l: Option<MeanCi>,
 }
 
 /// A sign test between two cost functions.
@@ -52,6 +58,8 @@ pub struct Analysis {
     pub excluded: Vec<Exclusion>,
     pub per_cost: Vec<CostSummary>,
     pub sign_tests: Vec<SignRow>,
+    /// Sign tests on the paired specular |ΔL*| per (sample, SRA geometry): 2 pairs a sample.
+    pub luminance_sign_tests: Vec<SignRow>,
 }
 
 impl Analysis {
@@ -76,12 +84,12 @@ impl Analysis {
                 });
             }
         }
-        let evaluation = |i: usize, c: CostFunction| -> &Evaluation {
-            &study.samples[i]
+        let done = |i: usize, c: CostFunction| -> &DoneFit {
+            study.samples[i]
                 .done(c)
                 .expect("included samples have every fit done")
-                .evaluation
         };
+        let evaluation = |i: usize, c: CostFunction| -> &Evaluation { &done(i, c).evaluation };
         let per_cost = cost_functions
             .iter()
             .map(|&c| {
@@ -95,10 +103,17 @@ impl Analysis {
                     all: ci(|e| e.all.mean),
                     diffuse: ci(|e| e.diffuse.mean),
                     specular: ci(|e| e.specular.mean),
+                    specular_delta_l: mean_ci95(
+                        &included
+                            .iter()
+                            .map(|&i| done(i, c).specular_delta_l.mean)
+                            .collect::<Vec<_>>(),
+                    ),
                 }
             })
             .collect();
         let mut sign_tests = Vec::new();
+        let mut luminance_sign_tests = Vec::new();
         for (k, &a) in cost_functions.iter().enumerate() {
             for &b in &cost_functions[k + 1..] {
                 let paired = |c: CostFunction| -> Vec<f64> {
@@ -112,6 +127,17 @@ impl Analysis {
                     b,
                     test: sign_test(&paired(a), &paired(b)),
                 });
+                let paired_l = |c: CostFunction| -> Vec<f64> {
+                    included
+                        .iter()
+                        .flat_map(|&i| done(i, c).specular_delta_l.per_geometry)
+                        .collect()
+                };
+                luminance_sign_tests.push(SignRow {
+                    a,
+                    b,
+                    test: sign_test(&paired_l(a), &paired_l(b)),
+                });
             }
         }
         Analysis {
@@ -120,6 +146,7 @@ impl Analysis {
             excluded,
             per_cost,
             sign_tests,
+            luminance_sign_tests,
         }
     }
 }
@@ -154,6 +181,11 @@ mod tests {
         assert_eq!(a.sign_tests.len(), 3);
         let t = a.sign_tests[0].test;
         assert_eq!(t.n + t.ties, 4 * 14);
+        // The luminance sign tests pair the 2 SRA geometries of each sample that takes part.
+        assert_eq!(a.luminance_sign_tests.len(), 3);
+        let t = a.luminance_sign_tests[0].test;
+        assert_eq!(t.n + t.ties, 4 * 2);
+        assert_eq!(a.per_cost[0].specular_delta_l.unwrap().n, 4);
     }
 
     #[test]

@@ -92,7 +92,7 @@ impl Figure {
     /// Whether the figure is drawn from the study's samples one by one (swatches, spectra,
     /// lightness panels, box plots), as opposed to its summary statistics (Fig. 12).
     pub fn per_sample(&self) -> bool {
-        !matches!(self.kind, Kind::MeanCi)
+        !matches!(self.kind, Kind::MeanCi | Kind::MeanDeltaL)
     }
 }
 
@@ -106,6 +106,9 @@ enum Kind {
     LightnessPerDetector(f64),
     BoxPlots,
     MeanCi,
+    LuminanceSpecular,
+    SpecularDeltaL,
+    MeanDeltaL,
 }
 
 fn methods(study: &Study) -> String {
@@ -159,6 +162,12 @@ pub fn figures(study: &Study) -> Vec<Figure> {
             kind: Kind::LightnessSpecular,
             size: (1000, 720),
         },
+        Figure {
+            stem: "fig06b-luminance-specular".into(),
+            caption: format!("Fig. 6b (luminance view of Fig. 6). CIELAB L* of the luminance at the two SRA geometries, measured (the reading) against estimated (the fitted model's luminance), per sample and cost function ({cost_list}), method {method}; luminance under {}. On the diagonal the fit reproduces what the SRA reads; this is the luminance metric, not the paper's ΔE00 against the grey spectrum.", instrument(study)),
+            kind: Kind::LuminanceSpecular,
+            size: (1000, 760),
+        },
     ];
     for &c in &costs {
         out.push(Figure {
@@ -197,20 +206,50 @@ pub fn figures(study: &Study) -> Vec<Figure> {
     out.push(Figure {
         stem: "fig11-delta-e-boxplots".into(),
         caption: format!(
-            "Fig. 11. ΔE00 between measured and estimated colour over the 14 geometries, per sample and cost function ({cost_list}), method {method}: box from first to third quartile, line at the median, whiskers to the smallest and largest value."
+            "Fig. 11. ΔE00 between measured and estimated colour over the 14 geometries, per sample and cost function ({cost_list}), method {method}: box from first to third quartile, line at the median, whiskers to the smallest and largest value. At the 2 SRA geometries this is the paper's metric, ΔE00 against the grey spectrum the reading is spread into; Fig. 11b shows the luminance metric."
         ),
         kind: Kind::BoxPlots,
         size: (1300, 700),
     });
     out.push(Figure {
+        stem: "fig11b-specular-delta-l".into(),
+        caption: format!(
+            "Fig. 11b (luminance view of Fig. 11). Specular |ΔL*| between the model's and the measured luminance at sra-20 (filled) and sra-60 (open), per sample and cost function ({cost_list}), method {method}; luminance under {}. The luminance metric, not the paper's ΔE00 against the grey spectrum that Fig. 11 includes at the SRA geometries.",
+            instrument(study)
+        ),
+        kind: Kind::SpecularDeltaL,
+        size: (1300, 700),
+    });
+    out.push(Figure {
         stem: "fig12-mean-delta-e".into(),
         caption: format!(
-            "Fig. 12. Mean ΔE00 over the samples that take part in the comparison, per cost function ({cost_list}), method {method}, over all 14 geometries and split into diffuse and specular; error bars are 95 % confidence intervals (Student t)."
+            "Fig. 12. Mean ΔE00 over the samples that take part in the comparison, per cost function ({cost_list}), method {method}, over all 14 geometries and split into diffuse and specular (the paper's specular metric, ΔE00 against the grey spectrum; Fig. 12b shows the luminance metric); error bars are 95 % confidence intervals (Student t)."
         ),
         kind: Kind::MeanCi,
         size: (1000, 700),
     });
+    out.push(Figure {
+        stem: "fig12b-mean-specular-delta-l".into(),
+        caption: format!(
+            "Fig. 12b (luminance view of Fig. 12). Mean over the samples that take part of each sample's mean specular |ΔL*| (model vs measured luminance at the SRA geometries, under {}), per cost function ({cost_list}), method {method}; error bars are 95 % confidence intervals (Student t). Fig. 12's specular group is the paper's ΔE00 against the grey spectrum.",
+            instrument(study)
+        ),
+        kind: Kind::MeanDeltaL,
+        size: (1000, 700),
+    });
     out
+}
+
+/// The SRA instrument of the study's luminance figures, e.g. "CIE illuminant C, 2° observer".
+fn instrument(study: &Study) -> String {
+    let d = study
+        .samples
+        .iter()
+        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+        .map(|d| d.sra)
+        .next()
+        .unwrap_or_default();
+    format!("CIE illuminant {}, {}° observer", d.illuminant, d.observer)
 }
 
 /// Draws `fig` as `<dir>/<stem>.png` and `.svg`; returns both paths.
@@ -256,6 +295,16 @@ fn draw<DB: DrawingBackend>(
         Kind::LightnessPerDetector(d) => lightness_per_detector(root, study, *d),
         Kind::BoxPlots => box_plots(root, study, analysis),
         Kind::MeanCi => mean_ci(root, study, analysis),
+        Kind::LuminanceSpecular => luminance_specular(root, study),
+        Kind::SpecularDeltaL => specular_delta_l_points(root, study),
+        Kind::MeanDeltaL => mean_ci_groups(
+            root,
+            study,
+            analysis,
+            "Fig. 12b  Mean specular |ΔL*| per cost function, luminance metric, 95 % CI",
+            "mean specular |ΔL*| over samples",
+            &[("specular |ΔL*| (SRA)", |s| s.specular_delta_l, PALETTE[6])],
+        ),
     }
 }
 
@@ -814,18 +863,38 @@ fn box_plots<DB: DrawingBackend>(
     Ok(())
 }
 
+type Pick = fn(&super::analysis::CostSummary) -> Option<crate::stats::MeanCi>;
+
 fn mean_ci<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     study: &Study,
     analysis: &Analysis,
 ) -> DrawResult<DB> {
+    let n_in = analysis.included.len();
+    mean_ci_groups(
+        root,
+        study,
+        analysis,
+        &format!("Fig. 12  Mean ΔE00 per cost function, 95 % CI (n = {n_in} samples)"),
+        "mean ΔE00 over samples",
+        &[
+            ("all 14 geometries", |s| s.all, PALETTE[0]),
+            ("diffuse (MA-T12)", |s| s.diffuse, PALETTE[5]),
+            ("specular (SRA)", |s| s.specular, PALETTE[6]),
+        ],
+    )
+}
+
+/// Means with their 95 % CI per cost function, one coloured group per `groups` entry.
+fn mean_ci_groups<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    study: &Study,
+    analysis: &Analysis,
+    title: &str,
+    y_desc: &str,
+    groups: &[(&str, Pick, RGBColor)],
+) -> DrawResult<DB> {
     let costs = &analysis.cost_functions;
-    type Pick = fn(&super::analysis::CostSummary) -> Option<crate::stats::MeanCi>;
-    let groups: [(&str, Pick, RGBColor); 3] = [
-        ("all 14 geometries", |s| s.all, PALETTE[0]),
-        ("diffuse (MA-T12)", |s| s.diffuse, PALETTE[5]),
-        ("specular (SRA)", |s| s.specular, PALETTE[6]),
-    ];
     let hi = analysis
         .per_cost
         .iter()
@@ -837,12 +906,8 @@ fn mean_ci<DB: DrawingBackend>(
         .iter()
         .map(|c| format!("{c} ({})", study.method_of(*c)))
         .collect();
-    let n_in = analysis.included.len();
     let mut chart = ChartBuilder::on(root)
-        .caption(
-            format!("Fig. 12  Mean ΔE00 per cost function, 95 % CI (n = {n_in} samples)"),
-            font(24),
-        )
+        .caption(title, font(24))
         .margin(20)
         .x_label_area_size(60)
         .y_label_area_size(70)
@@ -860,12 +925,13 @@ fn mean_ci<DB: DrawingBackend>(
             }
         })
         .x_desc("cost function (method)")
-        .y_desc("mean ΔE00 over samples")
+        .y_desc(y_desc)
         .label_style(font(15))
         .axis_desc_style(font(17))
         .draw()?;
+    let centre = (groups.len() as f64 - 1.0) / 2.0;
     for (k, (label, pick, col)) in groups.iter().enumerate() {
-        let offset = (k as f64 - 1.0) * 0.2;
+        let offset = (k as f64 - centre) * 0.2;
         let pts: Vec<(f64, crate::stats::MeanCi)> = analysis
             .per_cost
             .iter()
@@ -882,6 +948,149 @@ fn mean_ci<DB: DrawingBackend>(
         chart.draw_series(
             pts.iter()
                 .map(|(x, ci)| Circle::new((*x, ci.mean), 6, col.filled())),
+        )?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(font(15))
+        .draw()?;
+    Ok(())
+}
+
+/// Fig. 6b: L* of the luminance at the SRA geometries, measured against estimated.
+fn luminance_specular<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    study: &Study,
+) -> DrawResult<DB> {
+    let costs = study.cost_functions();
+    // (cost, measured L*, estimated L*) at every SRA geometry of every finished fit.
+    let mut pts: Vec<(CostFunction, f64, f64)> = Vec::new();
+    for s in &study.samples {
+        for &c in &costs {
+            let Some(d) = s.done(c) else { continue };
+            for g in GEOMETRIES.iter().filter(|g| g.device == Device::Sra) {
+                pts.push((
+                    c,
+                    d.sra.lightness(&s.measured.values[g.index]),
+                    d.sra.lightness(&d.estimated[g.index]),
+                ));
+            }
+        }
+    }
+    let (lo, hi) = padded(pts.iter().flat_map(|p| [p.1, p.2]));
+    let mut chart = ChartBuilder::on(root)
+        .caption(
+            "Fig. 6b  Specular luminance L*: measured (SRA reading) vs estimated",
+            font(24),
+        )
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(70)
+        .build_cartesian_2d(lo..hi, lo..hi)?;
+    chart
+        .configure_mesh()
+        .x_desc("measured L* of the SRA reading")
+        .y_desc("estimated L* of the model's luminance")
+        .label_style(font(15))
+        .axis_desc_style(font(17))
+        .draw()?;
+    chart.draw_series(std::iter::once(PathElement::new(
+        vec![(lo, lo), (hi, hi)],
+        BLACK.mix(0.5).stroke_width(1),
+    )))?;
+    for &c in &costs {
+        let col = cost_colour(c);
+        chart
+            .draw_series(
+                pts.iter()
+                    .filter(|p| p.0 == c)
+                    .map(|p| Circle::new((p.1, p.2), 5, col.filled())),
+            )?
+            .label(format!("{c} ({})", study.method_of(c)))
+            .legend(move |(x, y)| Circle::new((x + 8, y), 5, col.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(font(15))
+        .draw()?;
+    Ok(())
+}
+
+/// Fig. 11b: specular |ΔL*| at sra-20 (filled) and sra-60 (open) per sample and cost function.
+fn specular_delta_l_points<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    study: &Study,
+) -> DrawResult<DB> {
+    let costs = study.cost_functions();
+    let n = study.samples.len();
+    let hi = study
+        .samples
+        .iter()
+        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+        .flat_map(|d| d.specular_delta_l.per_geometry)
+        .fold(0.0f64, f64::max)
+        * 1.3;
+    let hi = if hi > 0.0 { hi } else { 1.0 };
+    let names: Vec<String> = study.samples.iter().map(|s| s.name.clone()).collect();
+    let mut chart = ChartBuilder::on(root)
+        .caption(
+            format!(
+                "Fig. 11b  Specular |ΔL*| (luminance) per sample and cost function (method {})",
+                methods(study)
+            ),
+            font(24),
+        )
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(70)
+        .build_cartesian_2d(-0.5f64..(n as f64 - 0.5), 0f64..hi)?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(n.max(1))
+        .x_label_formatter(&|x| {
+            let i = x.round();
+            if (x - i).abs() < 1e-6 && i >= 0.0 {
+                names.get(i as usize).cloned().unwrap_or_default()
+            } else {
+                String::new()
+            }
+        })
+        .x_desc("sample")
+        .y_desc("|ΔL*| at the SRA geometries")
+        .label_style(font(14))
+        .axis_desc_style(font(17))
+        .draw()?;
+    let m = costs.len().max(1) as f64;
+    let width = 0.7 / m;
+    for (k, &c) in costs.iter().enumerate() {
+        let col = cost_colour(c);
+        let offset = (k as f64 - (m - 1.0) / 2.0) * width;
+        let done: Vec<(f64, [f64; 2])> = study
+            .samples
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| {
+                s.done(c)
+                    .map(|d| (i as f64 + offset, d.specular_delta_l.per_geometry))
+            })
+            .collect();
+        chart
+            .draw_series(
+                done.iter()
+                    .map(|(x, v)| Circle::new((*x - width * 0.15, v[0]), 5, col.filled())),
+            )?
+            .label(format!("{c} ({})", study.method_of(c)))
+            .legend(move |(x, y)| Circle::new((x + 8, y), 5, col.filled()));
+        chart.draw_series(
+            done.iter()
+                .map(|(x, v)| Circle::new((*x + width * 0.15, v[1]), 5, col.stroke_width(2))),
         )?;
     }
     chart

@@ -121,14 +121,27 @@ fn fit_state_with(
                 .get("fresnel")
                 .and_then(|v| serde_json::from_value(v.clone()).ok())
                 .unwrap_or_default();
+            // The SRA reading model is in the settings (absent: the paper's flat model).
+            let sra: crate::sra_reading::SraReading = match run.settings.get("sra") {
+                None => Default::default(),
+                Some(v) => {
+                    serde_json::from_value(v.clone()).map_err(|e| LoadError::Inconsistent {
+                        scan,
+                        message: format!("fit run {}: settings: sra: {e}", run.id),
+                    })?
+                }
+            };
             // The colorimetry and the intervals stored with the fit (migration 0011).
-            FitState::Done(Box::new(DoneFit::from_params_with(
-                measured,
-                params,
-                fresnel,
-                extras.colorimetry.unwrap_or_default(),
-                extras.uncertainty.clone(),
-            )))
+            FitState::Done(Box::new(
+                DoneFit::from_params_with(
+                    measured,
+                    params,
+                    fresnel,
+                    extras.colorimetry.unwrap_or_default(),
+                    extras.uncertainty.clone(),
+                )
+                .with_sra(measured, sra),
+            ))
         }
         FitStatus::Failed => FitState::Failed {
             reason: run

@@ -210,8 +210,8 @@ mod tests {
         let mut steps = Vec::new();
         let files =
             write_report(&study, dir.path(), &mut |s, _, _| steps.push(s.to_string())).unwrap();
-        // 4, 5, 6, 7×3, 8×3, 9, 10, 11, 12.
-        assert_eq!(files.figures.len(), 3 + 3 + 3 + 4);
+        // 4, 5, 6, 6b, 7×3, 8×3, 9, 10, 11, 11b, 12, 12b.
+        assert_eq!(files.figures.len(), 4 + 3 + 3 + 6);
         for [png, svg] in &files.figures {
             let bytes = std::fs::read(png).unwrap();
             assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", png.display());
@@ -230,6 +230,22 @@ mod tests {
             "{md}"
         );
         assert!(md.contains("![fig12-mean-delta-e](fig12-mean-delta-e.png)"));
+        // The luminance views and tables, each saying which specular metric it shows.
+        for stem in [
+            "fig06b-luminance-specular",
+            "fig11b-specular-delta-l",
+            "fig12b-mean-specular-delta-l",
+        ] {
+            assert!(md.contains(&format!("![{stem}]({stem}.png)")), "{stem}");
+        }
+        assert!(md.contains("Table 6. Specular |ΔL*|"), "{md}");
+        assert!(
+            md.contains("| cf1 vs cf2 | separable / separable | 4 |"),
+            "{md}"
+        );
+        assert!(md.contains(
+            "ΔE00 against the grey spectrum the SRA reading is spread into (the paper's)"
+        ));
         let html = std::fs::read_to_string(&files.html).unwrap();
         assert!(html.contains("<img src=\"fig04-measured-swatches.png\""));
         assert!(html.contains("<td>T.Manzana green</td>"));
@@ -251,8 +267,8 @@ mod tests {
             max_sample_figures: 2,
         };
         let files = write_report_with(&study, dir.path(), &opts, &mut |_, _, _| {}).unwrap();
-        // 4, 5, 6, 7×3, 8×2 (not 3), 9, 10, 11, 12.
-        assert_eq!(files.figures.len(), 3 + 3 + 2 + 4);
+        // 4, 5, 6, 6b, 7×3, 8×2 (not 3), 9, 10, 11, 11b, 12, 12b.
+        assert_eq!(files.figures.len(), 4 + 3 + 2 + 6);
         assert_eq!(files.previews.len(), 2);
         let md = std::fs::read_to_string(&files.markdown).unwrap();
         assert!(md.contains("show the first 2 of the 3 samples"), "{md}");

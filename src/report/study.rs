@@ -18,6 +18,7 @@ use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
 use crate::processing::{MeasuredBrdf, Scale, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
+use crate::sra_reading::{SpecularDeltaL, SraReading, specular_delta_l};
 use crate::store::Provenance;
 use crate::uncertainty::Uncertainty;
 
@@ -98,6 +99,11 @@ pub struct DoneFit {
     pub colorimetry: Colorimetry,
     /// The bootstrap intervals, when they were computed (SCIENCE.md §10).
     pub uncertainty: Option<Uncertainty>,
+    /// The SRA reading model the fit's cost used (SCIENCE.md §5.1).
+    pub sra: SraReading,
+    /// |ΔL*| between model and measured luminance at the SRA geometries, under the
+    /// instrument of `sra` (SCIENCE.md §7.2).
+    pub specular_delta_l: SpecularDeltaL,
 }
 
 impl DoneFit {
@@ -117,6 +123,7 @@ impl DoneFit {
     ) -> DoneFit {
         let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
         let evaluation = evaluate_with(&measured.values, &estimated, colorimetry);
+        let sra = SraReading::default();
         DoneFit {
             params,
             fresnel,
@@ -124,7 +131,16 @@ impl DoneFit {
             evaluation,
             colorimetry,
             uncertainty,
+            sra,
+            specular_delta_l: specular_delta_l(&measured.values, &estimated, sra),
         }
+    }
+
+    /// The same fit made with the SRA reading model `sra` (its |ΔL*| under that instrument).
+    pub fn with_sra(mut self, measured: &MeasuredBrdf, sra: SraReading) -> DoneFit {
+        self.sra = sra;
+        self.specular_delta_l = specular_delta_l(&measured.values, &self.estimated, sra);
+        self
     }
 }
 
@@ -231,13 +247,16 @@ impl Study {
                     .map(|r| FitStudy {
                         cost: r.request.settings.cost,
                         method: r.outcome.method.to_string(),
-                        state: FitState::Done(Box::new(DoneFit::from_params_with(
-                            &r.measured,
-                            r.outcome.params,
-                            r.request.settings.fresnel,
-                            r.request.colorimetry,
-                            r.uncertainty.clone(),
-                        ))),
+                        state: FitState::Done(Box::new(
+                            DoneFit::from_params_with(
+                                &r.measured,
+                                r.outcome.params,
+                                r.request.settings.fresnel,
+                                r.request.colorimetry,
+                                r.uncertainty.clone(),
+                            )
+                            .with_sra(&r.measured, r.request.settings.sra),
+                        )),
                     })
                     .collect();
                 fits.sort_by_key(|f| CostFunction::ALL.iter().position(|c| *c == f.cost));

@@ -119,7 +119,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
         .collect();
     b.push(Block::Table {
         caption: format!(
-            "Table 1. Mean ΔE00 between measured and estimated colour per sample: over all 14 geometries, the 12 diffuse (MA-T12) and the 2 specular (SRA) ones, and the maximum; per cost function ({cost_list}), method {methods}."
+            "Table 1. Mean ΔE00 between measured and estimated colour per sample: over all 14 geometries, the 12 diffuse (MA-T12) and the 2 specular (SRA) ones, and the maximum; per cost function ({cost_list}), method {methods}. Specular metric: ΔE00 against the grey spectrum the SRA reading is spread into (the paper's); Table 6 gives the luminance metric."
         ),
         head,
         rows,
@@ -129,7 +129,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     ));
     b.push(Block::Table {
         caption: format!(
-            "Table 2. Mean over the {} samples that take part of each sample's mean ΔE00, ± half-width [low, high] of the 95 % confidence interval (Student t, n − 1 degrees of freedom).",
+            "Table 2. Mean over the {} samples that take part of each sample's mean ΔE00, ± half-width [low, high] of the 95 % confidence interval (Student t, n − 1 degrees of freedom). Specular: the paper's ΔE00 against the grey spectrum; Table 7 gives the luminance metric.",
             analysis.included.len()
         ),
         head: ["cost function", "method", "n", "all geometries", "diffuse (MA-T12)", "specular (SRA)"]
@@ -152,7 +152,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     });
     b.push(Block::Heading("Sign tests between cost functions".into()));
     b.push(Block::Table {
-        caption: "Table 3. Exact two-sided sign test on the paired ΔE00 of two cost functions per (sample, geometry) of the samples that take part, ties dropped: n pairs, \"A worse\" where the first has the larger ΔE00, p = min(1, 2·P(X ≤ min(k, n − k))), X ~ Bin(n, ½).".into(),
+        caption: "Table 3. Exact two-sided sign test on the paired ΔE00 of two cost functions per (sample, geometry) of the samples that take part (at the SRA geometries the paper's ΔE00 against the grey spectrum; Table 8 tests the luminance metric), ties dropped: n pairs, \"A worse\" where the first has the larger ΔE00, p = min(1, 2·P(X ≤ min(k, n − k))), X ~ Bin(n, ½).".into(),
         head: ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"]
             .map(String::from)
             .to_vec(),
@@ -249,6 +249,111 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             rows,
         });
     }
+    // The specular geometries judged by luminance (SCIENCE.md §7.2), beside the paper's ΔE00.
+    let mut sras: Vec<String> = Vec::new();
+    for d in study
+        .samples
+        .iter()
+        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+    {
+        let text = d.sra.to_string();
+        if !sras.contains(&text) {
+            sras.push(text);
+        }
+    }
+    let instrument = study
+        .samples
+        .iter()
+        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+        .map(|d| {
+            format!(
+                "CIE illuminant {}, {}° observer",
+                d.sra.illuminant, d.sra.observer
+            )
+        })
+        .next()
+        .unwrap_or_else(|| "CIE illuminant C, 2° observer".into());
+    b.push(Block::Heading(
+        "Specular geometries: luminance |ΔL*| (not the paper's metric)".into(),
+    ));
+    b.push(Block::Para(format!(
+        "The SRA reads one achromatic number per geometry. The paper's specular metric, the \"specular\" columns of Tables 1 and 2 and the sign tests of Table 3, is ΔE00 against the grey spectrum that number is spread into; Tables 6–8 judge the same fits by |ΔL*| between the model's luminance and the measured one ({instrument}; SCIENCE.md §7.2). SRA reading model of the fits' cost: {} (SCIENCE.md §5.1).",
+        if sras.is_empty() { "none".to_string() } else { sras.join(", ") }
+    )));
+    let mut head = vec!["sample".to_string()];
+    for c in costs {
+        for part in ["|ΔL*| sra-20", "|ΔL*| sra-60", "ΔE00 (paper)"] {
+            head.push(format!("{c} {part}"));
+        }
+    }
+    let rows = study
+        .samples
+        .iter()
+        .map(|s| {
+            let mut row = vec![s.name.clone()];
+            for &c in costs {
+                match s.done(c) {
+                    Some(d) => {
+                        let l = &d.specular_delta_l;
+                        row.push(format!("{:.3}", l.per_geometry[0]));
+                        row.push(format!("{:.3}", l.per_geometry[1]));
+                        row.push(format!("{:.3}", d.evaluation.specular.mean));
+                    }
+                    None => row.extend(["no result".into(), "".into(), "".into()]),
+                }
+            }
+            row
+        })
+        .collect();
+    b.push(Block::Table {
+        caption: format!(
+            "Table 6. Specular |ΔL*| between the model's and the measured luminance at sra-20 and sra-60 per sample and cost function ({cost_list}), method {methods}; beside it the paper's specular metric (mean ΔE00 against the grey spectrum, as in Table 1)."
+        ),
+        head,
+        rows,
+    });
+    b.push(Block::Table {
+        caption: format!(
+            "Table 7. Mean over the {} samples that take part of each sample's mean specular |ΔL*| (luminance metric), ± half-width [low, high] of the 95 % confidence interval (Student t), beside the paper's specular ΔE00 of Table 2.",
+            analysis.included.len()
+        ),
+        head: ["cost function", "method", "specular |ΔL*|", "specular ΔE00 (paper)"]
+            .map(String::from)
+            .to_vec(),
+        rows: analysis
+            .per_cost
+            .iter()
+            .map(|s| {
+                vec![
+                    s.cost.to_string(),
+                    s.method.clone(),
+                    ci(&s.specular_delta_l),
+                    ci(&s.specular),
+                ]
+            })
+            .collect(),
+    });
+    b.push(Block::Table {
+        caption: "Table 8. Exact two-sided sign test on the paired specular |ΔL*| (luminance metric) of two cost functions per (sample, SRA geometry) of the samples that take part, ties dropped: n pairs, \"A worse\" where the first has the larger |ΔL*|; p as in Table 3.".into(),
+        head: ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"]
+            .map(String::from)
+            .to_vec(),
+        rows: analysis
+            .luminance_sign_tests
+            .iter()
+            .map(|r| {
+                vec![
+                    format!("{} vs {}", r.a, r.b),
+                    format!("{} / {}", study.method_of(r.a), study.method_of(r.b)),
+                    r.test.n.to_string(),
+                    r.test.plus.to_string(),
+                    r.test.minus.to_string(),
+                    r.test.ties.to_string(),
+                    format_p(r.test.p),
+                ]
+            })
+            .collect(),
+    });
     b.push(Block::Heading("Samples left out".into()));
     if analysis.excluded.is_empty() {
         b.push(Block::Para(

@@ -68,6 +68,8 @@ pub struct ServiceSettings {
     pub max_concurrent_fits: usize,
     /// How the SRA readings become spectra.
     pub specular: SpecularStrategy,
+    /// How an SRA reading enters the cost (`[fit] sra`; a refit may ask for another).
+    pub sra: crate::sra_reading::SraModel,
     /// The reference tile's calibrated reflectance (`[reference] reflectance`), recorded with
     /// every reference set measured; `None`: results relative to the tile.
     pub reference_reflectance: Option<crate::spectral::Spectrum>,
@@ -92,6 +94,7 @@ impl ServiceSettings {
             seed: config.fit.seed,
             max_concurrent_fits: config.fit.max_concurrent_fits.get(),
             specular: config.fit.specular,
+            sra: config.fit.sra,
             reference_reflectance: config.reference.reflectance,
             shutdown_grace: Duration::from_secs(10),
             sync: config.sync.url.as_ref().map(|url| {
@@ -111,6 +114,7 @@ impl ServiceSettings {
             method,
             cost,
             seed,
+            sra: crate::sra_reading::SraReading::default().with_model(self.sra),
             ..Settings::default()
         }
     }
@@ -298,6 +302,8 @@ pub struct RefitRequest {
     pub method: Option<Method>,
     /// Seed; `None` = the configured one.
     pub seed: Option<u64>,
+    /// SRA reading model (`flat` or `luminance`); `None` = the configured one (`[fit] sra`).
+    pub sra: Option<crate::sra_reading::SraModel>,
     /// Fit even though the scan's reference is older than the configured limit.
     pub allow_stale_reference: bool,
 }

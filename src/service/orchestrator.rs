@@ -632,7 +632,10 @@ impl Service {
         let seed = request.seed.unwrap_or(settings.seed);
         let mut ids = Vec::with_capacity(costs.len());
         for cost in costs {
-            let fit_settings = settings.fit_settings(cost, method, seed);
+            let mut fit_settings = settings.fit_settings(cost, method, seed);
+            if let Some(model) = request.sra {
+                fit_settings.sra = fit_settings.sra.with_model(model);
+            }
             let new = NewFit {
                 method: method.name().to_string(),
                 cost_function: cost,

@@ -138,6 +138,51 @@ fn settings_follow_the_configuration() {
         (f.cost, f.method, f.seed),
         (CostFunction::Cf1, Method::Paper, 4)
     );
+    assert_eq!(f.sra, crate::sra_reading::SraReading::FLAT);
+    config.fit.sra = crate::sra_reading::SraModel::Luminance;
+    let f = ServiceSettings::from_config(&config).fit_settings(CostFunction::Cf1, Method::Paper, 4);
+    assert_eq!(f.sra, crate::sra_reading::SraReading::LUMINANCE);
+}
+
+/// A refit may ask for the luminance SRA model (`POST /scans/{id}/refit` `{"sra": …}`): the fit
+/// records it in its settings and its detail, and on a scan whose SRA reads the luminance it
+/// reproduces the readings' lightness.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_refit_can_ask_for_the_luminance_sra_model() {
+    use crate::sra_reading::{SraModel, SraReading};
+    use crate::synth::{SraResponse, SynthOptions, paper_samples, synth_scan};
+    let s = service().await;
+    let opts = SynthOptions {
+        sra_response: SraResponse::Luminance,
+        ..SynthOptions::default()
+    };
+    let file = synth_scan(&paper_samples()[2], &opts).unwrap();
+    let (scan, fits) = s.import_scan(&file).await.unwrap();
+    assert_eq!(fits.len(), 3);
+    let request: RefitRequest =
+        serde_json::from_str(r#"{"cost_functions": ["cf2"], "sra": "luminance"}"#).unwrap();
+    assert_eq!(request.sra, Some(SraModel::Luminance));
+    let refit = s.refit(scan, &request).await.unwrap();
+    assert!(
+        s.wait_settled(scan, Duration::from_secs(300))
+            .await
+            .unwrap()
+    );
+    let flat = s.store().fit_detail(fits[0]).await.unwrap();
+    assert_eq!(flat.sra, SraReading::FLAT);
+    assert!(flat.run.settings.get("sra").is_none());
+    let d = s.store().fit_detail(refit[0]).await.unwrap();
+    assert_eq!(
+        d.run.status,
+        crate::store::FitStatus::Done,
+        "{:?}",
+        d.run.error
+    );
+    assert_eq!(d.sra, SraReading::LUMINANCE);
+    assert_eq!(d.run.settings["sra"]["model"], "luminance");
+    let dl = d.specular_delta_l.unwrap();
+    assert!(dl.mean < 0.01, "{dl:?}");
+    s.shutdown().await;
 }
 
 #[tokio::test]

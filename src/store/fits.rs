@@ -6,6 +6,8 @@
 
 use crate::colour::Colorimetry;
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
+use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
+use crate::sra_reading::{SpecularDeltaL, SraReading, specular_delta_l};
 use crate::uncertainty::Uncertainty;
 
 use super::codec;
@@ -131,8 +133,8 @@ impl Store {
         }
         let id: Option<i64> = sqlx::query_scalar(
             "INSERT INTO fit_runs (scan_id, processed_id, method, cost_function, settings_json,
-                                   seed, status, queued_at_ms)
-             SELECT p.scan_id, p.id, $2, $3, $4, $5, 'queued', $6
+                                   seed, status, queued_at_ms, sra)
+             SELECT p.scan_id, p.id, $2, $3, $4, $5, 'queued', $6, $7
              FROM processed p WHERE p.id = $1
              RETURNING id",
         )
@@ -142,6 +144,7 @@ impl Store {
         .bind(to_json("fit settings", &fit.settings)?)
         .bind(fit.seed.to_string())
         .bind(now_ms())
+        .bind(fit.sra_model()?.name())
         .fetch_optional(&self.writer)
         .await?;
         id.map(FitRunId).ok_or(StoreError::NotFound {
@@ -450,11 +453,48 @@ impl Store {
                 },
             })
         };
+        let (sra, specular_delta_l) = self.specular_luminance(&run).await?;
         Ok(FitDetail {
             run,
             evaluation,
             colorimetry,
             uncertainty,
+            sra,
+            specular_delta_l,
         })
+    }
+
+    /// A fit's SRA reading model (its settings' `sra`, the paper's flat model when absent) and,
+    /// when it is done, the |ΔL*| of its model against its processed BRDF at the SRA geometries.
+    async fn specular_luminance(
+        &self,
+        run: &FitRun,
+    ) -> Result<(SraReading, Option<SpecularDeltaL>), StoreError> {
+        let sra: SraReading = match run.settings.get("sra") {
+            None => SraReading::default(),
+            Some(v) => serde_json::from_value(v.clone()).map_err(|e| StoreError::Corrupt {
+                table: "fit_runs",
+                id: run.id.0,
+                detail: format!("settings_json: sra: {e}"),
+            })?,
+        };
+        let Some(params) = run
+            .result
+            .as_ref()
+            .and_then(|r| serde_json::from_value::<Params>(r.params.clone()).ok())
+        else {
+            return Ok((sra, None));
+        };
+        let fresnel: FresnelCosine = run
+            .settings
+            .get("fresnel")
+            .and_then(|v| serde_json::from_value(v.clone()).ok())
+            .unwrap_or_default();
+        let measured = self.processed(run.processed).await?.brdf;
+        let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
+        Ok((
+            sra,
+            Some(specular_delta_l(&measured.values, &estimated, sra)),
+        ))
     }
 }

@@ -423,6 +423,22 @@ pub struct NewFit {
     pub seed: u64,
 }
 
+impl NewFit {
+    /// The SRA reading model its settings ask for (key `sra.model`; the paper's flat model when
+    /// absent), recorded in `fit_runs.sra` (migration 0015).
+    pub fn sra_model(&self) -> Result<crate::sra_reading::SraModel, super::StoreError> {
+        match self.settings.get("sra") {
+            None => Ok(crate::sra_reading::SraModel::default()),
+            Some(v) => serde_json::from_value::<crate::sra_reading::SraReading>(v.clone())
+                .map(|r| r.model)
+                .map_err(|source| super::StoreError::Json {
+                    field: "fit settings: sra",
+                    source,
+                }),
+        }
+    }
+}
+
 /// What a finished fit produced.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FitResult {
@@ -509,6 +525,11 @@ pub struct FitDetail {
     pub colorimetry: Option<crate::colour::Colorimetry>,
     /// The bootstrap intervals, once computed (SCIENCE.md §10).
     pub uncertainty: Option<crate::uncertainty::Uncertainty>,
+    /// The SRA reading model of the fit's cost, from its settings (SCIENCE.md §5.1).
+    pub sra: crate::sra_reading::SraReading,
+    /// Specular |ΔL*| between model and measured luminance (SCIENCE.md §7.2), for a done fit;
+    /// derived from the stored processed BRDF and parameters, as the report derives it.
+    pub specular_delta_l: Option<crate::sra_reading::SpecularDeltaL>,
 }
 
 #[cfg(test)]

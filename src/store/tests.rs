@@ -697,6 +697,23 @@ async fn processed_scans_and_fit_runs() {
             .collect::<Vec<_>>(),
         [f1, f2, f3]
     );
+    // The SRA reading model of each fit (migration 0015): from its settings, flat by default.
+    let sra_of = |id: FitRunId| {
+        sqlx::query_scalar::<_, String>("SELECT sra FROM fit_runs WHERE id = $1")
+            .bind(id.0)
+            .fetch_one(&store.reader)
+    };
+    assert_eq!(sra_of(f1).await.unwrap(), "flat");
+    let mut lum = new_fit(CostFunction::Cf2);
+    lum.settings["sra"] = serde_json::json!({"model": "luminance"});
+    assert_eq!(
+        lum.sra_model().unwrap(),
+        crate::sra_reading::SraModel::Luminance
+    );
+    let mut bad = new_fit(CostFunction::Cf2);
+    bad.settings["sra"] = serde_json::json!({"model": "grey"});
+    let e = store.queue_fit(p, &bad).await.unwrap_err().to_string();
+    assert!(e.contains("sra"), "{e}");
     let outcome = FitResult {
         cost: 0.012_345_678_901_234_5,
         params: serde_json::json!({"kd": vec![0.5; BANDS], "ks": 0.3, "alpha": 0.2, "ior": 1.5}),

@@ -169,6 +169,8 @@ pub static TABLES: [Table; 10] = [
             ("finished_at_ms", Int),
             // Migration 0011 (central 0002): the bootstrap intervals.
             ("uncertainty_json", Text),
+            // Migration 0015 (central 0003): the SRA reading model.
+            ("sra", Text),
         ],
     },
     Table {
