@@ -120,7 +120,18 @@ fn doctor(config: &Path, uid: Option<u32>) -> Doctor {
             // As root, std also drops the supplementary groups.
             cmd.uid(uid).gid(uid);
         }
-        cmd.output().expect("brdfd doctor runs")
+        // The copy was just written: while another test thread forks, its child briefly holds
+        // the copy's write descriptor (until it execs), and exec fails with ETXTBSY. Retry.
+        let mut tries = 0;
+        loop {
+            match cmd.output() {
+                Err(e) if e.kind() == std::io::ErrorKind::ExecutableFileBusy && tries < 100 => {
+                    tries += 1;
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                }
+                r => break r.expect("brdfd doctor runs"),
+            }
+        }
     };
     let json = run(true);
     let text = run(false);
