@@ -23,6 +23,10 @@ pub struct RefitArgs {
     /// Seed; default: the configured one.
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
+    /// How the SRA's readings enter the fit: `flat` (the paper's grey spectrum) or `luminance`
+    /// (the model's luminous reflectance; SCIENCE.md §5.1); default: the configured one.
+    #[arg(long, value_name = "flat|luminance")]
+    pub sra: Option<crate::sra_reading::SraModel>,
     /// Fit even though the scan's reference is older than the configured limit.
     #[arg(long)]
     pub allow_stale_reference: bool,
@@ -40,6 +44,7 @@ pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
         "cost_functions": args.cost,
         "method": args.method,
         "seed": args.seed,
+        "sra": args.sra,
         "allow_stale_reference": args.allow_stale_reference,
     });
     let v = client.post(&format!("/scans/{}/refit", args.scan), Some(&body))?;

@@ -161,6 +161,26 @@ fn print_fit_extras(fit: &Value) {
             s(c, "weighting")
         );
     }
+    let sra = &fit["sra"];
+    if sra.is_object() {
+        let dl = &fit["specular_delta_l"];
+        let delta_l = if dl.is_object() {
+            format!(
+                "; specular |ΔL*| {:.3} (sra-20 {:.3}, sra-60 {:.3})",
+                dl["mean"].as_f64().unwrap_or(f64::NAN),
+                dl["per_geometry"][0].as_f64().unwrap_or(f64::NAN),
+                dl["per_geometry"][1].as_f64().unwrap_or(f64::NAN)
+            )
+        } else {
+            String::new()
+        };
+        println!(
+            "       SRA reading model {} (illuminant {}, {}° observer){delta_l}",
+            s(sra, "model"),
+            s(sra, "illuminant"),
+            s(sra, "observer")
+        );
+    }
     let u = &fit["uncertainty"];
     if u.is_object() {
         let iv = |k: &str| {

@@ -512,6 +512,8 @@ async function renderResult(id) {
   const inst = (p, name) => p ? `${name}: ${p.model} · serial ${p.serial} · firmware ${p.firmware}${p.simulated ? " · SIMULATED" : ""}` : `${name}: unknown`;
   const fitsDone = (sw && sw.fits) || [];
   const best = fitsDone.length ? fitsDone.reduce((a, b) => (b.delta_e00_all < a.delta_e00_all ? b : a)) : null;
+  const latestDone = new Map();
+  for (const f of view.fits) if (f.run.status === "done") latestDone.set(f.run.cost_function, f);
   const latest = new Map();
   for (const f of view.fits) latest.set(f.run.cost_function, f);
   fill(main, 
@@ -530,10 +532,11 @@ async function renderResult(id) {
     h("section", { "aria-labelledby": "h-de" },
       h("h3", { id: "h-de" }, "ΔE00 (mean)"),
       fitsDone.length ? h("table", { class: "data", id: "de-table" },
-        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "specular (2, vs the paper's grey spectrum)", "all (14)", ""].map((c) => h("th", { scope: "col" }, c)))),
+        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "specular (2, vs the paper's grey spectrum)", "all (14)", "specular |ΔL*| (SRA model)", ""].map((c) => h("th", { scope: "col" }, c)))),
         h("tbody", {}, fitsDone.map((f) => h("tr", { "data-cost": f.cost_function },
           h("td", {}, f.cost_function), h("td", {}, f.method), h("td", {}, fmt(f.delta_e00_diffuse)),
           h("td", {}, fmt(f.delta_e00_specular)), h("td", {}, fmt(f.delta_e00_all)),
+          h("td", {}, deltaL(latestDone.get(f.cost_function))),
           h("td", { class: f === best ? "best" : "" }, f === best ? "★ best" : "")))))
         : h("p", {}, "No finished fit yet.")),
     h("section", { "aria-labelledby": "h-params" },
@@ -560,6 +563,12 @@ async function renderResult(id) {
       ].map(([f, name]) => h("a", { href: `/scans/${scan.id}/export/${f}`, id: `dl-${f}` }, name)) : null,
       scan.state === "complete" ? h("a", { href: `/report.html?scans=${scan.id}`, id: "dl-report" }, "study report") : null),
   );
+}
+
+/** A fit's specular |ΔL*| and its SRA reading model (SCIENCE.md §5.1, §7.2). */
+function deltaL(fit) {
+  if (!fit || !fit.specular_delta_l) return "—";
+  return `${fmt(fit.specular_delta_l.mean, 3)} (${fit.sra ? fit.sra.model : "flat"})`;
 }
 
 function swatchRow(label, swatches, de) {
