@@ -319,7 +319,6 @@ async function attempt(name, f) {{
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
-    let _one = common::serial();
     let dir = tempfile::tempdir().unwrap();
     let downloads = tempfile::tempdir().unwrap();
     let addr: SocketAddr = format!("127.0.0.1:{}", free_port()).parse().unwrap();
