@@ -49,6 +49,9 @@ async fn station(station: &str, url: &str, batch: usize) -> TestDaemon {
     .expect("simulated instruments");
     let settings = ServiceSettings {
         sync: Some(forwarding(station, url, batch)),
+        // Intervals are forwarded like every other column; a few resamples make them quickly
+        // enough for the comparison to wait for them (`bootstraps_pending`).
+        bootstrap: 5,
         ..settings()
     };
     start(devices, settings, ServiceOptions::default()).await
@@ -96,8 +99,12 @@ async fn drained_service(service: &brdfd::service::Service, db: &Path) {
         "the central cursor to reach the store's last entry",
         STEP_TIMEOUT,
         || async {
-            let s = service.status().await.unwrap().sync.expect("forwarding");
-            s.cursor == Some(highest_seq(db).await) && s.last_error.is_none()
+            // A bootstrap still running would write its intervals after the check.
+            let status = service.status().await.unwrap();
+            let s = status.sync.expect("forwarding");
+            status.bootstraps_pending == 0
+                && s.cursor == Some(highest_seq(db).await)
+                && s.last_error.is_none()
         },
     )
     .await;

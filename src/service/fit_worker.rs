@@ -15,7 +15,7 @@
 use std::ops::ControlFlow;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use tokio::sync::{Semaphore, mpsc};
@@ -274,6 +274,17 @@ impl Service {
         if resamples == 0 || self.inner.stopping.load(Ordering::Relaxed) {
             return;
         }
+        // Counted from now until stored (or given up), for `status`.
+        struct Pending<'a>(&'a AtomicUsize);
+        impl Drop for Pending<'_> {
+            fn drop(&mut self) {
+                self.0.fetch_sub(1, Ordering::Relaxed);
+            }
+        }
+        self.inner
+            .bootstraps_pending
+            .fetch_add(1, Ordering::Relaxed);
+        let _pending = Pending(&self.inner.bootstraps_pending);
         let Ok(permit) = self.inner.bootstrap_slot.clone().acquire_owned().await else {
             return;
         };

@@ -238,6 +238,8 @@ pub struct Status {
     pub reference: Option<ReferenceInForce>,
     pub fits_queued: usize,
     pub fits_running: usize,
+    /// Finished fits whose bootstrap intervals are still being computed (SCIENCE.md §10).
+    pub bootstraps_pending: usize,
     /// Whether each instrument is simulated.
     pub simulated: SimulatedStatus,
     /// Each instrument: its connection state and identity (MA-T12 first, then the SRA).
@@ -331,6 +333,8 @@ struct Inner {
     /// One bootstrap at a time, apart from the fits' permits: a bootstrap never holds up the
     /// point estimate of a later fit (SCIENCE.md §10).
     bootstrap_slot: Arc<tokio::sync::Semaphore>,
+    /// Bootstraps waiting for the slot or running.
+    bootstraps_pending: AtomicUsize,
     timings: Timings,
     /// Each instrument's identity as it last reported it (MA-T12, SRA), copied onto every
     /// reference set and scan as its provenance.
@@ -398,6 +402,7 @@ impl Service {
             fits_running: AtomicUsize::new(0),
             identities: Mutex::new([None, None]),
             bootstrap_slot: Arc::new(tokio::sync::Semaphore::new(1)),
+            bootstraps_pending: AtomicUsize::new(0),
             timings: Timings::default(),
             sync_status: std::sync::OnceLock::new(),
             device_transitions: Mutex::new(Default::default()),
@@ -583,6 +588,7 @@ impl Service {
             reference: self.reference_in_force().await?,
             fits_queued: self.inner.fits_queued.load(Ordering::Relaxed),
             fits_running: self.inner.fits_running.load(Ordering::Relaxed),
+            bootstraps_pending: self.inner.bootstraps_pending.load(Ordering::Relaxed),
             simulated: SimulatedStatus {
                 ma_t12: self.inner.devices.simulators.ma_t12.is_some(),
                 sra: self.inner.devices.simulators.sra.is_some(),
