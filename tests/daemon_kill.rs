@@ -100,8 +100,11 @@ fn sigkill_mid_scan_leaves_a_sound_store_and_sigterm_aborts_the_scan_gracefully(
             .post("/scans", Some(&json!({ "sample": "T.After" })))
             .unwrap();
         let after = v["scan"].as_i64().unwrap();
+        // Complete in the store comes a moment before the instruments are free (the scan's
+        // fits are queued first): wait for both before the next scan.
         wait_until("the scan after restart", || {
             d.client.get(&format!("/scans/{after}")).unwrap()["scan"]["state"] == "complete"
+                && d.client.get("/status").unwrap()["busy"].is_null()
         });
 
         // SIGTERM mid-scan: a graceful stop.
