@@ -302,17 +302,9 @@ mod tests {
         out
     }
 
-    #[test]
-    fn journald_gets_priorities_and_plain_field_names() {
+    /// The two entries `log` sends, received on a socket bound where journald's would be.
+    fn stand_in_journald(path: &std::path::Path, log: impl Fn()) -> Vec<Vec<(String, String)>> {
         use std::os::unix::net::UnixDatagram;
-        use tracing_subscriber::layer::SubscriberExt;
-        let path = std::path::Path::new("/run/systemd/journal/socket");
-        if path.exists() {
-            // A real journald owns the socket; the mapping is the same, shown by
-            // `journalctl -u brdfd -o verbose` on such a machine.
-            eprintln!("skipped: a real journald listens at {}", path.display());
-            return;
-        }
         std::fs::create_dir_all(path.parent().unwrap()).unwrap_or_else(|e| {
             panic!(
                 "cannot stand in for journald at {} ({e}): run the tests as root, as .ci/run \
@@ -331,12 +323,7 @@ mod tests {
         socket
             .set_read_timeout(Some(std::time::Duration::from_secs(5)))
             .unwrap();
-        let layer = journald_layer().unwrap();
-        let subscriber = tracing_subscriber::registry().with(layer);
-        tracing::subscriber::with_default(subscriber, || {
-            tracing::warn!(scan = 12, instrument = "sra", "lost the SRA");
-            tracing::error!(scan = 12, "cannot mark the scan failed");
-        });
+        log();
         let mut messages = Vec::new();
         let mut buf = vec![0u8; 1 << 16];
         while messages.len() < 2 {
@@ -346,6 +333,62 @@ mod tests {
                 messages.push(journal_fields(&buf[..n]));
             }
         }
+        messages
+    }
+
+    /// This run's two entries as the real journal stored them (`journalctl -o json`), oldest
+    /// first; fails if journalctl cannot be run or they do not appear within 10 s.
+    fn journal_entries(run: &str) -> Vec<Vec<(String, String)>> {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        loop {
+            let out = std::process::Command::new("journalctl")
+                .args(["-o", "json", "--no-pager", "-t", "brdfd"])
+                .arg(format!("TEST_RUN={run}"))
+                .output()
+                .expect("journalctl runs (a real journald listens on this machine)");
+            let entries: Vec<Vec<(String, String)>> = String::from_utf8_lossy(&out.stdout)
+                .lines()
+                .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+                .filter_map(|v| {
+                    v.as_object().map(|o| {
+                        o.iter()
+                            .filter_map(|(k, v)| Some((k.clone(), v.as_str()?.to_string())))
+                            .collect()
+                    })
+                })
+                .collect();
+            if entries.len() >= 2 {
+                return entries;
+            }
+            assert!(
+                std::time::Instant::now() < deadline,
+                "journald did not store the test's entries: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+    }
+
+    #[test]
+    fn journald_gets_priorities_and_plain_field_names() {
+        use tracing_subscriber::layer::SubscriberExt;
+        let path = std::path::Path::new("/run/systemd/journal/socket");
+        // A field that finds this run's two entries in a real journal.
+        let run = format!("{}-{}", std::process::id(), crate::store::now_ms());
+        let log = || {
+            let subscriber = tracing_subscriber::registry().with(journald_layer().unwrap());
+            tracing::subscriber::with_default(subscriber, || {
+                tracing::warn!(scan = 12, instrument = "sra", test_run = %run, "lost the SRA");
+                tracing::error!(scan = 12, test_run = %run, "cannot mark the scan failed");
+            });
+        };
+        let messages = if path.exists() {
+            // A real journald owns the socket: read the entries back from the journal.
+            log();
+            journal_entries(&run)
+        } else {
+            stand_in_journald(path, log)
+        };
         let has = |m: &[(String, String)], k: &str, v: &str| {
             m.iter().any(|(key, value)| key == k && value == v)
         };
