@@ -761,30 +761,28 @@ pub fn quartiles(xs: &[f64]) -> Option<[f64; 5]> {
     Some([v[0], q(0.25), q(0.5), q(0.75), v[v.len() - 1]])
 }
 
-fn box_plots<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
+/// The axes of Fig. 11 and 11b: one column per sample (named on the x axis), y from 0 to 1.3 ×
+/// the largest of `values` (1 when none is above 0), caption and y label as given.
+fn per_sample_chart<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
     study: &Study,
-    _analysis: &Analysis,
-) -> DrawResult<DB> {
-    let costs = study.cost_functions();
+    caption: String,
+    y_desc: &str,
+    values: &[f64],
+) -> Result<
+    ChartContext<
+        'a,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    DrawingAreaErrorKind<DB::ErrorType>,
+> {
     let n = study.samples.len();
-    let hi = study
-        .samples
-        .iter()
-        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
-        .flat_map(|d| d.evaluation.per_geometry)
-        .fold(0.0f64, f64::max)
-        * 1.3;
+    let hi = values.iter().copied().fold(0.0f64, f64::max) * 1.3;
     let hi = if hi > 0.0 { hi } else { 1.0 };
     let names: Vec<String> = study.samples.iter().map(|s| s.name.clone()).collect();
     let mut chart = ChartBuilder::on(root)
-        .caption(
-            format!(
-                "Fig. 11  ΔE00 over the 14 geometries per sample and cost function (method {})",
-                methods(study)
-            ),
-            font(24),
-        )
+        .caption(caption, font(24))
         .margin(20)
         .x_label_area_size(60)
         .y_label_area_size(70)
@@ -802,10 +800,35 @@ fn box_plots<DB: DrawingBackend>(
             }
         })
         .x_desc("sample")
-        .y_desc("ΔE00 (CIEDE2000)")
+        .y_desc(y_desc)
         .label_style(font(14))
         .axis_desc_style(font(17))
         .draw()?;
+    Ok(chart)
+}
+
+fn box_plots<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    study: &Study,
+    _analysis: &Analysis,
+) -> DrawResult<DB> {
+    let costs = study.cost_functions();
+    let values: Vec<f64> = study
+        .samples
+        .iter()
+        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+        .flat_map(|d| d.evaluation.per_geometry)
+        .collect();
+    let mut chart = per_sample_chart(
+        root,
+        study,
+        format!(
+            "Fig. 11  ΔE00 over the 14 geometries per sample and cost function (method {})",
+            methods(study)
+        ),
+        "ΔE00 (CIEDE2000)",
+        &values,
+    )?;
     let m = costs.len().max(1) as f64;
     let width = 0.7 / m;
     for (k, &c) in costs.iter().enumerate() {
@@ -1028,45 +1051,22 @@ fn specular_delta_l_points<DB: DrawingBackend>(
     study: &Study,
 ) -> DrawResult<DB> {
     let costs = study.cost_functions();
-    let n = study.samples.len();
-    let hi = study
+    let values: Vec<f64> = study
         .samples
         .iter()
         .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
         .flat_map(|d| d.specular_delta_l.per_geometry)
-        .fold(0.0f64, f64::max)
-        * 1.3;
-    let hi = if hi > 0.0 { hi } else { 1.0 };
-    let names: Vec<String> = study.samples.iter().map(|s| s.name.clone()).collect();
-    let mut chart = ChartBuilder::on(root)
-        .caption(
-            format!(
-                "Fig. 11b  Specular |ΔL*| (luminance) per sample and cost function (method {})",
-                methods(study)
-            ),
-            font(24),
-        )
-        .margin(20)
-        .x_label_area_size(60)
-        .y_label_area_size(70)
-        .build_cartesian_2d(-0.5f64..(n as f64 - 0.5), 0f64..hi)?;
-    chart
-        .configure_mesh()
-        .disable_x_mesh()
-        .x_labels(n.max(1))
-        .x_label_formatter(&|x| {
-            let i = x.round();
-            if (x - i).abs() < 1e-6 && i >= 0.0 {
-                names.get(i as usize).cloned().unwrap_or_default()
-            } else {
-                String::new()
-            }
-        })
-        .x_desc("sample")
-        .y_desc("|ΔL*| at the SRA geometries")
-        .label_style(font(14))
-        .axis_desc_style(font(17))
-        .draw()?;
+        .collect();
+    let mut chart = per_sample_chart(
+        root,
+        study,
+        format!(
+            "Fig. 11b  Specular |ΔL*| (luminance) per sample and cost function (method {})",
+            methods(study)
+        ),
+        "|ΔL*| at the SRA geometries",
+        &values,
+    )?;
     let m = costs.len().max(1) as f64;
     let width = 0.7 / m;
     for (k, &c) in costs.iter().enumerate() {
