@@ -6,9 +6,30 @@ use std::fmt::Write as _;
 
 use crate::stats::MeanCi;
 
-use super::analysis::{Analysis, format_p};
+use super::analysis::{Analysis, SignRow, format_p};
 use super::figures::Figure;
 use super::study::{FitState, Study};
+
+/// The columns of the sign-test tables (Table 3 on ΔE00, Table 8 on |ΔL*|).
+const SIGN_TEST_HEAD: [&str; 7] = ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"];
+
+/// The rows of a sign-test table: one per pair of cost functions.
+fn sign_test_rows(study: &Study, tests: &[SignRow]) -> Vec<Vec<String>> {
+    tests
+        .iter()
+        .map(|r| {
+            vec![
+                format!("{} vs {}", r.a, r.b),
+                format!("{} / {}", study.method_of(r.a), study.method_of(r.b)),
+                r.test.n.to_string(),
+                r.test.plus.to_string(),
+                r.test.minus.to_string(),
+                r.test.ties.to_string(),
+                format_p(r.test.p),
+            ]
+        })
+        .collect()
+}
 
 /// A piece of the page.
 enum Block {
@@ -153,24 +174,8 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     b.push(Block::Heading("Sign tests between cost functions".into()));
     b.push(Block::Table {
         caption: "Table 3. Exact two-sided sign test on the paired ΔE00 of two cost functions per (sample, geometry) of the samples that take part (at the SRA geometries the paper's ΔE00 against the grey spectrum; Table 8 tests the luminance metric), ties dropped: n pairs, \"A worse\" where the first has the larger ΔE00, p = min(1, 2·P(X ≤ min(k, n − k))), X ~ Bin(n, ½).".into(),
-        head: ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"]
-            .map(String::from)
-            .to_vec(),
-        rows: analysis
-            .sign_tests
-            .iter()
-            .map(|r| {
-                vec![
-                    format!("{} vs {}", r.a, r.b),
-                    format!("{} / {}", study.method_of(r.a), study.method_of(r.b)),
-                    r.test.n.to_string(),
-                    r.test.plus.to_string(),
-                    r.test.minus.to_string(),
-                    r.test.ties.to_string(),
-                    format_p(r.test.p),
-                ]
-            })
-            .collect(),
+        head: SIGN_TEST_HEAD.map(String::from).to_vec(),
+        rows: sign_test_rows(study, &analysis.sign_tests),
     });
     // Parameters with their bootstrap intervals, when any fit has them (SCIENCE.md §10).
     let with_intervals: Vec<Vec<String>> = study
@@ -335,24 +340,8 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     });
     b.push(Block::Table {
         caption: "Table 8. Exact two-sided sign test on the paired specular |ΔL*| (luminance metric) of two cost functions per (sample, SRA geometry) of the samples that take part, ties dropped: n pairs, \"A worse\" where the first has the larger |ΔL*|; p as in Table 3.".into(),
-        head: ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"]
-            .map(String::from)
-            .to_vec(),
-        rows: analysis
-            .luminance_sign_tests
-            .iter()
-            .map(|r| {
-                vec![
-                    format!("{} vs {}", r.a, r.b),
-                    format!("{} / {}", study.method_of(r.a), study.method_of(r.b)),
-                    r.test.n.to_string(),
-                    r.test.plus.to_string(),
-                    r.test.minus.to_string(),
-                    r.test.ties.to_string(),
-                    format_p(r.test.p),
-                ]
-            })
-            .collect(),
+        head: SIGN_TEST_HEAD.map(String::from).to_vec(),
+        rows: sign_test_rows(study, &analysis.luminance_sign_tests),
     });
     b.push(Block::Heading("Samples left out".into()));
     if analysis.excluded.is_empty() {
