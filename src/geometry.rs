@@ -26,6 +26,16 @@ impl Device {
     }
 }
 
+impl From<drivers::Instrument> for Device {
+    /// The instrument a driver speaks to is the device its readings belong to.
+    fn from(instrument: drivers::Instrument) -> Device {
+        match instrument {
+            drivers::Instrument::MaT12 => Device::MaT12,
+            drivers::Instrument::Sra => Device::Sra,
+        }
+    }
+}
+
 impl fmt::Display for Device {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {

@@ -7,15 +7,21 @@
 //! the CPU-bound work ends, whoever awaits it. The closure wraps the fit in `catch_unwind`; a
 //! panic becomes a `failed` fit with the panic's message, and the worker takes the next fit.
 //!
+//! [`FitWorker`] owns the worker's state — the queue's sending end, the fits' cancel flags,
+//! the queued/running/bootstrap counters, the bootstrap slot and the fit computation — and
+//! nothing outside this module changes it; the rest of the service hands it fit ids
+//! ([`FitWorker::submit`]) and reads its counters.
+//!
 //! Cancellation goes through the optimiser's observer, called once per generation: it returns
 //! `Break` when the fit's flag is set ([`Service::cancel_fit`]) or the daemon is stopping. A fit
 //! stopped by shutdown is left `running`; the next start queues it again (same seed, same
 //! result).
 
+use std::collections::HashMap;
 use std::ops::ControlFlow;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 use tokio::sync::{Semaphore, mpsc};
@@ -60,6 +66,79 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
         .map(|s| s.to_string())
         .or_else(|| payload.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "a panic without a message".into())
+}
+
+/// The fit worker's state (module docs).
+pub(crate) struct FitWorker {
+    fit_fn: FitFn,
+    /// Cancellation flags of queued and running fits.
+    cancels: Mutex<HashMap<FitRunId, Arc<AtomicBool>>>,
+    tx: mpsc::UnboundedSender<FitRunId>,
+    queued: AtomicUsize,
+    running: AtomicUsize,
+    /// One bootstrap at a time, apart from the fits' permits: a bootstrap never holds up the
+    /// point estimate of a later fit (SCIENCE.md §10).
+    bootstrap_slot: Arc<Semaphore>,
+    /// Bootstraps waiting for the slot or running.
+    bootstraps_pending: AtomicUsize,
+}
+
+impl FitWorker {
+    /// The worker's state and the receiving end of its queue, for [`Service::start_fit_worker`].
+    pub(crate) fn new(fit_fn: FitFn) -> (FitWorker, mpsc::UnboundedReceiver<FitRunId>) {
+        let (tx, rx) = mpsc::unbounded_channel();
+        let worker = FitWorker {
+            fit_fn,
+            cancels: Mutex::new(HashMap::new()),
+            tx,
+            queued: AtomicUsize::new(0),
+            running: AtomicUsize::new(0),
+            bootstrap_slot: Arc::new(Semaphore::new(1)),
+            bootstraps_pending: AtomicUsize::new(0),
+        };
+        (worker, rx)
+    }
+
+    /// Hands a queued fit to the worker.
+    pub(crate) fn submit(&self, fit: FitRunId) {
+        self.cancels()
+            .entry(fit)
+            .or_insert_with(|| Arc::new(AtomicBool::new(false)));
+        self.queued.fetch_add(1, Ordering::Relaxed);
+        if self.tx.send(fit).is_err() {
+            // The worker has stopped (shutdown): the fit stays queued in the store and runs at
+            // the next start.
+            self.queued.fetch_sub(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Fits handed to the worker and not started yet.
+    pub(crate) fn queued(&self) -> usize {
+        self.queued.load(Ordering::Relaxed)
+    }
+
+    /// Fits computing now.
+    pub(crate) fn running(&self) -> usize {
+        self.running.load(Ordering::Relaxed)
+    }
+
+    /// Finished fits whose bootstrap is waiting or running.
+    pub(crate) fn bootstraps_pending(&self) -> usize {
+        self.bootstraps_pending.load(Ordering::Relaxed)
+    }
+
+    fn cancels(&self) -> MutexGuard<'_, HashMap<FitRunId, Arc<AtomicBool>>> {
+        self.cancels.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The cancel flag of a fit this worker was handed.
+    fn flag(&self, fit: FitRunId) -> Option<Arc<AtomicBool>> {
+        self.cancels().get(&fit).cloned()
+    }
+
+    fn forget(&self, fit: FitRunId) {
+        self.cancels().remove(&fit);
+    }
 }
 
 /// Why a queued fit could not start, and its scan when the fit could be read far enough to
@@ -110,22 +189,6 @@ impl Service {
         });
     }
 
-    /// Hands a queued fit to the worker.
-    pub(crate) fn submit_fit(&self, fit: FitRunId) {
-        self.inner
-            .cancels
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .entry(fit)
-            .or_insert_with(|| Arc::new(AtomicBool::new(false)));
-        self.inner.fits_queued.fetch_add(1, Ordering::Relaxed);
-        if self.inner.fit_tx.send(fit).is_err() {
-            // The worker has stopped (shutdown): the fit stays queued in the store and runs at
-            // the next start.
-            self.inner.fits_queued.fetch_sub(1, Ordering::Relaxed);
-        }
-    }
-
     /// Cancels a queued or running fit. A running fit stops at its next generation.
     pub async fn cancel_fit(&self, fit: FitRunId) -> Result<(), ServiceError> {
         let detail = self.inner.store.fit_detail(fit).await?;
@@ -137,14 +200,7 @@ impl Service {
                 )));
             }
         }
-        let flag = self
-            .inner
-            .cancels
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .get(&fit)
-            .cloned();
-        match flag {
+        match self.inner.fits.flag(fit) {
             Some(flag) => flag.store(true, Ordering::SeqCst),
             // Queued in the store but not handed to this worker: cancel it there.
             None => {
@@ -159,20 +215,14 @@ impl Service {
     }
 
     async fn run_fit(&self, fit: FitRunId, permit: tokio::sync::OwnedSemaphorePermit) {
-        self.inner.fits_queued.fetch_sub(1, Ordering::Relaxed);
-        let cancel = self
-            .inner
-            .cancels
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .get(&fit)
-            .cloned()
-            .unwrap_or_default();
+        let worker = &self.inner.fits;
+        worker.queued.fetch_sub(1, Ordering::Relaxed);
+        let cancel = worker.flag(fit).unwrap_or_default();
         let prepared = self.prepare_fit(fit).await;
         let (job, cost) = match prepared {
             Ok(Some(p)) => p,
             Ok(None) => {
-                self.forget(fit);
+                worker.forget(fit);
                 return;
             }
             Err(PrepareError { scan, error: e }) => {
@@ -186,7 +236,7 @@ impl Service {
                     // The fit could not even be read: there is no scan to name in an event.
                     None => tracing::warn!(%fit, %error, "fit failed before its scan was known"),
                 }
-                self.forget(fit);
+                worker.forget(fit);
                 return;
             }
         };
@@ -194,15 +244,15 @@ impl Service {
         if cancel.load(Ordering::SeqCst) {
             self.mark_cancelled(fit).await;
             self.inner.events.send(Event::FitCancelled { fit, scan });
-            self.forget(fit);
+            worker.forget(fit);
             return;
         }
         if let Err(e) = self.timed_store(self.inner.store.start_fit(fit)).await {
             tracing::warn!(error = %e, %fit, "fit not started");
-            self.forget(fit);
+            worker.forget(fit);
             return;
         }
-        self.inner.fits_running.fetch_add(1, Ordering::Relaxed);
+        worker.running.fetch_add(1, Ordering::Relaxed);
         self.inner.events.send(Event::FitStarted {
             fit,
             scan,
@@ -211,7 +261,7 @@ impl Service {
 
         let events = self.inner.events.clone();
         let stopping = self.inner.stopping.clone();
-        let fit_fn = self.inner.fit_fn.clone();
+        let fit_fn = worker.fit_fn.clone();
         let cancel_flag = cancel.clone();
         let started = Instant::now();
         let joined = tokio::task::spawn_blocking(move || {
@@ -236,7 +286,7 @@ impl Service {
         })
         .await;
         Timings::add(&self.inner.timings.fit_ns, started.elapsed());
-        self.inner.fits_running.fetch_sub(1, Ordering::Relaxed);
+        worker.running.fetch_sub(1, Ordering::Relaxed);
 
         let ended = match joined {
             Ok(Ok(Ok(report))) => Ended::Done(Box::new(report)),
@@ -259,7 +309,7 @@ impl Service {
             Err(join) => Ended::Failed(format!("the fit's thread ended abnormally: {join}")),
         };
         let stored = self.record_fit_end(fit, scan, cost, ended).await;
-        self.forget(fit);
+        worker.forget(fit);
         if let Some(report) = stored {
             self.bootstrap_fit(fit, *report).await;
         }
@@ -281,11 +331,10 @@ impl Service {
                 self.0.fetch_sub(1, Ordering::Relaxed);
             }
         }
-        self.inner
-            .bootstraps_pending
-            .fetch_add(1, Ordering::Relaxed);
-        let _pending = Pending(&self.inner.bootstraps_pending);
-        let Ok(permit) = self.inner.bootstrap_slot.clone().acquire_owned().await else {
+        let worker = &self.inner.fits;
+        worker.bootstraps_pending.fetch_add(1, Ordering::Relaxed);
+        let _pending = Pending(&worker.bootstraps_pending);
+        let Ok(permit) = worker.bootstrap_slot.clone().acquire_owned().await else {
             return;
         };
         let stopping = self.inner.stopping.clone();
@@ -329,14 +378,6 @@ impl Service {
             ),
             Err(e) => tracing::error!(error = %e, %fit, "the bootstrap's thread ended abnormally"),
         }
-    }
-
-    fn forget(&self, fit: FitRunId) {
-        self.inner
-            .cancels
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .remove(&fit);
     }
 
     /// Stores that `fit` failed with `error`; a store that refuses is logged, as the fit's

@@ -47,7 +47,7 @@ use crate::scan::Scan;
 use crate::store::{FileImport, ImportedScan, Provenance, Source, StoreError};
 
 use super::events::Event;
-use super::orchestrator::{IMPORTED_SUFFIX, check_name, new_readings};
+use super::pipeline::{IMPORTED_SUFFIX, check_name, new_readings};
 use super::{RefitRequest, Service, ServiceError};
 
 /// Where finished files go, and the folder of files being imported.

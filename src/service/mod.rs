@@ -4,11 +4,23 @@
 //! Data flow (ARCHITECTURE.md): an operator's request → the scan orchestrator
 //! (`orchestrator.rs`) → both instruments' driver tasks measuring concurrently → every reading
 //! stored the moment it arrives (with its raw frame) → the scan completes only with all 14 →
-//! processing against the reference in force (a reference older than the configured limit is
-//! flagged, and the scan not fitted) → one fit per configured cost function queued → the fit
-//! worker (`fit_worker.rs`: CPU-bound work on blocking threads behind a semaphore, cancellable,
-//! a panic failing only that fit) → fits and ΔE00 stored → [`events::Event`]s to every
-//! subscriber all along.
+//! the pipeline (`pipeline.rs`): processing against the reference in force (a reference older
+//! than the configured limit is flagged, and the scan not fitted) → one fit per configured cost
+//! function queued → the fit worker (`fit_worker.rs`: CPU-bound work on blocking threads behind
+//! a semaphore, cancellable, a panic failing only that fit) → fits and ΔE00 stored →
+//! [`events::Event`]s to every subscriber all along.
+//!
+//! Each part owns its state, private to its module; this file wires them and holds only what
+//! they share:
+//! - `acquisition.rs` ([`acquisition::Acquisition`]): the instruments, the busy claim, the
+//!   reference in force, each instrument's identity and connection state, and the device
+//!   watcher;
+//! - `orchestrator.rs`: the measurement runs (references and scans, one path);
+//! - `pipeline.rs`: processing, refits, imports, and the store ↔ scan-file conversion;
+//! - `fit_worker.rs` ([`fit_worker::FitWorker`]): the fit queue, permits, cancel flags and
+//!   counters, and the bootstraps;
+//! - shared here: the store, the event bus, the settings, the stop signal and task tracking,
+//!   the timings, and the status of the forwarder and the watch folder.
 //!
 //! - [`Service`] is the handle (cheap to clone) the HTTP API and the in-process callers use.
 //! - [`devices`] builds the instruments (simulated or real, with the recording tap).
@@ -21,38 +33,41 @@
 //! measured is refused with [`ServiceError::Busy`] (HTTP 409), never queued — an operator who
 //! has put a new sample on the bench must not get the previous request's readings.
 
+mod acquisition;
 pub mod devices;
 mod error;
 pub mod events;
 mod fit_worker;
 pub mod ingest;
 mod orchestrator;
+mod pipeline;
 pub mod shutdown;
 
-use std::collections::HashMap;
 use std::future::Future;
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
-use tokio::sync::{Notify, broadcast};
+use tokio::sync::broadcast;
 
 use crate::config::Config;
 use crate::cost::CostFunction;
 use crate::optimise::{Method, Settings};
 use crate::processing::SpecularStrategy;
 use crate::scan::Scan;
-use crate::store::{FitRunId, ReferenceId, ReferenceSummary, ScanId, ScanState, Store, now_ms};
-use drivers::Instrument;
+use crate::store::{ReferenceId, ReferenceSummary, ScanId, ScanState, Store};
 
+pub use acquisition::{BusyStatus, DeviceStatus, Operation, SimulatedStatus};
 pub use devices::{DeviceSetupError, Devices};
 pub use error::ServiceError;
 pub use events::{Event, EventBus, ReadingShown};
 pub use fit_worker::{FitFn, FitJob, default_fit_fn};
 pub use ingest::{IngestSettings, IngestStatus};
-pub use orchestrator::{IMPORTED_SUFFIX, scan_from_detail};
+pub use pipeline::{IMPORTED_SUFFIX, scan_from_detail};
 
+use acquisition::Acquisition;
+use fit_worker::FitWorker;
 use shutdown::Coordinator;
 
 /// What the service does with a complete scan, from `[scan]` and `[fit]` of the configuration.
@@ -176,58 +191,6 @@ impl Timings {
     }
 }
 
-/// What the instruments are doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Operation {
-    Reference { reference: ReferenceId },
-    Scan { scan: ScanId },
-}
-
-impl std::fmt::Display for Operation {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Operation::Reference { reference } => write!(f, "reference {reference}"),
-            Operation::Scan { scan } => write!(f, "scan {scan}"),
-        }
-    }
-}
-
-/// The operation in progress and how to stop it.
-#[derive(Debug)]
-struct Busy {
-    operation: Operation,
-    since: Instant,
-    /// Notified by [`Service::abort`].
-    abort: Arc<Notify>,
-}
-
-/// The instruments claimed by one operation ([`Service::claim`]); dropping it frees them. It
-/// dereferences to the operation's abort signal.
-pub(crate) struct BusyClaim {
-    inner: Arc<Inner>,
-    abort: Arc<Notify>,
-}
-
-impl std::ops::Deref for BusyClaim {
-    type Target = Notify;
-    fn deref(&self) -> &Notify {
-        &self.abort
-    }
-}
-
-impl std::fmt::Debug for BusyClaim {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("BusyClaim").finish_non_exhaustive()
-    }
-}
-
-impl Drop for BusyClaim {
-    fn drop(&mut self) {
-        *self.inner.busy.lock().unwrap_or_else(|p| p.into_inner()) = None;
-    }
-}
-
 /// `GET /status`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Status {
@@ -252,12 +215,6 @@ pub struct Status {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct BusyStatus {
-    pub operation: Operation,
-    pub seconds: f64,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ReferenceInForce {
     pub id: ReferenceId,
     pub name: String,
@@ -265,33 +222,6 @@ pub struct ReferenceInForce {
     pub age_hours: f64,
     /// Older than `[scan] reference_max_age_hours`: scans will not be fitted.
     pub stale: bool,
-}
-
-/// One instrument as `status` shows it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct DeviceStatus {
-    /// `ma_t12` or `sra`.
-    pub device: &'static str,
-    /// The instrument's name for people.
-    pub instrument: String,
-    /// `unknown` (not heard from since start), `connected`, `disconnected`, `reconnecting` or
-    /// `error`.
-    pub state: &'static str,
-    /// What the driver said with the state (identity, reason, attempt).
-    pub detail: String,
-    /// When the state began (Unix milliseconds).
-    pub since_ms: i64,
-    pub simulated: bool,
-    /// As the instrument last identified itself; `None` if it never answered.
-    pub model: Option<String>,
-    pub serial: Option<String>,
-    pub firmware: Option<String>,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub struct SimulatedStatus {
-    pub ma_t12: bool,
-    pub sra: bool,
 }
 
 /// What a refit asks for.
@@ -310,41 +240,22 @@ pub struct RefitRequest {
     pub allow_stale_reference: bool,
 }
 
-/// Shared state of the running service.
+/// Shared state of the running service: the parts, and what they all use.
 struct Inner {
     store: Store,
     events: EventBus,
-    devices: Devices,
     settings: ServiceSettings,
-    fit_fn: FitFn,
-    busy: Mutex<Option<Busy>>,
-    /// The reference new scans use: the last one this daemon (or a previous run) measured.
-    /// Imported references (which come with their scans) never take its place.
-    reference: Mutex<Option<ReferenceId>>,
+    /// The instruments and what is known of them (`acquisition.rs`).
+    acquisition: Acquisition,
+    /// The fit queue and its workers' state (`fit_worker.rs`).
+    fits: FitWorker,
     coordinator: tokio::sync::Mutex<Coordinator>,
     /// Set at shutdown, before the stop signal: fits break off at their next generation and are
     /// left `running` for the next start to queue again.
     stopping: Arc<AtomicBool>,
-    /// Cancellation flags of queued and running fits.
-    cancels: Mutex<HashMap<FitRunId, Arc<AtomicBool>>>,
-    fit_tx: tokio::sync::mpsc::UnboundedSender<FitRunId>,
-    fits_queued: AtomicUsize,
-    fits_running: AtomicUsize,
-    /// One bootstrap at a time, apart from the fits' permits: a bootstrap never holds up the
-    /// point estimate of a later fit (SCIENCE.md §10).
-    bootstrap_slot: Arc<tokio::sync::Semaphore>,
-    /// Bootstraps waiting for the slot or running.
-    bootstraps_pending: AtomicUsize,
     timings: Timings,
-    /// Each instrument's identity as it last reported it (MA-T12, SRA), copied onto every
-    /// reference set and scan as its provenance.
-    identities: Mutex<[Option<drivers::Identity>; 2]>,
     /// The forwarder's status, once it started.
     sync_status: std::sync::OnceLock<Arc<Mutex<crate::sync::SyncStatus>>>,
-    /// How often each instrument changed connection state: (instrument, state) → count.
-    device_transitions: Mutex<std::collections::BTreeMap<(&'static str, &'static str), u64>>,
-    /// Each instrument's last connection state (MA-T12, SRA): state, detail, since (Unix ms).
-    device_states: Mutex<[(&'static str, String, i64); 2]>,
     /// The watch folder's status, once it started.
     ingest_status: std::sync::OnceLock<Arc<Mutex<IngestStatus>>>,
 }
@@ -385,37 +296,24 @@ impl Service {
             .latest_reference_not_ending(IMPORTED_SUFFIX)
             .await?
             .map(|r| r.id);
-        let (fit_tx, fit_rx) = tokio::sync::mpsc::unbounded_channel();
+        let (fits, fit_rx) = FitWorker::new(options.fit_fn.unwrap_or_else(default_fit_fn));
         let inner = Arc::new(Inner {
             store,
             events: EventBus::new(),
-            devices,
-            fit_fn: options.fit_fn.unwrap_or_else(default_fit_fn),
             settings,
-            busy: Mutex::new(None),
-            reference: Mutex::new(reference),
+            acquisition: Acquisition::new(devices, reference),
+            fits,
             coordinator: tokio::sync::Mutex::new(Coordinator::new()),
             stopping: Arc::new(AtomicBool::new(false)),
-            cancels: Mutex::new(HashMap::new()),
-            fit_tx,
-            fits_queued: AtomicUsize::new(0),
-            fits_running: AtomicUsize::new(0),
-            identities: Mutex::new([None, None]),
-            bootstrap_slot: Arc::new(tokio::sync::Semaphore::new(1)),
-            bootstraps_pending: AtomicUsize::new(0),
             timings: Timings::default(),
             sync_status: std::sync::OnceLock::new(),
-            device_transitions: Mutex::new(Default::default()),
-            device_states: Mutex::new(
-                [0, 1].map(|_| ("unknown", "not heard from yet".to_string(), now_ms())),
-            ),
             ingest_status: std::sync::OnceLock::new(),
         });
         let service = Service { inner };
         service.start_fit_worker(fit_rx).await;
         service.watch_devices().await;
         for fit in service.inner.store.queued_fits().await? {
-            service.submit_fit(fit.id);
+            service.inner.fits.submit(fit.id);
         }
         if let Some(options) = service.inner.settings.sync.clone() {
             service.start_forwarder(options).await?;
@@ -466,7 +364,7 @@ impl Service {
 
     /// The instruments.
     pub fn devices(&self) -> &Devices {
-        &self.inner.devices
+        self.inner.acquisition.devices()
     }
 
     pub fn settings(&self) -> &ServiceSettings {
@@ -491,72 +389,22 @@ impl Service {
         out
     }
 
-    /// Claims the instruments for `operation`, or says who has them. The claim holds until the
-    /// returned guard is dropped — at the end of the operation's task, or when that task
-    /// panics or is cancelled — so the instruments can never stay "busy" with nobody using them.
-    fn claim(&self, operation: Operation) -> Result<BusyClaim, ServiceError> {
-        let mut busy = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some(b) = busy.as_ref() {
-            return Err(ServiceError::Busy {
-                operation: b.operation.to_string(),
-                seconds: b.since.elapsed().as_secs_f64(),
-            });
-        }
-        let abort = Arc::new(Notify::new());
-        *busy = Some(Busy {
-            operation,
-            since: Instant::now(),
-            abort: abort.clone(),
-        });
-        Ok(BusyClaim {
-            inner: self.inner.clone(),
-            abort,
-        })
-    }
-
-    /// Fails with `Busy` if the instruments are in use (checked before writing anything).
-    fn check_idle(&self) -> Result<(), ServiceError> {
-        let busy = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
-        match busy.as_ref() {
-            Some(b) => Err(ServiceError::Busy {
-                operation: b.operation.to_string(),
-                seconds: b.since.elapsed().as_secs_f64(),
-            }),
-            None => Ok(()),
-        }
-    }
-
     /// What the instruments are doing now.
     pub fn current_operation(&self) -> Option<Operation> {
-        self.inner
-            .busy
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .as_ref()
-            .map(|b| b.operation)
+        self.inner.acquisition.current_operation()
     }
 
     /// Stops the reference or scan in progress: the instruments abort, the readings already
     /// stored are kept, and a scan is marked `aborted`. Returns what was aborted.
     pub fn abort(&self) -> Result<Operation, ServiceError> {
-        let busy = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
-        match busy.as_ref() {
-            Some(b) => {
-                b.abort.notify_one();
-                Ok(b.operation)
-            }
-            None => Err(ServiceError::Idle),
-        }
+        self.inner.acquisition.abort()
     }
 
     /// The reference in force, with its age.
     pub async fn reference_in_force(&self) -> Result<Option<ReferenceInForce>, ServiceError> {
-        let id = *self
-            .inner
-            .reference
-            .lock()
-            .unwrap_or_else(|p| p.into_inner());
-        let Some(id) = id else { return Ok(None) };
+        let Some(id) = self.inner.acquisition.reference_in_force() else {
+            return Ok(None);
+        };
         let detail = self.inner.store.reference_detail(id).await?;
         Ok(Some(self.in_force_view(&detail.reference)))
     }
@@ -575,24 +423,16 @@ impl Service {
 
     /// The daemon's state.
     pub async fn status(&self) -> Result<Status, ServiceError> {
-        let busy = {
-            let b = self.inner.busy.lock().unwrap_or_else(|p| p.into_inner());
-            b.as_ref().map(|b| BusyStatus {
-                operation: b.operation,
-                seconds: b.since.elapsed().as_secs_f64(),
-            })
-        };
+        let acquisition = &self.inner.acquisition;
+        let fits = &self.inner.fits;
         Ok(Status {
             version: env!("CARGO_PKG_VERSION"),
-            busy,
+            busy: acquisition.busy_status(),
             reference: self.reference_in_force().await?,
-            fits_queued: self.inner.fits_queued.load(Ordering::Relaxed),
-            fits_running: self.inner.fits_running.load(Ordering::Relaxed),
-            bootstraps_pending: self.inner.bootstraps_pending.load(Ordering::Relaxed),
-            simulated: SimulatedStatus {
-                ma_t12: self.inner.devices.simulators.ma_t12.is_some(),
-                sra: self.inner.devices.simulators.sra.is_some(),
-            },
+            fits_queued: fits.queued(),
+            fits_running: fits.running(),
+            bootstraps_pending: fits.bootstraps_pending(),
+            simulated: acquisition.simulated(),
             devices: self.device_statuses(),
             timings: self.timings(),
             sync: self
@@ -606,53 +446,13 @@ impl Service {
 
     /// Each instrument's connection state and identity, MA-T12 first.
     pub fn device_statuses(&self) -> Vec<DeviceStatus> {
-        let states = self
-            .inner
-            .device_states
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone();
-        let ids = self
-            .inner
-            .identities
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone();
-        let simulated = [
-            self.inner.devices.simulators.ma_t12.is_some(),
-            self.inner.devices.simulators.sra.is_some(),
-        ];
-        [Instrument::MaT12, Instrument::Sra]
-            .into_iter()
-            .enumerate()
-            .map(|(i, instrument)| {
-                let (state, detail, since_ms) = states[i].clone();
-                let id = ids[i].as_ref();
-                DeviceStatus {
-                    device: instrument.key(),
-                    instrument: instrument.to_string(),
-                    state,
-                    detail,
-                    since_ms,
-                    simulated: simulated[i],
-                    model: id.map(|i| i.model.clone()),
-                    serial: id.map(|i| i.serial.clone()),
-                    firmware: id.map(|i| i.firmware.clone()),
-                }
-            })
-            .collect()
+        self.inner.acquisition.device_statuses()
     }
 
     /// How often each instrument has been connected, disconnected, reconnecting or in error
     /// since start: `((instrument, state), count)`, for `GET /metrics`.
     pub fn device_transitions(&self) -> Vec<((&'static str, &'static str), u64)> {
-        self.inner
-            .device_transitions
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .iter()
-            .map(|(k, v)| (*k, *v))
-            .collect()
+        self.inner.acquisition.device_transitions()
     }
 
     /// Whether a scan has nothing more coming: it is not being measured, and none of its fits
@@ -742,7 +542,7 @@ impl Service {
         if !all_ended {
             tracing::warn!("some tasks did not stop within {} s", grace.as_secs());
         }
-        if let Err(e) = self.inner.devices.clone().shutdown().await {
+        if let Err(e) = self.inner.acquisition.devices().clone().shutdown().await {
             tracing::warn!(error = %e, "the session recording is incomplete");
         }
         all_ended

@@ -1,7 +1,9 @@
 //! The scan orchestrator: measures a reference or a scan on both instruments at once, stores
 //! every reading the moment its event arrives, decides how the measurement ends (complete,
-//! failed with the devices' reasons, or aborted), and hands a complete scan to processing and
-//! the fit worker. Also imports, refits, and the device watcher that records instruments.
+//! failed with the devices' reasons, or aborted), and hands a complete scan to the pipeline
+//! (`pipeline.rs`). References and scans take one path, [`Service::start_measurement`] then
+//! `run`, parameterised by the [`Target`] they fill; the instruments are claimed through
+//! `acquisition.rs`.
 //!
 //! Decisions:
 //! - Readings are taken from the drivers' event stream, not from the result of
@@ -15,7 +17,8 @@
 //! - One instrument failing does not stop the other: its readings are stored too, and the scan
 //!   fails with every device's reason.
 //! - A scan is complete only through `Store::complete_scan`, which refuses fewer than 14
-//!   readings; an abort or shutdown marks it `aborted` with the reason.
+//!   readings; an abort or shutdown marks it `aborted` with the reason (a reference set, which
+//!   has no such state, `failed`).
 
 use std::collections::HashSet;
 use std::future::Future;
@@ -24,27 +27,91 @@ use std::time::{Duration, Instant};
 use drivers::{DriverError, Instrument, ReadingValue, ReceivedReading};
 use tokio::sync::{Notify, broadcast};
 
-use crate::geometry::{self, Device, GEOMETRY_COUNT, Geometry, MA_T12_COUNT, SRA_COUNT};
-use crate::processing::{self, ProcessingOptions};
-use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
-use crate::store::{
-    FitRunId, InstrumentProvenance, NewFit, NewReading, Provenance, ReadingValues, ReferenceId,
-    ScanDetail, ScanId, ScanState, Source, StoreError,
-};
+use crate::geometry::{self, Device, GEOMETRY_COUNT, Geometry};
+use crate::store::{Provenance, ReadingValues, ReferenceId, ScanId, Source, Store, StoreError};
 
+use super::acquisition::{BusyClaim, Operation};
 use super::events::{Event, ReadingShown};
-use super::shutdown::Shutdown;
-use super::{Operation, RefitRequest, Service, ServiceError, Timings};
+use super::pipeline::check_name;
+use super::shutdown::{Shutdown, TaskGuard};
+use super::{RefitRequest, Service, ServiceError, Timings};
 
-/// Appended to the name of a reference set that came with an imported scan; such a set is
-/// never the reference in force for new scans.
-pub const IMPORTED_SUFFIX: &str = " (imported)";
-
-/// What a measurement is for.
+/// What a measurement is for: the store row its readings go to.
 #[derive(Debug, Clone, Copy)]
 enum Target {
     Reference(ReferenceId),
     Scan(ScanId),
+}
+
+impl Target {
+    fn operation(self) -> Operation {
+        match self {
+            Target::Reference(reference) => Operation::Reference { reference },
+            Target::Scan(scan) => Operation::Scan { scan },
+        }
+    }
+
+    /// The row's kind and id, for log lines.
+    fn named(self) -> (&'static str, i64) {
+        match self {
+            Target::Reference(r) => ("reference", r.0),
+            Target::Scan(s) => ("scan", s.0),
+        }
+    }
+
+    async fn set_provenance(self, store: &Store, p: &Provenance) -> Result<(), StoreError> {
+        match self {
+            Target::Reference(r) => store.set_reference_provenance(r, p).await,
+            Target::Scan(s) => store.set_scan_provenance(s, p).await,
+        }
+    }
+
+    async fn complete(self, store: &Store) -> Result<(), StoreError> {
+        match self {
+            Target::Reference(r) => store.complete_reference(r).await,
+            Target::Scan(s) => store.complete_scan(s).await,
+        }
+    }
+
+    /// Marks the row failed with `reason`, keeping its readings.
+    async fn fail(self, store: &Store, reason: &str) -> Result<(), StoreError> {
+        match self {
+            Target::Reference(r) => store.fail_reference(r, reason).await,
+            Target::Scan(s) => store.fail_scan(s, reason).await,
+        }
+    }
+
+    /// Marks the row stopped early (abort, shutdown): a scan `aborted`; a reference set, which
+    /// has no such state, `failed`.
+    async fn stop(self, store: &Store, reason: &str) -> Result<(), StoreError> {
+        match self {
+            Target::Reference(r) => store.fail_reference(r, reason).await,
+            Target::Scan(s) => store.abort_scan_because(s, reason).await,
+        }
+    }
+
+    fn failed(self, reason: String) -> Event {
+        match self {
+            Target::Reference(reference) => Event::ReferenceFailed { reference, reason },
+            Target::Scan(scan) => Event::ScanFailed { scan, reason },
+        }
+    }
+
+    fn stopped(self, reason: String) -> Event {
+        match self {
+            Target::Reference(reference) => Event::ReferenceFailed { reference, reason },
+            Target::Scan(scan) => Event::ScanAborted { scan, reason },
+        }
+    }
+
+    /// The failure reason of a row whose request lost the instruments to another one between
+    /// the idle check and the claim.
+    fn lost_the_instruments(self) -> &'static str {
+        match self {
+            Target::Reference(_) => "the instruments were busy",
+            Target::Scan(_) => "refused: the instruments were busy with another scan",
+        }
+    }
 }
 
 /// How the instruments' part of a measurement went.
@@ -56,13 +123,6 @@ struct Acquired {
     errors: Vec<String>,
     /// Why it was stopped early, if it was.
     aborted: Option<String>,
-}
-
-fn device_of(instrument: Instrument) -> Device {
-    match instrument {
-        Instrument::MaT12 => Device::MaT12,
-        Instrument::Sra => Device::Sra,
-    }
 }
 
 /// A driver reading as the store takes it: device, geometry, values (the raw frame goes to the
@@ -81,49 +141,15 @@ fn convert(
         ReadingValue::Reflectance(s) => ReadingValues::Spectrum(s),
         ReadingValue::Intensity(v) => ReadingValues::Intensity(v),
     };
-    Ok((device_of(instrument), geometry, values))
+    Ok((instrument.into(), geometry, values))
 }
 
-/// A stored scan (complete, with its reference) as a `brdfd.scan/1` scan.
-pub fn scan_from_detail(detail: &ScanDetail) -> Result<Scan, ScanError> {
-    let readings = device_readings(&detail.readings);
-    let reference = device_readings(&detail.reference.readings);
-    let name = detail
-        .reference
-        .reference
-        .name
-        .trim_end_matches(IMPORTED_SUFFIX)
-        .to_string();
-    let scan = Scan {
-        sample: detail.scan.sample.clone(),
-        reference: Reference {
-            name,
-            readings: reference,
-        },
-        readings,
-    };
-    scan.validate()?;
-    Ok(scan)
-}
-
-/// Readings in table order; a missing geometry is left NaN, which `Scan::validate` names.
-fn device_readings(readings: &[crate::store::Reading]) -> DeviceReadings {
-    let mut out = DeviceReadings {
-        ma_t12: [[f64::NAN; crate::spectral::BANDS]; MA_T12_COUNT],
-        sra: [f64::NAN; SRA_COUNT],
-    };
-    for r in readings {
-        match r.values {
-            ReadingValues::Spectrum(s) if r.geometry.index < MA_T12_COUNT => {
-                out.ma_t12[r.geometry.index] = s
-            }
-            ReadingValues::Intensity(v) if r.geometry.index >= MA_T12_COUNT => {
-                out.sra[r.geometry.index - MA_T12_COUNT] = v
-            }
-            _ => {}
-        }
-    }
-    out
+/// What an operator asked the instruments to measure.
+enum Plan<'a> {
+    /// The white reference tile.
+    Reference,
+    /// A sample, against the reference in force.
+    Scan { sample: &'a str },
 }
 
 /// How often [`retry_store_write`] tries a write.
@@ -157,60 +183,10 @@ impl Service {
     /// new reference set's id; progress comes as events. Refused while the instruments are
     /// busy or the daemon is stopping.
     pub async fn request_reference(&self) -> Result<ReferenceId, ServiceError> {
-        let (guard, listener) = self.task_slot().await?;
-        self.check_idle()?;
-        let reference = self
-            .timed_store(self.inner.store.begin_reference(
-                "Munsell N9",
-                self.inner.settings.reference_reflectance.as_ref(),
-            ))
-            .await?;
-        let provenance = self.provenance(Source::Measured, None);
-        if let Err(e) = self
-            .timed_store(
-                self.inner
-                    .store
-                    .set_reference_provenance(reference, &provenance),
-            )
-            .await
-        {
-            let reason = e.to_string();
-            if let Err(fail) = self.inner.store.fail_reference(reference, &reason).await {
-                tracing::warn!(error = %fail, %reference, %reason,
-                    "cannot mark the reference failed after its provenance was refused");
-            }
-            return Err(e.into());
+        match self.start_measurement(Plan::Reference).await? {
+            Target::Reference(reference) => Ok(reference),
+            Target::Scan(scan) => unreachable!("a reference request started scan {scan}"),
         }
-        let abort = match self.claim(Operation::Reference { reference }) {
-            Ok(a) => a,
-            Err(e) => {
-                // Another request won the race between the check and the claim.
-                if let Err(fail) = self
-                    .inner
-                    .store
-                    .fail_reference(reference, "the instruments were busy")
-                    .await
-                {
-                    tracing::warn!(error = %fail, %reference,
-                        "cannot mark the reference failed after losing the instruments to another request");
-                }
-                return Err(e);
-            }
-        };
-        self.inner.devices.cue_simulators(None);
-        self.inner
-            .events
-            .send(Event::ReferenceStarted { reference });
-        let service = self.clone();
-        tokio::spawn(async move {
-            let mut listener = listener;
-            service
-                .run_reference(reference, &abort, &mut listener)
-                .await;
-            drop(abort);
-            drop(guard);
-        });
-        Ok(reference)
     }
 
     /// Starts a scan of sample `sample` against the reference in force. Returns at once with
@@ -225,64 +201,99 @@ impl Service {
             ));
         }
         check_name("sample name", sample)?;
+        match self.start_measurement(Plan::Scan { sample }).await? {
+            Target::Scan(scan) => Ok(scan),
+            Target::Reference(r) => unreachable!("a scan request started reference {r}"),
+        }
+    }
+
+    /// The one path of a reference or scan request: checks that the daemon and the
+    /// instruments are free, creates the row with its provenance, claims the instruments, cues
+    /// simulated ones, announces the start and spawns the run. A row created but not run (its
+    /// provenance refused, or another request won the instruments between the check and the
+    /// claim) is marked failed with the reason.
+    async fn start_measurement(&self, plan: Plan<'_>) -> Result<Target, ServiceError> {
         let (guard, listener) = self.task_slot().await?;
-        self.check_idle()?;
-        let reference = (*self
-            .inner
-            .reference
-            .lock()
-            .unwrap_or_else(|p| p.into_inner()))
-        .ok_or(ServiceError::NoReference)?;
-        let scan = self
-            .timed_store(self.inner.store.request_scan(sample, reference))
-            .await?;
-        let provenance = self.provenance(Source::Measured, None);
+        let acquisition = &self.inner.acquisition;
+        acquisition.check_idle()?;
+        let store = &self.inner.store;
+        let (target, started) = match plan {
+            Plan::Reference => {
+                let reference = self
+                    .timed_store(store.begin_reference(
+                        "Munsell N9",
+                        self.inner.settings.reference_reflectance.as_ref(),
+                    ))
+                    .await?;
+                (
+                    Target::Reference(reference),
+                    Event::ReferenceStarted { reference },
+                )
+            }
+            Plan::Scan { sample } => {
+                let reference = acquisition
+                    .reference_in_force()
+                    .ok_or(ServiceError::NoReference)?;
+                let scan = self
+                    .timed_store(store.request_scan(sample, reference))
+                    .await?;
+                let started = Event::ScanStarted {
+                    scan,
+                    sample: sample.to_string(),
+                    reference,
+                };
+                (Target::Scan(scan), started)
+            }
+        };
+        let provenance = acquisition.provenance(Source::Measured, None);
         if let Err(e) = self
-            .timed_store(self.inner.store.set_scan_provenance(scan, &provenance))
+            .timed_store(target.set_provenance(store, &provenance))
             .await
         {
             let reason = e.to_string();
-            if let Err(fail) = self.inner.store.fail_scan(scan, &reason).await {
-                tracing::warn!(error = %fail, %scan, %reason,
-                    "cannot mark the scan failed after its provenance was refused");
+            if let Err(fail) = target.fail(store, &reason).await {
+                tracing::warn!(error = %fail, ?target, %reason,
+                    "cannot mark the {} failed after its provenance was refused", target.named().0);
             }
             return Err(e.into());
         }
-        let abort = match self.claim(Operation::Scan { scan }) {
-            Ok(a) => a,
+        let claim = match acquisition.claim(target.operation()) {
+            Ok(claim) => claim,
             Err(e) => {
-                if let Err(fail) = self
-                    .inner
-                    .store
-                    .fail_scan(scan, "refused: the instruments were busy with another scan")
-                    .await
-                {
-                    tracing::warn!(error = %fail, %scan,
-                        "cannot mark the scan failed after losing the instruments to another request");
+                // Another request won the race between the check and the claim.
+                if let Err(fail) = target.fail(store, target.lost_the_instruments()).await {
+                    tracing::warn!(error = %fail, ?target,
+                        "cannot mark the {} failed after losing the instruments to another request",
+                        target.named().0);
                 }
                 return Err(e);
             }
         };
-        self.inner.devices.cue_simulators(Some(sample));
-        self.inner.events.send(Event::ScanStarted {
-            scan,
-            sample: sample.to_string(),
-            reference,
+        acquisition.devices().cue_simulators(match plan {
+            Plan::Reference => None,
+            Plan::Scan { sample } => Some(sample),
         });
+        self.inner.events.send(started);
         let service = self.clone();
-        tokio::spawn(async move {
-            let mut listener = listener;
-            service.run_scan(scan, &abort, &mut listener).await;
-            drop(abort);
-            drop(guard);
-        });
-        Ok(scan)
+        tokio::spawn(service.run_claimed(target, claim, guard, listener));
+        Ok(target)
+    }
+
+    /// Runs a claimed measurement to its end, then frees the instruments and the task slot.
+    async fn run_claimed(
+        self,
+        target: Target,
+        claim: BusyClaim,
+        guard: TaskGuard,
+        mut listener: Shutdown,
+    ) {
+        self.run(target, &claim, &mut listener).await;
+        drop(claim);
+        drop(guard);
     }
 
     /// A guard and a stop listener for a new task, or `ShuttingDown`.
-    pub(super) async fn task_slot(
-        &self,
-    ) -> Result<(super::shutdown::TaskGuard, Shutdown), ServiceError> {
+    pub(super) async fn task_slot(&self) -> Result<(TaskGuard, Shutdown), ServiceError> {
         if self
             .inner
             .stopping
@@ -315,82 +326,59 @@ impl Service {
         }
     }
 
-    async fn run_reference(&self, reference: ReferenceId, abort: &Notify, stop: &mut Shutdown) {
-        let acquired = self
-            .acquire(Target::Reference(reference), abort, stop)
-            .await;
+    /// Measures `target` and records how it ended: complete (a reference set then in force, a
+    /// scan handed to the pipeline), failed with every device's reason, or stopped early.
+    async fn run(&self, target: Target, abort: &Notify, stop: &mut Shutdown) {
         let store = &self.inner.store;
-        let reason = acquired
-            .aborted
-            .clone()
-            .or_else(|| (!acquired.errors.is_empty()).then(|| acquired.errors.join("; ")));
-        if let Some(reason) = reason {
-            self.record_end("reference", reference.0, || {
-                store.fail_reference(reference, &reason)
-            })
-            .await;
-            self.inner
-                .events
-                .send(Event::ReferenceFailed { reference, reason });
+        if let Target::Scan(scan) = target
+            && let Err(e) = self.timed_store(store.start_measuring(scan)).await
+        {
+            let reason = format!("cannot start measuring: {e}");
+            self.end_failed(target, reason).await;
             return;
         }
-        match self.timed_store(store.complete_reference(reference)).await {
-            Ok(()) => {
-                *self
-                    .inner
-                    .reference
-                    .lock()
-                    .unwrap_or_else(|p| p.into_inner()) = Some(reference);
+        let acquired = self.acquire(target, abort, stop).await;
+        if let Some(reason) = acquired.aborted {
+            let (what, id) = target.named();
+            self.record_end(what, id, || target.stop(store, &reason))
+                .await;
+            self.inner.events.send(target.stopped(reason));
+            return;
+        }
+        if !acquired.errors.is_empty() {
+            self.end_failed(target, acquired.errors.join("; ")).await;
+            return;
+        }
+        if let Err(e) = self.timed_store(target.complete(store)).await {
+            self.end_failed(target, e.to_string()).await;
+            return;
+        }
+        match target {
+            Target::Reference(reference) => {
+                self.inner.acquisition.put_in_force(reference);
                 self.inner
                     .events
                     .send(Event::ReferenceComplete { reference });
             }
-            Err(e) => {
-                let reason = e.to_string();
-                self.record_end("reference", reference.0, || {
-                    store.fail_reference(reference, &reason)
-                })
-                .await;
-                self.inner
-                    .events
-                    .send(Event::ReferenceFailed { reference, reason });
+            Target::Scan(scan) => {
+                self.inner.events.send(Event::ScanComplete { scan });
+                self.fit_measured_scan(scan).await;
             }
         }
     }
 
-    async fn run_scan(&self, scan: ScanId, abort: &Notify, stop: &mut Shutdown) {
+    /// Records that `target` failed with `reason` and says so.
+    async fn end_failed(&self, target: Target, reason: String) {
         let store = &self.inner.store;
-        if let Err(e) = self.timed_store(store.start_measuring(scan)).await {
-            let reason = format!("cannot start measuring: {e}");
-            self.record_end("scan", scan.0, || store.fail_scan(scan, &reason))
-                .await;
-            self.inner.events.send(Event::ScanFailed { scan, reason });
-            return;
-        }
-        let acquired = self.acquire(Target::Scan(scan), abort, stop).await;
-        if let Some(reason) = acquired.aborted {
-            self.record_end("scan", scan.0, || store.abort_scan_because(scan, &reason))
-                .await;
-            self.inner.events.send(Event::ScanAborted { scan, reason });
-            return;
-        }
-        if !acquired.errors.is_empty() {
-            let reason = acquired.errors.join("; ");
-            self.record_end("scan", scan.0, || store.fail_scan(scan, &reason))
-                .await;
-            self.inner.events.send(Event::ScanFailed { scan, reason });
-            return;
-        }
-        if let Err(e) = self.timed_store(store.complete_scan(scan)).await {
-            let reason = e.to_string();
-            self.record_end("scan", scan.0, || store.fail_scan(scan, &reason))
-                .await;
-            self.inner.events.send(Event::ScanFailed { scan, reason });
-            return;
-        }
-        self.inner.events.send(Event::ScanComplete { scan });
-        // A failure here leaves a complete scan without fits; the event says why, and
-        // `brdfd refit` can try again.
+        let (what, id) = target.named();
+        self.record_end(what, id, || target.fail(store, &reason))
+            .await;
+        self.inner.events.send(target.failed(reason));
+    }
+
+    /// Hands a scan just measured to the pipeline. A failure here leaves a complete scan
+    /// without fits; the event says why, and `brdfd refit` can try again.
+    async fn fit_measured_scan(&self, scan: ScanId) {
         match self.process_and_queue(scan, &RefitRequest::default()).await {
             Ok(_) => {}
             Err(ServiceError::StaleReference {
@@ -417,7 +405,7 @@ impl Service {
     /// arrives, until both are done (or aborted).
     async fn acquire(&self, target: Target, abort: &Notify, stop: &mut Shutdown) -> Acquired {
         let started = Instant::now();
-        let devices = &self.inner.devices;
+        let devices = self.inner.acquisition.devices();
         // Subscribe before the commands go out, so no reading event can be missed.
         let mut rx_m = devices.ma_t12.subscribe();
         let mut rx_s = devices.sra.subscribe();
@@ -442,11 +430,11 @@ impl Service {
                 r = &mut s, if s_done.is_none() => s_done = Some(r),
                 _ = abort.notified(), if acquired.aborted.is_none() => {
                     acquired.aborted = Some("aborted by the operator".into());
-                    self.abort_devices();
+                    self.inner.acquisition.abort_devices();
                 }
                 _ = stop.recv(), if acquired.aborted.is_none() => {
                     acquired.aborted = Some("the daemon was shut down during the measurement".into());
-                    self.abort_devices();
+                    self.inner.acquisition.abort_devices();
                 }
             }
         }
@@ -476,18 +464,6 @@ impl Service {
         }
         Timings::add(&self.inner.timings.acquire_ns, started.elapsed());
         acquired
-    }
-
-    /// Sends ABORT to both instruments without waiting for the answers.
-    fn abort_devices(&self) {
-        for h in [&self.inner.devices.ma_t12, &self.inner.devices.sra] {
-            let h = h.clone();
-            tokio::spawn(async move {
-                if let Err(e) = h.abort().await {
-                    tracing::debug!(error = %e, "abort");
-                }
-            });
-        }
     }
 
     /// Handles one driver event during a measurement; returns whether the channel is open.
@@ -575,355 +551,4 @@ impl Service {
             Err(e) => acquired.errors.push(e.to_string()),
         }
     }
-
-    /// Processes a complete scan (once per specular strategy) and queues one fit per cost
-    /// function asked for. Refused when the scan's reference is too old, unless allowed.
-    pub(crate) async fn process_and_queue(
-        &self,
-        scan: ScanId,
-        request: &RefitRequest,
-    ) -> Result<Vec<FitRunId>, ServiceError> {
-        let settings = &self.inner.settings;
-        let store = &self.inner.store;
-        let detail = self.timed_store(store.scan_detail(scan)).await?;
-        if detail.scan.state != ScanState::Complete {
-            return Err(ServiceError::NotComplete {
-                scan,
-                state: detail.scan.state,
-                action: "fitting it",
-            });
-        }
-        let reference = &detail.reference.reference;
-        let reference_done = reference.completed_at_ms.unwrap_or(reference.taken_at_ms);
-        let age_ms = (detail.scan.requested_at_ms - reference_done).max(0);
-        let max = settings.reference_max_age;
-        if age_ms as u128 > max.as_millis() && !request.allow_stale_reference {
-            return Err(ServiceError::StaleReference {
-                scan,
-                reference: reference.id,
-                age_hours: age_ms as f64 / 3.6e6,
-                max_age_hours: max.as_secs_f64() / 3600.0,
-            });
-        }
-        let processed = match self
-            .timed_store(store.processed_for_scan(scan))
-            .await?
-            .into_iter()
-            .find(|p| p.specular == settings.specular)
-        {
-            Some(p) => p.id,
-            None => {
-                let file = scan_from_detail(&detail)?;
-                let options = ProcessingOptions {
-                    specular: settings.specular,
-                    reference_reflectance: reference.rho_ref,
-                };
-                let brdf = processing::process(&file, &options)?;
-                self.timed_store(store.add_processed(scan, settings.specular, &brdf))
-                    .await?
-            }
-        };
-        let costs = if request.cost_functions.is_empty() {
-            settings.cost_functions.clone()
-        } else {
-            request.cost_functions.clone()
-        };
-        let method = request.method.unwrap_or(settings.method);
-        let seed = request.seed.unwrap_or(settings.seed);
-        let mut ids = Vec::with_capacity(costs.len());
-        for cost in costs {
-            let mut fit_settings = settings.fit_settings(cost, method, seed);
-            if let Some(model) = request.sra {
-                fit_settings.sra = fit_settings.sra.with_model(model);
-            }
-            let new = NewFit {
-                method: method.name().to_string(),
-                cost_function: cost,
-                settings: serde_json::to_value(fit_settings).map_err(|e| {
-                    ServiceError::Store(StoreError::Json {
-                        field: "fit settings",
-                        source: e,
-                    })
-                })?,
-                seed,
-            };
-            let id = self.timed_store(store.queue_fit(processed, &new)).await?;
-            self.inner.events.send(Event::FitQueued {
-                fit: id,
-                scan,
-                cost_function: cost,
-            });
-            self.submit_fit(id);
-            ids.push(id);
-        }
-        Ok(ids)
-    }
-
-    /// Queues fits of a complete scan again (other cost functions, method or seed).
-    pub async fn refit(
-        &self,
-        scan: ScanId,
-        request: &RefitRequest,
-    ) -> Result<Vec<FitRunId>, ServiceError> {
-        // A request naming a cost function many times queues it once: the list is a set.
-        let mut request = request.clone();
-        let mut seen = Vec::with_capacity(request.cost_functions.len().min(8));
-        request.cost_functions.retain(|cf| {
-            let first = !seen.contains(cf);
-            if first {
-                seen.push(*cf);
-            }
-            first
-        });
-        self.process_and_queue(scan, &request).await
-    }
-
-    /// Imports a `brdfd.scan/1` scan: its reference readings become a reference set (named
-    /// with [`IMPORTED_SUFFIX`]; never the reference in force for new scans), its readings a
-    /// complete scan, all in one transaction, which is then processed and fitted like a
-    /// measured one. Returns the scan's id and its fits.
-    pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
-        file.validate()?;
-        check_name("sample name", &file.sample)?;
-        check_name("reference name", &file.reference.name)?;
-        let store = &self.inner.store;
-        // A brdfd.scan/1 file does not say which instruments measured it.
-        let provenance = Provenance {
-            source: Source::Imported,
-            source_detail: Some("brdfd.scan/1 file".into()),
-            ..Provenance::unknown()
-        };
-        let name = format!("{}{IMPORTED_SUFFIX}", file.reference.name);
-        // One transaction: a failure leaves no half-imported reference or scan behind.
-        let (_reference, scan) = self
-            .timed_store(store.import_scan(
-                &file.sample,
-                &name,
-                &provenance,
-                &new_readings(&file.reference.readings),
-                &new_readings(&file.readings),
-            ))
-            .await?;
-        self.inner.events.send(Event::ScanComplete { scan });
-        let fits = self
-            .process_and_queue(scan, &RefitRequest::default())
-            .await?;
-        Ok((scan, fits))
-    }
-
-    /// Records the instruments' identities and reports their connection changes as events,
-    /// until shutdown.
-    pub(crate) async fn watch_devices(&self) {
-        let Ok((guard, mut stop)) = self.task_slot().await else {
-            return;
-        };
-        let service = self.clone();
-        let mut rx_m = self.inner.devices.ma_t12.subscribe();
-        let mut rx_s = self.inner.devices.sra.subscribe();
-        tokio::spawn(async move {
-            // The drivers connected before anyone subscribed: ask who is there.
-            for h in [
-                service.inner.devices.ma_t12.clone(),
-                service.inner.devices.sra.clone(),
-            ] {
-                let s = service.clone();
-                tokio::spawn(async move {
-                    match h.identify().await {
-                        Ok(identity) => {
-                            s.count_transition(h.instrument(), "connected", identity.to_string());
-                            s.record_instrument(h.instrument(), &identity).await
-                        }
-                        Err(e) => tracing::warn!(error = %e, "instrument not available at start"),
-                    }
-                });
-            }
-            let (mut m_open, mut s_open) = (true, true);
-            while m_open || s_open {
-                let ev = tokio::select! {
-                    ev = rx_m.recv(), if m_open => ev,
-                    ev = rx_s.recv(), if s_open => ev,
-                    _ = stop.recv() => break,
-                };
-                match ev {
-                    Ok(ev) => service.on_device_event(ev).await,
-                    Err(broadcast::error::RecvError::Lagged(_)) => {}
-                    Err(broadcast::error::RecvError::Closed) => {
-                        // Which one closed is not said; stop watching both (the drivers only
-                        // stop at shutdown).
-                        m_open = false;
-                        s_open = false;
-                    }
-                }
-            }
-            drop(guard);
-        });
-    }
-
-    /// After a failed command (`error`), the instrument's next answer shows it is connected.
-    fn clear_device_error(&self, instrument: Instrument) {
-        let slot = instrument_slot(instrument);
-        let mut states = self
-            .inner
-            .device_states
-            .lock()
-            .unwrap_or_else(|p| p.into_inner());
-        if states[slot].0 == "error" {
-            states[slot] = (
-                "connected",
-                "answering again".into(),
-                crate::store::now_ms(),
-            );
-        }
-    }
-
-    /// Counts one connection change of `instrument` for `GET /metrics` and keeps it as the
-    /// instrument's state for `status`.
-    fn count_transition(&self, instrument: Instrument, state: &'static str, detail: String) {
-        let slot = instrument_slot(instrument);
-        self.inner
-            .device_states
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())[slot] = (state, detail, crate::store::now_ms());
-        *self
-            .inner
-            .device_transitions
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .entry((instrument.key(), state))
-            .or_default() += 1;
-    }
-
-    async fn on_device_event(&self, ev: drivers::Event) {
-        let (instrument, state, detail) = match ev {
-            drivers::Event::Connected {
-                instrument,
-                identity,
-            } => {
-                self.record_instrument(instrument, &identity).await;
-                (instrument, "connected", identity.to_string())
-            }
-            drivers::Event::Disconnected { instrument, reason } => {
-                (instrument, "disconnected", reason)
-            }
-            drivers::Event::Reconnecting {
-                instrument,
-                attempt,
-                delay,
-            } => (
-                instrument,
-                "reconnecting",
-                format!("attempt {attempt} after {} ms", delay.as_millis()),
-            ),
-            drivers::Event::Error { instrument, error } => (instrument, "error", error.to_string()),
-            drivers::Event::Measuring { instrument, .. }
-            | drivers::Event::Reading { instrument, .. } => {
-                // An instrument that answers again after a failed command is connected.
-                self.clear_device_error(instrument);
-                return;
-            }
-        };
-        self.count_transition(instrument, state, detail.clone());
-        self.inner.events.send(Event::Device {
-            device: instrument.key().to_string(),
-            state: state.to_string(),
-            detail,
-        });
-    }
-
-    /// The provenance of a reference set or scan measured now: each instrument's last reported
-    /// identity ("unknown" if it never answered) and whether it is simulated.
-    pub(crate) fn provenance(&self, source: Source, detail: Option<String>) -> Provenance {
-        let ids = self
-            .inner
-            .identities
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone();
-        let one = |id: &Option<drivers::Identity>, simulated: bool| {
-            let mut p = InstrumentProvenance::unknown();
-            if let Some(id) = id {
-                p.model = id.model.clone();
-                p.serial = id.serial.clone();
-                p.firmware = id.firmware.clone();
-            }
-            p.simulated = Some(simulated);
-            p
-        };
-        let sims = &self.inner.devices.simulators;
-        Provenance {
-            ma_t12: one(&ids[0], sims.ma_t12.is_some()),
-            sra: one(&ids[1], sims.sra.is_some()),
-            source,
-            source_detail: detail,
-        }
-    }
-
-    async fn record_instrument(&self, instrument: Instrument, identity: &drivers::Identity) {
-        {
-            let mut ids = self
-                .inner
-                .identities
-                .lock()
-                .unwrap_or_else(|p| p.into_inner());
-            let slot = instrument_slot(instrument);
-            ids[slot] = Some(identity.clone());
-        }
-        let text = format!("{} firmware {}", identity.model, identity.firmware);
-        if let Err(e) = self
-            .inner
-            .store
-            .add_instrument(device_of(instrument), &identity.serial, &text)
-            .await
-        {
-            tracing::warn!(error = %e, "cannot record the instrument");
-        }
-    }
-}
-
-/// Where an instrument's entry is in the per-instrument arrays of the service (identities,
-/// connection states): MA-T12 first, then the SRA.
-pub(crate) fn instrument_slot(instrument: Instrument) -> usize {
-    match instrument {
-        Instrument::MaT12 => 0,
-        Instrument::Sra => 1,
-    }
-}
-
-/// The longest sample or reference name accepted.
-pub const MAX_NAME_CHARS: usize = 200;
-
-/// Names end up in terminals (`brdfd scans`), file names and reports: at most
-/// [`MAX_NAME_CHARS`] characters, and no control characters (an escape sequence in a sample
-/// name would otherwise reach the operator's terminal).
-pub fn check_name(what: &str, name: &str) -> Result<(), ServiceError> {
-    let count = name.chars().count();
-    if count > MAX_NAME_CHARS {
-        return Err(ServiceError::BadRequest(format!(
-            "the {what} has {count} characters: at most {MAX_NAME_CHARS}"
-        )));
-    }
-    if let Some(c) = name.chars().find(|c| c.is_control()) {
-        return Err(ServiceError::BadRequest(format!(
-            "the {what} {:?} holds the control character U+{:04X}: names are printable text",
-            name.escape_debug().to_string(),
-            c as u32
-        )));
-    }
-    Ok(())
-}
-
-/// A scan file's readings as store readings, in table order, with empty raw frames.
-pub(super) fn new_readings(r: &DeviceReadings) -> Vec<NewReading<'static>> {
-    geometry::GEOMETRIES
-        .iter()
-        .map(|g| NewReading {
-            device: g.device,
-            geometry: g,
-            values: match g.device {
-                Device::MaT12 => ReadingValues::Spectrum(r.ma_t12[g.index]),
-                Device::Sra => ReadingValues::Intensity(r.sra[g.index - MA_T12_COUNT]),
-            },
-            raw_frame: &[],
-        })
-        .collect()
 }

@@ -4,6 +4,17 @@ use super::*;
 use crate::store::ScanState;
 use drivers::Instrument;
 
+/// The busy claim as the service's parts see it (`acquisition.rs`).
+impl Service {
+    fn claim(&self, operation: Operation) -> Result<acquisition::BusyClaim, ServiceError> {
+        self.inner.acquisition.claim(operation)
+    }
+
+    fn check_idle(&self) -> Result<(), ServiceError> {
+        self.inner.acquisition.check_idle()
+    }
+}
+
 async fn service() -> Service {
     let devices = Devices::simulated(
         mock_devices::recordings::playlist(Instrument::MaT12).unwrap(),

@@ -1,0 +1,243 @@
+//! The pipeline from a complete scan to queued fits: processing against the scan's reference
+//! (refused when the reference is older than `[scan] reference_max_age_hours`, unless the
+//! operator allows it), one fit per cost function handed to the fit worker; refits of stored
+//! scans; imports of `brdfd.scan/1` files. Also the one conversion between the store's rows
+//! and the scan model ([`scan_from_detail`], [`new_readings`]) that the demo, the exports and
+//! the report use too, and the name rules every sample and reference name passes.
+//!
+//! Measured and imported scans enter here the same way: measured ones from the orchestrator
+//! when their 14th reading is stored, imported ones from [`Service::import_scan`] (the API,
+//! `brdfd import`, the watch folder).
+
+use crate::geometry::{self, Device, MA_T12_COUNT, SRA_COUNT};
+use crate::processing::{self, ProcessingOptions};
+use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
+use crate::store::{
+    FitRunId, NewFit, NewReading, Provenance, ReadingValues, ScanDetail, ScanId, ScanState, Source,
+    StoreError,
+};
+
+use super::events::Event;
+use super::{RefitRequest, Service, ServiceError};
+
+/// Appended to the name of a reference set that came with an imported scan; such a set is
+/// never the reference in force for new scans.
+pub const IMPORTED_SUFFIX: &str = " (imported)";
+
+/// A stored scan (complete, with its reference) as a `brdfd.scan/1` scan.
+pub fn scan_from_detail(detail: &ScanDetail) -> Result<Scan, ScanError> {
+    let readings = device_readings(&detail.readings);
+    let reference = device_readings(&detail.reference.readings);
+    let name = detail
+        .reference
+        .reference
+        .name
+        .trim_end_matches(IMPORTED_SUFFIX)
+        .to_string();
+    let scan = Scan {
+        sample: detail.scan.sample.clone(),
+        reference: Reference {
+            name,
+            readings: reference,
+        },
+        readings,
+    };
+    scan.validate()?;
+    Ok(scan)
+}
+
+/// Readings in table order; a missing geometry is left NaN, which `Scan::validate` names.
+fn device_readings(readings: &[crate::store::Reading]) -> DeviceReadings {
+    let mut out = DeviceReadings {
+        ma_t12: [[f64::NAN; crate::spectral::BANDS]; MA_T12_COUNT],
+        sra: [f64::NAN; SRA_COUNT],
+    };
+    for r in readings {
+        match r.values {
+            ReadingValues::Spectrum(s) if r.geometry.index < MA_T12_COUNT => {
+                out.ma_t12[r.geometry.index] = s
+            }
+            ReadingValues::Intensity(v) if r.geometry.index >= MA_T12_COUNT => {
+                out.sra[r.geometry.index - MA_T12_COUNT] = v
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+impl Service {
+    /// Processes a complete scan (once per specular strategy) and queues one fit per cost
+    /// function asked for. Refused when the scan's reference is too old, unless allowed.
+    pub(crate) async fn process_and_queue(
+        &self,
+        scan: ScanId,
+        request: &RefitRequest,
+    ) -> Result<Vec<FitRunId>, ServiceError> {
+        let settings = &self.inner.settings;
+        let store = &self.inner.store;
+        let detail = self.timed_store(store.scan_detail(scan)).await?;
+        if detail.scan.state != ScanState::Complete {
+            return Err(ServiceError::NotComplete {
+                scan,
+                state: detail.scan.state,
+                action: "fitting it",
+            });
+        }
+        let reference = &detail.reference.reference;
+        let reference_done = reference.completed_at_ms.unwrap_or(reference.taken_at_ms);
+        let age_ms = (detail.scan.requested_at_ms - reference_done).max(0);
+        let max = settings.reference_max_age;
+        if age_ms as u128 > max.as_millis() && !request.allow_stale_reference {
+            return Err(ServiceError::StaleReference {
+                scan,
+                reference: reference.id,
+                age_hours: age_ms as f64 / 3.6e6,
+                max_age_hours: max.as_secs_f64() / 3600.0,
+            });
+        }
+        let processed = match self
+            .timed_store(store.processed_for_scan(scan))
+            .await?
+            .into_iter()
+            .find(|p| p.specular == settings.specular)
+        {
+            Some(p) => p.id,
+            None => {
+                let file = scan_from_detail(&detail)?;
+                let options = ProcessingOptions {
+                    specular: settings.specular,
+                    reference_reflectance: reference.rho_ref,
+                };
+                let brdf = processing::process(&file, &options)?;
+                self.timed_store(store.add_processed(scan, settings.specular, &brdf))
+                    .await?
+            }
+        };
+        let costs = if request.cost_functions.is_empty() {
+            settings.cost_functions.clone()
+        } else {
+            request.cost_functions.clone()
+        };
+        let method = request.method.unwrap_or(settings.method);
+        let seed = request.seed.unwrap_or(settings.seed);
+        let mut ids = Vec::with_capacity(costs.len());
+        for cost in costs {
+            let mut fit_settings = settings.fit_settings(cost, method, seed);
+            if let Some(model) = request.sra {
+                fit_settings.sra = fit_settings.sra.with_model(model);
+            }
+            let new = NewFit {
+                method: method.name().to_string(),
+                cost_function: cost,
+                settings: serde_json::to_value(fit_settings).map_err(|e| {
+                    ServiceError::Store(StoreError::Json {
+                        field: "fit settings",
+                        source: e,
+                    })
+                })?,
+                seed,
+            };
+            let id = self.timed_store(store.queue_fit(processed, &new)).await?;
+            self.inner.events.send(Event::FitQueued {
+                fit: id,
+                scan,
+                cost_function: cost,
+            });
+            self.inner.fits.submit(id);
+            ids.push(id);
+        }
+        Ok(ids)
+    }
+
+    /// Queues fits of a complete scan again (other cost functions, method or seed).
+    pub async fn refit(
+        &self,
+        scan: ScanId,
+        request: &RefitRequest,
+    ) -> Result<Vec<FitRunId>, ServiceError> {
+        // A request naming a cost function many times queues it once: the list is a set.
+        let mut request = request.clone();
+        let mut seen = Vec::with_capacity(request.cost_functions.len().min(8));
+        request.cost_functions.retain(|cf| {
+            let first = !seen.contains(cf);
+            if first {
+                seen.push(*cf);
+            }
+            first
+        });
+        self.process_and_queue(scan, &request).await
+    }
+
+    /// Imports a `brdfd.scan/1` scan: its reference readings become a reference set (named
+    /// with [`IMPORTED_SUFFIX`]; never the reference in force for new scans), its readings a
+    /// complete scan, all in one transaction, which is then processed and fitted like a
+    /// measured one. Returns the scan's id and its fits.
+    pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
+        file.validate()?;
+        check_name("sample name", &file.sample)?;
+        check_name("reference name", &file.reference.name)?;
+        let store = &self.inner.store;
+        // A brdfd.scan/1 file does not say which instruments measured it.
+        let provenance = Provenance {
+            source: Source::Imported,
+            source_detail: Some("brdfd.scan/1 file".into()),
+            ..Provenance::unknown()
+        };
+        let name = format!("{}{IMPORTED_SUFFIX}", file.reference.name);
+        // One transaction: a failure leaves no half-imported reference or scan behind.
+        let (_reference, scan) = self
+            .timed_store(store.import_scan(
+                &file.sample,
+                &name,
+                &provenance,
+                &new_readings(&file.reference.readings),
+                &new_readings(&file.readings),
+            ))
+            .await?;
+        self.inner.events.send(Event::ScanComplete { scan });
+        let fits = self
+            .process_and_queue(scan, &RefitRequest::default())
+            .await?;
+        Ok((scan, fits))
+    }
+}
+
+/// The longest sample or reference name accepted.
+pub const MAX_NAME_CHARS: usize = 200;
+
+/// Names end up in terminals (`brdfd scans`), file names and reports: at most
+/// [`MAX_NAME_CHARS`] characters, and no control characters (an escape sequence in a sample
+/// name would otherwise reach the operator's terminal).
+pub fn check_name(what: &str, name: &str) -> Result<(), ServiceError> {
+    let count = name.chars().count();
+    if count > MAX_NAME_CHARS {
+        return Err(ServiceError::BadRequest(format!(
+            "the {what} has {count} characters: at most {MAX_NAME_CHARS}"
+        )));
+    }
+    if let Some(c) = name.chars().find(|c| c.is_control()) {
+        return Err(ServiceError::BadRequest(format!(
+            "the {what} {:?} holds the control character U+{:04X}: names are printable text",
+            name.escape_debug().to_string(),
+            c as u32
+        )));
+    }
+    Ok(())
+}
+
+/// A scan file's readings as store readings, in table order, with empty raw frames.
+pub(super) fn new_readings(r: &DeviceReadings) -> Vec<NewReading<'static>> {
+    geometry::GEOMETRIES
+        .iter()
+        .map(|g| NewReading {
+            device: g.device,
+            geometry: g,
+            values: match g.device {
+                Device::MaT12 => ReadingValues::Spectrum(r.ma_t12[g.index]),
+                Device::Sra => ReadingValues::Intensity(r.sra[g.index - MA_T12_COUNT]),
+            },
+            raw_frame: &[],
+        })
+        .collect()
+}
