@@ -12,15 +12,11 @@
 use std::collections::HashMap;
 
 use crate::cost::CostFunction;
-use crate::geometry::{Device, GEOMETRIES, MA_T12_COUNT};
 use crate::model::{FresnelCosine, Params};
 use crate::processing::{self, ProcessingOptions};
-use crate::scan::{DeviceReadings, Reference, Scan};
-use crate::spectral::BANDS;
 use crate::store::central::{self, CentralSelection};
 use crate::store::{
-    FitRun, FitStatus, Processed, Reading, ReadingValues, ScanDetail, ScanFilter, ScanId,
-    ScanState, Store, StoreError,
+    FitRun, FitStatus, Processed, ScanDetail, ScanFilter, ScanId, ScanState, Store, StoreError,
 };
 
 use super::study::{DoneFit, FitState, FitStudy, Origin, SampleStudy, Study};
@@ -45,39 +41,6 @@ pub enum LoadError {
     /// What the store holds does not make a valid scan or fit (a bug or a damaged database).
     #[error("scan {scan}: {message}")]
     Inconsistent { scan: ScanId, message: String },
-}
-
-fn readings_of(
-    scan: ScanId,
-    readings: &[Reading],
-    what: &str,
-) -> Result<DeviceReadings, LoadError> {
-    let mut out = DeviceReadings {
-        ma_t12: [[0.0; BANDS]; MA_T12_COUNT],
-        sra: [0.0; crate::geometry::SRA_COUNT],
-    };
-    let mut seen = [false; crate::geometry::GEOMETRY_COUNT];
-    for r in readings {
-        let g = r.geometry;
-        match (g.device, &r.values) {
-            (Device::MaT12, ReadingValues::Spectrum(s)) => out.ma_t12[g.index] = *s,
-            (Device::Sra, ReadingValues::Intensity(v)) => out.sra[g.index - MA_T12_COUNT] = *v,
-            _ => {
-                return Err(LoadError::Inconsistent {
-                    scan,
-                    message: format!("{what} reading at {} has the wrong kind of value", g.name),
-                });
-            }
-        }
-        seen[g.index] = true;
-    }
-    if let Some(g) = seen.iter().position(|s| !s) {
-        return Err(LoadError::Inconsistent {
-            scan,
-            message: format!("no {what} reading at {}", GEOMETRIES[g].name),
-        });
-    }
-    Ok(out)
 }
 
 /// What a fit run's stored detail adds to its row (migration 0011): the colorimetry of its
@@ -170,14 +133,10 @@ fn assemble(
             state: detail.scan.state,
         });
     }
-    let scan = Scan {
-        sample: detail.scan.sample.clone(),
-        reference: Reference {
-            name: detail.reference.reference.name.clone(),
-            readings: readings_of(id, &detail.reference.readings, "reference")?,
-        },
-        readings: readings_of(id, &detail.readings, "sample")?,
-    };
+    let scan = detail.to_scan().map_err(|e| LoadError::Inconsistent {
+        scan: id,
+        message: e.to_string(),
+    })?;
     // The processed version most fits were made from; else the first; else process now.
     let mut uses: HashMap<i64, usize> = HashMap::new();
     for r in &runs {

@@ -9,9 +9,9 @@
 //! when their 14th reading is stored, imported ones from [`Service::import_scan`] (the API,
 //! `brdfd import`, the watch folder).
 
-use crate::geometry::{self, Device, MA_T12_COUNT, SRA_COUNT};
+use crate::geometry::{self, Device, MA_T12_COUNT};
 use crate::processing::{self, ProcessingOptions};
-use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
+use crate::scan::{DeviceReadings, Scan, ScanError};
 use crate::store::{
     FitRunId, NewFit, NewReading, Provenance, ReadingValues, ScanDetail, ScanId, ScanState, Source,
     StoreError,
@@ -24,46 +24,17 @@ use super::{RefitRequest, Service, ServiceError};
 /// never the reference in force for new scans.
 pub const IMPORTED_SUFFIX: &str = " (imported)";
 
-/// A stored scan (complete, with its reference) as a `brdfd.scan/1` scan.
+/// A stored scan (complete, with its reference) as a `brdfd.scan/1` scan: the store's one
+/// conversion ([`ScanDetail::to_scan`]), with the name the reference had before it was
+/// imported.
 pub fn scan_from_detail(detail: &ScanDetail) -> Result<Scan, ScanError> {
-    let readings = device_readings(&detail.readings);
-    let reference = device_readings(&detail.reference.readings);
-    let name = detail
-        .reference
+    let mut scan = detail.to_scan()?;
+    scan.reference.name = scan
         .reference
         .name
         .trim_end_matches(IMPORTED_SUFFIX)
         .to_string();
-    let scan = Scan {
-        sample: detail.scan.sample.clone(),
-        reference: Reference {
-            name,
-            readings: reference,
-        },
-        readings,
-    };
-    scan.validate()?;
     Ok(scan)
-}
-
-/// Readings in table order; a missing geometry is left NaN, which `Scan::validate` names.
-fn device_readings(readings: &[crate::store::Reading]) -> DeviceReadings {
-    let mut out = DeviceReadings {
-        ma_t12: [[f64::NAN; crate::spectral::BANDS]; MA_T12_COUNT],
-        sra: [f64::NAN; SRA_COUNT],
-    };
-    for r in readings {
-        match r.values {
-            ReadingValues::Spectrum(s) if r.geometry.index < MA_T12_COUNT => {
-                out.ma_t12[r.geometry.index] = s
-            }
-            ReadingValues::Intensity(v) if r.geometry.index >= MA_T12_COUNT => {
-                out.sra[r.geometry.index - MA_T12_COUNT] = v
-            }
-            _ => {}
-        }
-    }
-    out
 }
 
 impl Service {

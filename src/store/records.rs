@@ -379,6 +379,67 @@ pub struct ScanDetail {
     pub reference: ReferenceDetail,
 }
 
+impl ScanDetail {
+    /// The one conversion from a stored scan to the scan model (`brdfd.scan/1`), used by the
+    /// service's exports and fits, the demo and the study report: every geometry's reading
+    /// exactly where the geometry table puts it, with the reference set's readings and name.
+    /// A geometry without a reading, or with the other instrument's kind of value, is an
+    /// error naming it (a store is only that way when damaged: `complete` needs all 14); the
+    /// result is [`Scan::validate`]d like a scan read from a file.
+    ///
+    /// [`Scan::validate`]: crate::scan::Scan::validate
+    pub fn to_scan(&self) -> Result<crate::scan::Scan, crate::scan::ScanError> {
+        let scan = crate::scan::Scan {
+            sample: self.scan.sample.clone(),
+            reference: crate::scan::Reference {
+                name: self.reference.reference.name.clone(),
+                readings: device_readings(&self.reference.readings, "reference.readings")?,
+            },
+            readings: device_readings(&self.readings, "readings")?,
+        };
+        scan.validate()?;
+        Ok(scan)
+    }
+}
+
+/// Stored readings as the scan model holds them (see [`ScanDetail::to_scan`]).
+fn device_readings(
+    readings: &[Reading],
+    field: &str,
+) -> Result<crate::scan::DeviceReadings, crate::scan::ScanError> {
+    use crate::geometry::{GEOMETRIES, MA_T12_COUNT, SRA_COUNT};
+    let mut out = crate::scan::DeviceReadings {
+        ma_t12: [[0.0; crate::spectral::BANDS]; MA_T12_COUNT],
+        sra: [0.0; SRA_COUNT],
+    };
+    let mut seen = [false; GEOMETRY_COUNT];
+    for r in readings {
+        let g = r.geometry;
+        match (g.device, &r.values) {
+            (Device::MaT12, ReadingValues::Spectrum(s)) => out.ma_t12[g.index] = *s,
+            (Device::Sra, ReadingValues::Intensity(v)) => out.sra[g.index - MA_T12_COUNT] = *v,
+            _ => {
+                return Err(crate::scan::ScanError::Shape {
+                    field: format!("{field}.{}", g.name),
+                    message: format!(
+                        "{} holds {}",
+                        g.device,
+                        ReadingValues::expected_kind(g.device)
+                    ),
+                });
+            }
+        }
+        seen[g.index] = true;
+    }
+    if let Some(g) = seen.iter().position(|s| !s) {
+        return Err(crate::scan::ScanError::MissingGeometry {
+            field: field.to_string(),
+            geometry: GEOMETRIES[g].name,
+        });
+    }
+    Ok(out)
+}
+
 /// Which scans [`super::Store::list_scans`] returns, newest first.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ScanFilter {
