@@ -113,7 +113,7 @@ async fn an_unplugged_instrument_fails_the_scan_keeping_its_readings_and_the_nex
         let ma_readings = detail
             .readings
             .iter()
-            .filter(|r| r.device == Device::MaT12)
+            .filter(|r| r.device() == Device::MaT12)
             .count();
         let sra_readings = detail.readings.len() - ma_readings;
         assert_eq!(

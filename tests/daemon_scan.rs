@@ -340,7 +340,7 @@ async fn the_stored_frame_is_the_one_received_even_in_digits_brdfd_would_not_wri
         }
         // The codec would have written those readings differently: a re-encoding could not
         // have produced the stored frames.
-        for r in rd.readings.iter().filter(|r| r.device == Device::Sra) {
+        for r in rd.readings.iter().filter(|r| r.device() == Device::Sra) {
             let ReadingValues::Intensity(v) = r.values else {
                 panic!("{}: not an intensity", r.geometry.name)
             };

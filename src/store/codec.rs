@@ -186,6 +186,13 @@ impl ReadingRow {
             .ok_or_else(|| corrupt(format!("unknown device \"{}\"", self.device)))?;
         let geometry = geometry::by_name(&self.geometry)
             .ok_or_else(|| corrupt(format!("unknown geometry \"{}\"", self.geometry)))?;
+        // The column is kept for SQL readers; the geometry says which instrument it is.
+        if device != geometry.device {
+            return Err(corrupt(format!(
+                "device \"{}\" for geometry {}, which the {} measures",
+                self.device, geometry.name, geometry.device
+            )));
+        }
         let values = decode_values(device, &self.values_f64le).ok_or_else(|| {
             corrupt(format!(
                 "{} bytes of values for a {} reading",
@@ -195,7 +202,6 @@ impl ReadingRow {
         })?;
         Ok(Reading {
             id: ReadingId(self.id),
-            device,
             geometry,
             values,
             raw_frame: self.raw_frame,

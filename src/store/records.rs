@@ -145,10 +145,6 @@ pub struct NewReading<'a> {
     pub raw_frame: &'a [u8],
 }
 
-fn geometry_name<S: Serializer>(g: &&'static Geometry, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_str(g.name)
-}
-
 fn hex<S: Serializer>(bytes: &[u8], s: S) -> Result<S::Ok, S::Error> {
     use std::fmt::Write;
     let mut out = String::with_capacity(bytes.len() * 2);
@@ -158,19 +154,45 @@ fn hex<S: Serializer>(bytes: &[u8], s: S) -> Result<S::Ok, S::Error> {
     s.serialize_str(&out)
 }
 
-/// A stored reading of a scan or of a reference set. Serialises with the geometry by name and
-/// the raw frame as lowercase hex.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// A stored reading of a scan or of a reference set. Its instrument is its geometry's
+/// ([`Reading::device`]). Serialises as `{id, device, geometry, values, raw_frame, at_ms}`, with
+/// the geometry by name and the raw frame as lowercase hex.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Reading {
     pub id: ReadingId,
-    pub device: Device,
-    #[serde(serialize_with = "geometry_name")]
     pub geometry: &'static Geometry,
     pub values: ReadingValues,
-    #[serde(serialize_with = "hex")]
     pub raw_frame: Vec<u8>,
     /// When the store received it.
     pub at_ms: i64,
+}
+
+impl Reading {
+    /// The instrument that measured it: the one its geometry belongs to.
+    pub fn device(&self) -> Device {
+        self.geometry.device
+    }
+}
+
+impl Serialize for Reading {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        /// The raw frame as lowercase hex.
+        struct Hex<'a>(&'a [u8]);
+        impl Serialize for Hex<'_> {
+            fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                hex(self.0, s)
+            }
+        }
+        let mut st = s.serialize_struct("Reading", 6)?;
+        st.serialize_field("id", &self.id)?;
+        st.serialize_field("device", &self.device())?;
+        st.serialize_field("geometry", self.geometry.name)?;
+        st.serialize_field("values", &self.values)?;
+        st.serialize_field("raw_frame", &Hex(&self.raw_frame))?;
+        st.serialize_field("at_ms", &self.at_ms)?;
+        st.end()
+    }
 }
 
 /// A known instrument.
@@ -596,6 +618,29 @@ pub struct FitDetail {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The API and `brdfd show` read `device` from a reading's JSON; it comes from the geometry.
+    #[test]
+    fn a_reading_serialises_with_its_geometrys_device() {
+        let g = crate::geometry::by_name("sra-20").unwrap();
+        let r = Reading {
+            id: ReadingId(7),
+            geometry: g,
+            values: ReadingValues::Intensity(0.5),
+            raw_frame: vec![0xab, 0x01],
+            at_ms: 12,
+        };
+        let v = serde_json::to_value(&r).unwrap();
+        assert_eq!(
+            v,
+            serde_json::json!({"id": 7, "device": "sra", "geometry": "sra-20",
+                "values": serde_json::to_value(ReadingValues::Intensity(0.5)).unwrap(),
+                "raw_frame": "ab01", "at_ms": 12})
+        );
+        let text = serde_json::to_string(&r).unwrap();
+        let keys: Vec<&str> = text.split('"').skip(1).step_by(2).take(2).collect();
+        assert_eq!(keys, ["id", "device"], "field order as before");
+    }
 
     #[test]
     fn states_round_trip_through_their_text() {
