@@ -342,6 +342,20 @@ fn child<'a, 'i>(node: roxmltree::Node<'a, 'i>, name: &str) -> Option<roxmltree:
     node.children().find(|c| is(c, name))
 }
 
+/// Line numbers of nodes, as `doc.text_pos_at` counts them, without its scan from the start
+/// of the text for every spectrum and point (quadratic in the file's size).
+struct Lines(Vec<usize>);
+
+impl Lines {
+    fn of_text(text: &str) -> Lines {
+        Lines(text.match_indices('\n').map(|(i, _)| i).collect())
+    }
+
+    fn of(&self, n: &roxmltree::Node) -> usize {
+        self.0.partition_point(|&b| b < n.range().start) + 1
+    }
+}
+
 /// The readings in a CxF3 document (objects of kind `measured` and `estimated` are skipped).
 pub(crate) fn observations(
     file: &str,
@@ -350,21 +364,82 @@ pub(crate) fn observations(
 ) -> Result<Vec<Observation>, FormatError> {
     let doc = roxmltree::Document::parse(text)
         .map_err(|e| FormatError::invalid(file, e.pos().row as usize, "xml", e.to_string()))?;
-    // The line of a node, as `doc.text_pos_at` counts it, without its scan from the start of
-    // the text for every spectrum and point (quadratic in the file's size).
-    let breaks: Vec<usize> = text.match_indices('\n').map(|(i, _)| i).collect();
-    let line = |n: &roxmltree::Node| breaks.partition_point(|&b| b < n.range().start) + 1;
+    let lines = Lines::of_text(text);
     let root = doc.root_element();
     if root.tag_name().name() != "CxF" {
         return Err(FormatError::invalid(
             file,
-            line(&root),
+            lines.of(&root),
             root.tag_name().name(),
             "not a CxF document (the root element must be CxF)",
         ));
     }
+    let specs = color_specifications(file, root, &lines)?;
+    let mut out = Vec::new();
+    for object in root.descendants().filter(|n| is(n, "Object")) {
+        let Some(owner) = owner_of(file, object, &lines, opts)? else {
+            continue;
+        };
+        let Some(values) = child(object, "ColorValues") else {
+            continue;
+        };
+        for sp in values
+            .children()
+            .filter(|c| is(c, "ReflectanceSpectrum") || is(c, "CustomSpectrum"))
+        {
+            let at = lines.of(&sp);
+            let element = sp.tag_name().name();
+            let spec_ref = sp.attribute("ColorSpecification").ok_or_else(|| {
+                FormatError::invalid(file, at, element, "no ColorSpecification attribute")
+            })?;
+            let spec = specs.get(spec_ref).ok_or_else(|| {
+                FormatError::invalid(
+                    file,
+                    at,
+                    format!("{element}/@ColorSpecification"),
+                    format!("\"{spec_ref}\" names no ColorSpecification with a MultiAngle BRDFAngle; brdfd needs the geometry of every spectrum"),
+                )
+            })?;
+            let spectrum = if element == "ReflectanceSpectrum" {
+                reflectance_spectrum(file, at, sp, spec)?
+            } else {
+                custom_spectrum(file, at, sp, &lines)?
+            };
+            let value = if spec.geometry.device == Device::Sra
+                && spectrum
+                    .iter()
+                    .all(|v| v.to_bits() == spectrum[0].to_bits())
+            {
+                Value::Intensity(spectrum[0])
+            } else {
+                Value::Spectrum(spectrum)
+            };
+            out.push(Observation {
+                owner: owner.clone(),
+                geometry: spec.geometry,
+                value,
+                at: Location {
+                    file: file.to_string(),
+                    line: at,
+                },
+                fields: wavelengths_nm()
+                    .iter()
+                    .map(|nm| format!("{element} ({nm} nm)"))
+                    .collect(),
+            });
+        }
+    }
+    Ok(out)
+}
 
-    // Geometry and wavelength grid per ColorSpecification Id.
+/// Geometry and wavelength grid per `ColorSpecification` Id (specifications without a
+/// multi-angle geometry are left out: only a spectrum that uses one is an error).
+fn color_specifications(
+    file: &str,
+    root: roxmltree::Node,
+    lines: &Lines,
+) -> Result<HashMap<String, Spec>, FormatError> {
+    let line = |n: &roxmltree::Node| lines.of(n);
     let mut specs: HashMap<String, Spec> = HashMap::new();
     for cs in root.descendants().filter(|n| is(n, "ColorSpecification")) {
         let Some(id) = cs.attribute("Id") else {
@@ -410,173 +485,152 @@ pub(crate) fn observations(
             },
         );
     }
+    Ok(specs)
+}
 
-    let mut out = Vec::new();
-    for object in root.descendants().filter(|n| is(n, "Object")) {
-        let name = object.attribute("Name").unwrap_or("").trim().to_string();
-        let tags: HashMap<&str, &str> = object
-            .children()
-            .filter(|c| is(c, "TagCollection") && c.attribute("Name") == Some("brdfd"))
-            .flat_map(|c| c.children().filter(|t| is(t, "Tag")))
-            .filter_map(|t| Some((t.attribute("Name")?, t.attribute("Value")?)))
-            .collect();
-        let owner = match tags.get("data_kind") {
-            Some(kind) => {
-                let kind: DataKind = kind.parse().map_err(|e: String| {
-                    FormatError::invalid(file, line(&object), "Tag data_kind", e)
-                })?;
-                let sample = tags.get("sample").map_or(name.clone(), |s| s.to_string());
-                match kind {
-                    DataKind::Measured
-                    | DataKind::Estimated
-                    | DataKind::EstimatedLow
-                    | DataKind::EstimatedHigh => continue,
-                    DataKind::Reading => Owner::Sample(sample),
-                    DataKind::Reference => Owner::ReferenceOf {
-                        sample,
-                        tile: tags
-                            .get("reference")
-                            .map_or(name.clone(), |s| s.to_string()),
-                    },
-                }
-            }
-            None if name == opts.reference => Owner::SharedReference,
-            None => Owner::Sample(name.clone()),
-        };
-        if let Owner::Sample(s) = &owner
-            && s.is_empty()
-        {
-            return Err(FormatError::invalid(
-                file,
-                line(&object),
-                "Object/@Name",
-                "an object with readings needs a name (the sample's)",
-            ));
-        }
-        let Some(values) = child(object, "ColorValues") else {
-            continue;
-        };
-        for sp in values
-            .children()
-            .filter(|c| is(c, "ReflectanceSpectrum") || is(c, "CustomSpectrum"))
-        {
-            let at = line(&sp);
-            let element = sp.tag_name().name();
-            let spec_ref = sp.attribute("ColorSpecification").ok_or_else(|| {
-                FormatError::invalid(file, at, element, "no ColorSpecification attribute")
+/// Whose readings an `Object` holds, from brdfd's tags or else its name; `None` for the
+/// fitted spectra brdfd writes beside the readings (`measured`, `estimated`, …).
+fn owner_of(
+    file: &str,
+    object: roxmltree::Node,
+    lines: &Lines,
+    opts: &ImportOptions,
+) -> Result<Option<Owner>, FormatError> {
+    let name = object.attribute("Name").unwrap_or("").trim().to_string();
+    let tags: HashMap<&str, &str> = object
+        .children()
+        .filter(|c| is(c, "TagCollection") && c.attribute("Name") == Some("brdfd"))
+        .flat_map(|c| c.children().filter(|t| is(t, "Tag")))
+        .filter_map(|t| Some((t.attribute("Name")?, t.attribute("Value")?)))
+        .collect();
+    let owner = match tags.get("data_kind") {
+        Some(kind) => {
+            let kind: DataKind = kind.parse().map_err(|e: String| {
+                FormatError::invalid(file, lines.of(&object), "Tag data_kind", e)
             })?;
-            let spec = specs.get(spec_ref).ok_or_else(|| {
-                FormatError::invalid(
-                    file,
-                    at,
-                    format!("{element}/@ColorSpecification"),
-                    format!("\"{spec_ref}\" names no ColorSpecification with a MultiAngle BRDFAngle; brdfd needs the geometry of every spectrum"),
-                )
-            })?;
-            let spectrum = if element == "ReflectanceSpectrum" {
-                let start = match sp.attribute("StartWL") {
-                    Some(v) => parse_number(file, at, "ReflectanceSpectrum/@StartWL", v)?,
-                    None => spec.start_wl.unwrap_or(f64::from(FIRST_NM)),
-                };
-                let step = spec.increment.unwrap_or(f64::from(STEP_NM));
-                if step != f64::from(STEP_NM) {
-                    return Err(FormatError::invalid(
-                        file,
-                        at,
-                        element,
-                        format!(
-                            "wavelength increment {step} nm; brdfd reads the MA-T12's 10 nm grid"
-                        ),
-                    ));
-                }
-                let list: Vec<&str> = sp.text().unwrap_or("").split_whitespace().collect();
-                let offset = (f64::from(FIRST_NM) - start) / step;
-                // A negative start is no wavelength (and, far enough below 0, would put 400 nm
-                // past the end of the index range).
-                if start < 0.0 || offset < 0.0 || offset.fract() != 0.0 {
-                    return Err(FormatError::invalid(
-                        file,
-                        at,
-                        element,
-                        format!("starts at {start} nm; brdfd needs 400–700 nm every 10 nm"),
-                    ));
-                }
-                let offset = offset as usize;
-                if list.len() < offset + BANDS {
-                    return Err(FormatError::invalid(
-                        file,
-                        at,
-                        element,
-                        format!(
-                            "{} values from {start} nm do not reach 700 nm (need {})",
-                            list.len(),
-                            offset + BANDS
-                        ),
-                    ));
-                }
-                let mut s = [0.0; BANDS];
-                for (b, v) in s.iter_mut().enumerate() {
-                    *v = parse_number(
-                        file,
-                        at,
-                        &format!("ReflectanceSpectrum ({} nm)", wavelengths_nm()[b]),
-                        list[offset + b],
-                    )?;
-                }
-                s
-            } else {
-                let mut s = [None; BANDS];
-                for p in sp.children().filter(|c| is(c, "SpectralPoint")) {
-                    let pl = line(&p);
-                    let wl = parse_number(
-                        file,
-                        pl,
-                        "SpectralPoint/@WL",
-                        p.attribute("WL").unwrap_or(""),
-                    )?;
-                    let v = parse_number(file, pl, "SpectralPoint", p.text().unwrap_or(""))?;
-                    if let Some(b) = wavelengths_nm().iter().position(|&nm| f64::from(nm) == wl) {
-                        s[b] = Some(v);
-                    }
-                }
-                let mut full = [0.0; BANDS];
-                for (b, v) in s.iter().enumerate() {
-                    full[b] = v.ok_or_else(|| {
-                        FormatError::invalid(
-                            file,
-                            at,
-                            element,
-                            format!("no SpectralPoint at {} nm", wavelengths_nm()[b]),
-                        )
-                    })?;
-                }
-                full
-            };
-            let value = if spec.geometry.device == Device::Sra
-                && spectrum
-                    .iter()
-                    .all(|v| v.to_bits() == spectrum[0].to_bits())
-            {
-                Value::Intensity(spectrum[0])
-            } else {
-                Value::Spectrum(spectrum)
-            };
-            out.push(Observation {
-                owner: owner.clone(),
-                geometry: spec.geometry,
-                value,
-                at: Location {
-                    file: file.to_string(),
-                    line: at,
+            let sample = tags.get("sample").map_or(name.clone(), |s| s.to_string());
+            match kind {
+                DataKind::Measured
+                | DataKind::Estimated
+                | DataKind::EstimatedLow
+                | DataKind::EstimatedHigh => return Ok(None),
+                DataKind::Reading => Owner::Sample(sample),
+                DataKind::Reference => Owner::ReferenceOf {
+                    sample,
+                    tile: tags
+                        .get("reference")
+                        .map_or(name.clone(), |s| s.to_string()),
                 },
-                fields: wavelengths_nm()
-                    .iter()
-                    .map(|nm| format!("{element} ({nm} nm)"))
-                    .collect(),
-            });
+            }
+        }
+        None if name == opts.reference => Owner::SharedReference,
+        None => Owner::Sample(name.clone()),
+    };
+    if let Owner::Sample(s) = &owner
+        && s.is_empty()
+    {
+        return Err(FormatError::invalid(
+            file,
+            lines.of(&object),
+            "Object/@Name",
+            "an object with readings needs a name (the sample's)",
+        ));
+    }
+    Ok(Some(owner))
+}
+
+/// A `ReflectanceSpectrum`: a list of values from a start wavelength on the MA-T12's 10 nm
+/// grid, of which the 31 bands 400–700 nm are read.
+fn reflectance_spectrum(
+    file: &str,
+    at: usize,
+    sp: roxmltree::Node,
+    spec: &Spec,
+) -> Result<Spectrum, FormatError> {
+    let element = "ReflectanceSpectrum";
+    let start = match sp.attribute("StartWL") {
+        Some(v) => parse_number(file, at, "ReflectanceSpectrum/@StartWL", v)?,
+        None => spec.start_wl.unwrap_or(f64::from(FIRST_NM)),
+    };
+    let step = spec.increment.unwrap_or(f64::from(STEP_NM));
+    if step != f64::from(STEP_NM) {
+        return Err(FormatError::invalid(
+            file,
+            at,
+            element,
+            format!("wavelength increment {step} nm; brdfd reads the MA-T12's 10 nm grid"),
+        ));
+    }
+    let list: Vec<&str> = sp.text().unwrap_or("").split_whitespace().collect();
+    let offset = (f64::from(FIRST_NM) - start) / step;
+    // A negative start is no wavelength (and, far enough below 0, would put 400 nm past the
+    // end of the index range).
+    if start < 0.0 || offset < 0.0 || offset.fract() != 0.0 {
+        return Err(FormatError::invalid(
+            file,
+            at,
+            element,
+            format!("starts at {start} nm; brdfd needs 400–700 nm every 10 nm"),
+        ));
+    }
+    let offset = offset as usize;
+    if list.len() < offset + BANDS {
+        return Err(FormatError::invalid(
+            file,
+            at,
+            element,
+            format!(
+                "{} values from {start} nm do not reach 700 nm (need {})",
+                list.len(),
+                offset + BANDS
+            ),
+        ));
+    }
+    let mut s = [0.0; BANDS];
+    for (b, v) in s.iter_mut().enumerate() {
+        *v = parse_number(
+            file,
+            at,
+            &format!("ReflectanceSpectrum ({} nm)", wavelengths_nm()[b]),
+            list[offset + b],
+        )?;
+    }
+    Ok(s)
+}
+
+/// A `CustomSpectrum`: `SpectralPoint`s by wavelength, one needed at each of the 31 bands.
+fn custom_spectrum(
+    file: &str,
+    at: usize,
+    sp: roxmltree::Node,
+    lines: &Lines,
+) -> Result<Spectrum, FormatError> {
+    let mut s = [None; BANDS];
+    for p in sp.children().filter(|c| is(c, "SpectralPoint")) {
+        let pl = lines.of(&p);
+        let wl = parse_number(
+            file,
+            pl,
+            "SpectralPoint/@WL",
+            p.attribute("WL").unwrap_or(""),
+        )?;
+        let v = parse_number(file, pl, "SpectralPoint", p.text().unwrap_or(""))?;
+        if let Some(b) = wavelengths_nm().iter().position(|&nm| f64::from(nm) == wl) {
+            s[b] = Some(v);
         }
     }
-    Ok(out)
+    let mut full = [0.0; BANDS];
+    for (b, v) in s.iter().enumerate() {
+        full[b] = v.ok_or_else(|| {
+            FormatError::invalid(
+                file,
+                at,
+                "CustomSpectrum",
+                format!("no SpectralPoint at {} nm", wavelengths_nm()[b]),
+            )
+        })?;
+    }
+    Ok(full)
 }
 
 #[cfg(test)]
