@@ -7,6 +7,10 @@
 //! a central schema newer than this brdfd are refused; a bad URL or a wrong password is one
 //! clear line while the station goes on measuring.
 
+// `common::serial()` is a process-wide std mutex held for a whole test on purpose: each
+// `#[tokio::test]` has its own runtime, so no task of the same runtime waits for it.
+#![allow(clippy::await_holding_lock)]
+
 mod common;
 #[path = "common/pg.rs"]
 mod pg;
