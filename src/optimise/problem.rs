@@ -166,8 +166,8 @@ pub(crate) struct Problem {
     /// over the bands side by side).
     lm: [[f64; G]; BANDS],
     lmg: [[f64; BP]; G],
-    /// Σ_g w_g² M_g(λ_b) per band (cf1's closed-form kd).
-    sum_w2m: [f64; BANDS],
+    /// Σ_g w_g² M_g(λ_b) per (padded) band (cf1's closed-form kd).
+    sum_w2m: [f64; BP],
     /// m2's linearised weights `c = (w / (1 + w·M))²` per geometry and (padded) band,
     /// `c[g][b]`, used for the starting kd of each band's Newton solve, and their sums.
     c: [[f64; BP]; G],
@@ -281,7 +281,7 @@ impl Problem {
             wm: [[0.0; G]; BANDS],
             lm: [[0.0; G]; BANDS],
             lmg: [[0.0; BP]; G],
-            sum_w2m: [0.0; BANDS],
+            sum_w2m: [0.0; BP],
             c: [[0.0; BP]; G],
             sum_c: [0.0; BP],
             sum_cm: [0.0; BP],
@@ -300,10 +300,10 @@ impl Problem {
                 p.c[g][b] = c;
                 p.sum_c[b] += c;
                 p.sum_cm[b] += c * m;
+                p.sum_w2m[b] += w2[g] * m;
                 if b < BANDS {
                     p.wm[b][g] = wm;
                     p.lm[b][g] = lm;
-                    p.sum_w2m[b] += w2[g] * m;
                 }
             }
         }
@@ -401,15 +401,23 @@ impl Problem {
             Criterion::Cf1 => {
                 // Σ_g w²(M − s − kd)² is a convex quadratic in kd with its minimum at the
                 // w²-weighted mean of M − s; clamping a 1-D convex minimiser to an interval
-                // gives the constrained minimiser.
+                // gives the constrained minimiser. Every band at once: the band is the
+                // innermost loop, each band's terms summed in geometry order.
                 let sum_w2s: f64 = (0..G).map(|g| self.w2[g] * s[g]).sum();
-                for b in 0..BANDS {
-                    let k = ((self.sum_w2m[b] - sum_w2s) / self.sum_w2).clamp(lo, hi);
-                    kd[b] = k;
-                    for g in 0..G {
-                        let r = self.wm[b][g] - self.w[g] * (k + s[g]);
-                        sum += r * r;
+                let k: [f64; BP] = std::array::from_fn(|b| {
+                    ((self.sum_w2m[b] - sum_w2s) / self.sum_w2).clamp(lo, hi)
+                });
+                let mut f = [0.0; BP];
+                for g in 0..G {
+                    let (wg, sg, mg) = (self.w[g], s[g], &self.mg[g]);
+                    for b in 0..BP {
+                        let r = wg * mg[b] - wg * (k[b] + sg);
+                        f[b] += r * r;
                     }
+                }
+                for b in 0..BANDS {
+                    kd[b] = k[b];
+                    sum += f[b];
                 }
             }
             Criterion::L1 => {
