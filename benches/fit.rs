@@ -3,9 +3,9 @@
 //! - `fit/<cost>`: the default (separable) method on one synthetic 14-geometry scan with 1 %
 //!   noise, for each cost function. Targets (issue 12): cf2 ≤ 10 ms and m2 ≤ 5 ms median on
 //!   one core, release. A cf2 fit includes its continuation stages (cf1, then weighted L1;
-//!   `optimise::separable`), which are what make it reliable (2 989 evaluations: about 850 cf1,
-//!   990 L1 and 1 150 cf2). The README ("The optimiser", Speed) quotes the figures before and
-//!   after the SIMD profile solves; `examples/fit_times.rs` times the eight example scans.
+//!   `optimise::separable`), which are what make it reliable (2 405 evaluations over the three
+//!   stages). The README ("The optimiser", Speed) quotes the figures before and after issue
+//!   12's two rounds of speed work; `examples/fit_times.rs` times the eight example scans.
 //! - `fit_paper/cf2`: the paper GA with its default settings on the same scan (fewer samples:
 //!   it is slow, which is part of the point).
 //! - `bootstrap/all_costs_200`: the bootstrap intervals (SCIENCE.md §10) of the three fits of the

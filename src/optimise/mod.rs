@@ -171,7 +171,8 @@ pub struct SeparableSettings {
     pub max_evaluations_per_search: u32,
     /// Nelder–Mead restarts at the best point, each with a fresh simplex a quarter the size of
     /// the last (the first 0.05), to polish it and to undo a simplex that collapsed early.
-    /// Default 3; stops early when a restart improves the cost by no more than `f_tolerance`.
+    /// Default 3; stops early when a restart improves the cost by no more than
+    /// `search_tolerance` (relative): only a simplex that stalled gains that much.
     pub polish_restarts: u32,
     /// Most cost evaluations of one polishing restart. Default 300.
     pub max_evaluations_per_polish: u32,

@@ -18,11 +18,13 @@
 //! of libm's, see [`ln_1p_recip`]).
 //!
 //! Speed (issue 12): a profile is the inner loop of every fit and of every bootstrap refit, so
-//! its per-band solves are written to run in SIMD lanes — cf2 and L1 over all 31 bands at once
-//! (the band is the innermost loop of the 91 pairwise terms), m2 over the 14 geometries of a
-//! band — and [`Problem::profile`] is compiled a second time for AVX2, chosen at run time. The
-//! arithmetic on each value is the same in both compilations, so fits do not depend on the
-//! CPU. `examples/fit_times.rs` times the fits; the README quotes the figures.
+//! its per-band solves are written to run in SIMD lanes, all 31 bands at once with the band
+//! the innermost loop — cf1's closed form and its sums, cf2 and L1 over the 91 pairwise terms,
+//! m2's Newton–Halley passes (each band's solve in its own lane, the few bands that need a
+//! third pass finishing alone) — and [`Problem::profile`] is compiled a second time for AVX2,
+//! chosen at run time. The arithmetic on each value is the same in both compilations, so fits
+//! do not depend on the CPU. `examples/fit_times.rs` times the fits; the README quotes the
+//! figures.
 
 // Numeric loops index parallel per-geometry and per-band arrays; `for g in 0..G` reads
 // closest to the equations.
@@ -161,15 +163,18 @@ pub(crate) struct Problem {
     mg: [[f64; BP]; G],
     /// `w_g · M_g(λ_b)`.
     wm: [[f64; G]; BANDS],
-    /// `ln(1 + w_g · M_g(λ_b))` (m2), by [`ln_1p_recip`] as the model's side.
+    /// `ln(1 + w_g · M_g(λ_b))` (m2), by [`ln_1p_recip`] as the model's side; `lm[b][g]`
+    /// band-major, and `lmg[g][b]` geometry-major padded to [`BP`] bands (m2's solve runs
+    /// over the bands side by side).
     lm: [[f64; G]; BANDS],
-    /// Σ_g w_g² M_g(λ_b) per band (cf1's closed-form kd).
-    sum_w2m: [f64; BANDS],
-    /// m2's linearised weights `c = (w / (1 + w·M))²` per band and geometry, used for the
-    /// starting kd of each band's Newton solve.
-    c: [[f64; G]; BANDS],
-    sum_c: [f64; BANDS],
-    sum_cm: [f64; BANDS],
+    lmg: [[f64; BP]; G],
+    /// Σ_g w_g² M_g(λ_b) per (padded) band (cf1's closed-form kd).
+    sum_w2m: [f64; BP],
+    /// m2's linearised weights `c = (w / (1 + w·M))²` per geometry and (padded) band,
+    /// `c[g][b]`, used for the starting kd of each band's Newton solve, and their sums.
+    c: [[f64; BP]; G],
+    sum_c: [f64; BP],
+    sum_cm: [f64; BP],
     /// The SRA luminance residuals of the `luminance` reading model; `None` for the paper's
     /// flat model.
     lum: Option<Lum>,
@@ -277,29 +282,31 @@ impl Problem {
             mg: [[0.0; BP]; G],
             wm: [[0.0; G]; BANDS],
             lm: [[0.0; G]; BANDS],
-            sum_w2m: [0.0; BANDS],
-            c: [[0.0; G]; BANDS],
-            sum_c: [0.0; BANDS],
-            sum_cm: [0.0; BANDS],
+            lmg: [[0.0; BP]; G],
+            sum_w2m: [0.0; BP],
+            c: [[0.0; BP]; G],
+            sum_c: [0.0; BP],
+            sum_cm: [0.0; BP],
             lum,
         };
-        for b in 0..BANDS {
+        // The padded bands repeat the last one.
+        for b in 0..BP {
+            let band = b.min(BANDS - 1);
             for g in 0..G {
-                let m = measured.values[g][b];
+                let m = measured.values[g][band];
                 let wm = w[g] * m;
+                let lm = ln_1p_recip(wm).0;
                 p.mg[g][b] = m;
-                p.wm[b][g] = wm;
-                p.lm[b][g] = ln_1p_recip(wm).0;
-                p.sum_w2m[b] += w2[g] * m;
+                p.lmg[g][b] = lm;
                 let c = (w[g] / (1.0 + wm)).powi(2);
-                p.c[b][g] = c;
+                p.c[g][b] = c;
                 p.sum_c[b] += c;
                 p.sum_cm[b] += c * m;
-            }
-        }
-        for g in 0..G {
-            for b in BANDS..BP {
-                p.mg[g][b] = p.mg[g][BANDS - 1];
+                p.sum_w2m[b] += w2[g] * m;
+                if b < BANDS {
+                    p.wm[b][g] = wm;
+                    p.lm[b][g] = lm;
+                }
             }
         }
         p
@@ -396,15 +403,23 @@ impl Problem {
             Criterion::Cf1 => {
                 // Σ_g w²(M − s − kd)² is a convex quadratic in kd with its minimum at the
                 // w²-weighted mean of M − s; clamping a 1-D convex minimiser to an interval
-                // gives the constrained minimiser.
+                // gives the constrained minimiser. Every band at once: the band is the
+                // innermost loop, each band's terms summed in geometry order.
                 let sum_w2s: f64 = (0..G).map(|g| self.w2[g] * s[g]).sum();
-                for b in 0..BANDS {
-                    let k = ((self.sum_w2m[b] - sum_w2s) / self.sum_w2).clamp(lo, hi);
-                    kd[b] = k;
-                    for g in 0..G {
-                        let r = self.wm[b][g] - self.w[g] * (k + s[g]);
-                        sum += r * r;
+                let k: [f64; BP] = std::array::from_fn(|b| {
+                    ((self.sum_w2m[b] - sum_w2s) / self.sum_w2).clamp(lo, hi)
+                });
+                let mut f = [0.0; BP];
+                for g in 0..G {
+                    let (wg, sg, mg) = (self.w[g], s[g], &self.mg[g]);
+                    for b in 0..BP {
+                        let r = wg * mg[b] - wg * (k[b] + sg);
+                        f[b] += r * r;
                     }
+                }
+                for b in 0..BANDS {
+                    kd[b] = k[b];
+                    sum += f[b];
                 }
             }
             Criterion::L1 => {
@@ -428,10 +443,10 @@ impl Problem {
                 }
             }
             Criterion::M2 => {
+                let (k, f) = self.m2_bands(&s, lo, hi, M2_LANES_MIN);
                 for b in 0..BANDS {
-                    let (k, f) = self.m2_band(b, &s, lo, hi);
-                    kd[b] = k;
-                    sum += f;
+                    kd[b] = k[b];
+                    sum += f[b];
                 }
             }
         }
@@ -454,8 +469,8 @@ impl Problem {
         d
     }
 
-    /// m2 in one band: minimise `f(k) = Σ_g (ln(1 + w_g(k + s_g)) − ln(1 + w_g M_g))²` over
-    /// k ∈ [lo, hi]. Returns (k, f(k)).
+    /// m2 in every band b: minimise `f(k) = Σ_g (ln(1 + w_g(k + s_g)) − ln(1 + w_g M_g))²` over
+    /// k ∈ [lo, hi]. Returns k and f(k) per band.
     ///
     /// With `x_g = w_g(k + s_g)`, `e_g` the log residual and `q_g = w_g / (1 + x_g)`:
     /// `f' = 2 Σ e q` and `f'' = 2 Σ q² (1 − e)`. Each term of f' increases with k while its
@@ -468,70 +483,172 @@ impl Problem {
     /// would lower f by less than 1e-16 of it (`f'²/(2f'')`, f quadratic near its minimum): k
     /// is then the minimiser to working precision, and one more evaluation of the 14
     /// logarithms would not change f.
+    ///
+    /// Nearly every band ends after two evaluations, so the bands are solved side by side:
+    /// while at least `lanes_min` ([`M2_LANES_MIN`]) bands are still running, one pass evaluates the 14
+    /// terms of every band at its own k in SIMD lanes (the band innermost, as for cf2) and
+    /// each running band takes its step; the few bands left then finish one by one
+    /// ([`Problem::m2_sums`]). Either way a band's sums are accumulated in geometry order from
+    /// the same operations, so its k and f do not depend on which pass evaluated it.
     #[inline(always)]
-    fn m2_band(&self, b: usize, s: &[f64; G], lo: f64, hi: f64) -> (f64, f64) {
-        let (w, lm, c) = (&self.w, &self.lm[b], &self.c[b]);
-        let sum_cs: f64 = (0..G).map(|g| c[g] * s[g]).sum();
-        let mut k = ((self.sum_cm[b] - sum_cs) / self.sum_c[b]).clamp(lo, hi);
-        let (mut a, mut z) = (lo, hi);
-        let mut f = 0.0;
-        for _ in 0..60 {
-            // The 14 logarithms side by side (SIMD lanes), then the sums in geometry order.
-            let mut e = [0.0; G];
-            let mut q = [0.0; G];
-            for g in 0..G {
-                let x = w[g] * (k + s[g]);
-                let (l, inv) = ln_1p_recip(x);
-                e[g] = l - lm[g];
-                q[g] = w[g] * inv;
+    fn m2_bands(&self, s: &[f64; G], lo: f64, hi: f64, lanes_min: usize) -> ([f64; BP], [f64; BP]) {
+        // The starting kd of every band: Σ_g c s_g as `Iterator::sum` adds it, from −0.
+        let mut sum_cs = [-0.0; BP];
+        for g in 0..G {
+            for b in 0..BP {
+                sum_cs[b] += self.c[g][b] * s[g];
             }
-            let (mut d1, mut d2, mut d3, mut ff) = (0.0, 0.0, 0.0, 0.0);
-            for g in 0..G {
-                let q2 = q[g] * q[g];
-                ff += e[g] * e[g];
-                d1 += e[g] * q[g];
-                d2 += q2 * (1.0 - e[g]);
-                d3 += q2 * q[g] * (3.0 - 2.0 * e[g]);
-            }
-            f = ff;
-            if d1 > 0.0 {
-                z = k;
-            } else if d1 < 0.0 {
-                a = k;
-            } else {
-                break;
-            }
-            // The minimiser sits on a bound when f' points out of the interval there.
-            if (k <= lo && d1 > 0.0) || (k >= hi && d1 < 0.0) {
-                break;
-            }
-            let mut step = d1 / d2;
-            if d2 <= 0.0 {
-                // Outside the convex region: fall back on the Gauss–Newton curvature.
-                d2 = (0..G).map(|g| q[g] * q[g]).sum();
-                step = d1 / d2;
-            } else {
-                // Halley's correction with the third derivative, −2 Σ q³ (3 − 2e): one step
-                // that triples the correct digits instead of two that double them, taken only
-                // where it is a mild correction of Newton's.
-                let h = 1.0 + 0.5 * step * d3 / d2;
-                if (0.5..=2.0).contains(&h) {
-                    step /= h;
+        }
+        let mut solve = M2Solve {
+            k: std::array::from_fn(|b| {
+                ((self.sum_cm[b] - sum_cs[b]) / self.sum_c[b]).clamp(lo, hi)
+            }),
+            a: [lo; BP],
+            z: [hi; BP],
+            f: [0.0; BP],
+            evaluations: [0; BP],
+            running: std::array::from_fn(|b| b < BANDS),
+        };
+        let mut running = BANDS;
+        while running >= lanes_min.max(1) {
+            let sums = self.m2_sums_lanes(&solve.k, s);
+            running = 0;
+            for b in 0..BANDS {
+                if solve.running[b] {
+                    let band = [sums[0][b], sums[1][b], sums[2][b], sums[3][b], sums[4][b]];
+                    solve.step(b, band, lo, hi);
+                    running += usize::from(solve.running[b]);
                 }
             }
-            if d1 * d1 <= 1e-16 * f * d2 {
-                break;
-            }
-            let mut next = (k - step).clamp(lo, hi);
-            if !(next >= a && next <= z) {
-                next = 0.5 * (a + z);
-            }
-            if (next - k).abs() <= 4.0 * f64::EPSILON * k.abs().max(1e-6) || z - a <= 0.0 {
-                break;
-            }
-            k = next;
         }
-        (k, f)
+        for b in 0..BANDS {
+            while solve.running[b] {
+                let band = self.m2_sums(b, solve.k[b], s);
+                solve.step(b, band, lo, hi);
+            }
+        }
+        (solve.k, solve.f)
+    }
+
+    /// The sums of one evaluation of band b's m2 terms at kd = k, the 14 logarithms side by
+    /// side (SIMD lanes) and then the sums in geometry order: `[f, f'/2, f''/2, −f'''/2, Σ q²]`
+    /// ([`Problem::m2_bands`]).
+    #[inline(always)]
+    fn m2_sums(&self, b: usize, k: f64, s: &[f64; G]) -> [f64; 5] {
+        let (w, lm) = (&self.w, &self.lm[b]);
+        let mut e = [0.0; G];
+        let mut q = [0.0; G];
+        for g in 0..G {
+            let (l, inv) = ln_1p_recip(w[g] * (k + s[g]));
+            e[g] = l - lm[g];
+            q[g] = w[g] * inv;
+        }
+        let mut sums = [0.0, 0.0, 0.0, 0.0, -0.0];
+        for g in 0..G {
+            m2_accumulate(&mut sums, e[g], q[g]);
+        }
+        sums
+    }
+
+    /// [`Problem::m2_sums`] for every (padded) band b at kd = `k[b]`, the bands side by side
+    /// in SIMD lanes; `sums[i][b]` is band b's i-th sum.
+    #[inline(always)]
+    fn m2_sums_lanes(&self, k: &[f64; BP], s: &[f64; G]) -> [[f64; BP]; 5] {
+        let mut sums = [[0.0; BP], [0.0; BP], [0.0; BP], [0.0; BP], [-0.0; BP]];
+        for g in 0..G {
+            let (wg, sg, lm) = (self.w[g], s[g], &self.lmg[g]);
+            for b in 0..BP {
+                let (l, inv) = ln_1p_recip(wg * (k[b] + sg));
+                let (e, q) = (l - lm[b], wg * inv);
+                let q2 = q * q;
+                sums[0][b] += e * e;
+                sums[1][b] += e * q;
+                sums[2][b] += q2 * (1.0 - e);
+                sums[3][b] += q2 * q * (3.0 - 2.0 * e);
+                sums[4][b] += q2;
+            }
+        }
+        sums
+    }
+}
+
+/// While at least this many bands' m2 solves are running, a pass evaluates all [`BP`] bands
+/// in SIMD lanes; below it, the bands left finish one by one ([`Problem::m2_bands`]).
+const M2_LANES_MIN: usize = 8;
+
+/// Adds one geometry's m2 terms, log residual `e` and `q = w / (1 + x)`, to the sums
+/// `[f, f'/2, f''/2, −f'''/2, Σ q²]` ([`Problem::m2_sums`]); the same operations as
+/// [`Problem::m2_sums_lanes`].
+#[inline(always)]
+fn m2_accumulate(sums: &mut [f64; 5], e: f64, q: f64) {
+    let q2 = q * q;
+    sums[0] += e * e;
+    sums[1] += e * q;
+    sums[2] += q2 * (1.0 - e);
+    sums[3] += q2 * q * (3.0 - 2.0 * e);
+    sums[4] += q2;
+}
+
+/// The m2 solves of every (padded) band ([`Problem::m2_bands`]): each band's kd, the bracket
+/// [a, z] known to hold its minimiser, f at its last evaluation, its evaluations so far, and
+/// whether it is still running.
+struct M2Solve {
+    k: [f64; BP],
+    a: [f64; BP],
+    z: [f64; BP],
+    f: [f64; BP],
+    evaluations: [u32; BP],
+    running: [bool; BP],
+}
+
+impl M2Solve {
+    /// Band b's step from its sums at its current k (`[f, f'/2, f''/2, −f'''/2, Σ q²]`):
+    /// records f, narrows the bracket and moves k, or ends the band's solve (k is then the
+    /// minimiser and f its value). At most 60 evaluations a band.
+    #[inline(always)]
+    fn step(&mut self, b: usize, [f, d1, d2, d3, gn]: [f64; 5], lo: f64, hi: f64) {
+        let k = self.k[b];
+        self.f[b] = f;
+        self.running[b] = false;
+        if d1 > 0.0 {
+            self.z[b] = k;
+        } else if d1 < 0.0 {
+            self.a[b] = k;
+        } else {
+            return;
+        }
+        // The minimiser sits on a bound when f' points out of the interval there.
+        if (k <= lo && d1 > 0.0) || (k >= hi && d1 < 0.0) {
+            return;
+        }
+        let (mut d2, mut step) = (d2, d1 / d2);
+        if d2 <= 0.0 {
+            // Outside the convex region: fall back on the Gauss–Newton curvature.
+            d2 = gn;
+            step = d1 / d2;
+        } else {
+            // Halley's correction with the third derivative, −2 Σ q³ (3 − 2e): one step
+            // that triples the correct digits instead of two that double them, taken only
+            // where it is a mild correction of Newton's.
+            let h = 1.0 + 0.5 * step * d3 / d2;
+            if (0.5..=2.0).contains(&h) {
+                step /= h;
+            }
+        }
+        if d1 * d1 <= 1e-16 * f * d2 {
+            return;
+        }
+        let (a, z) = (self.a[b], self.z[b]);
+        let mut next = (k - step).clamp(lo, hi);
+        if !(next >= a && next <= z) {
+            next = 0.5 * (a + z);
+        }
+        if (next - k).abs() <= 4.0 * f64::EPSILON * k.abs().max(1e-6) || z - a <= 0.0 {
+            return;
+        }
+        self.k[b] = next;
+        self.evaluations[b] += 1;
+        self.running[b] = self.evaluations[b] < 60;
     }
 }
 
@@ -897,6 +1014,49 @@ mod tests {
                             "{cf} {criterion:?}"
                         );
                     }
+                }
+            }
+        }
+    }
+
+    /// m2's per-band solves give the same bits whether the bands run side by side in SIMD
+    /// lanes, one by one, or (the default) side by side until few are left.
+    #[test]
+    fn m2_lane_and_band_passes_agree_bit_for_bit() {
+        let (m, truth) = scan();
+        for noise in [0.0, 0.01, 0.05] {
+            let m = synthetic::with_noise(&m, noise, 11);
+            let prob = Problem::new(
+                &m,
+                CostFunction::M2,
+                FresnelCosine::Incidence,
+                Bounds::default(),
+            );
+            for (ks, alpha, ior) in [
+                (truth.ks, truth.alpha, truth.ior),
+                (truth.ks * 1.4, truth.alpha * 0.6, 2.1),
+                (8.0, 0.02, 2.9),
+                (0.0, 0.5, 1.0),
+            ] {
+                let s = prob.specular(ks, alpha, ior);
+                let (lo, hi) = prob.bounds.kd;
+                let bits = |lanes_min| {
+                    let (k, f) = prob.m2_bands(&s, lo, hi, lanes_min);
+                    (k.map(f64::to_bits), f.map(f64::to_bits))
+                };
+                let (k, f) = bits(usize::MAX);
+                for lanes_min in [1, M2_LANES_MIN] {
+                    let (k2, f2) = bits(lanes_min);
+                    assert_eq!(
+                        k[..BANDS],
+                        k2[..BANDS],
+                        "{noise} ({ks}, {alpha}, {ior}) {lanes_min}"
+                    );
+                    assert_eq!(
+                        f[..BANDS],
+                        f2[..BANDS],
+                        "{noise} ({ks}, {alpha}, {ior}) {lanes_min}"
+                    );
                 }
             }
         }
