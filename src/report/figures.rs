@@ -242,13 +242,7 @@ pub fn figures(study: &Study) -> Vec<Figure> {
 
 /// The SRA instrument of the study's luminance figures, e.g. "CIE illuminant C, 2° observer".
 fn instrument(study: &Study) -> String {
-    let d = study
-        .samples
-        .iter()
-        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
-        .map(|d| d.sra)
-        .next()
-        .unwrap_or_default();
+    let d = study.done_fits().map(|d| d.sra).next().unwrap_or_default();
     format!("CIE illuminant {}, {}° observer", d.illuminant, d.observer)
 }
 
@@ -814,9 +808,7 @@ fn box_plots<DB: DrawingBackend>(
 ) -> DrawResult<DB> {
     let costs = study.cost_functions();
     let values: Vec<f64> = study
-        .samples
-        .iter()
-        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+        .done_fits()
         .flat_map(|d| d.evaluation.per_geometry)
         .collect();
     let mut chart = per_sample_chart(
@@ -1052,9 +1044,7 @@ fn specular_delta_l_points<DB: DrawingBackend>(
 ) -> DrawResult<DB> {
     let costs = study.cost_functions();
     let values: Vec<f64> = study
-        .samples
-        .iter()
-        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+        .done_fits()
         .flat_map(|d| d.specular_delta_l.per_geometry)
         .collect();
     let mut chart = per_sample_chart(

@@ -183,6 +183,13 @@ impl SampleStudy {
 }
 
 impl Study {
+    /// Every finished fit of every sample, in sample order.
+    pub fn done_fits(&self) -> impl Iterator<Item = &DoneFit> {
+        self.samples
+            .iter()
+            .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+    }
+
     /// The cost functions any sample was fitted with, in [`CostFunction::ALL`] order.
     pub fn cost_functions(&self) -> Vec<CostFunction> {
         CostFunction::ALL

@@ -256,20 +256,14 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     }
     // The specular geometries judged by luminance (SCIENCE.md §7.2), beside the paper's ΔE00.
     let mut sras: Vec<String> = Vec::new();
-    for d in study
-        .samples
-        .iter()
-        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
-    {
+    for d in study.done_fits() {
         let text = d.sra.to_string();
         if !sras.contains(&text) {
             sras.push(text);
         }
     }
     let instrument = study
-        .samples
-        .iter()
-        .flat_map(|s| s.fits.iter().filter_map(|f| f.done()))
+        .done_fits()
         .map(|d| {
             format!(
                 "CIE illuminant {}, {}° observer",
