@@ -99,10 +99,10 @@ fn main() {
                     row.alpha += rel(p.alpha, q.alpha);
                     row.ior += rel(p.ior, q.ior);
                     row.diffuse += r.evaluation.diffuse.mean;
-                    row.dl_measured += r.specular_delta_l.mean;
+                    row.dl_measured += r.specular_delta_l.unwrap().mean;
                     row.dl_true += specular_delta_l(&true_brdf, &r.estimated, sra).mean;
-                    row.de_true += evaluate(&true_brdf, &r.estimated).specular.mean;
-                    row.de_paper += r.evaluation.specular.mean;
+                    row.de_true += evaluate(&true_brdf, &r.estimated).specular.unwrap().mean;
+                    row.de_paper += r.evaluation.specular.unwrap().mean;
                 }
             }
             for (row, sra) in rows.iter().zip(models) {

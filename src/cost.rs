@@ -1,6 +1,7 @@
 //! The three cost functions a fit minimises (paper Eq. 6–8, SCIENCE.md §5).
 //!
-//! Every cost sums over all 14 geometries × 31 bands, N = 434 terms, with the cosine weight
+//! Every cost sums over the geometries the scan measured × 31 bands — all 14, N = 434 terms, or
+//! the 12 MA-T12 ones of a scan without SRA readings, N = 372 ([`terms`]) — with the cosine weight
 //! `w_g = cos θi` of the geometry; `M` is the measured and `A` the model BRDF, both in sr⁻¹.
 //!
 //! - [`CostFunction::Cf1`], cosine-weighted RMSE: `sqrt(Σ (M·w − A·w)² / N)`.
@@ -29,13 +30,18 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, GeometrySet, MA_T12_COUNT};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, Spectrum};
 use crate::sra_reading::{SraModel, SraReading, luminance_with};
 
-/// Number of (geometry, band) terms in every cost: 14 · 31.
+/// Number of (geometry, band) terms in the cost of a full scan: 14 · 31.
 pub const TERMS: usize = GEOMETRY_COUNT * BANDS;
+
+/// Number of (geometry, band) terms in the cost of a scan that measured `geometries`.
+pub const fn terms(geometries: GeometrySet) -> usize {
+    geometries.len() * BANDS
+}
 
 /// Which of the paper's cost functions a fit minimises.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
@@ -105,6 +111,9 @@ pub fn cost(cf: CostFunction, measured: &MeasuredBrdf, model: &[Spectrum; GEOMET
     let w = weights();
     let mut sum = 0.0;
     for g in 0..GEOMETRY_COUNT {
+        if !measured.geometries.contains(g) {
+            continue;
+        }
         for b in 0..BANDS {
             let (m, a) = (measured.values[g][b] * w[g], model[g][b] * w[g]);
             sum += match cf {
@@ -117,7 +126,7 @@ pub fn cost(cf: CostFunction, measured: &MeasuredBrdf, model: &[Spectrum; GEOMET
             };
         }
     }
-    (sum / TERMS as f64).sqrt()
+    (sum / terms(measured.geometries) as f64).sqrt()
 }
 
 /// One term of cost function `cf` for weighted measured and model values `m = w·M`, `a = w·A`.
@@ -149,18 +158,24 @@ pub fn cost_with(
     let c = sra.weights();
     let mut sum = 0.0;
     for g in 0..MA_T12_COUNT {
+        if !measured.geometries.contains(g) {
+            continue;
+        }
         for b in 0..BANDS {
             sum += term(cf, measured.values[g][b] * w[g], model[g][b] * w[g]);
         }
     }
     for g in MA_T12_COUNT..GEOMETRY_COUNT {
+        if !measured.geometries.contains(g) {
+            continue;
+        }
         let (m, a) = (
             luminance_with(&c, &measured.values[g]) * w[g],
             luminance_with(&c, &model[g]) * w[g],
         );
         sum += BANDS as f64 * term(cf, m, a);
     }
-    (sum / TERMS as f64).sqrt()
+    (sum / terms(measured.geometries) as f64).sqrt()
 }
 
 #[cfg(test)]
@@ -185,7 +200,7 @@ mod tests {
         let mut m = zeros();
         m[by_name("15as-45").unwrap().index][0] = 0.4;
         m[by_name("15as15").unwrap().index][5] = 0.1;
-        (MeasuredBrdf { values: m }, zeros())
+        (MeasuredBrdf::full(m), zeros())
     }
 
     #[test]
@@ -237,7 +252,7 @@ mod tests {
         let mut a = zeros();
         mv[g][30] = 0.3;
         a[g][30] = 0.1;
-        let m = MeasuredBrdf { values: mv };
+        let m = MeasuredBrdf::full(mv);
         // cf1: sqrt(0.03532088886237957 / 434) = 0.009021337846974899.
         close(cost(CostFunction::Cf1, &m, &a), 0.009021337846974899, 1e-14);
         // cf2: 0.03532088886237957^(1/3) = 0.32810325689657616; / 434, sqrt → 0.027495423033300093.
@@ -246,7 +261,7 @@ mod tests {
         // 0.15853681951337206; squared / 434, sqrt → 0.007610010860885858.
         close(cost(CostFunction::M2, &m, &a), 0.007610010860885858, 1e-14);
         // cf1 and cf2 depend on |M − A| only; m2 does not (it is a log ratio).
-        let swapped = MeasuredBrdf { values: a };
+        let swapped = MeasuredBrdf::full(a);
         close(
             cost(CostFunction::Cf1, &swapped, &mv),
             0.009021337846974899,
@@ -269,7 +284,7 @@ mod tests {
                 a[g][b] = 0.06 + 0.011 * g as f64 - 0.002 * (b as f64).cos();
             }
         }
-        let m = MeasuredBrdf { values: m };
+        let m = MeasuredBrdf::full(m);
         for cf in CostFunction::ALL {
             assert_eq!(
                 cost_with(cf, SraReading::FLAT, &m, &a).to_bits(),
@@ -286,7 +301,7 @@ mod tests {
         let g = by_name("sra-60").unwrap().index;
         let mut mv = zeros();
         mv[g] = [0.3; BANDS];
-        let m = MeasuredBrdf { values: mv };
+        let m = MeasuredBrdf::full(mv);
         let c = SraReading::LUMINANCE.weights();
         let mut a = zeros();
         let shape: Spectrum = std::array::from_fn(|b| 1.0 + (b as f64 / 5.0).sin());
@@ -329,7 +344,7 @@ mod tests {
                 *x = 0.05 + 0.01 * g as f64 + 0.002 * b as f64;
             }
         }
-        let m = MeasuredBrdf { values: v };
+        let m = MeasuredBrdf::full(v);
         for cf in CostFunction::ALL {
             assert_eq!(cost(cf, &m, &v), 0.0, "{cf}");
         }

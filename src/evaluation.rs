@@ -9,7 +9,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::colour::{Colorimetry, Lab, brdf_to_reflectance, ciede2000, reflectance_to_lab};
-use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT};
+use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, GeometrySet};
 use crate::spectral::Spectrum;
 
 /// Mean, median and maximum of a set of ΔE00 values.
@@ -44,24 +44,46 @@ impl Summary {
     }
 }
 
-/// The colour evaluation of one fit.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// The colour evaluation of one fit, over the geometries the scan measured.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Evaluation {
-    /// ΔE00 at each geometry, in [`GEOMETRIES`] order.
+    /// ΔE00 at each geometry, in [`GEOMETRIES`] order; NaN at a geometry outside
+    /// [`Evaluation::geometries`] (read them through [`Evaluation::per_geometry_named`] or
+    /// [`Evaluation::at`]).
     pub per_geometry: [f64; GEOMETRY_COUNT],
-    /// Over all 14 geometries.
+    /// The geometries evaluated: those the scan measured.
+    #[serde(skip)]
+    pub geometries: GeometrySet,
+    /// Over every geometry evaluated.
     pub all: Summary,
     /// Over the 12 MA-T12 geometries.
     pub diffuse: Summary,
-    /// Over the 2 SRA geometries.
-    pub specular: Summary,
+    /// Over the 2 SRA geometries; `None` for a scan without SRA readings.
+    pub specular: Option<Summary>,
 }
 
 impl Evaluation {
-    /// `(geometry name, ΔE00)` in [`GEOMETRIES`] order, for the `"delta_e00": {"<geometry>": x}`
-    /// objects of the CLI and the API.
-    pub fn per_geometry_named(&self) -> [(&'static str, f64); GEOMETRY_COUNT] {
-        std::array::from_fn(|g| (GEOMETRIES[g].name, self.per_geometry[g]))
+    /// `(geometry name, ΔE00)` of every geometry evaluated, in [`GEOMETRIES`] order, for the
+    /// `"delta_e00": {"<geometry>": x}` objects of the CLI and the API.
+    pub fn per_geometry_named(&self) -> Vec<(&'static str, f64)> {
+        self.geometries
+            .iter()
+            .map(|g| (g.name, self.per_geometry[g.index]))
+            .collect()
+    }
+
+    /// ΔE00 at the geometry of table index `g`, `None` where it was not evaluated.
+    pub fn at(&self, g: usize) -> Option<f64> {
+        self.geometries.contains(g).then(|| self.per_geometry[g])
+    }
+
+    /// The evaluation from its stored parts: per-geometry values (NaN where absent) and the
+    /// set they cover; the summaries are recomputed, so they cannot disagree with the values.
+    pub fn from_per_geometry(
+        per_geometry: [f64; GEOMETRY_COUNT],
+        geometries: GeometrySet,
+    ) -> Evaluation {
+        summarise(per_geometry, geometries)
     }
 }
 
@@ -78,42 +100,59 @@ pub fn lab_per_geometry_with(
     brdf.map(|f| colorimetry.reflectance_to_lab(&brdf_to_reflectance(&f)))
 }
 
-/// ΔE00 between a measured and an estimated BRDF (both sr⁻¹, [`GEOMETRIES`] order), D65/2°
-/// summation (the paper's colorimetry).
+/// The summaries of per-geometry ΔE00 over `geometries` (NaN is put at every other geometry).
+fn summarise(mut per_geometry: [f64; GEOMETRY_COUNT], geometries: GeometrySet) -> Evaluation {
+    for (g, v) in per_geometry.iter_mut().enumerate() {
+        if !geometries.contains(g) {
+            *v = f64::NAN;
+        }
+    }
+    // Split by the device the geometry table names, not by position, so a reordered table
+    // cannot silently move a geometry into the wrong group.
+    let of = |device: Option<Device>| -> Vec<f64> {
+        GEOMETRIES
+            .iter()
+            .filter(|g| geometries.contains(g.index) && device.is_none_or(|d| g.device == d))
+            .map(|g| per_geometry[g.index])
+            .collect()
+    };
+    Evaluation {
+        per_geometry,
+        geometries,
+        all: Summary::of(&of(None)).expect("a scan measures at least one geometry"),
+        diffuse: Summary::of(&of(Some(Device::MaT12)))
+            .expect("every scan has the 12 MA-T12 geometries"),
+        specular: Summary::of(&of(Some(Device::Sra))),
+    }
+}
+
+/// ΔE00 between a measured and an estimated BRDF (both sr⁻¹, [`GEOMETRIES`] order) at all 14
+/// geometries, D65/2° summation (the paper's colorimetry).
 pub fn evaluate(
     measured: &[Spectrum; GEOMETRY_COUNT],
     estimated: &[Spectrum; GEOMETRY_COUNT],
 ) -> Evaluation {
-    evaluate_with(measured, estimated, Colorimetry::default())
+    evaluate_with(
+        measured,
+        estimated,
+        Colorimetry::default(),
+        GeometrySet::ALL,
+    )
 }
 
-/// ΔE00 between a measured and an estimated BRDF under `colorimetry`.
+/// ΔE00 between a measured and an estimated BRDF under `colorimetry`, at `geometries` (those
+/// the scan measured).
 pub fn evaluate_with(
     measured: &[Spectrum; GEOMETRY_COUNT],
     estimated: &[Spectrum; GEOMETRY_COUNT],
     colorimetry: Colorimetry,
+    geometries: GeometrySet,
 ) -> Evaluation {
     let lab_m = lab_per_geometry_with(measured, colorimetry);
     let lab_e = lab_per_geometry_with(estimated, colorimetry);
     let per_geometry: [f64; GEOMETRY_COUNT] =
         std::array::from_fn(|g| ciede2000(lab_m[g], lab_e[g]));
-    // Split by the device the geometry table names, not by position, so a reordered table
-    // cannot silently move a geometry into the wrong group.
-    let of = |device: Device| -> Vec<f64> {
-        GEOMETRIES
-            .iter()
-            .filter(|g| g.device == device)
-            .map(|g| per_geometry[g.index])
-            .collect()
-    };
-    // Neither group is empty: the table has 12 MA-T12 and 2 SRA geometries (tested in geometry).
-    let summary = |xs: &[f64]| Summary::of(xs).expect("geometry group is never empty");
-    Evaluation {
-        per_geometry,
-        all: summary(&per_geometry),
-        diffuse: summary(&of(Device::MaT12)),
-        specular: summary(&of(Device::Sra)),
-    }
+    summarise(per_geometry, geometries)
 }
 
 #[cfg(test)]
@@ -178,7 +217,7 @@ mod tests {
         assert_eq!(e.all.max, e.per_geometry[g]);
         assert!((e.diffuse.mean - e.per_geometry[g] / 12.0).abs() < 1e-12);
         assert_eq!(
-            e.specular,
+            e.specular.unwrap(),
             Summary {
                 mean: 0.0,
                 median: 0.0,
@@ -206,9 +245,9 @@ mod tests {
                 max: 0.0
             }
         );
-        assert!((e.specular.mean - (d20 + d60) / 2.0).abs() < 1e-12);
-        assert!((e.specular.median - (d20 + d60) / 2.0).abs() < 1e-12);
-        assert_eq!(e.specular.max, d20);
+        assert!((e.specular.unwrap().mean - (d20 + d60) / 2.0).abs() < 1e-12);
+        assert!((e.specular.unwrap().median - (d20 + d60) / 2.0).abs() < 1e-12);
+        assert_eq!(e.specular.unwrap().max, d20);
         assert_eq!(e.all.max, d20);
         let named = e.per_geometry_named();
         assert_eq!(named[0], ("15as-45", 0.0));

@@ -12,10 +12,10 @@ use serde::de::{self, Deserializer, MapAccess, Visitor};
 use serde::ser::Serializer;
 use serde::{Deserialize, Serialize};
 
-use crate::colour::Colorimetry;
+use crate::colour::{Colorimetry, Lab};
 use crate::cost::CostFunction;
-use crate::evaluation::{Evaluation, evaluate_with};
-use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
+use crate::evaluation::{Evaluation, evaluate_with, lab_per_geometry_with};
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
 use crate::model::{self, FresnelCosine, SpecularGeometry};
 use crate::optimise::{self, FitError, FitOutcome, Progress, Settings};
 use crate::processing::{self, MeasuredBrdf, ProcessingError, ProcessingOptions, SpecularStrategy};
@@ -41,6 +41,8 @@ pub struct FitRequest {
 pub struct FitReport {
     /// The scan's sample name.
     pub sample: String,
+    /// What the scan was normalised by: the tile's name, or "instrument calibration".
+    pub reference: String,
     /// The request the fit ran with (recorded in full with every fit).
     pub request: FitRequest,
     /// The measured BRDF the fit was made to, sr⁻¹.
@@ -53,8 +55,8 @@ pub struct FitReport {
     /// spectrum the reading is spread into: the paper's specular metric).
     pub evaluation: Evaluation,
     /// |ΔL*| between measured and model luminance at the SRA geometries, under the instrument
-    /// of `request.settings.sra` (SCIENCE.md §7.2).
-    pub specular_delta_l: SpecularDeltaL,
+    /// of `request.settings.sra` (SCIENCE.md §7.2); `None` for a scan without SRA readings.
+    pub specular_delta_l: Option<SpecularDeltaL>,
     /// The bootstrap intervals, when asked for ([`FitReport::with_uncertainty`]).
     pub uncertainty: Option<Uncertainty>,
 }
@@ -87,12 +89,20 @@ pub fn fit_scan_with_observer(
     observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<FitReport, FitScanError> {
     let measured = processing::process(scan, &request.processing)?;
-    fit_measured(&scan.sample, measured, request, observer)
+    fit_measured(
+        &scan.sample,
+        scan.reference_label(),
+        measured,
+        request,
+        observer,
+    )
 }
 
-/// Fits an already processed measurement (the daemon stores processed scans).
+/// Fits an already processed measurement (the daemon stores processed scans); `reference` is
+/// what it was normalised by ([`Scan::reference_label`]).
 pub fn fit_measured(
     sample: &str,
+    reference: &str,
     measured: MeasuredBrdf,
     request: &FitRequest,
     observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
@@ -110,10 +120,19 @@ pub fn fit_measured(
         request.settings.fresnel,
         &SpecularGeometry::all(),
     );
-    let evaluation = evaluate_with(&measured.values, &estimated, request.colorimetry);
-    let specular_delta_l = specular_delta_l(&measured.values, &estimated, request.settings.sra);
+    let evaluation = evaluate_with(
+        &measured.values,
+        &estimated,
+        request.colorimetry,
+        measured.geometries,
+    );
+    let specular_delta_l = measured
+        .geometries
+        .has_sra()
+        .then(|| specular_delta_l(&measured.values, &estimated, request.settings.sra));
     Ok(FitReport {
         sample: sample.to_string(),
+        reference: reference.to_string(),
         request: request.clone(),
         measured,
         estimated,
@@ -143,11 +162,31 @@ impl FitReport {
         Ok(self)
     }
 
+    /// L*a*b* of the measured and the fitted BRDF at every geometry the scan measured, under
+    /// the colorimetry the fit was evaluated with.
+    pub fn lab(&self) -> LabPerGeometry {
+        let measured = lab_per_geometry_with(&self.measured.values, self.request.colorimetry);
+        let fitted = lab_per_geometry_with(&self.estimated, self.request.colorimetry);
+        LabPerGeometry(
+            self.measured
+                .geometries
+                .iter()
+                .map(|g| LabPair {
+                    geometry: g.name.to_string(),
+                    measured: lab_array(measured[g.index]),
+                    fitted: lab_array(fitted[g.index]),
+                })
+                .collect(),
+        )
+    }
+
     /// The contract-3 document.
     pub fn document(&self) -> FitDocument {
         let p = &self.outcome.params;
         FitDocument {
             sample: self.sample.clone(),
+            reference: self.reference.clone(),
+            specular_readings: self.measured.geometries.has_sra(),
             cost_function: self.request.settings.cost,
             method: self.outcome.method.to_string(),
             seed: self.outcome.seed,
@@ -161,15 +200,16 @@ impl FitReport {
             evaluations: self.outcome.evaluations,
             generations: self.outcome.generations,
             wall_ms: self.outcome.wall_ms,
-            delta_e00: PerGeometry(self.evaluation.per_geometry),
+            delta_e00: PerGeometry(std::array::from_fn(|g| self.evaluation.at(g))),
             delta_e00_mean: self.evaluation.all.mean,
             delta_e00_diffuse_mean: self.evaluation.diffuse.mean,
-            delta_e00_specular_mean: self.evaluation.specular.mean,
+            delta_e00_specular_mean: self.evaluation.specular.map(|s| s.mean),
+            lab: self.lab(),
             specular_strategy: self.request.processing.specular,
             fresnel: self.request.settings.fresnel,
             colorimetry: self.request.colorimetry,
             sra: self.request.settings.sra,
-            specular_delta_l: self.specular_delta_l.into(),
+            specular_delta_l: self.specular_delta_l.map(SpecularDeltaLDocument::from),
             uncertainty: self.uncertainty.clone(),
         }
     }
@@ -186,6 +226,15 @@ impl Serialize for FitReport {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitDocument {
     pub sample: String,
+    /// What the scan was normalised by: the reference tile's name, or "instrument
+    /// calibration" (an instrument-software export, reflectance factor as the instrument
+    /// reports it).
+    #[serde(default)]
+    pub reference: String,
+    /// Whether the scan has the SRA's specular readings; without them the fit and every
+    /// figure are over the 12 MA-T12 geometries ("no specular readings").
+    #[serde(default = "yes")]
+    pub specular_readings: bool,
     pub cost_function: CostFunction,
     /// The optimiser method's name, e.g. "paper".
     pub method: String,
@@ -198,14 +247,18 @@ pub struct FitDocument {
     pub generations: u32,
     /// Wall-clock time of the optimisation, ms.
     pub wall_ms: f64,
-    /// ΔE00 per geometry, keyed by geometry name, in table order.
+    /// ΔE00 per geometry measured, keyed by geometry name, in table order.
     pub delta_e00: PerGeometry,
-    /// Mean ΔE00 over all 14 geometries.
+    /// Mean ΔE00 over every geometry measured (14, or 12 without SRA readings).
     pub delta_e00_mean: f64,
     /// Mean over the 12 MA-T12 geometries.
     pub delta_e00_diffuse_mean: f64,
-    /// Mean over the 2 SRA geometries.
-    pub delta_e00_specular_mean: f64,
+    /// Mean over the 2 SRA geometries; `null` without specular readings.
+    pub delta_e00_specular_mean: Option<f64>,
+    /// L*a*b* per geometry measured, measured and fitted, under `colorimetry`:
+    /// `{"15as-45": {"measured": [L, a, b], "fitted": [L, a, b]}, …}`.
+    #[serde(default)]
+    pub lab: LabPerGeometry,
     /// How the SRA readings were processed.
     pub specular_strategy: SpecularStrategy,
     /// Which cosine the model's Fresnel term used.
@@ -239,14 +292,73 @@ pub struct SpecularDeltaLDocument {
     pub mean: f64,
 }
 
-impl From<SpecularDeltaL> for Option<SpecularDeltaLDocument> {
+impl From<SpecularDeltaL> for SpecularDeltaLDocument {
     fn from(d: SpecularDeltaL) -> Self {
-        Some(SpecularDeltaLDocument {
+        SpecularDeltaLDocument {
             sra_20: d.per_geometry[0],
             sra_60: d.per_geometry[1],
             mean: d.mean,
-        })
+        }
     }
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn lab_array(lab: Lab) -> [f64; 3] {
+    [lab.l, lab.a, lab.b]
+}
+
+/// Measured and fitted L*a*b* at one geometry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LabPair {
+    #[serde(skip)]
+    pub geometry: String,
+    pub measured: [f64; 3],
+    pub fitted: [f64; 3],
+}
+
+/// `{"<geometry>": {"measured": [L, a, b], "fitted": [L, a, b]}, …}` in table order.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LabPerGeometry(pub Vec<LabPair>);
+
+impl Serialize for LabPerGeometry {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(self.0.iter().map(|p| (p.geometry.as_str(), p)))
+    }
+}
+
+impl<'de> Deserialize<'de> for LabPerGeometry {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let map: Vec<(String, LabPair)> = crate::fit::ordered_entries(d)?;
+        Ok(LabPerGeometry(
+            map.into_iter()
+                .map(|(geometry, pair)| LabPair { geometry, ..pair })
+                .collect(),
+        ))
+    }
+}
+
+/// A JSON object's entries in document order.
+fn ordered_entries<'de, D: Deserializer<'de>, V: Deserialize<'de>>(
+    d: D,
+) -> Result<Vec<(String, V)>, D::Error> {
+    struct E<V>(std::marker::PhantomData<V>);
+    impl<'de, V: Deserialize<'de>> Visitor<'de> for E<V> {
+        type Value = Vec<(String, V)>;
+        fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("an object keyed by geometry name")
+        }
+        fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+            let mut out = Vec::new();
+            while let Some(entry) = map.next_entry::<String, V>()? {
+                out.push(entry);
+            }
+            Ok(out)
+        }
+    }
+    d.deserialize_map(E(std::marker::PhantomData))
 }
 
 /// The fitted parameters as the contract writes them.
@@ -259,14 +371,19 @@ pub struct ParamsDocument {
     pub ior: f64,
 }
 
-/// One number per geometry, written as an object keyed by geometry name in table order;
-/// reading requires exactly the 14 names.
+/// One number per geometry measured, written as an object keyed by geometry name in table
+/// order; reading requires the 12 MA-T12 names and both SRA names or neither.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PerGeometry(pub [f64; GEOMETRY_COUNT]);
+pub struct PerGeometry(pub [Option<f64>; GEOMETRY_COUNT]);
 
 impl Serialize for PerGeometry {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_map(GEOMETRIES.iter().map(|g| g.name).zip(self.0.iter()))
+        s.collect_map(
+            GEOMETRIES
+                .iter()
+                .zip(self.0.iter())
+                .filter_map(|(g, v)| v.map(|v| (g.name, v))),
+        )
     }
 }
 
@@ -287,12 +404,17 @@ impl<'de> Deserialize<'de> for PerGeometry {
                         .ok_or_else(|| de::Error::custom(format!("unknown geometry \"{name}\"")))?;
                     out[geo.index] = Some(value);
                 }
-                match out.iter().position(Option::is_none) {
+                let no_sra = out[MA_T12_COUNT..].iter().all(Option::is_none);
+                let missing = out
+                    .iter()
+                    .enumerate()
+                    .position(|(i, v)| v.is_none() && !(no_sra && i >= MA_T12_COUNT));
+                match missing {
                     Some(i) => Err(de::Error::custom(format!(
                         "missing geometry \"{}\"",
                         GEOMETRIES[i].name
                     ))),
-                    None => Ok(PerGeometry(out.map(|v| v.unwrap_or(f64::NAN)))),
+                    None => Ok(PerGeometry(out)),
                 }
             }
         }
@@ -343,6 +465,9 @@ mod tests {
             "colorimetry",
             "sra",
             "specular_delta_l",
+            "reference",
+            "specular_readings",
+            "lab",
         ];
         let mut got = keys.clone();
         got.sort();
@@ -362,6 +487,11 @@ mod tests {
         // The mean is the mean of the 14 values printed.
         let mean = de.values().map(|x| x.as_f64().unwrap()).sum::<f64>() / 14.0;
         assert!((mean - v["delta_e00_mean"].as_f64().unwrap()).abs() < 1e-12);
+        assert_eq!(v["reference"], "Munsell N9");
+        assert_eq!(v["specular_readings"], true);
+        let lab = v["lab"].as_object().unwrap();
+        assert_eq!(lab.len(), 14);
+        assert_eq!(lab["15as-45"]["measured"].as_array().unwrap().len(), 3);
         // And the document reads back into its typed form.
         let doc: FitDocument = serde_json::from_value(v).unwrap();
         assert_eq!(doc, report.document());
@@ -435,7 +565,7 @@ mod tests {
                 );
             }
             assert!(
-                r.specular_delta_l.mean < 0.01,
+                r.specular_delta_l.unwrap().mean < 0.01,
                 "{}: {:?}",
                 truth.sample,
                 r.specular_delta_l
@@ -444,7 +574,7 @@ mod tests {
 
             // The paper's specular metric (ΔE00 against the grey spectrum the reading is
             // spread into) charges this exact fit with the spreading.
-            paper_worst = paper_worst.max(r.evaluation.specular.mean);
+            paper_worst = paper_worst.max(r.evaluation.specular.unwrap().mean);
 
             // cf1 spreads the SRA residuals over the lobe: the flat model, which takes the
             // luminance for a grey spectrum, then misses the truth; the luminance model not.
@@ -480,7 +610,13 @@ mod tests {
     fn processing_errors_pass_through_naming_the_field() {
         let truth = &paper_samples()[0];
         let mut scan = synth_scan(truth, &SynthOptions::default()).unwrap();
-        scan.reference.readings.sra[0] = 0.0;
+        scan.reference
+            .as_mut()
+            .unwrap()
+            .readings
+            .sra
+            .as_mut()
+            .unwrap()[0] = 0.0;
         let e = fit_scan(&scan, &FitRequest::default())
             .unwrap_err()
             .to_string();
@@ -502,7 +638,7 @@ mod tests {
 
     #[test]
     fn per_geometry_rejects_missing_and_unknown_names() {
-        let mut v = serde_json::to_value(PerGeometry([1.0; GEOMETRY_COUNT])).unwrap();
+        let mut v = serde_json::to_value(PerGeometry([Some(1.0); GEOMETRY_COUNT])).unwrap();
         v.as_object_mut().unwrap().remove("sra-60");
         let e = serde_json::from_value::<PerGeometry>(v.clone())
             .unwrap_err()

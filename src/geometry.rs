@@ -135,6 +135,61 @@ pub fn by_name(name: &str) -> Option<&'static Geometry> {
     GEOMETRIES.iter().find(|g| g.name == name)
 }
 
+/// A set of the 14 geometries: which ones a scan measured and a fit takes part in. A full scan
+/// has all 14; a scan from an MA-T12 alone ([`GeometrySet::MA_T12`]) has the first 12. Cost
+/// functions, evaluations and reports take their means over the geometries of the set only.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub struct GeometrySet(u16);
+
+impl GeometrySet {
+    /// All 14 geometries (both instruments).
+    pub const ALL: GeometrySet = GeometrySet((1 << GEOMETRY_COUNT) - 1);
+    /// The 12 MA-T12 geometries: a scan without SRA readings.
+    pub const MA_T12: GeometrySet = GeometrySet((1 << MA_T12_COUNT) - 1);
+
+    /// The set without geometry `index` (leave-one-out prediction).
+    pub const fn without(self, index: usize) -> GeometrySet {
+        GeometrySet(self.0 & !(1 << index))
+    }
+
+    /// Whether the geometry at `index` (table order) is in the set.
+    pub const fn contains(self, index: usize) -> bool {
+        index < GEOMETRY_COUNT && self.0 & (1 << index) != 0
+    }
+
+    /// How many geometries the set holds.
+    pub const fn len(self) -> usize {
+        self.0.count_ones() as usize
+    }
+
+    /// Whether the set is empty (no fit can be made over it).
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// Whether every SRA geometry is in the set.
+    pub const fn has_sra(self) -> bool {
+        self.0 & !Self::MA_T12.0 == !Self::MA_T12.0 & Self::ALL.0
+    }
+
+    /// The geometries of the set, in table order.
+    pub fn iter(self) -> impl Iterator<Item = &'static Geometry> {
+        GEOMETRIES.iter().filter(move |g| self.contains(g.index))
+    }
+}
+
+impl Default for GeometrySet {
+    fn default() -> Self {
+        GeometrySet::ALL
+    }
+}
+
+impl fmt::Debug for GeometrySet {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_list().entries(self.iter().map(|g| g.name)).finish()
+    }
+}
+
 /// A unit vector in the surface frame (normal = +z).
 pub type Vec3 = [f64; 3];
 
@@ -217,6 +272,42 @@ mod tests {
             };
             assert_eq!(geo.aspecular_deg, expected, "{}", geo.name);
         }
+    }
+
+    #[test]
+    fn geometry_sets() {
+        assert_eq!(GeometrySet::ALL.len(), GEOMETRY_COUNT);
+        assert_eq!(GeometrySet::MA_T12.len(), MA_T12_COUNT);
+        assert!(GeometrySet::ALL.has_sra());
+        assert!(!GeometrySet::MA_T12.has_sra());
+        assert!(!GeometrySet::ALL.without(13).has_sra());
+        assert!(
+            GeometrySet::MA_T12
+                .iter()
+                .all(|g| g.device == Device::MaT12)
+        );
+        let loo = GeometrySet::MA_T12.without(3);
+        assert_eq!(loo.len(), 11);
+        assert!(!loo.contains(3) && loo.contains(2) && !loo.contains(14));
+        assert_eq!(
+            format!(
+                "{:?}",
+                GeometrySet::ALL
+                    .without(0)
+                    .without(1)
+                    .without(2)
+                    .without(3)
+                    .without(4)
+                    .without(5)
+                    .without(6)
+                    .without(7)
+                    .without(8)
+                    .without(9)
+                    .without(10)
+                    .without(11)
+            ),
+            "[\"sra-20\", \"sra-60\"]"
+        );
     }
 
     #[test]

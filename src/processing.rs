@@ -8,6 +8,11 @@
 //! - SRA, `q_g = I_g / I_ref,g`, then by [`SpecularStrategy`]:
 //!   `ratio` `R_g = q_g · ρ̄_ref`, or `paper-eq9` `R_g = q_g · π / 300 nm` (paper Eq. 9).
 //!
+//! A scan without an N9 reading (an instrument-software export) is already the reflectance
+//! factor relative to the instrument's own calibrated white standard: `R_g(λ) = S_g(λ)`,
+//! absolute scale, and no tile calibration applies. A scan without SRA readings has a measured
+//! BRDF at the 12 MA-T12 geometries only ([`MeasuredBrdf::geometries`]).
+//!
 //! `ρ_ref` is the reference tile's calibrated reflectance factor; without a calibration table it
 //! is 1 and results are relative to the tile, as the paper's are. The SRA is achromatic, so the
 //! `ratio` strategy scales it by the band mean `ρ̄_ref` of the table: the specular readings stay
@@ -19,14 +24,28 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, GeometrySet, MA_T12_COUNT};
 use crate::scan::{Scan, ScanError};
 use crate::spectral::{BANDS, Spectrum, wavelengths_nm};
 
-/// Measured BRDF, sr⁻¹, at all 14 geometries in [`crate::geometry::GEOMETRIES`] order.
+/// Measured BRDF, sr⁻¹, in [`crate::geometry::GEOMETRIES`] order, at the geometries the scan
+/// measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MeasuredBrdf {
+    /// sr⁻¹; 0 at a geometry outside [`MeasuredBrdf::geometries`] (never read there).
     pub values: [Spectrum; GEOMETRY_COUNT],
+    /// Which geometries were measured: all 14, or the 12 MA-T12 ones.
+    pub geometries: GeometrySet,
+}
+
+impl MeasuredBrdf {
+    /// A measurement at all 14 geometries.
+    pub fn full(values: [Spectrum; GEOMETRY_COUNT]) -> MeasuredBrdf {
+        MeasuredBrdf {
+            values,
+            geometries: GeometrySet::ALL,
+        }
+    }
 }
 
 /// The spectral range Eq. 9 divides by, λmax − λmin, nm.
@@ -100,6 +119,9 @@ pub enum Scale {
     RelativeToTile,
     /// The tile's certificate applied; `tile_mean` is its band mean ρ̄_ref.
     Absolute { tile_mean: f64 },
+    /// No tile: the instrument's own reflectance factor, relative to its calibrated white
+    /// standard (an instrument-software export).
+    InstrumentCalibration,
 }
 
 impl Scale {
@@ -123,6 +145,9 @@ impl Scale {
             Scale::Absolute { tile_mean } => format!(
                 "absolute scale: reference tile calibrated (mean reflectance factor {tile_mean:.4})"
             ),
+            Scale::InstrumentCalibration => "absolute scale: reference: instrument calibration \
+                 (reflectance factor relative to the instrument's calibrated white standard)"
+                .into(),
         }
     }
 
@@ -131,6 +156,16 @@ impl Scale {
         match self {
             Scale::RelativeToTile => "relative-to-tile",
             Scale::Absolute { .. } => "absolute",
+            Scale::InstrumentCalibration => "instrument-calibration",
+        }
+    }
+
+    /// The scale of one scan processed with `opts`: a scan without a tile reference is on the
+    /// instrument's own scale whatever the tile calibration says.
+    pub fn of_scan(scan: &Scan, opts: &ProcessingOptions) -> Scale {
+        match scan.reference {
+            Some(_) => opts.scale(),
+            None => Scale::InstrumentCalibration,
         }
     }
 }
@@ -184,18 +219,39 @@ pub fn process(scan: &Scan, opts: &ProcessingOptions) -> Result<MeasuredBrdf, Pr
         })?;
     let rho = opts.rho_ref()?;
     let rho_mean = rho.iter().sum::<f64>() / BANDS as f64;
+    let geometries = scan.geometries();
 
     let mut values = [[0.0; BANDS]; GEOMETRY_COUNT];
     for (geo, out) in GEOMETRIES.iter().zip(values.iter_mut()) {
+        if !geometries.contains(geo.index) {
+            continue;
+        }
         if geo.index < MA_T12_COUNT {
             let s = &scan.readings.ma_t12[geo.index];
-            let w = &scan.reference.readings.ma_t12[geo.index];
-            for b in 0..BANDS {
-                out[b] = s[b] / w[b] * rho[b] / PI;
+            match &scan.reference {
+                Some(reference) => {
+                    let w = &reference.readings.ma_t12[geo.index];
+                    for b in 0..BANDS {
+                        out[b] = s[b] / w[b] * rho[b] / PI;
+                    }
+                }
+                // The instrument's own reflectance factor (SCIENCE.md §3): R = S.
+                None => {
+                    for b in 0..BANDS {
+                        out[b] = s[b] / PI;
+                    }
+                }
             }
         } else {
+            // `validate` guarantees the tile's SRA readings wherever the scan has its own.
+            let (Some(sra), Some(sra_ref)) = (
+                scan.readings.sra,
+                scan.reference.as_ref().and_then(|r| r.readings.sra),
+            ) else {
+                unreachable!("a scan with SRA geometries has the tile's SRA readings (validate)")
+            };
             let k = geo.index - MA_T12_COUNT;
-            let q = scan.readings.sra[k] / scan.reference.readings.sra[k];
+            let q = sra[k] / sra_ref[k];
             let r = match opts.specular {
                 SpecularStrategy::Ratio => q * rho_mean,
                 SpecularStrategy::PaperEq9 => q * PI / PAPER_EQ9_RANGE_NM,
@@ -203,7 +259,7 @@ pub fn process(scan: &Scan, opts: &ProcessingOptions) -> Result<MeasuredBrdf, Pr
             *out = [r / PI; BANDS];
         }
     }
-    Ok(MeasuredBrdf { values })
+    Ok(MeasuredBrdf { values, geometries })
 }
 
 #[cfg(test)]
@@ -218,16 +274,16 @@ mod tests {
         sample[0][0] = 0.2;
         Scan {
             sample: "hand".into(),
-            reference: Reference {
+            reference: Some(Reference {
                 name: "Munsell N9".into(),
                 readings: DeviceReadings {
                     ma_t12: [[0.8; BANDS]; MA_T12_COUNT],
-                    sra: [0.25, 0.5],
+                    sra: Some([0.25, 0.5]),
                 },
-            },
+            }),
             readings: DeviceReadings {
                 ma_t12: sample,
-                sra: [2.0, 1.0],
+                sra: Some([2.0, 1.0]),
             },
         }
     }
@@ -236,6 +292,34 @@ mod tests {
         assert!(
             (got - want).abs() <= 1e-15 * want.abs().max(1.0),
             "got {got}, want {want}"
+        );
+    }
+
+    #[test]
+    fn instrument_calibration_takes_the_reflectance_factor_as_it_is() {
+        let mut s = scan();
+        s.reference = None;
+        s.readings.sra = None;
+        // A tile calibration does not apply to a scan without a tile.
+        let opts = ProcessingOptions {
+            reference_reflectance: Some([0.77; BANDS]),
+            ..Default::default()
+        };
+        let m = process(&s, &opts).unwrap();
+        assert_eq!(m.geometries, GeometrySet::MA_T12);
+        close(m.values[0][0], 0.2 / PI);
+        close(m.values[11][30], 0.4 / PI);
+        assert_eq!(m.values[12], [0.0; BANDS]);
+        assert_eq!(Scale::of_scan(&s, &opts), Scale::InstrumentCalibration);
+        assert_eq!(Scale::of_scan(&scan(), &opts).name(), "absolute");
+        // SRA readings without a tile cannot be normalised.
+        let mut s = scan();
+        s.reference = None;
+        assert!(
+            process(&s, &opts)
+                .unwrap_err()
+                .to_string()
+                .contains("SRA readings need")
         );
     }
 
@@ -287,7 +371,7 @@ mod tests {
     #[test]
     fn rejects_a_bad_reference_or_calibration() {
         let mut s = scan();
-        s.reference.readings.ma_t12[4][2] = 0.0;
+        s.reference.as_mut().unwrap().readings.ma_t12[4][2] = 0.0;
         let e = process(&s, &ProcessingOptions::default())
             .unwrap_err()
             .to_string();
@@ -296,7 +380,7 @@ mod tests {
             "scan \"hand\": reference.ma_t12.15as45[2] (420 nm): reference reading 0 must be positive; re-measure the reference tile"
         );
         let mut s = scan();
-        s.reference.readings.sra[0] = f64::NAN;
+        s.reference.as_mut().unwrap().readings.sra.as_mut().unwrap()[0] = f64::NAN;
         assert!(matches!(
             process(&s, &ProcessingOptions::default()),
             Err(ProcessingError::InvalidScan { .. })

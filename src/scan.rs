@@ -2,6 +2,12 @@
 //! readings and the Munsell N9 reference readings they are normalised by — leaves and enters
 //! brdfd outside the store.
 //!
+//! A scan from an instrument's own software may lack parts, and the file says so explicitly
+//! (never by zeros or NaN): `"reference": "instrument-calibration"` when there is no N9 reading
+//! (the MA-T12's reflectance factor is then relative to the instrument's own calibrated white
+//! standard, absolute scale), and `"sra": "not-measured"` when there are no SRA readings (the
+//! scan has the 12 MA-T12 geometries only). Files without these keep reading as they always did.
+//!
 //! On disk the readings are JSON maps keyed by the devices' geometry names (SCIENCE.md §2), with
 //! the 31-band grid spelled out in `wavelengths_nm`. In memory they are fixed-size arrays in
 //! [`GEOMETRIES`] table order, so nothing downstream looks a name up again.
@@ -21,19 +27,30 @@ use serde::de::{Deserializer, MapAccess, Visitor};
 use serde::ser::Serializer;
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{self, Device, GEOMETRIES, Geometry, MA_T12_COUNT, SRA_COUNT};
+use crate::geometry::{self, Device, GEOMETRIES, Geometry, GeometrySet, MA_T12_COUNT, SRA_COUNT};
 use crate::spectral::{BANDS, Spectrum, wavelengths_nm};
 
 /// The format tag this build reads and writes.
 pub const FORMAT: &str = "brdfd.scan/1";
+
+/// The value of `"reference"` for a scan normalised by the instrument's own white calibration.
+pub const INSTRUMENT_CALIBRATION: &str = "instrument-calibration";
+
+/// The value of an `"sra"` field when the scan has no SRA readings.
+pub const SRA_NOT_MEASURED: &str = "not-measured";
+
+/// How the reference of a scan reads for people: the tile's name, or "instrument calibration".
+pub const INSTRUMENT_CALIBRATION_LABEL: &str = "instrument calibration";
 
 /// One scan: the sample's readings and the reference readings in force when it was taken.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scan {
     /// The sample's name, e.g. "T.Freesia pink".
     pub sample: String,
-    /// The white reference (Munsell N9) the readings are normalised by.
-    pub reference: Reference,
+    /// The white reference (Munsell N9) the readings are normalised by; `None` when the MA-T12
+    /// values are already the reflectance factor relative to the instrument's own calibrated
+    /// white standard (an instrument-software export: `R = S`, absolute scale).
+    pub reference: Option<Reference>,
     /// The sample's own readings.
     pub readings: DeviceReadings,
 }
@@ -53,8 +70,23 @@ pub struct DeviceReadings {
     /// X-Rite MA-T12: reflectance factor as the device reports it (0–1 scale), 31 bands each,
     /// for `GEOMETRIES[0..12]`.
     pub ma_t12: [Spectrum; MA_T12_COUNT],
-    /// Canon RA-532H: one achromatic 1D-BRDF intensity each, for `GEOMETRIES[12..14]`.
-    pub sra: [f64; SRA_COUNT],
+    /// Canon RA-532H: one achromatic 1D-BRDF intensity each, for `GEOMETRIES[12..14]`;
+    /// `None` when the SRA was not measured.
+    pub sra: Option<[f64; SRA_COUNT]>,
+}
+
+impl Scan {
+    /// The geometries this scan measured: all 14, or the 12 MA-T12 ones without SRA readings.
+    pub fn geometries(&self) -> GeometrySet {
+        self.readings.geometries()
+    }
+
+    /// The reference as people read it: the tile's name, or "instrument calibration".
+    pub fn reference_label(&self) -> &str {
+        self.reference
+            .as_ref()
+            .map_or(INSTRUMENT_CALIBRATION_LABEL, |r| r.name.as_str())
+    }
 }
 
 impl DeviceReadings {
@@ -70,7 +102,18 @@ impl DeviceReadings {
     pub fn intensity(&self, geo: &Geometry) -> Option<f64> {
         match geo.device {
             Device::MaT12 => None,
-            Device::Sra => self.sra.get(geo.index - MA_T12_COUNT).copied(),
+            Device::Sra => self
+                .sra
+                .and_then(|sra| sra.get(geo.index - MA_T12_COUNT).copied()),
+        }
+    }
+
+    /// The geometries these readings cover.
+    pub fn geometries(&self) -> GeometrySet {
+        if self.sra.is_some() {
+            GeometrySet::ALL
+        } else {
+            GeometrySet::MA_T12
         }
     }
 }
@@ -123,6 +166,18 @@ pub enum ScanError {
     BadReference { field: String, value: f64 },
     #[error("{field}: reading {value} is negative; a device reading cannot be")]
     NegativeReading { field: String, value: f64 },
+    #[error("{field}: expected an object of readings or \"{expected}\", got \"{found}\"")]
+    UnknownTag {
+        field: &'static str,
+        expected: &'static str,
+        found: String,
+    },
+    /// SRA readings are normalised by the tile's SRA readings: without them they cannot be used.
+    #[error(
+        "readings.sra: SRA readings need an N9 reference with SRA readings to be normalised by; \
+         give the reference's \"sra\" readings, or mark the scan's \"sra\" as \"{SRA_NOT_MEASURED}\""
+    )]
+    SraWithoutReference,
 }
 
 /// Whose readings a value belongs to; the reference must be strictly positive, the sample only
@@ -186,8 +241,10 @@ impl DeviceReadings {
                     }
                 }
                 Device::Sra => {
-                    let v = self.sra[geo.index - MA_T12_COUNT];
-                    check_value(role, || geometry_field(role, geo), v)?;
+                    if let Some(sra) = &self.sra {
+                        let v = sra[geo.index - MA_T12_COUNT];
+                        check_value(role, || geometry_field(role, geo), v)?;
+                    }
                 }
             }
         }
@@ -202,12 +259,18 @@ impl Scan {
         if self.sample.trim().is_empty() {
             return Err(ScanError::EmptyName { field: "sample" });
         }
-        if self.reference.name.trim().is_empty() {
-            return Err(ScanError::EmptyName {
-                field: "reference.name",
-            });
+        if let Some(reference) = &self.reference {
+            if reference.name.trim().is_empty() {
+                return Err(ScanError::EmptyName {
+                    field: "reference.name",
+                });
+            }
+            reference.readings.validate(Role::Reference)?;
         }
-        self.reference.readings.validate(Role::Reference)?;
+        let sra_reference = self.reference.as_ref().and_then(|r| r.readings.sra);
+        if self.readings.sra.is_some() && sra_reference.is_none() {
+            return Err(ScanError::SraWithoutReference);
+        }
         self.readings.validate(Role::Sample)
     }
 
@@ -279,14 +342,17 @@ impl Scan {
             format: FORMAT,
             sample: &self.sample,
             wavelengths_nm: wavelengths_nm(),
-            reference: OutReference {
-                name: &self.reference.name,
-                ma_t12: OutMaT12(&self.reference.readings.ma_t12),
-                sra: OutSra(&self.reference.readings.sra),
+            reference: match &self.reference {
+                Some(reference) => OrTag::Value(OutReference {
+                    name: &reference.name,
+                    ma_t12: OutMaT12(&reference.readings.ma_t12),
+                    sra: OutSra::of(&reference.readings.sra),
+                }),
+                None => OrTag::Tag(INSTRUMENT_CALIBRATION.to_string()),
             },
             readings: OutReadings {
                 ma_t12: OutMaT12(&self.readings.ma_t12),
-                sra: OutSra(&self.readings.sra),
+                sra: OutSra::of(&self.readings.sra),
             },
         };
         let mut buf = Vec::new();
@@ -318,7 +384,7 @@ struct RawScan {
     format: String,
     sample: String,
     wavelengths_nm: Vec<f64>,
-    reference: RawReference,
+    reference: OrTag<RawReference>,
     readings: RawReadings,
 }
 
@@ -327,14 +393,65 @@ struct RawScan {
 struct RawReference {
     name: String,
     ma_t12: Entries<Vec<f64>>,
-    sra: Entries<f64>,
+    sra: OrTag<Entries<f64>>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawReadings {
     ma_t12: Entries<Vec<f64>>,
-    sra: Entries<f64>,
+    sra: OrTag<Entries<f64>>,
+}
+
+/// A field that holds either its object or a string tag that stands for its absence
+/// (`"instrument-calibration"`, `"not-measured"`). A custom visitor rather than an untagged
+/// enum, so that an error inside the object keeps its JSON path.
+enum OrTag<T> {
+    Tag(String),
+    Value(T),
+}
+
+impl<'de, T: Deserialize<'de>> Deserialize<'de> for OrTag<T> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V_<T>(std::marker::PhantomData<T>);
+        impl<'de, T: Deserialize<'de>> Visitor<'de> for V_<T> {
+            type Value = OrTag<T>;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("an object, or a string that says why it is absent")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+                Ok(OrTag::Tag(v.to_string()))
+            }
+            fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+                T::deserialize(serde::de::value::MapAccessDeserializer::new(map)).map(OrTag::Value)
+            }
+        }
+        d.deserialize_any(V_(std::marker::PhantomData))
+    }
+}
+
+impl<T: Serialize> Serialize for OrTag<T> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            OrTag::Tag(tag) => s.serialize_str(tag),
+            OrTag::Value(v) => v.serialize(s),
+        }
+    }
+}
+
+impl<T> OrTag<T> {
+    /// The object, `None` for the one tag allowed here, an error naming `field` for another.
+    fn expect(self, field: &'static str, tag: &'static str) -> Result<Option<T>, ScanError> {
+        match self {
+            OrTag::Value(v) => Ok(Some(v)),
+            OrTag::Tag(t) if t == tag => Ok(None),
+            OrTag::Tag(found) => Err(ScanError::UnknownTag {
+                field,
+                expected: tag,
+                found,
+            }),
+        }
+    }
 }
 
 /// A JSON object read as its entries in document order, duplicates kept (a `BTreeMap` would
@@ -403,9 +520,14 @@ fn arrange<V, T: Copy>(
 
 fn arrange_readings(
     ma_t12: Entries<Vec<f64>>,
-    sra: Entries<f64>,
+    sra: OrTag<Entries<f64>>,
     role: Role,
 ) -> Result<DeviceReadings, ScanError> {
+    let sra_field = match role {
+        Role::Reference => "reference.sra",
+        Role::Sample => "readings.sra",
+    };
+    let sra = sra.expect(sra_field, SRA_NOT_MEASURED)?;
     let spectra = arrange(
         ma_t12,
         role,
@@ -427,23 +549,28 @@ fn arrange_readings(
         },
         [0.0; BANDS],
     )?;
-    let intensities = arrange(
-        sra,
-        role,
-        Device::Sra,
-        |geo, v: f64| {
-            check_value(role, || geometry_field(role, geo), v)?;
-            Ok(v)
-        },
-        0.0,
-    )?;
+    let intensities = sra
+        .map(|sra| {
+            arrange(
+                sra,
+                role,
+                Device::Sra,
+                |geo, v: f64| {
+                    check_value(role, || geometry_field(role, geo), v)?;
+                    Ok(v)
+                },
+                0.0,
+            )
+        })
+        .transpose()?;
     Ok(DeviceReadings {
         ma_t12: spectra
             .try_into()
             .expect("arrange returns one slot per MA-T12 geometry"),
-        sra: intensities
-            .try_into()
-            .expect("arrange returns one slot per SRA geometry"),
+        sra: intensities.map(|v| {
+            v.try_into()
+                .expect("arrange returns one slot per SRA geometry")
+        }),
     })
 }
 
@@ -473,22 +600,30 @@ impl RawScan {
             };
             return Err(ScanError::WavelengthGrid { found });
         }
-        if self.reference.name.trim().is_empty() {
-            return Err(ScanError::EmptyName {
-                field: "reference.name",
-            });
-        }
-        let reference =
-            arrange_readings(self.reference.ma_t12, self.reference.sra, Role::Reference)?;
+        let reference = match self.reference.expect("reference", INSTRUMENT_CALIBRATION)? {
+            Some(raw) => {
+                if raw.name.trim().is_empty() {
+                    return Err(ScanError::EmptyName {
+                        field: "reference.name",
+                    });
+                }
+                let readings = arrange_readings(raw.ma_t12, raw.sra, Role::Reference)?;
+                Some(Reference {
+                    name: raw.name,
+                    readings,
+                })
+            }
+            None => None,
+        };
         let readings = arrange_readings(self.readings.ma_t12, self.readings.sra, Role::Sample)?;
-        Ok(Scan {
+        let scan = Scan {
             sample: self.sample,
-            reference: Reference {
-                name: self.reference.name,
-                readings: reference,
-            },
+            reference,
             readings,
-        })
+        };
+        // The checks across parts (SRA readings need the tile's) are the in-memory ones.
+        scan.validate()?;
+        Ok(scan)
     }
 }
 
@@ -500,7 +635,7 @@ struct OutScan<'a> {
     format: &'static str,
     sample: &'a str,
     wavelengths_nm: [u32; BANDS],
-    reference: OutReference<'a>,
+    reference: OrTag<OutReference<'a>>,
     readings: OutReadings<'a>,
 }
 
@@ -508,17 +643,26 @@ struct OutScan<'a> {
 struct OutReference<'a> {
     name: &'a str,
     ma_t12: OutMaT12<'a>,
-    sra: OutSra<'a>,
+    sra: OrTag<OutSra<'a>>,
 }
 
 #[derive(Serialize)]
 struct OutReadings<'a> {
     ma_t12: OutMaT12<'a>,
-    sra: OutSra<'a>,
+    sra: OrTag<OutSra<'a>>,
 }
 
 struct OutMaT12<'a>(&'a [Spectrum; MA_T12_COUNT]);
 struct OutSra<'a>(&'a [f64; SRA_COUNT]);
+
+impl<'a> OutSra<'a> {
+    fn of(sra: &'a Option<[f64; SRA_COUNT]>) -> OrTag<OutSra<'a>> {
+        match sra {
+            Some(values) => OrTag::Value(OutSra(values)),
+            None => OrTag::Tag(SRA_NOT_MEASURED.to_string()),
+        }
+    }
+}
 
 impl Serialize for OutMaT12<'_> {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
@@ -601,16 +745,16 @@ mod tests {
         };
         Scan {
             sample: "T.Freesia pink".into(),
-            reference: Reference {
+            reference: Some(Reference {
                 name: "Munsell N9".into(),
                 readings: DeviceReadings {
                     ma_t12: spectra(0.7),
-                    sra: [0.245, 0.25],
+                    sra: Some([0.245, 0.25]),
                 },
-            },
+            }),
             readings: DeviceReadings {
                 ma_t12: spectra(0.3),
-                sra: [3.1, 7.9],
+                sra: Some([3.1, 7.9]),
             },
         }
     }
@@ -651,14 +795,14 @@ mod tests {
             .readings
             .ma_t12
             .iter_mut()
-            .chain(scan.reference.readings.ma_t12.iter_mut())
+            .chain(scan.reference.as_mut().unwrap().readings.ma_t12.iter_mut())
         {
             for v in s.iter_mut() {
                 // Full-precision mantissas over many decades, plus subnormal-ish extremes.
                 *v = rng.random::<f64>() * 10f64.powi(rng.random_range(-12..4)) + f64::MIN_POSITIVE;
             }
         }
-        scan.readings.sra = [0.1 + 0.2, 1e-300];
+        scan.readings.sra = Some([0.1 + 0.2, 1e-300]);
         scan.readings.ma_t12[0][0] = 0.0;
         let back = Scan::from_json(scan.to_json_pretty().unwrap().as_bytes()).unwrap();
         for (a, b) in back
@@ -836,7 +980,13 @@ mod tests {
             "readings.ma_t12.15as-15[5] (450 nm): NaN is not a finite number"
         );
         let mut scan = example();
-        scan.reference.readings.sra[1] = f64::INFINITY;
+        scan.reference
+            .as_mut()
+            .unwrap()
+            .readings
+            .sra
+            .as_mut()
+            .unwrap()[1] = f64::INFINITY;
         let e = scan.validate().unwrap_err().to_string();
         assert_eq!(e, "reference.sra.sra-60: inf is not a finite number");
     }
@@ -864,7 +1014,58 @@ mod tests {
         v["readings"]["sra"]["sra-20"] = 0.into();
         let scan = Scan::from_json(&serde_json::to_vec(&v).unwrap()).unwrap();
         assert_eq!(scan.readings.ma_t12[8][0], 0.0);
-        assert_eq!(scan.readings.sra[0], 0.0);
+        assert_eq!(scan.readings.sra.unwrap()[0], 0.0);
+    }
+
+    #[test]
+    fn instrument_calibration_and_no_sra_round_trip_explicitly() {
+        let mut scan = example();
+        scan.reference = None;
+        scan.readings.sra = None;
+        let text = scan.to_json_pretty().unwrap();
+        assert!(
+            text.contains("\"reference\": \"instrument-calibration\""),
+            "{text}"
+        );
+        assert!(text.contains("\"sra\": \"not-measured\""), "{text}");
+        let back = Scan::from_json(text.as_bytes()).unwrap();
+        assert_eq!(back, scan);
+        assert_eq!(back.geometries(), GeometrySet::MA_T12);
+        assert_eq!(back.reference_label(), "instrument calibration");
+        assert_eq!(example().geometries(), GeometrySet::ALL);
+
+        // A tile reference without SRA readings, and a scan without them: fine.
+        let mut v = example_value();
+        v["reference"]["sra"] = "not-measured".into();
+        v["readings"]["sra"] = "not-measured".into();
+        let scan = Scan::from_json(&serde_json::to_vec(&v).unwrap()).unwrap();
+        assert_eq!(scan.reference_label(), "Munsell N9");
+        assert!(scan.readings.sra.is_none());
+
+        // SRA readings need the tile's SRA readings.
+        let e = error_after(|v| v["reference"] = "instrument-calibration".into());
+        assert!(
+            e.starts_with("readings.sra: SRA readings need an N9 reference"),
+            "{e}"
+        );
+        let e = error_after(|v| v["reference"]["sra"] = "not-measured".into());
+        assert!(e.starts_with("readings.sra: SRA readings need"), "{e}");
+        // Unknown tags are named, and errors inside an object keep their path.
+        let e = error_after(|v| v["reference"] = "none".into());
+        assert_eq!(
+            e,
+            "reference: expected an object of readings or \"instrument-calibration\", got \"none\""
+        );
+        let e = error_after(|v| v["readings"]["sra"] = "missing".into());
+        assert!(
+            e.starts_with("readings.sra: expected an object of readings or \"not-measured\""),
+            "{e}"
+        );
+        let e = error_after(|v| v["reference"]["ma_t12"]["15as80"] = "x".into());
+        assert!(
+            e.starts_with("reference.ma_t12.15as80: invalid type"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -361,25 +361,21 @@ pub fn synth_scan(truth: &GroundTruth, opts: &SynthOptions) -> Result<Scan, Synt
     let rho = opts.n9_reflectance;
     let c = SRA_REFERENCE_INTENSITY;
 
-    let mut reference = DeviceReadings {
-        ma_t12: [[0.0; BANDS]; MA_T12_COUNT],
-        sra: [0.0; 2],
-    };
-    for (i, spectrum) in reference.ma_t12.iter_mut().enumerate() {
+    let mut reference_ma_t12 = [[0.0; BANDS]; MA_T12_COUNT];
+    for (i, spectrum) in reference_ma_t12.iter_mut().enumerate() {
         *spectrum = std::array::from_fn(|_| g[i] * rho * noise.factor());
     }
-    for (k, v) in reference.sra.iter_mut().enumerate() {
+    let mut reference_sra = [0.0; 2];
+    for (k, v) in reference_sra.iter_mut().enumerate() {
         *v = g[MA_T12_COUNT + k] * c * noise.factor();
     }
 
-    let mut readings = DeviceReadings {
-        ma_t12: [[0.0; BANDS]; MA_T12_COUNT],
-        sra: [0.0; 2],
-    };
-    for (i, spectrum) in readings.ma_t12.iter_mut().enumerate() {
+    let mut ma_t12 = [[0.0; BANDS]; MA_T12_COUNT];
+    for (i, spectrum) in ma_t12.iter_mut().enumerate() {
         *spectrum = std::array::from_fn(|b| g[i] * rho * PI * f[i][b] * noise.factor());
     }
-    for (k, v) in readings.sra.iter_mut().enumerate() {
+    let mut sra = [0.0; 2];
+    for (k, v) in sra.iter_mut().enumerate() {
         let gi = MA_T12_COUNT + k;
         let mean = opts.sra_response.read(&f[gi]);
         *v = g[gi] * c * PI * mean * noise.factor();
@@ -387,11 +383,17 @@ pub fn synth_scan(truth: &GroundTruth, opts: &SynthOptions) -> Result<Scan, Synt
 
     Ok(Scan {
         sample: truth.sample.clone(),
-        reference: Reference {
+        reference: Some(Reference {
             name: "Munsell N9".to_string(),
-            readings: reference,
+            readings: DeviceReadings {
+                ma_t12: reference_ma_t12,
+                sra: Some(reference_sra),
+            },
+        }),
+        readings: DeviceReadings {
+            ma_t12,
+            sra: Some(sra),
         },
-        readings,
     })
 }
 
@@ -483,7 +485,10 @@ mod tests {
         let band_mean = synth_scan(truth, &SynthOptions::default()).unwrap();
         assert_eq!(band_mean.readings.ma_t12, scan.readings.ma_t12);
         for k in 0..2 {
-            let (a, b) = (band_mean.readings.sra[k], scan.readings.sra[k]);
+            let (a, b) = (
+                band_mean.readings.sra.unwrap()[k],
+                scan.readings.sra.unwrap()[k],
+            );
             assert!((a - b).abs() > 1e-3 * a, "{a} vs {b}");
         }
         assert_eq!(
@@ -503,9 +508,18 @@ mod tests {
         let truth = &paper_samples()[0];
         let scan = synth_scan(truth, &SynthOptions::default()).unwrap();
         // MA-T12 reference = gain · 0.767; SRA reference = gain · 0.245.
-        assert_eq!(scan.reference.readings.ma_t12[0][0], 1.04 * 0.767);
-        assert_eq!(scan.reference.readings.ma_t12[3][30], 0.93 * 0.767);
-        assert_eq!(scan.reference.readings.sra[1], 0.92 * 0.245);
+        assert_eq!(
+            scan.reference.as_ref().unwrap().readings.ma_t12[0][0],
+            1.04 * 0.767
+        );
+        assert_eq!(
+            scan.reference.as_ref().unwrap().readings.ma_t12[3][30],
+            0.93 * 0.767
+        );
+        assert_eq!(
+            scan.reference.as_ref().unwrap().readings.sra.unwrap()[1],
+            0.92 * 0.245
+        );
         // The raw sample reading is the reflectance factor relative to N9 times the tile's:
         // 15as15 (θi = 0) is kd·π·0.767·gain + specular.
         let f = truth.brdf(FresnelCosine::Incidence);
@@ -529,11 +543,22 @@ mod tests {
         let clean = synth_scan(truth, &SynthOptions::default()).unwrap();
         let dev: Vec<f64> = a
             .reference
+            .as_ref()
+            .unwrap()
             .readings
             .ma_t12
             .iter()
             .flatten()
-            .zip(clean.reference.readings.ma_t12.iter().flatten())
+            .zip(
+                clean
+                    .reference
+                    .as_ref()
+                    .unwrap()
+                    .readings
+                    .ma_t12
+                    .iter()
+                    .flatten(),
+            )
             .map(|(n, c)| n / c - 1.0)
             .collect();
         let n = dev.len() as f64;

@@ -86,7 +86,9 @@ pub struct Uncertainty {
     /// The spread of the ΔE00 summaries: each resample's fit evaluated against its resample.
     pub delta_e00_mean: Interval,
     pub delta_e00_diffuse_mean: Interval,
-    pub delta_e00_specular_mean: Interval,
+    /// `None` for a scan without SRA readings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delta_e00_specular_mean: Option<Interval>,
 }
 
 impl Uncertainty {
@@ -209,7 +211,7 @@ struct Draw {
     params: Params,
     de_mean: f64,
     de_diffuse: f64,
-    de_specular: f64,
+    de_specular: Option<f64>,
 }
 
 /// Bootstraps the fit `point` of `measured` (made with `settings`); `cancel` stops it between
@@ -241,12 +243,12 @@ pub fn bootstrap(
         let out = refit_local(&m, settings, point)
             .map_err(|source| UncertaintyError::Refit { index: i, source })?;
         let est = model::evaluate(&out.params, settings.fresnel, &SpecularGeometry::all());
-        let e = evaluate_with(&m.values, &est, colorimetry);
+        let e = evaluate_with(&m.values, &est, colorimetry, m.geometries);
         Ok(Draw {
             params: out.params,
             de_mean: e.all.mean,
             de_diffuse: e.diffuse.mean,
-            de_specular: e.specular.mean,
+            de_specular: e.specular.map(|s| s.mean),
         })
     };
     // Resample i goes to thread i mod threads; every draw is independent of the split.
@@ -289,7 +291,10 @@ pub fn bootstrap(
         kd,
         delta_e00_mean: col(&|d| d.de_mean),
         delta_e00_diffuse_mean: col(&|d| d.de_diffuse),
-        delta_e00_specular_mean: col(&|d| d.de_specular),
+        delta_e00_specular_mean: measured
+            .geometries
+            .has_sra()
+            .then(|| col(&|d| d.de_specular.unwrap_or(f64::NAN))),
     })
 }
 

@@ -91,6 +91,7 @@ fn probed_fit_fn() -> (FitFn, FitProbe, mpsc::Receiver<i64>) {
                 fit: job.fit,
                 scan: job.scan,
                 sample: job.sample.clone(),
+                reference: job.reference.clone(),
                 measured: job.measured,
                 request: job.request.clone(),
             };

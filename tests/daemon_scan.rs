@@ -160,7 +160,10 @@ async fn a_reference_a_scan_and_three_fits_land_in_the_store_with_every_row() {
             let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs().max(1.0);
             assert!(close(e.all.mean, standalone.evaluation.all.mean));
             assert!(close(e.diffuse.mean, standalone.evaluation.diffuse.mean));
-            assert!(close(e.specular.mean, standalone.evaluation.specular.mean));
+            assert!(close(
+                e.specular.unwrap().mean,
+                standalone.evaluation.specular.unwrap().mean
+            ));
         }
 
         // Both instruments are recorded with the identities they gave.

@@ -123,7 +123,10 @@ fn cgats_export(scan: &Scan) -> String {
     t += "\nEND_DATA_FORMAT\nBEGIN_DATA\n";
     let mut id = 0;
     for (name, readings) in [
-        (scan.reference.name.as_str(), &scan.reference.readings),
+        (
+            scan.reference.as_ref().unwrap().name.as_str(),
+            &scan.reference.as_ref().unwrap().readings,
+        ),
         (scan.sample.as_str(), &scan.readings),
     ] {
         for g in brdfd::geometry::ma_t12() {
@@ -147,7 +150,10 @@ fn cxf3_export(scan: &Scan) -> String {
         brdfd::formats::cxf3::NAMESPACE
     );
     for (i, (name, r)) in [
-        (scan.reference.name.as_str(), &scan.reference.readings),
+        (
+            scan.reference.as_ref().unwrap().name.as_str(),
+            &scan.reference.as_ref().unwrap().readings,
+        ),
         (scan.sample.as_str(), &scan.readings),
     ]
     .iter()
@@ -282,7 +288,10 @@ fn files_written_slowly_in_pieces_are_imported_whole_and_fitted() {
     )
     .unwrap();
     assert_eq!(exported.readings, scan.readings);
-    assert_eq!(exported.reference.readings, scan.reference.readings);
+    assert_eq!(
+        exported.reference.as_ref().unwrap().readings,
+        scan.reference.as_ref().unwrap().readings
+    );
     // Fitted like a measured scan: the configured cost function's fit is queued or further.
     let fits = shown["fits"].as_array().unwrap();
     assert_eq!(fits.len(), 1, "{shown}");
@@ -592,7 +601,7 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
                             brdfd::store::ReadingValues::Spectrum(r.ma_t12[g.index])
                         }
                         brdfd::geometry::Device::Sra => brdfd::store::ReadingValues::Intensity(
-                            r.sra[g.index - brdfd::geometry::MA_T12_COUNT],
+                            r.sra.unwrap()[g.index - brdfd::geometry::MA_T12_COUNT],
                         ),
                     },
                     raw_frame: &[],
@@ -604,7 +613,10 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
             source_detail: Some("imported from x.scan.json, brdfd.scan/1 file".into()),
             ..brdfd::store::Provenance::unknown()
         };
-        let (r, m) = (readings(&scan.reference.readings), readings(&scan.readings));
+        let (r, m) = (
+            readings(&scan.reference.as_ref().unwrap().readings),
+            readings(&scan.readings),
+        );
         let store = brdfd::store::Store::open(&db).await.unwrap();
         let hash = "ab".repeat(32);
         let imported = store
@@ -616,8 +628,9 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
                     sample_name: &scan.sample,
                     reference_name: "Munsell N9 (imported)",
                     provenance: &provenance,
-                    reference_readings: &r,
+                    reference_readings: Some(&r),
                     readings: &m,
+                    taken_at_ms: None,
                 }],
             )
             .await
@@ -638,8 +651,9 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
                     sample_name: "other",
                     reference_name: "Munsell N9 (imported)",
                     provenance: &provenance,
-                    reference_readings: &r,
+                    reference_readings: Some(&r),
                     readings: &m,
+                    taken_at_ms: None,
                 }],
             )
             .await

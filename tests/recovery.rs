@@ -90,7 +90,7 @@ fn fit_and_report(noisy: bool, cf: CostFunction) -> Vec<(FitReport, GroundTruth)
             "  {:<20} {:>8.4} {:>8.3}   ks {:>7.2} %  α {:>7.2} %  μ {:>7.2} %",
             truth.sample,
             r.evaluation.diffuse.mean,
-            r.evaluation.specular.mean,
+            r.evaluation.specular.unwrap().mean,
             100.0 * rel(p.ks, t.ks),
             100.0 * rel(p.alpha, t.alpha),
             100.0 * rel(p.ior, t.ior)
@@ -118,7 +118,7 @@ fn fit_and_report(noisy: bool, cf: CostFunction) -> Vec<(FitReport, GroundTruth)
             .sum::<f64>()
             / n,
         out.iter()
-            .map(|(r, _)| r.evaluation.specular.mean)
+            .map(|(r, _)| r.evaluation.specular.unwrap().mean)
             .sum::<f64>()
             / n
     );

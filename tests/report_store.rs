@@ -43,12 +43,18 @@ async fn fill(path: &Path) -> Vec<Scan> {
         )
         .unwrap();
         let r = store
-            .begin_reference(&scan.reference.name, None)
+            .begin_reference(&scan.reference.as_ref().unwrap().name, None)
             .await
             .unwrap();
         for g in &GEOMETRIES {
             store
-                .add_reference_reading(r, g.device, g, &values(&scan.reference.readings, g), b"")
+                .add_reference_reading(
+                    r,
+                    g.device,
+                    g,
+                    &values(&scan.reference.as_ref().unwrap().readings, g),
+                    b"",
+                )
                 .await
                 .unwrap();
         }

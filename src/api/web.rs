@@ -321,9 +321,11 @@ pub struct FittedSwatches {
     /// The fitted model's colour at each geometry.
     pub estimated: Vec<Swatch>,
     /// ΔE00 at each geometry, and means over the diffuse, specular and all geometries.
-    pub delta_e00: Vec<f64>,
+    /// `null` at a geometry the scan did not measure.
+    pub delta_e00: Vec<Option<f64>>,
     pub delta_e00_diffuse: f64,
-    pub delta_e00_specular: f64,
+    /// `null` without specular readings.
+    pub delta_e00_specular: Option<f64>,
     pub delta_e00_all: f64,
 }
 
@@ -365,9 +367,11 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
                 cost_function: c,
                 method: fit.method.clone(),
                 estimated: done.estimated.iter().map(Swatch::of_brdf).collect(),
-                delta_e00: done.evaluation.per_geometry.to_vec(),
+                delta_e00: (0..crate::geometry::GEOMETRY_COUNT)
+                    .map(|g| done.evaluation.at(g))
+                    .collect(),
                 delta_e00_diffuse: done.evaluation.diffuse.mean,
-                delta_e00_specular: done.evaluation.specular.mean,
+                delta_e00_specular: done.evaluation.specular.map(|s| s.mean),
                 delta_e00_all: done.evaluation.all.mean,
             })
         })

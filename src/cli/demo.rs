@@ -273,7 +273,7 @@ pub fn summary(result: &DemoResult) -> String {
                 r.scan,
                 r.cost_function.name(),
                 e.diffuse.mean,
-                e.specular.mean,
+                e.specular.map_or(f64::NAN, |s| s.mean),
                 e.all.mean,
                 r.cost,
                 r.wall_ms
@@ -297,7 +297,7 @@ pub fn summary(result: &DemoResult) -> String {
             "  {:<4} diffuse {}   specular {}   all {}",
             cost.name(),
             ci(|r| r.evaluation.diffuse.mean),
-            ci(|r| r.evaluation.specular.mean),
+            ci(|r| r.evaluation.specular.map_or(f64::NAN, |s| s.mean)),
             ci(|r| r.evaluation.all.mean)
         );
     }

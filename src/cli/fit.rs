@@ -163,6 +163,16 @@ pub fn table(r: &FitReport) -> String {
     let _ = writeln!(t, "sample           {}", r.sample);
     let _ = writeln!(
         t,
+        "reference        {}{}",
+        r.reference,
+        if r.measured.geometries.has_sra() {
+            ""
+        } else {
+            "; no specular readings (fitted over the 12 MA-T12 geometries)"
+        }
+    );
+    let _ = writeln!(
+        t,
         "fit              cost function {}, method {}, seed {}, specular {}, fresnel {}, sra {}",
         s.cost,
         o.method,
@@ -212,9 +222,24 @@ pub fn table(r: &FitReport) -> String {
             .collect();
         let _ = writeln!(t, "  {}", cells.join("  "));
     }
-    let _ = writeln!(t, "ΔE00 per geometry ({})", r.request.colorimetry);
-    for (geo, de) in GEOMETRIES.iter().zip(e.per_geometry) {
-        let _ = writeln!(t, "  {:<8} {:>4}  {de:8.4}", geo.name, geo.device.key());
+    let _ = writeln!(
+        t,
+        "ΔE00 per geometry ({}), L*a*b* measured → fitted",
+        r.request.colorimetry
+    );
+    for (pair, (name, de)) in r.lab().0.iter().zip(e.per_geometry_named()) {
+        let geo = GEOMETRIES
+            .iter()
+            .find(|g| g.name == name)
+            .expect("table geometry");
+        let [lm, am, bm] = pair.measured;
+        let [lf, af, bf] = pair.fitted;
+        let _ = writeln!(
+            t,
+            "  {:<8} {:>6}  {de:8.4}   ({lm:6.2} {am:6.2} {bm:6.2}) → ({lf:6.2} {af:6.2} {bf:6.2})",
+            geo.name,
+            geo.device.key()
+        );
     }
     let _ = writeln!(
         t,
@@ -226,17 +251,23 @@ pub fn table(r: &FitReport) -> String {
         "  diffuse  (12)  {:.4}  (median {:.4}, max {:.4})",
         e.diffuse.mean, e.diffuse.median, e.diffuse.max
     );
-    let _ = writeln!(
-        t,
-        "  specular (2)   {:.4}  (max {:.4})  the paper's: against the grey spectrum",
-        e.specular.mean, e.specular.max
-    );
-    let d = &r.specular_delta_l;
-    let _ = writeln!(
-        t,
-        "specular |ΔL*|   {:.4}  (sra-20 {:.4}, sra-60 {:.4}; luminance under {}/{}°)",
-        d.mean, d.per_geometry[0], d.per_geometry[1], s.sra.illuminant, s.sra.observer
-    );
+    match (&e.specular, &r.specular_delta_l) {
+        (Some(spec), Some(d)) => {
+            let _ = writeln!(
+                t,
+                "  specular (2)   {:.4}  (max {:.4})  the paper's: against the grey spectrum",
+                spec.mean, spec.max
+            );
+            let _ = writeln!(
+                t,
+                "specular |ΔL*|   {:.4}  (sra-20 {:.4}, sra-60 {:.4}; luminance under {}/{}°)",
+                d.mean, d.per_geometry[0], d.per_geometry[1], s.sra.illuminant, s.sra.observer
+            );
+        }
+        _ => {
+            let _ = writeln!(t, "  specular       no specular readings");
+        }
+    }
     t
 }
 

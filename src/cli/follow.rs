@@ -202,9 +202,14 @@ impl Follower<'_> {
                 wall_ms,
                 ..
             } if mine => {
+                let specular = if delta_e00_specular_mean.is_nan() {
+                    "none: no specular readings".to_string()
+                } else {
+                    format!("{delta_e00_specular_mean:.3}")
+                };
                 let text = format!(
                     "fit {fit} ({}) done: mean ΔE00 {delta_e00_mean:.3} (diffuse \
-                     {delta_e00_diffuse_mean:.3}, specular {delta_e00_specular_mean:.3}), cost \
+                     {delta_e00_diffuse_mean:.3}, specular {specular}), cost \
                      {cost:.4e}, {wall_ms:.0} ms",
                     terminal_safe(cost_function.name())
                 );

@@ -335,7 +335,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
                             "error": f.run.error,
                             "delta_e00_mean": f.evaluation.as_ref().map(|e| e.all.mean),
                             "delta_e00_diffuse_mean": f.evaluation.as_ref().map(|e| e.diffuse.mean),
-                            "delta_e00_specular_mean": f.evaluation.as_ref().map(|e| e.specular.mean),
+                            "delta_e00_specular_mean": f.evaluation.as_ref().and_then(|e| e.specular.map(|s| s.mean)),
                         })
                     })
                     .collect();
@@ -363,13 +363,16 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
             for f in fits {
                 match &f.evaluation {
                     Some(e) => println!(
-                        "  fit {} {:<4} {}: mean ΔE00 {:.3} (diffuse {:.3}, specular {:.3})",
+                        "  fit {} {:<4} {}: mean ΔE00 {:.3} (diffuse {:.3}, specular {})",
                         f.run.id,
                         f.run.cost_function.name(),
                         f.run.status,
                         e.all.mean,
                         e.diffuse.mean,
-                        e.specular.mean
+                        e.specular.map_or("none: no specular readings".into(), |s| format!(
+                            "{:.3}",
+                            s.mean
+                        ))
                     ),
                     None => println!(
                         "  fit {} {:<4} {}{}",

@@ -334,6 +334,7 @@ mod tests {
             sample_id: crate::store::SampleId(1),
             sample: "S".into(),
             reference_id: crate::store::ReferenceId(1),
+            specular_readings: true,
             state: crate::store::ScanState::Complete,
             reason: None,
             requested_at_ms: 0,

@@ -81,7 +81,13 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         if args.sessions {
             if i == 0 {
                 let pair = generate_reference_session(
-                    &device_readings(&scan.reference.readings),
+                    &device_readings(
+                        &scan
+                            .reference
+                            .as_ref()
+                            .expect("synthetic scans have an N9 reference")
+                            .readings,
+                    ),
                     &GenerateOptions::default(),
                 )?;
                 sessions.extend(write_sessions(&args.out, "n9", &pair, args.json)?);
@@ -117,7 +123,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
 fn device_readings(readings: &DeviceReadings) -> Readings {
     Readings {
         ma_t12: readings.ma_t12,
-        sra: readings.sra,
+        sra: readings.sra.expect("synthetic scans have SRA readings"),
     }
 }
 

@@ -359,7 +359,7 @@ mod tests {
         t += "\nEND_DATA_FORMAT\nBEGIN_DATA\n";
         let mut id = 0;
         for (name, readings) in [
-            ("Munsell N9", &s.scan.reference.readings),
+            ("Munsell N9", &s.scan.reference.as_ref().unwrap().readings),
             (s.name.as_str(), &s.scan.readings),
         ] {
             for g in crate::geometry::ma_t12() {

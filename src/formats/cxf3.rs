@@ -120,35 +120,43 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
     for s in &study.samples {
         let origin = super::provenance_values(s);
         // (kind, (cost function, method) of an estimate, one spectrum per geometry)
-        type Object<'a> = (DataKind, Option<(&'a str, &'a str)>, [Spectrum; 14]);
-        let mut objects: Vec<Object> = vec![
-            (
-                DataKind::Reading,
-                None,
-                GEOMETRIES.map(|g| device_spectrum(&s.scan.readings, &g)),
-            ),
-            (
+        // (`None` at a geometry the scan did not measure; no reference object without a tile)
+        type Object<'a> = (DataKind, Option<(&'a str, &'a str)>, [Option<Spectrum>; 14]);
+        let geometries = s.scan.geometries();
+        let only_measured = |spectra: [Spectrum; 14]| -> [Option<Spectrum>; 14] {
+            std::array::from_fn(|g| geometries.contains(g).then_some(spectra[g]))
+        };
+        let mut objects: Vec<Object> = vec![(
+            DataKind::Reading,
+            None,
+            GEOMETRIES.map(|g| device_spectrum(&s.scan.readings, &g)),
+        )];
+        if let Some(reference) = &s.scan.reference {
+            objects.push((
                 DataKind::Reference,
                 None,
-                GEOMETRIES.map(|g| device_spectrum(&s.scan.reference.readings, &g)),
-            ),
-            (
-                DataKind::Measured,
-                None,
-                s.measured.values.map(|f| reflectance(&f)),
-            ),
-        ];
+                GEOMETRIES.map(|g| {
+                    device_spectrum(&reference.readings, &g)
+                        .filter(|_| geometries.contains(g.index))
+                }),
+            ));
+        }
+        objects.push((
+            DataKind::Measured,
+            None,
+            only_measured(s.measured.values.map(|f| reflectance(&f))),
+        ));
         for f in &s.fits {
             if let Some(d) = f.done() {
                 objects.push((
                     DataKind::Estimated,
                     Some((f.cost.name(), f.method.as_str())),
-                    d.estimated.map(|f| reflectance(&f)),
+                    only_measured(d.estimated.map(|f| reflectance(&f))),
                 ));
                 if let Some([lo, hi]) = super::estimate_band(d) {
                     let fit = Some((f.cost.name(), f.method.as_str()));
-                    objects.push((DataKind::EstimatedLow, fit, lo));
-                    objects.push((DataKind::EstimatedHigh, fit, hi));
+                    objects.push((DataKind::EstimatedLow, fit, only_measured(lo)));
+                    objects.push((DataKind::EstimatedHigh, fit, only_measured(hi)));
                 }
             }
         }
@@ -156,7 +164,7 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
             id += 1;
             let (object_type, name) = match kind {
                 DataKind::Reading => ("Sample", s.name.as_str()),
-                DataKind::Reference => ("Reference", s.scan.reference.name.as_str()),
+                DataKind::Reference => ("Reference", s.scan.reference_label()),
                 DataKind::Measured => ("Measured", s.name.as_str()),
                 DataKind::Estimated => ("Estimated", s.name.as_str()),
                 DataKind::EstimatedLow => ("EstimatedLow", s.name.as_str()),
@@ -176,7 +184,8 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
                 (DataKind::Reading, _) => format!("device readings of sample \"{}\"", s.name),
                 (DataKind::Reference, _) => format!(
                     "device readings of reference tile \"{}\" for the scan of \"{}\"",
-                    s.scan.reference.name, s.name
+                    s.scan.reference_label(),
+                    s.name
                 ),
                 (DataKind::Measured, _) => format!(
                     "measured reflectance factor of \"{}\" (specular strategy {})",
@@ -213,14 +222,16 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
             );
             for g in &GEOMETRIES {
                 let reflectance_factor = is_reflectance || g.device == Device::MaT12;
-                write_spectrum(&mut t, g, &spectra[g.index], reflectance_factor);
+                if let Some(spectrum) = &spectra[g.index] {
+                    write_spectrum(&mut t, g, spectrum, reflectance_factor);
+                }
             }
             let _ = writeln!(t, "        </cc:ColorValues>");
             let _ = writeln!(t, "        <cc:TagCollection Name=\"brdfd\">");
             let mut tags = vec![
                 ("data_kind", kind.name().to_string()),
                 ("sample", s.name.clone()),
-                ("reference", s.scan.reference.name.clone()),
+                ("reference", s.scan.reference_label().to_string()),
             ];
             if let Some((cost, method)) = fit {
                 tags.push(("cost_function", cost.to_string()));
@@ -748,7 +759,7 @@ pub(crate) mod tests {
             "<?xml version=\"1.0\"?>\n<CxF xmlns=\"{NAMESPACE}\"><Resources><ObjectCollection>\n"
         );
         for (i, (name, r)) in [
-            ("Munsell N9", &s.scan.reference.readings),
+            ("Munsell N9", &s.scan.reference.as_ref().unwrap().readings),
             (s.name.as_str(), &s.scan.readings),
         ]
         .iter()

@@ -150,7 +150,7 @@ pub fn write(study: &Study, opts: &ExportOptions) -> Result<String, FormatError>
                     colorimetry: d.map(|d| d.colorimetry),
                     uncertainty: d.and_then(|d| d.uncertainty.as_ref()),
                     sra: d.map(|d| d.sra),
-                    specular_delta_l: d.and_then(|d| d.specular_delta_l.into()),
+                    specular_delta_l: d.and_then(|d| d.specular_delta_l.map(Into::into)),
                 }
             })
             .collect();

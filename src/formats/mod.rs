@@ -366,53 +366,61 @@ pub fn rows(study: &Study) -> Vec<SpectralRow> {
     let mut out = Vec::new();
     for s in &study.samples {
         let origin = provenance_values(s);
-        let mut push =
-            |kind, fit: Option<(CostFunction, &str)>, spectra: [Spectrum; GEOMETRY_COUNT]| {
-                for g in &GEOMETRIES {
-                    out.push(SpectralRow {
-                        sample: s.name.clone(),
-                        kind,
-                        reference: s.scan.reference.name.clone(),
-                        cost_function: fit.map(|f| f.0),
-                        method: fit.map(|f| f.1.to_string()),
-                        geometry: g,
-                        origin: origin.clone(),
-                        values: spectra[g.index],
-                    });
-                }
-            };
+        // Rows only at the geometries the scan measured, and reference rows only for a tile.
+        let geometries = s.scan.geometries();
+        let mut push = |kind,
+                        fit: Option<(CostFunction, &str)>,
+                        spectra: [Option<Spectrum>; GEOMETRY_COUNT]| {
+            for g in geometries.iter() {
+                let Some(values) = spectra[g.index] else {
+                    continue;
+                };
+                out.push(SpectralRow {
+                    sample: s.name.clone(),
+                    kind,
+                    reference: s.scan.reference_label().to_string(),
+                    cost_function: fit.map(|f| f.0),
+                    method: fit.map(|f| f.1.to_string()),
+                    geometry: g,
+                    origin: origin.clone(),
+                    values,
+                });
+            }
+        };
         push(
             DataKind::Reading,
             None,
             GEOMETRIES.map(|g| device_spectrum(&s.scan.readings, &g)),
         );
-        push(
-            DataKind::Reference,
-            None,
-            GEOMETRIES.map(|g| device_spectrum(&s.scan.reference.readings, &g)),
-        );
+        if let Some(reference) = &s.scan.reference {
+            push(
+                DataKind::Reference,
+                None,
+                GEOMETRIES.map(|g| device_spectrum(&reference.readings, &g)),
+            );
+        }
         push(
             DataKind::Measured,
             None,
-            s.measured.values.map(|f| reflectance(&f)),
+            s.measured.values.map(|f| Some(reflectance(&f))),
         );
         for f in &s.fits {
             if let Some(d) = f.done() {
                 push(
                     DataKind::Estimated,
                     Some((f.cost, f.method.as_str())),
-                    d.estimated.map(|f| reflectance(&f)),
+                    d.estimated.map(|f| Some(reflectance(&f))),
                 );
                 if let Some([lo, hi]) = estimate_band(d) {
                     push(
                         DataKind::EstimatedLow,
                         Some((f.cost, f.method.as_str())),
-                        lo,
+                        lo.map(Some),
                     );
                     push(
                         DataKind::EstimatedHigh,
                         Some((f.cost, f.method.as_str())),
-                        hi,
+                        hi.map(Some),
                     );
                 }
             }
@@ -441,11 +449,12 @@ pub fn estimate_band(d: &DoneFit) -> Option<[[Spectrum; GEOMETRY_COUNT]; 2]> {
     Some([band(0), band(1)])
 }
 
-/// A device reading as a spectrum: the MA-T12's 31 bands, or the SRA's intensity in every band.
-pub fn device_spectrum(readings: &DeviceReadings, g: &Geometry) -> Spectrum {
+/// A device reading as a spectrum: the MA-T12's 31 bands, or the SRA's intensity in every band;
+/// `None` at an SRA geometry of readings without SRA values.
+pub fn device_spectrum(readings: &DeviceReadings, g: &Geometry) -> Option<Spectrum> {
     match g.device {
-        Device::MaT12 => readings.ma_t12[g.index],
-        Device::Sra => [readings.sra[g.index - MA_T12_COUNT]; BANDS],
+        Device::MaT12 => Some(readings.ma_t12[g.index]),
+        Device::Sra => readings.intensity(g).map(|v| [v; BANDS]),
     }
 }
 
@@ -576,10 +585,8 @@ impl Slots {
         who: &str,
         reference: bool,
     ) -> Result<DeviceReadings, FormatError> {
-        let mut out = DeviceReadings {
-            ma_t12: [[0.0; BANDS]; MA_T12_COUNT],
-            sra: [0.0; crate::geometry::SRA_COUNT],
-        };
+        let mut ma_t12 = [[0.0; BANDS]; MA_T12_COUNT];
+        let mut sra = [0.0; crate::geometry::SRA_COUNT];
         for g in &GEOMETRIES {
             let Some((value, at, fields)) = &self.values[g.index] else {
                 let source = match g.device {
@@ -619,7 +626,7 @@ impl Slots {
                     for (b, &v) in s.iter().enumerate() {
                         check(v, Some(b))?;
                     }
-                    out.ma_t12[g.index] = *s;
+                    ma_t12[g.index] = *s;
                 }
                 (Device::MaT12, Value::Intensity(_)) => {
                     return Err(FormatError::invalid(
@@ -633,7 +640,7 @@ impl Slots {
                     ));
                 }
                 (Device::Sra, Value::Intensity(v)) => {
-                    out.sra[g.index - MA_T12_COUNT] = check(*v, None)?;
+                    sra[g.index - MA_T12_COUNT] = check(*v, None)?;
                 }
                 (Device::Sra, Value::Spectrum(s)) => {
                     // The SRA is achromatic: brdfd writes its value in every band.
@@ -648,11 +655,14 @@ impl Slots {
                             ),
                         ));
                     }
-                    out.sra[g.index - MA_T12_COUNT] = check(s[0], None)?;
+                    sra[g.index - MA_T12_COUNT] = check(s[0], None)?;
                 }
             }
         }
-        Ok(out)
+        Ok(DeviceReadings {
+            ma_t12,
+            sra: Some(sra),
+        })
     }
 }
 
@@ -740,10 +750,10 @@ pub fn assemble(
         )?;
         let scan = Scan {
             sample: name.clone(),
-            reference: Reference {
+            reference: Some(Reference {
                 name: tile,
                 readings: ref_readings,
-            },
+            }),
             readings,
         };
         scan.validate().map_err(|source| FormatError::Scan {
@@ -877,7 +887,7 @@ pub(crate) mod tests {
         let s = &study.samples[0];
         let r = &rows[12];
         assert_eq!((r.kind, r.geometry.name), (DataKind::Reading, "sra-20"));
-        assert_eq!(r.values, [s.scan.readings.sra[0]; BANDS]);
+        assert_eq!(r.values, [s.scan.readings.sra.unwrap()[0]; BANDS]);
         let m = rows
             .iter()
             .find(|r| r.kind == DataKind::Measured && r.geometry.name == "45as45")
@@ -903,7 +913,7 @@ pub(crate) mod tests {
             kd: p.kd.iter().map(|k| [k * 0.9, k * 1.1]).collect(),
             delta_e00_mean: [0.1, 0.2],
             delta_e00_diffuse_mean: [0.1, 0.2],
-            delta_e00_specular_mean: [1.0, 2.0],
+            delta_e00_specular_mean: Some([1.0, 2.0]),
         });
         study
     }
@@ -963,11 +973,11 @@ pub(crate) mod tests {
                         d.ma_t12
                             .iter()
                             .flatten()
-                            .chain(&d.sra)
+                            .chain(d.sra.iter().flatten())
                             .map(|v| v.to_bits())
                             .collect::<Vec<_>>()
                     };
-                    [r(&s.readings), r(&s.reference.readings)].concat()
+                    [r(&s.readings), r(&s.reference.as_ref().unwrap().readings)].concat()
                 };
                 assert_eq!(g, w, "{format}");
                 assert_eq!(bits(g), bits(w), "{format}");

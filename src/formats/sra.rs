@@ -23,14 +23,21 @@ pub fn write_scans(scans: &[Scan]) -> String {
             s.to_string()
         }
     };
+    // A scan without SRA readings has no rows here.
     for s in scans {
-        for (g, v) in sra().iter().zip(s.readings.sra) {
+        for (g, v) in sra().iter().zip(s.readings.sra.into_iter().flatten()) {
             let _ = writeln!(t, "{},{},{v}", q(&s.sample), g.name);
         }
     }
-    if let Some(first) = scans.first() {
-        for (g, v) in sra().iter().zip(first.reference.readings.sra) {
-            let _ = writeln!(t, "{},{},{v}", q(&first.reference.name), g.name);
+    let tile = scans
+        .iter()
+        .find_map(|s| s.reference.as_ref().filter(|r| r.readings.sra.is_some()));
+    if let Some(reference) = tile {
+        for (g, v) in sra()
+            .iter()
+            .zip(reference.readings.sra.into_iter().flatten())
+        {
+            let _ = writeln!(t, "{},{},{v}", q(&reference.name), g.name);
         }
     }
     t
@@ -170,7 +177,7 @@ mod proptests {
             let _ = write!(t, ",nm{nm}");
         }
         t.push('\n');
-        let tile = &SCANS[0].reference;
+        let tile = SCANS[0].reference.as_ref().unwrap();
         let objects = std::iter::once((&tile.name, &tile.readings))
             .chain(SCANS.iter().map(|s| (&s.sample, &s.readings)));
         for (name, readings) in objects {

@@ -18,7 +18,6 @@
 //! of [`super::PROVENANCE_FIELDS`].
 
 use super::{FormatError, device_spectrum, provenance_values, reflectance};
-use crate::geometry::GEOMETRIES;
 use crate::report::study::{FitState, Study};
 use crate::spectral::wavelengths_nm;
 
@@ -87,16 +86,22 @@ pub fn spectra(study: &Study) -> Result<String, FormatError> {
             .map(|c| s.done(*c).map(|d| d.estimated.map(|f| reflectance(&f))))
             .collect();
         let measured = s.measured.values.map(|f| reflectance(&f));
-        for g in &GEOMETRIES {
-            let reading = device_spectrum(&s.scan.readings, g);
-            let reference = device_spectrum(&s.scan.reference.readings, g);
+        // Rows at the geometries the scan measured; the reference column is empty without a
+        // tile (the reference is the instrument's own calibration).
+        for g in s.scan.geometries().iter() {
+            let reading = device_spectrum(&s.scan.readings, g).unwrap_or([f64::NAN; 31]);
+            let reference = s
+                .scan
+                .reference
+                .as_ref()
+                .and_then(|r| device_spectrum(&r.readings, g));
             for (b, nm) in nms.iter().enumerate() {
                 let mut row: Vec<String> = vec![
                     origin[0].clone(),
                     origin[2].clone(),
                     origin[1].clone(),
                     s.scan.sample.clone(),
-                    s.scan.reference.name.clone(),
+                    s.scan.reference_label().to_string(),
                     origin[5].clone(),
                     origin[9].clone(),
                     simulated(&origin).into(),
@@ -107,7 +112,7 @@ pub fn spectra(study: &Study) -> Result<String, FormatError> {
                     g.phi_r_deg.to_string(),
                     nm.to_string(),
                     reading[b].to_string(),
-                    reference[b].to_string(),
+                    reference.map_or(String::new(), |r| r[b].to_string()),
                     measured[g.index][b].to_string(),
                 ];
                 row.extend(
@@ -190,7 +195,7 @@ pub fn fits(study: &Study) -> Result<String, FormatError> {
                     row.extend(lo_hi(u.map(|u| u.delta_e00_mean)));
                     row.extend([
                         n(e.diffuse.mean),
-                        n(e.specular.mean),
+                        e.specular.map_or(String::new(), |s| n(s.mean)),
                         n(e.all.max),
                         d.colorimetry.observer.to_string(),
                         d.colorimetry.weighting.to_string(),
@@ -250,7 +255,7 @@ mod tests {
         assert_eq!(parse("reading"), s.scan.readings.ma_t12[9][15]);
         assert_eq!(
             parse("reference_reading"),
-            s.scan.reference.readings.ma_t12[9][15]
+            s.scan.reference.as_ref().unwrap().readings.ma_t12[9][15]
         );
         assert_eq!(
             parse("measured"),

@@ -30,7 +30,7 @@
 // closest to the equations.
 #![allow(clippy::needless_range_loop)]
 
-use crate::cost::{CostFunction, TERMS, weights};
+use crate::cost::{CostFunction, terms, weights};
 use crate::geometry::GEOMETRY_COUNT as G;
 use crate::geometry::{MA_T12_COUNT, SRA_COUNT};
 use crate::model::{Bounds, FresnelCosine, SpecularGeometry, specular_term};
@@ -151,8 +151,11 @@ pub(crate) struct Problem {
     pub fresnel: FresnelCosine,
     pub bounds: Bounds,
     geos: [SpecularGeometry; G],
-    /// Cosine weights w_g = cos θi.
+    /// Cosine weights w_g = cos θi; 0 at a geometry the scan did not measure, which takes it
+    /// out of every sum and every per-band solve.
     w: [f64; G],
+    /// N, the number of (geometry, band) terms every cost is normalised by.
+    terms: f64,
     /// w_g², and their sum (cf1).
     w2: [f64; G],
     sum_w2: f64,
@@ -218,6 +221,18 @@ impl Lum {
     }
 }
 
+/// The cosine weights of the geometries `measured` has, 0 at the others.
+fn masked_weights(measured: &MeasuredBrdf) -> [f64; G] {
+    let w = weights();
+    std::array::from_fn(|g| {
+        if measured.geometries.contains(g) {
+            w[g]
+        } else {
+            0.0
+        }
+    })
+}
+
 impl Problem {
     /// Prepares `measured` for fitting. The caller has checked that it is finite.
     pub fn new(
@@ -226,7 +241,14 @@ impl Problem {
         fresnel: FresnelCosine,
         bounds: Bounds,
     ) -> Self {
-        Self::build(measured, cf, fresnel, bounds, weights(), None)
+        Self::build(
+            measured,
+            cf,
+            fresnel,
+            bounds,
+            masked_weights(measured),
+            None,
+        )
     }
 
     /// The same problem under the SRA reading model `sra` (SCIENCE.md §5.1). The paper's flat
@@ -235,10 +257,11 @@ impl Problem {
     /// MA-T12 geometries only) and adds their luminance residuals, counted 31 times each, to
     /// every cost ([`Lum`]).
     pub fn with_sra(self, measured: &MeasuredBrdf, sra: SraReading) -> Self {
-        if sra.model == SraModel::Flat {
+        // Without SRA readings there are no SRA terms to read any way.
+        if sra.model == SraModel::Flat || !measured.geometries.has_sra() {
             return self;
         }
-        let w = weights();
+        let w = masked_weights(measured);
         let spectral: [f64; G] = std::array::from_fn(|g| if g < MA_T12_COUNT { w[g] } else { 0.0 });
         let c = sra.weights();
         let ws: [f64; SRA_COUNT] = std::array::from_fn(|k| w[MA_T12_COUNT + k]);
@@ -276,6 +299,7 @@ impl Problem {
             bounds,
             geos: SpecularGeometry::all(),
             w,
+            terms: terms(measured.geometries) as f64,
             w2,
             sum_w2: w2.iter().sum(),
             w23: w.map(|x| (x * x).cbrt()),
@@ -339,7 +363,7 @@ impl Problem {
         if let Some(lum) = &self.lum {
             sum += lum.terms(self.cf.into(), kd, &s);
         }
-        (sum / TERMS as f64).sqrt()
+        (sum / self.terms).sqrt()
     }
 
     /// The least value of `criterion` over kd for fixed (ks, α, μ); writes that kd (sr⁻¹,
@@ -453,7 +477,7 @@ impl Problem {
         if let Some(lum) = &self.lum {
             sum += lum.terms(criterion, kd, &s);
         }
-        (sum / TERMS as f64).sqrt()
+        (sum / self.terms).sqrt()
     }
 
     /// `d[g][b] = M_g(λ_b) − s_g` for every geometry and (padded) band: the kinks of the
@@ -885,7 +909,7 @@ mod tests {
                 sum += (w[g] * (m.values[g][b] - a[g][b])).abs();
             }
         }
-        (sum / TERMS as f64).sqrt()
+        (sum / crate::cost::TERMS as f64).sqrt()
     }
 
     /// The L1 profile is the L1 error of the kd it returns, and no kd does better: not a
@@ -974,7 +998,7 @@ mod tests {
                     );
                     sum += best;
                 }
-                let want = (sum / TERMS as f64).sqrt();
+                let want = (sum / crate::cost::TERMS as f64).sqrt();
                 assert!(
                     (f - want).abs() <= 1e-13 * want,
                     "{criterion:?} ({ks}, {alpha}, {ior}): {f} vs {want}"

@@ -78,9 +78,7 @@ pub fn cases() -> [SyntheticCase; 6] {
 
 /// The model BRDF of `truth` at all 14 geometries, exactly: every geometry spectral.
 pub fn consistent(truth: &Params, fresnel: FresnelCosine) -> MeasuredBrdf {
-    MeasuredBrdf {
-        values: evaluate(truth, fresnel, &SpecularGeometry::all()),
-    }
+    MeasuredBrdf::full(evaluate(truth, fresnel, &SpecularGeometry::all()))
 }
 
 /// What the two instruments would measure for `truth`: the model BRDF, with each SRA

@@ -94,7 +94,12 @@ impl Analysis {
             .iter()
             .map(|&c| {
                 let ci = |pick: fn(&Evaluation) -> f64| {
-                    let xs: Vec<f64> = included.iter().map(|&i| pick(evaluation(i, c))).collect();
+                    // NaN: no such geometries (a scan without SRA readings has no specular mean).
+                    let xs: Vec<f64> = included
+                        .iter()
+                        .map(|&i| pick(evaluation(i, c)))
+                        .filter(|v| !v.is_nan())
+                        .collect();
                     mean_ci95(&xs)
                 };
                 CostSummary {
@@ -102,11 +107,11 @@ impl Analysis {
                     method: study.method_of(c),
                     all: ci(|e| e.all.mean),
                     diffuse: ci(|e| e.diffuse.mean),
-                    specular: ci(|e| e.specular.mean),
+                    specular: ci(|e| e.specular.map_or(f64::NAN, |s| s.mean)),
                     specular_delta_l: mean_ci95(
                         &included
                             .iter()
-                            .map(|&i| done(i, c).specular_delta_l.mean)
+                            .filter_map(|&i| done(i, c).specular_delta_l.map(|d| d.mean))
                             .collect::<Vec<_>>(),
                     ),
                 }
@@ -130,7 +135,8 @@ impl Analysis {
                 let paired_l = |c: CostFunction| -> Vec<f64> {
                     included
                         .iter()
-                        .flat_map(|&i| done(i, c).specular_delta_l.per_geometry)
+                        .flat_map(|&i| done(i, c).specular_delta_l.map(|d| d.per_geometry))
+                        .flatten()
                         .collect()
                 };
                 luminance_sign_tests.push(SignRow {

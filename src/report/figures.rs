@@ -1045,7 +1045,8 @@ fn specular_delta_l_points<DB: DrawingBackend>(
     let costs = study.cost_functions();
     let values: Vec<f64> = study
         .done_fits()
-        .flat_map(|d| d.specular_delta_l.per_geometry)
+        .flat_map(|d| d.specular_delta_l.map(|l| l.per_geometry))
+        .flatten()
         .collect();
     let mut chart = per_sample_chart(
         root,
@@ -1068,7 +1069,8 @@ fn specular_delta_l_points<DB: DrawingBackend>(
             .enumerate()
             .filter_map(|(i, s)| {
                 s.done(c)
-                    .map(|d| (i as f64 + offset, d.specular_delta_l.per_geometry))
+                    .and_then(|d| d.specular_delta_l)
+                    .map(|l| (i as f64 + offset, l.per_geometry))
             })
             .collect();
         chart

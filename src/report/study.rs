@@ -102,8 +102,8 @@ pub struct DoneFit {
     /// The SRA reading model the fit's cost used (SCIENCE.md §5.1).
     pub sra: SraReading,
     /// |ΔL*| between model and measured luminance at the SRA geometries, under the
-    /// instrument of `sra` (SCIENCE.md §7.2).
-    pub specular_delta_l: SpecularDeltaL,
+    /// instrument of `sra` (SCIENCE.md §7.2); `None` for a scan without SRA readings.
+    pub specular_delta_l: Option<SpecularDeltaL>,
 }
 
 impl DoneFit {
@@ -122,7 +122,12 @@ impl DoneFit {
         uncertainty: Option<Uncertainty>,
     ) -> DoneFit {
         let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
-        let evaluation = evaluate_with(&measured.values, &estimated, colorimetry);
+        let evaluation = evaluate_with(
+            &measured.values,
+            &estimated,
+            colorimetry,
+            measured.geometries,
+        );
         let sra = SraReading::default();
         DoneFit {
             params,
@@ -132,14 +137,20 @@ impl DoneFit {
             colorimetry,
             uncertainty,
             sra,
-            specular_delta_l: specular_delta_l(&measured.values, &estimated, sra),
+            specular_delta_l: measured
+                .geometries
+                .has_sra()
+                .then(|| specular_delta_l(&measured.values, &estimated, sra)),
         }
     }
 
     /// The same fit made with the SRA reading model `sra` (its |ΔL*| under that instrument).
     pub fn with_sra(mut self, measured: &MeasuredBrdf, sra: SraReading) -> DoneFit {
         self.sra = sra;
-        self.specular_delta_l = specular_delta_l(&measured.values, &self.estimated, sra);
+        self.specular_delta_l = measured
+            .geometries
+            .has_sra()
+            .then(|| specular_delta_l(&measured.values, &self.estimated, sra));
         self
     }
 }

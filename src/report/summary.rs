@@ -122,8 +122,15 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
                     Some(FitState::Done(d)) => {
                         let e = &d.evaluation;
                         row.extend(
-                            [e.all.mean, e.diffuse.mean, e.specular.mean, e.all.max]
-                                .map(|v| format!("{v:.3}")),
+                            [
+                                Some(e.all.mean),
+                                Some(e.diffuse.mean),
+                                e.specular.map(|s| s.mean),
+                                Some(e.all.max),
+                            ]
+                            .map(|v| {
+                                v.map_or("no specular readings".into(), |v| format!("{v:.3}"))
+                            }),
                         );
                     }
                     Some(FitState::Failed { .. }) => {
@@ -292,12 +299,14 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             let mut row = vec![s.name.clone()];
             for &c in costs {
                 match s.done(c) {
-                    Some(d) => {
-                        let l = &d.specular_delta_l;
-                        row.push(format!("{:.3}", l.per_geometry[0]));
-                        row.push(format!("{:.3}", l.per_geometry[1]));
-                        row.push(format!("{:.3}", d.evaluation.specular.mean));
-                    }
+                    Some(d) => match (&d.specular_delta_l, &d.evaluation.specular) {
+                        (Some(l), Some(e)) => {
+                            row.push(format!("{:.3}", l.per_geometry[0]));
+                            row.push(format!("{:.3}", l.per_geometry[1]));
+                            row.push(format!("{:.3}", e.mean));
+                        }
+                        _ => row.extend(["no specular readings".into(), "".into(), "".into()]),
+                    },
                     None => row.extend(["no result".into(), "".into(), "".into()]),
                 }
             }

@@ -156,6 +156,7 @@ pub enum Event {
         delta_e00_mean: f64,
         #[serde(deserialize_with = "f64_or_nan")]
         delta_e00_diffuse_mean: f64,
+        /// NaN (`null` on the wire) for a scan without SRA readings.
         #[serde(deserialize_with = "f64_or_nan")]
         delta_e00_specular_mean: f64,
         #[serde(deserialize_with = "f64_or_nan")]

@@ -42,6 +42,8 @@ pub struct FitJob {
     pub fit: FitRunId,
     pub scan: ScanId,
     pub sample: String,
+    /// What the scan is normalised by (the tile's name, or "instrument calibration").
+    pub reference: String,
     /// The processed scan, sr⁻¹.
     pub measured: MeasuredBrdf,
     pub request: FitRequest,
@@ -56,7 +58,15 @@ pub type FitFn = Arc<
 
 /// The real computation: [`crate::fit::fit_measured`].
 pub fn default_fit_fn() -> FitFn {
-    Arc::new(|job, observer| fit_measured(&job.sample, job.measured, &job.request, observer))
+    Arc::new(|job, observer| {
+        fit_measured(
+            &job.sample,
+            &job.reference,
+            job.measured,
+            &job.request,
+            observer,
+        )
+    })
 }
 
 /// The text of a panic payload.
@@ -449,6 +459,9 @@ impl Service {
             FitJob {
                 fit,
                 scan,
+                reference: crate::service::pipeline::scan_from_detail(&scan_detail)
+                    .map(|s| s.reference_label().to_string())
+                    .unwrap_or_else(|_| scan_detail.reference.reference.name.clone()),
                 sample: scan_detail.scan.sample,
                 measured: processed.brdf,
                 request,
@@ -483,6 +496,7 @@ impl Service {
                         fit,
                         &result,
                         &e.per_geometry,
+                        e.geometries,
                         report.request.colorimetry,
                     ))
                     .await
@@ -495,7 +509,7 @@ impl Service {
                             cost: outcome.cost,
                             delta_e00_mean: e.all.mean,
                             delta_e00_diffuse_mean: e.diffuse.mean,
-                            delta_e00_specular_mean: e.specular.mean,
+                            delta_e00_specular_mean: e.specular.map_or(f64::NAN, |s| s.mean),
                             wall_ms: outcome.wall_ms,
                         });
                         return Some(report);

@@ -655,7 +655,7 @@ impl Service {
         };
         for s in &scans {
             check_name("sample name", &s.sample)
-                .and_then(|()| check_name("reference name", &s.reference.name))
+                .and_then(|()| check_name("reference name", s.reference_label()))
                 .map_err(|e| Failure::Rejected(format!("{}: {e}", unit.main)))?;
         }
         let detail = match &unit.partner {
@@ -675,13 +675,13 @@ impl Service {
         };
         let names: Vec<String> = scans
             .iter()
-            .map(|s| format!("{}{IMPORTED_SUFFIX}", s.reference.name))
+            .map(|s| format!("{}{IMPORTED_SUFFIX}", s.reference_label()))
             .collect();
         let readings: Vec<_> = scans
             .iter()
             .map(|s| {
                 (
-                    new_readings(&s.reference.readings),
+                    s.reference.as_ref().map(|r| new_readings(&r.readings)),
                     new_readings(&s.readings),
                 )
             })
@@ -694,8 +694,9 @@ impl Service {
                 sample_name: &s.sample,
                 reference_name: name,
                 provenance: &provenance,
-                reference_readings: r,
+                reference_readings: r.as_deref(),
                 readings: m,
+                taken_at_ms: None,
             })
             .collect();
         let stored = self

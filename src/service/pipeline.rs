@@ -9,12 +9,12 @@
 //! when their 14th reading is stored, imported ones from [`Service::import_scan`] (the API,
 //! `brdfd import`, the watch folder).
 
-use crate::geometry::{self, Device, MA_T12_COUNT};
+use crate::geometry::{Device, MA_T12_COUNT};
 use crate::processing::{self, ProcessingOptions};
 use crate::scan::{DeviceReadings, Scan, ScanError};
 use crate::store::{
-    FitRunId, NewFit, NewReading, Provenance, ReadingValues, ScanDetail, ScanId, ScanState, Source,
-    StoreError,
+    FitRunId, ImportedScan, NewFit, NewReading, Provenance, ReadingValues, ScanDetail, ScanId,
+    ScanState, Source, StoreError,
 };
 
 use super::events::Event;
@@ -29,11 +29,9 @@ pub const IMPORTED_SUFFIX: &str = " (imported)";
 /// imported.
 pub fn scan_from_detail(detail: &ScanDetail) -> Result<Scan, ScanError> {
     let mut scan = detail.to_scan()?;
-    scan.reference.name = scan
-        .reference
-        .name
-        .trim_end_matches(IMPORTED_SUFFIX)
-        .to_string();
+    if let Some(reference) = scan.reference.as_mut() {
+        reference.name = reference.name.trim_end_matches(IMPORTED_SUFFIX).to_string();
+    }
     Ok(scan)
 }
 
@@ -145,26 +143,40 @@ impl Service {
     /// complete scan, all in one transaction, which is then processed and fitted like a
     /// measured one. Returns the scan's id and its fits.
     pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
-        file.validate()?;
-        check_name("sample name", &file.sample)?;
-        check_name("reference name", &file.reference.name)?;
-        let store = &self.inner.store;
         // A brdfd.scan/1 file does not say which instruments measured it.
         let provenance = Provenance {
             source: Source::Imported,
             source_detail: Some("brdfd.scan/1 file".into()),
             ..Provenance::unknown()
         };
-        let name = format!("{}{IMPORTED_SUFFIX}", file.reference.name);
+        self.import_scan_as(file, &provenance, None).await
+    }
+
+    /// [`Service::import_scan`] with what the file says of its origin: the instruments and
+    /// source (`provenance`) and when the readings were taken (`taken_at_ms`, else now).
+    pub async fn import_scan_as(
+        &self,
+        file: &Scan,
+        provenance: &Provenance,
+        taken_at_ms: Option<i64>,
+    ) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
+        file.validate()?;
+        check_name("sample name", &file.sample)?;
+        check_name("reference name", file.reference_label())?;
+        let store = &self.inner.store;
+        let name = format!("{}{IMPORTED_SUFFIX}", file.reference_label());
+        let reference_readings = file.reference.as_ref().map(|r| new_readings(&r.readings));
+        let readings = new_readings(&file.readings);
         // One transaction: a failure leaves no half-imported reference or scan behind.
         let (_reference, scan) = self
-            .timed_store(store.import_scan(
-                &file.sample,
-                &name,
-                &provenance,
-                &new_readings(&file.reference.readings),
-                &new_readings(&file.readings),
-            ))
+            .timed_store(store.import(&ImportedScan {
+                sample_name: &file.sample,
+                reference_name: &name,
+                provenance,
+                reference_readings: reference_readings.as_deref(),
+                readings: &readings,
+                taken_at_ms,
+            }))
             .await?;
         self.inner.events.send(Event::ScanComplete { scan });
         let fits = self
@@ -197,16 +209,17 @@ pub fn check_name(what: &str, name: &str) -> Result<(), ServiceError> {
     Ok(())
 }
 
-/// A scan file's readings as store readings, in table order, with empty raw frames.
+/// A scan file's readings as store readings, in table order, with empty raw frames (the 12
+/// MA-T12 ones only when there are no SRA readings).
 pub(super) fn new_readings(r: &DeviceReadings) -> Vec<NewReading<'static>> {
-    geometry::GEOMETRIES
+    r.geometries()
         .iter()
         .map(|g| NewReading {
             device: g.device,
             geometry: g,
-            values: match g.device {
-                Device::MaT12 => ReadingValues::Spectrum(r.ma_t12[g.index]),
-                Device::Sra => ReadingValues::Intensity(r.sra[g.index - MA_T12_COUNT]),
+            values: match (g.device, r.sra) {
+                (Device::Sra, Some(sra)) => ReadingValues::Intensity(sra[g.index - MA_T12_COUNT]),
+                _ => ReadingValues::Spectrum(r.ma_t12[g.index]),
             },
             raw_frame: &[],
         })

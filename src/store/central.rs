@@ -186,8 +186,10 @@ pub async fn load_scans(
         pool,
         &format!(
             "{SELECTED}
-         SELECT p.station, p.id, p.scan_id, p.specular, p.brdf_f64le, p.created_at_ms
+         SELECT p.station, p.id, p.scan_id, p.specular, p.brdf_f64le, p.created_at_ms,
+                s.geometries
          FROM sel JOIN processed p ON p.station = sel.station AND p.scan_id = sel.id
+              JOIN scans s ON s.station = p.station AND s.id = p.scan_id
          ORDER BY p.station, p.id"
         ),
         station,

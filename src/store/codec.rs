@@ -1,7 +1,7 @@
 //! How values are laid out in the database and checked on the way in: f64 arrays as
 //! little-endian BLOBs, reading values per device, and the finiteness and positivity rules.
 
-use crate::geometry::{self, Device, GEOMETRIES, GEOMETRY_COUNT, Geometry};
+use crate::geometry::{self, Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, GeometrySet};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, Spectrum, wavelengths_nm};
 
@@ -40,8 +40,8 @@ pub(crate) fn encode_brdf(brdf: &MeasuredBrdf) -> Vec<u8> {
     encode_f64s(brdf.values.as_flattened())
 }
 
-/// The inverse of [`encode_brdf`].
-pub(crate) fn decode_brdf(bytes: &[u8]) -> Option<MeasuredBrdf> {
+/// The inverse of [`encode_brdf`], for a scan that measured `geometries` (the others hold 0).
+pub(crate) fn decode_brdf(bytes: &[u8], geometries: GeometrySet) -> Option<MeasuredBrdf> {
     let flat = decode_f64s(bytes)?;
     if flat.len() != GEOMETRY_COUNT * BANDS {
         return None;
@@ -50,7 +50,7 @@ pub(crate) fn decode_brdf(bytes: &[u8]) -> Option<MeasuredBrdf> {
     for (g, chunk) in flat.chunks_exact(BANDS).enumerate() {
         values[g].copy_from_slice(chunk);
     }
-    Some(MeasuredBrdf { values })
+    Some(MeasuredBrdf { values, geometries })
 }
 
 /// A stored reading's values, by its device.
@@ -249,13 +249,15 @@ mod tests {
                 *v = (g * 100 + b) as f64;
             }
         }
-        let brdf = MeasuredBrdf { values };
+        let brdf = MeasuredBrdf::full(values);
         let bytes = encode_brdf(&brdf);
         assert_eq!(bytes.len(), 3472);
         // Second value stored is geometry 0, band 1.
         assert_eq!(f64::from_le_bytes(bytes[8..16].try_into().unwrap()), 1.0);
-        assert_eq!(decode_brdf(&bytes).unwrap(), brdf);
-        assert!(decode_brdf(&bytes[..3464]).is_none());
+        assert_eq!(decode_brdf(&bytes, GeometrySet::ALL).unwrap(), brdf);
+        assert!(decode_brdf(&bytes[..3464], GeometrySet::ALL).is_none());
+        let partial = decode_brdf(&bytes, GeometrySet::MA_T12).unwrap();
+        assert_eq!(partial.geometries, GeometrySet::MA_T12);
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! transaction, so a fit is never `done` without its evaluation.
 
 use crate::colour::Colorimetry;
-use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
+use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, GeometrySet, MA_T12_COUNT};
 use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
 use crate::sra_reading::{SpecularDeltaL, SraReading, specular_delta_l};
 use crate::uncertainty::Uncertainty;
@@ -176,16 +176,25 @@ impl Store {
         outcome: &FitResult,
         delta_e00: &[f64; GEOMETRY_COUNT],
     ) -> Result<(), StoreError> {
-        self.finish_fit_with(fit, outcome, delta_e00, Colorimetry::default())
-            .await
+        self.finish_fit_with(
+            fit,
+            outcome,
+            delta_e00,
+            GeometrySet::ALL,
+            Colorimetry::default(),
+        )
+        .await
     }
 
-    /// [`Store::finish_fit`], recording the colorimetry the ΔE00 values were computed with.
+    /// [`Store::finish_fit`] for a scan that measured `geometries` (the ΔE00 at the others are
+    /// not stored, and the specular summary is NULL without SRA geometries), recording the
+    /// colorimetry the ΔE00 values were computed with.
     pub async fn finish_fit_with(
         &self,
         fit: FitRunId,
         outcome: &FitResult,
         delta_e00: &[f64; GEOMETRY_COUNT],
+        geometries: GeometrySet,
         colorimetry: Colorimetry,
     ) -> Result<(), StoreError> {
         let owner = || format!("fit run {fit}");
@@ -194,14 +203,29 @@ impl Store {
         codec::check_finite(&owner, &outcome.best_cost_per_generation, |i| {
             format!("the best cost of generation {i}")
         })?;
-        codec::check_finite(&owner, delta_e00, |i| {
-            format!("ΔE00 at {}", GEOMETRIES[i].name)
-        })?;
+        let measured: Vec<(&Geometry, f64)> =
+            geometries.iter().map(|g| (g, delta_e00[g.index])).collect();
+        for (g, de) in &measured {
+            codec::check_finite(&owner, &[*de], |_| format!("ΔE00 at {}", g.name))?;
+        }
+        if geometries.is_empty() || !(0..MA_T12_COUNT).all(|g| geometries.contains(g)) {
+            return Err(StoreError::Empty {
+                field: "the MA-T12 geometries of the evaluation",
+            });
+        }
+        let values = |device: Option<Device>| -> Vec<f64> {
+            measured
+                .iter()
+                .filter(|(g, _)| device.is_none_or(|d| g.device == d))
+                .map(|(_, de)| *de)
+                .collect()
+        };
+        let specular = values(Some(Device::Sra));
         let evaluation = EvaluationRecord {
             per_geometry: *delta_e00,
-            all: DeltaESummary::of(delta_e00),
-            diffuse: DeltaESummary::of(&delta_e00[..MA_T12_COUNT]),
-            specular: DeltaESummary::of(&delta_e00[MA_T12_COUNT..]),
+            all: DeltaESummary::of(&values(None)),
+            diffuse: DeltaESummary::of(&values(Some(Device::MaT12))),
+            specular: (!specular.is_empty()).then(|| DeltaESummary::of(&specular)),
         };
         let params = to_json("fit parameters", &outcome.params)?;
         let best = to_json(
@@ -230,13 +254,13 @@ impl Store {
         if done.rows_affected() != 1 {
             return Err(refused(&mut *tx, fit, "running", "finish it").await);
         }
-        for (g, de) in GEOMETRIES.iter().zip(delta_e00) {
+        for (g, de) in &measured {
             sqlx::query(
                 "INSERT INTO evaluations (fit_run_id, geometry, delta_e00) VALUES ($1, $2, $3)",
             )
             .bind(fit.0)
             .bind(g.name)
-            .bind(*de)
+            .bind(de)
             .execute(&mut *tx)
             .await?;
         }
@@ -254,9 +278,9 @@ impl Store {
         .bind(d.mean)
         .bind(d.median)
         .bind(d.max)
-        .bind(s.mean)
-        .bind(s.median)
-        .bind(s.max)
+        .bind(s.map(|s| s.mean))
+        .bind(s.map(|s| s.median))
+        .bind(s.map(|s| s.max))
         .bind(colorimetry.observer.to_string())
         .bind(colorimetry.weighting.to_string())
         .execute(&mut *tx)
@@ -403,7 +427,11 @@ impl Store {
                 })?;
                 per_geometry[g.index] = *de;
             }
-            if let Some(g) = per_geometry.iter().position(|v| v.is_nan()) {
+            // Every MA-T12 geometry, and both SRA ones or neither.
+            let no_sra = per_geometry[MA_T12_COUNT..].iter().all(|v| v.is_nan());
+            let missing = (0..GEOMETRY_COUNT)
+                .find(|&g| per_geometry[g].is_nan() && !(no_sra && g >= MA_T12_COUNT));
+            if let Some(g) = missing {
                 return Err(StoreError::Corrupt {
                     table: "evaluations",
                     id: fit.0,
@@ -411,7 +439,19 @@ impl Store {
                 });
             }
             // Read back what finish_fit stored, rather than recomputing it.
-            type Row = (f64, f64, f64, f64, f64, f64, f64, f64, f64, String, String);
+            type Row = (
+                f64,
+                f64,
+                f64,
+                f64,
+                f64,
+                f64,
+                Option<f64>,
+                Option<f64>,
+                Option<f64>,
+                String,
+                String,
+            );
             let s: Row = sqlx::query_as(
                 "SELECT mean, median, max, diffuse_mean, diffuse_median, diffuse_max,
                         specular_mean, specular_median, specular_max, observer, weighting
@@ -446,10 +486,11 @@ impl Store {
                     median: s.4,
                     max: s.5,
                 },
-                specular: DeltaESummary {
-                    mean: s.6,
-                    median: s.7,
-                    max: s.8,
+                specular: match (s.6, s.7, s.8) {
+                    (Some(mean), Some(median), Some(max)) => {
+                        Some(DeltaESummary { mean, median, max })
+                    }
+                    _ => None,
                 },
             })
         };
@@ -491,6 +532,9 @@ impl Store {
             .and_then(|v| serde_json::from_value(v.clone()).ok())
             .unwrap_or_default();
         let measured = self.processed(run.processed).await?.brdf;
+        if !measured.geometries.has_sra() {
+            return Ok((sra, None));
+        }
         let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
         Ok((
             sra,

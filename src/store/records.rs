@@ -221,6 +221,9 @@ pub struct ReferenceSummary {
     /// When it was begun.
     pub taken_at_ms: i64,
     pub completed_at_ms: Option<i64>,
+    /// No tile: the instrument's own white calibration (an instrument-software export; the
+    /// set has no readings and the MA-T12 values are taken as they are, SCIENCE.md §3).
+    pub instrument_calibration: bool,
     pub reading_count: usize,
     /// Which instruments measured it, and how its readings came in.
     pub provenance: Provenance,
@@ -389,8 +392,22 @@ pub struct ScanSummary {
     pub started_at_ms: Option<i64>,
     pub finished_at_ms: Option<i64>,
     pub reading_count: usize,
+    /// Whether the scan has (or is to have) the SRA's two readings; without them it has the
+    /// 12 MA-T12 geometries only.
+    pub specular_readings: bool,
     /// Which instruments measured it, and how its readings came in.
     pub provenance: Provenance,
+}
+
+impl ScanSummary {
+    /// The geometries the scan measures.
+    pub fn geometries(&self) -> crate::geometry::GeometrySet {
+        if self.specular_readings {
+            crate::geometry::GeometrySet::ALL
+        } else {
+            crate::geometry::GeometrySet::MA_T12
+        }
+    }
 }
 
 /// A scan, its readings (geometry-table order) and its reference set.
@@ -411,13 +428,34 @@ impl ScanDetail {
     ///
     /// [`Scan::validate`]: crate::scan::Scan::validate
     pub fn to_scan(&self) -> Result<crate::scan::Scan, crate::scan::ScanError> {
+        let geometries = self.scan.geometries();
+        let reference = if self.reference.reference.instrument_calibration {
+            None
+        } else {
+            // A tile measured for MA-T12-only scans has no SRA readings either.
+            let reference_geometries = if self
+                .reference
+                .readings
+                .iter()
+                .any(|r| r.geometry.device == Device::Sra)
+            {
+                crate::geometry::GeometrySet::ALL
+            } else {
+                crate::geometry::GeometrySet::MA_T12
+            };
+            Some(crate::scan::Reference {
+                name: self.reference.reference.name.clone(),
+                readings: device_readings(
+                    &self.reference.readings,
+                    "reference.readings",
+                    reference_geometries,
+                )?,
+            })
+        };
         let scan = crate::scan::Scan {
             sample: self.scan.sample.clone(),
-            reference: crate::scan::Reference {
-                name: self.reference.reference.name.clone(),
-                readings: device_readings(&self.reference.readings, "reference.readings")?,
-            },
-            readings: device_readings(&self.readings, "readings")?,
+            reference,
+            readings: device_readings(&self.readings, "readings", geometries)?,
         };
         scan.validate()?;
         Ok(scan)
@@ -428,18 +466,24 @@ impl ScanDetail {
 fn device_readings(
     readings: &[Reading],
     field: &str,
+    geometries: crate::geometry::GeometrySet,
 ) -> Result<crate::scan::DeviceReadings, crate::scan::ScanError> {
     use crate::geometry::{GEOMETRIES, MA_T12_COUNT, SRA_COUNT};
-    let mut out = crate::scan::DeviceReadings {
-        ma_t12: [[0.0; crate::spectral::BANDS]; MA_T12_COUNT],
-        sra: [0.0; SRA_COUNT],
-    };
+    let mut ma_t12 = [[0.0; crate::spectral::BANDS]; MA_T12_COUNT];
+    let mut sra = [0.0; SRA_COUNT];
     let mut seen = [false; GEOMETRY_COUNT];
     for r in readings {
         let g = r.geometry;
         match (g.device, &r.values) {
-            (Device::MaT12, ReadingValues::Spectrum(s)) => out.ma_t12[g.index] = *s,
-            (Device::Sra, ReadingValues::Intensity(v)) => out.sra[g.index - MA_T12_COUNT] = *v,
+            _ if !geometries.contains(g.index) => {
+                return Err(crate::scan::ScanError::UnknownGeometry {
+                    field: field.to_string(),
+                    name: g.name.to_string(),
+                    expected: "the 12 MA-T12 geometries (a scan without SRA readings)".into(),
+                });
+            }
+            (Device::MaT12, ReadingValues::Spectrum(s)) => ma_t12[g.index] = *s,
+            (Device::Sra, ReadingValues::Intensity(v)) => sra[g.index - MA_T12_COUNT] = *v,
             _ => {
                 return Err(crate::scan::ScanError::Shape {
                     field: format!("{field}.{}", g.name),
@@ -453,13 +497,16 @@ fn device_readings(
         }
         seen[g.index] = true;
     }
-    if let Some(g) = seen.iter().position(|s| !s) {
+    if let Some(g) = (0..GEOMETRY_COUNT).position(|g| geometries.contains(g) && !seen[g]) {
         return Err(crate::scan::ScanError::MissingGeometry {
             field: field.to_string(),
             geometry: GEOMETRIES[g].name,
         });
     }
-    Ok(out)
+    Ok(crate::scan::DeviceReadings {
+        ma_t12,
+        sra: geometries.has_sra().then_some(sra),
+    })
 }
 
 /// Which scans [`super::Store::list_scans`] returns, newest first.
@@ -590,13 +637,14 @@ impl DeltaESummary {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct EvaluationRecord {
     /// ΔE00 at each geometry, in geometry-table order.
+    /// NaN at a geometry the scan did not measure (`null` in JSON).
     pub per_geometry: [f64; GEOMETRY_COUNT],
-    /// Over all 14 geometries.
+    /// Over every geometry evaluated.
     pub all: DeltaESummary,
     /// Over the 12 MA-T12 geometries.
     pub diffuse: DeltaESummary,
-    /// Over the 2 SRA geometries.
-    pub specular: DeltaESummary,
+    /// Over the 2 SRA geometries; `None` for a scan without SRA readings.
+    pub specular: Option<DeltaESummary>,
 }
 
 /// A fit run and, when done, its evaluation.

@@ -2,6 +2,7 @@
 //! scans are normalised by).
 
 use crate::geometry::{Device, Geometry};
+use crate::scan::INSTRUMENT_CALIBRATION;
 use crate::spectral::{Spectrum, wavelengths_nm};
 
 use super::backend;
@@ -31,6 +32,7 @@ pub(super) struct ReferenceRow {
     rho_ref: Option<Vec<u8>>,
     taken_at_ms: i64,
     completed_at_ms: Option<i64>,
+    kind: String,
     reading_count: i64,
     #[sqlx(flatten)]
     provenance: ProvenanceRow,
@@ -40,6 +42,7 @@ pub(super) struct ReferenceRow {
 static REFERENCE_SUMMARY: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
     format!(
         "SELECT r.id, r.name, r.status, r.reason, r.rho_ref, r.taken_at_ms, r.completed_at_ms,
+                r.kind,
                 (SELECT COUNT(*) FROM reference_readings rr WHERE rr.reference_id = r.id)
                     AS reading_count,
                 {}
@@ -71,6 +74,11 @@ impl ReferenceRow {
             rho_ref,
             taken_at_ms: self.taken_at_ms,
             completed_at_ms: self.completed_at_ms,
+            instrument_calibration: match self.kind.as_str() {
+                "tile" => false,
+                INSTRUMENT_CALIBRATION => true,
+                other => return Err(corrupt(format!("unknown kind \"{other}\""))),
+            },
             reading_count: self.reading_count as usize,
             provenance: self.provenance.into_provenance().map_err(corrupt)?,
         })

@@ -4,7 +4,7 @@
 //! conditional UPDATE (`… WHERE state = 'measuring'`), so the rule holds even if two tasks race,
 //! and only reads the row again to explain a refusal.
 
-use crate::geometry::{Device, GEOMETRY_COUNT, Geometry};
+use crate::geometry::{Device, GEOMETRY_COUNT, Geometry, MA_T12_COUNT};
 use crate::processing::{MeasuredBrdf, SpecularStrategy};
 use crate::spectral::wavelengths_nm;
 
@@ -17,6 +17,20 @@ use super::records::{
     ScanFilter, ScanState, ScanSummary, provenance_columns,
 };
 use super::{Store, StoreError, now_ms};
+
+/// `scans.geometries` of a scan with all 14 geometries.
+pub(super) const GEOMETRIES_ALL: &str = "all";
+/// `scans.geometries` of a scan without SRA readings: the 12 MA-T12 geometries.
+pub(super) const GEOMETRIES_MA_T12: &str = "ma-t12";
+
+/// The `scans.geometries` value of a geometry set the store keeps.
+pub(super) fn geometries_key(specular_readings: bool) -> &'static str {
+    if specular_readings {
+        GEOMETRIES_ALL
+    } else {
+        GEOMETRIES_MA_T12
+    }
+}
 
 /// The reason [`Store::mark_interrupted_scans_failed`] records.
 pub const INTERRUPTED_REASON: &str = "daemon stopped during the scan";
@@ -32,6 +46,7 @@ pub(super) struct ScanRow {
     requested_at_ms: i64,
     started_at_ms: Option<i64>,
     finished_at_ms: Option<i64>,
+    geometries: String,
     reading_count: i64,
     #[sqlx(flatten)]
     provenance: ProvenanceRow,
@@ -41,7 +56,7 @@ pub(super) struct ScanRow {
 static SCAN_SUMMARY: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
     format!(
         "SELECT s.id, s.sample_id, sa.name AS sample, s.reference_id, s.state, s.reason,
-                s.requested_at_ms, s.started_at_ms, s.finished_at_ms,
+                s.requested_at_ms, s.started_at_ms, s.finished_at_ms, s.geometries,
                 (SELECT COUNT(*) FROM readings r WHERE r.scan_id = s.id) AS reading_count,
                 {}
          FROM scans s JOIN samples sa ON sa.id = s.sample_id",
@@ -67,6 +82,17 @@ impl ScanRow {
             started_at_ms: self.started_at_ms,
             finished_at_ms: self.finished_at_ms,
             reading_count: self.reading_count as usize,
+            specular_readings: match self.geometries.as_str() {
+                GEOMETRIES_ALL => true,
+                GEOMETRIES_MA_T12 => false,
+                other => {
+                    return Err(StoreError::Corrupt {
+                        table: "scans",
+                        id: self.id,
+                        detail: format!("unknown geometries \"{other}\""),
+                    });
+                }
+            },
             provenance: self.provenance.into_provenance().map_err(|detail| {
                 StoreError::Corrupt {
                     table: "scans",
@@ -85,6 +111,8 @@ pub(super) struct ProcessedRow {
     specular: String,
     brdf_f64le: Vec<u8>,
     created_at_ms: i64,
+    /// The scan's `geometries`: which of the 14 the BRDF holds.
+    geometries: String,
 }
 
 impl ProcessedRow {
@@ -98,7 +126,12 @@ impl ProcessedRow {
             .specular
             .parse()
             .map_err(|e: crate::processing::UnknownSpecularStrategy| corrupt(e.to_string()))?;
-        let brdf = codec::decode_brdf(&self.brdf_f64le)
+        let geometries = match self.geometries.as_str() {
+            GEOMETRIES_ALL => crate::geometry::GeometrySet::ALL,
+            GEOMETRIES_MA_T12 => crate::geometry::GeometrySet::MA_T12,
+            other => return Err(corrupt(format!("unknown scan geometries \"{other}\""))),
+        };
+        let brdf = codec::decode_brdf(&self.brdf_f64le, geometries)
             .ok_or_else(|| corrupt(format!("brdf has {} bytes", self.brdf_f64le.len())))?;
         Ok(Processed {
             id: ProcessedId(self.id),
@@ -259,9 +292,23 @@ impl Store {
             sample_name,
             reference_name,
             provenance,
-            reference_readings,
+            reference_readings: Some(reference_readings),
             readings,
+            taken_at_ms: None,
         };
+        import.check()?;
+        let mut tx = self.writer.begin().await?;
+        let ids = import.insert(&mut tx, now_ms()).await?;
+        tx.commit().await?;
+        Ok(ids)
+    }
+
+    /// [`Store::import_scan`] for any [`ImportedScan`]: a tile or the instrument's own
+    /// calibration, with or without SRA readings. All or nothing.
+    pub async fn import(
+        &self,
+        import: &ImportedScan<'_>,
+    ) -> Result<(ReferenceId, ScanId), StoreError> {
         import.check()?;
         let mut tx = self.writer.begin().await?;
         let ids = import.insert(&mut tx, now_ms()).await?;
@@ -444,7 +491,8 @@ impl Store {
     /// A processed scan by id (the fit worker's input).
     pub async fn processed(&self, id: ProcessedId) -> Result<Processed, StoreError> {
         let row: Option<ProcessedRow> = sqlx::query_as(
-            "SELECT id, scan_id, specular, brdf_f64le, created_at_ms FROM processed WHERE id = $1",
+            "SELECT p.id, p.scan_id, p.specular, p.brdf_f64le, p.created_at_ms, s.geometries
+             FROM processed p JOIN scans s ON s.id = p.scan_id WHERE p.id = $1",
         )
         .bind(id.0)
         .fetch_optional(&self.reader)
@@ -459,8 +507,9 @@ impl Store {
     /// Every processed version of a scan, by id.
     pub async fn processed_for_scan(&self, scan: ScanId) -> Result<Vec<Processed>, StoreError> {
         let rows: Vec<ProcessedRow> = sqlx::query_as(
-            "SELECT id, scan_id, specular, brdf_f64le, created_at_ms FROM processed
-             WHERE scan_id = $1 ORDER BY id",
+            "SELECT p.id, p.scan_id, p.specular, p.brdf_f64le, p.created_at_ms, s.geometries
+             FROM processed p JOIN scans s ON s.id = p.scan_id
+             WHERE p.scan_id = $1 ORDER BY p.id",
         )
         .bind(scan.0)
         .fetch_all(&self.reader)
@@ -476,13 +525,31 @@ pub struct ImportedScan<'a> {
     pub sample_name: &'a str,
     pub reference_name: &'a str,
     pub provenance: &'a Provenance,
-    pub reference_readings: &'a [NewReading<'a>],
+    /// The tile's readings; `None` for a scan normalised by the instrument's own white
+    /// calibration (an instrument-software export without an N9 reading): its reference set
+    /// is of kind `instrument-calibration` and holds no readings.
+    pub reference_readings: Option<&'a [NewReading<'a>]>,
+    /// All 14 geometries, or the 12 MA-T12 ones of a scan without SRA readings.
     pub readings: &'a [NewReading<'a>],
+    /// When the instrument took the readings, ms since the epoch, if the file says so (else the
+    /// import time is recorded).
+    pub taken_at_ms: Option<i64>,
+}
+
+/// The number of SRA readings in a set.
+fn sra_count(set: &[NewReading<'_>]) -> usize {
+    set.iter().filter(|r| r.device == Device::Sra).count()
 }
 
 impl ImportedScan<'_> {
+    /// Whether the scan has SRA readings (then all 14 geometries are required).
+    pub(super) fn specular_readings(&self) -> bool {
+        sra_count(self.readings) > 0
+    }
+
     /// The checks of [`Store::add_reference_reading`] and [`Store::add_reading`], before any
-    /// write: non-empty names, and each of the 14 geometries once in both sets.
+    /// write: non-empty names, each geometry of the scan once (all 14, or the 12 MA-T12 ones
+    /// without SRA readings), and a tile that has every geometry the scan has.
     pub(super) fn check(&self) -> Result<(), StoreError> {
         for (field, name) in [
             ("sample name", self.sample_name),
@@ -498,15 +565,15 @@ impl ImportedScan<'_> {
     fn checked(&self) -> Result<Vec<(bool, &NewReading<'_>, &'static Geometry)>, StoreError> {
         let reference_owner = || format!("imported reference \"{}\"", self.reference_name);
         let scan_owner = || format!("imported scan of \"{}\"", self.sample_name);
-        let mut checked = Vec::with_capacity(self.reference_readings.len() + self.readings.len());
-        for (set, owner, is_reference) in [
-            (
-                self.reference_readings,
-                &reference_owner as &dyn Fn() -> String,
-                true,
-            ),
-            (self.readings, &scan_owner, false),
-        ] {
+        let reference_readings = self.reference_readings.unwrap_or(&[]);
+        let mut checked = Vec::with_capacity(reference_readings.len() + self.readings.len());
+        let scan_has_sra = self.specular_readings();
+        let mut sets: Vec<(&[NewReading<'_>], &dyn Fn() -> String, bool)> =
+            vec![(self.readings, &scan_owner, false)];
+        if let Some(set) = self.reference_readings {
+            sets.insert(0, (set, &reference_owner, true));
+        }
+        for (set, owner, is_reference) in sets {
             let mut present = Vec::with_capacity(set.len());
             for r in set {
                 let g = codec::check_reading(owner, r.device, r.geometry, &r.values, is_reference)?;
@@ -519,8 +586,19 @@ impl ImportedScan<'_> {
                 present.push(g.name);
                 checked.push((is_reference, r, g));
             }
-            if present.len() != GEOMETRY_COUNT {
-                let present: Vec<String> = present.iter().map(|g| g.to_string()).collect();
+            // A set is whole with its SRA readings or without any; a tile needs them when the
+            // scan has them.
+            let has_sra = sra_count(set) > 0 || (is_reference && scan_has_sra);
+            let want = if has_sra {
+                GEOMETRY_COUNT
+            } else {
+                MA_T12_COUNT
+            };
+            if present.len() != want {
+                let mut present: Vec<String> = present.iter().map(|g| g.to_string()).collect();
+                if !has_sra {
+                    present.extend(crate::geometry::sra().iter().map(|g| g.name.to_string()));
+                }
                 let missing = codec::missing_geometries(&present);
                 return Err(if is_reference {
                     StoreError::ReferenceIncomplete {
@@ -548,12 +626,18 @@ impl ImportedScan<'_> {
         now: i64,
     ) -> Result<(ReferenceId, ScanId), StoreError> {
         let checked = self.checked()?;
+        let kind = match self.reference_readings {
+            Some(_) => "tile",
+            None => crate::scan::INSTRUMENT_CALIBRATION,
+        };
+        let taken = self.taken_at_ms.unwrap_or(now);
         let reference: i64 = sqlx::query_scalar(
-            "INSERT INTO reference_sets (name, status, taken_at_ms, completed_at_ms)
-             VALUES ($1, 'complete', $2, $2) RETURNING id",
+            "INSERT INTO reference_sets (name, status, taken_at_ms, completed_at_ms, kind)
+             VALUES ($1, 'complete', $2, $2, $3) RETURNING id",
         )
         .bind(self.reference_name)
-        .bind(now)
+        .bind(taken)
+        .bind(kind)
         .fetch_one(&mut **tx)
         .await?;
         super::write_provenance(
@@ -570,13 +654,14 @@ impl ImportedScan<'_> {
             .fetch_one(&mut **tx)
             .await?;
         let scan: i64 = sqlx::query_scalar(
-            "INSERT INTO scans
-                 (sample_id, reference_id, state, requested_at_ms, started_at_ms, finished_at_ms)
-             VALUES ($1, $2, 'complete', $3, $3, $3) RETURNING id",
+            "INSERT INTO scans (sample_id, reference_id, state, requested_at_ms, started_at_ms,
+                                finished_at_ms, geometries)
+             VALUES ($1, $2, 'complete', $3, $3, $3, $4) RETURNING id",
         )
         .bind(sample)
         .bind(reference)
-        .bind(now)
+        .bind(taken)
+        .bind(geometries_key(self.specular_readings()))
         .fetch_one(&mut **tx)
         .await?;
         super::write_provenance(&mut **tx, "scans", ScanId::WHAT, scan, self.provenance).await?;

@@ -67,9 +67,9 @@ async fn measuring_scan(
 
 fn brdf(seed: u64) -> MeasuredBrdf {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    MeasuredBrdf {
-        values: std::array::from_fn(|_| std::array::from_fn(|_| rng.random::<f64>() / 3.0)),
-    }
+    MeasuredBrdf::full(std::array::from_fn(|_| {
+        std::array::from_fn(|_| rng.random::<f64>() / 3.0)
+    }))
 }
 
 fn new_fit(cf: CostFunction) -> NewFit {
@@ -752,7 +752,11 @@ async fn processed_scans_and_fit_runs() {
         (6.0, 6.0, 11.5)
     );
     assert_eq!(
-        (ev.specular.mean, ev.specular.median, ev.specular.max),
+        (
+            ev.specular.unwrap().mean,
+            ev.specular.unwrap().median,
+            ev.specular.unwrap().max
+        ),
         (13.0, 13.0, 13.5)
     );
     assert!(store.cancel_fit(f1).await.is_err());

@@ -87,6 +87,8 @@ pub static TABLES: [Table; 10] = [
             ("rho_ref", Blob),
             ("taken_at_ms", Int),
             ("completed_at_ms", Int),
+            // A tile, or the instrument's own calibration (no readings).
+            ("kind", Text),
         ],
     },
     Table {
@@ -116,6 +118,8 @@ pub static TABLES: [Table; 10] = [
             ("requested_at_ms", Int),
             ("started_at_ms", Int),
             ("finished_at_ms", Int),
+            // All 14 geometries, or the 12 MA-T12 ones (no SRA readings).
+            ("geometries", Text),
         ],
     },
     Table {
