@@ -331,12 +331,17 @@ impl Serialize for LabPerGeometry {
 
 impl<'de> Deserialize<'de> for LabPerGeometry {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let map: Vec<(String, LabPair)> = crate::fit::ordered_entries(d)?;
-        Ok(LabPerGeometry(
-            map.into_iter()
-                .map(|(geometry, pair)| LabPair { geometry, ..pair })
-                .collect(),
-        ))
+        let map: Vec<(String, LabPair)> = ordered_entries(d)?;
+        let mut pairs = Vec::with_capacity(map.len());
+        for (geometry, pair) in map {
+            if crate::geometry::by_name(&geometry).is_none() {
+                return Err(de::Error::custom(format!("unknown geometry \"{geometry}\"")));
+            }
+            pairs.push(LabPair { geometry, ..pair });
+        }
+        // Table order, whatever order the object came in.
+        pairs.sort_by_key(|p| crate::geometry::by_name(&p.geometry).map(|g| g.index));
+        Ok(LabPerGeometry(pairs))
     }
 }
 
