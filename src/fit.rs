@@ -335,7 +335,9 @@ impl<'de> Deserialize<'de> for LabPerGeometry {
         let mut pairs = Vec::with_capacity(map.len());
         for (geometry, pair) in map {
             if crate::geometry::by_name(&geometry).is_none() {
-                return Err(de::Error::custom(format!("unknown geometry \"{geometry}\"")));
+                return Err(de::Error::custom(format!(
+                    "unknown geometry \"{geometry}\""
+                )));
             }
             pairs.push(LabPair { geometry, ..pair });
         }
@@ -629,6 +631,48 @@ mod tests {
             e.contains("reference.sra.sra-20: reference reading 0 must be positive"),
             "{e}"
         );
+    }
+
+    /// A scan without a tile and without SRA readings (an instrument export): the fit is over
+    /// the 12 MA-T12 geometries, reflectance factor as given; it recovers the diffuse colour of
+    /// a synthetic truth exactly, and says what it is.
+    #[test]
+    fn an_ma_t12_only_scan_fits_over_its_12_geometries() {
+        let truth = &paper_samples()[2];
+        let full = synth_scan(truth, &SynthOptions::default()).unwrap();
+        let m = processing::process(&full, &ProcessingOptions::default()).unwrap();
+        let mut scan = full.clone();
+        scan.reference = None;
+        scan.readings.sra = None;
+        // R = S: the readings are the reflectance factors the tile normalisation gave.
+        for g in 0..MA_T12_COUNT {
+            scan.readings.ma_t12[g] = m.values[g].map(|f| f * std::f64::consts::PI);
+        }
+        for cost in CostFunction::ALL {
+            let r = fit_scan(&scan, &quick_request(cost)).unwrap();
+            assert_eq!(r.measured.geometries, crate::geometry::GeometrySet::MA_T12);
+            assert!(r.evaluation.specular.is_none() && r.specular_delta_l.is_none());
+            assert!(
+                r.evaluation.all.mean < 0.01,
+                "{cost}: {:?}",
+                r.evaluation.all
+            );
+            // The reported cost is normalised over the 12 · 31 values present.
+            let direct = crate::cost::cost(cost, &r.measured, &r.estimated);
+            assert!(
+                (r.outcome.cost - direct).abs() <= 1e-9 * direct.max(1e-12),
+                "{cost}"
+            );
+            let v = serde_json::to_value(&r).unwrap();
+            assert_eq!(v["reference"], "instrument calibration");
+            assert_eq!(v["specular_readings"], false);
+            assert!(v["delta_e00_specular_mean"].is_null());
+            assert_eq!(v["delta_e00"].as_object().unwrap().len(), 12);
+            assert_eq!(v["lab"].as_object().unwrap().len(), 12);
+            assert!(v.get("specular_delta_l").is_none());
+            let doc: FitDocument = serde_json::from_value(v).unwrap();
+            assert!(!doc.specular_readings);
+        }
     }
 
     #[test]

@@ -1177,3 +1177,101 @@ async fn an_unwritable_path_names_the_file() {
     assert!(matches!(e, StoreError::Open { .. }), "{e}");
     assert!(e.to_string().contains("no-such-dir"), "{e}");
 }
+
+/// A scan from an instrument's own software: no tile (the instrument's calibration) and no SRA
+/// readings. It imports with its 12 readings, reads back as such, and its fit's evaluation
+/// keeps the 12 geometries and no specular summary.
+#[tokio::test]
+async fn instrument_calibration_scans_without_sra_readings() {
+    let store = Store::open_in_memory().await.unwrap();
+    let spectrum = |g: usize| -> Spectrum {
+        std::array::from_fn(|b| 0.2 + 0.01 * g as f64 + 0.001 * b as f64)
+    };
+    let readings: Vec<NewReading<'_>> = crate::geometry::ma_t12()
+        .iter()
+        .map(|g| NewReading {
+            device: Device::MaT12,
+            geometry: g,
+            values: ReadingValues::Spectrum(spectrum(g.index)),
+            raw_frame: &[],
+        })
+        .collect();
+    let provenance = Provenance::unknown();
+    let import = ImportedScan {
+        sample_name: "PAR_PW_RO_NG_1",
+        reference_name: "instrument calibration",
+        provenance: &provenance,
+        reference_readings: None,
+        readings: &readings,
+        taken_at_ms: Some(1_723_000_000_000),
+    };
+    let (reference, scan) = store.import(&import).await.unwrap();
+    let detail = store.scan_detail(scan).await.unwrap();
+    assert!(detail.reference.reference.instrument_calibration);
+    assert_eq!(detail.reference.reference.id, reference);
+    assert!(!detail.scan.specular_readings);
+    assert_eq!(detail.scan.requested_at_ms, 1_723_000_000_000);
+    let file = detail.to_scan().unwrap();
+    assert!(file.reference.is_none() && file.readings.sra.is_none());
+    assert_eq!(file.readings.ma_t12[11], spectrum(11));
+
+    // One SRA reading without the other is an incomplete scan; a tile is refused without the
+    // SRA readings the scan has.
+    let mut with_one_sra = readings.clone();
+    with_one_sra.push(NewReading {
+        device: Device::Sra,
+        geometry: by_name("sra-20").unwrap(),
+        values: ReadingValues::Intensity(1.0),
+        raw_frame: &[],
+    });
+    let e = store
+        .import(&ImportedScan {
+            readings: &with_one_sra,
+            ..import
+        })
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("sra-60"), "{e}");
+
+    let measured = crate::processing::process(&file, &Default::default()).unwrap();
+    let p = store
+        .add_processed(scan, SpecularStrategy::Ratio, &measured)
+        .await
+        .unwrap();
+    let back = store.processed(p).await.unwrap();
+    assert_eq!(back.brdf.geometries, crate::geometry::GeometrySet::MA_T12);
+    assert_eq!(back.brdf, measured);
+    let f = store
+        .queue_fit(p, &new_fit(CostFunction::Cf2))
+        .await
+        .unwrap();
+    store.start_fit(f).await.unwrap();
+    let outcome = FitResult {
+        cost: 0.1,
+        params: serde_json::json!({"kd": vec![0.1; BANDS], "ks": 0.2, "alpha": 0.3, "ior": 1.5}),
+        best_cost_per_generation: vec![0.2, 0.1],
+        evaluations: 10,
+        generations: 2,
+        wall_ms: 1.0,
+    };
+    let mut de = [f64::NAN; GEOMETRY_COUNT];
+    for (g, v) in de.iter_mut().enumerate().take(12) {
+        *v = 0.5 + g as f64 * 0.1;
+    }
+    store
+        .finish_fit_with(
+            f,
+            &outcome,
+            &de,
+            crate::geometry::GeometrySet::MA_T12,
+            crate::colour::Colorimetry::default(),
+        )
+        .await
+        .unwrap();
+    let d = store.fit_detail(f).await.unwrap();
+    let e = d.evaluation.unwrap();
+    assert!(e.specular.is_none());
+    assert!(e.per_geometry[12].is_nan() && e.per_geometry[13].is_nan());
+    assert!((e.all.mean - (0.5 + 0.55)).abs() < 1e-12, "{:?}", e.all);
+    assert!(d.specular_delta_l.is_none());
+}
