@@ -285,6 +285,7 @@ mod tests {
                 ma_t12: sample,
                 sra: Some([2.0, 1.0]),
             },
+            origin: None,
         }
     }
 

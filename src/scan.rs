@@ -53,6 +53,67 @@ pub struct Scan {
     pub reference: Option<Reference>,
     /// The sample's own readings.
     pub readings: DeviceReadings,
+    /// Where the readings came from, when the file that brought them says (`"origin"`):
+    /// an instrument-software export's measurement time, instrument and source file.
+    pub origin: Option<Origin>,
+}
+
+/// What a scan file says of where its readings came from (`"origin"`, optional). Imports
+/// keep it: the measurement time becomes the scan's time, the instrument its provenance.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Origin {
+    /// When the instrument took the readings, RFC 3339 (e.g. `2024-08-12T10:31:07Z`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_at: Option<String>,
+    /// The MA-T12 that measured it, as the file names it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ma_t12: Option<OriginInstrument>,
+    /// The SRA that measured it, as the file names it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sra: Option<OriginInstrument>,
+    /// What brought the readings in, e.g. `X-Rite QC export PAR_EW_RL_NG_3.xlsx`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+    /// What else the source file states, by name (job, standard, illuminant/observer, the
+    /// file's SHA-256, the colorimetry check), in name order.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub notes: std::collections::BTreeMap<String, String>,
+}
+
+/// An instrument as a file names it.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OriginInstrument {
+    /// e.g. "MA-T12".
+    pub model: String,
+    /// `None` when the file does not say.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub serial: Option<String>,
+    /// A simulated instrument (a replayed recording).
+    #[serde(default)]
+    pub simulated: bool,
+}
+
+impl Origin {
+    /// `measured_at` as milliseconds since the epoch, or an error naming the field.
+    pub fn measured_at_ms(&self) -> Result<Option<i64>, ScanError> {
+        let Some(text) = &self.measured_at else {
+            return Ok(None);
+        };
+        let t: jiff::Timestamp = text.parse().map_err(|e| ScanError::Shape {
+            field: "origin.measured_at".into(),
+            message: format!("\"{text}\" is not an RFC 3339 time ({e})"),
+        })?;
+        Ok(Some(t.as_millisecond()))
+    }
+
+    /// The notes as one line, `key value; key value`, for a provenance detail.
+    pub fn describe(&self) -> String {
+        let mut parts: Vec<String> = self.source.iter().cloned().collect();
+        parts.extend(self.notes.iter().map(|(k, v)| format!("{k} {v}")));
+        parts.join("; ")
+    }
 }
 
 /// A white reference tile and its readings on both devices at all 14 geometries.
@@ -271,6 +332,9 @@ impl Scan {
         if self.readings.sra.is_some() && sra_reference.is_none() {
             return Err(ScanError::SraWithoutReference);
         }
+        if let Some(origin) = &self.origin {
+            origin.measured_at_ms()?;
+        }
         self.readings.validate(Role::Sample)
     }
 
@@ -354,6 +418,7 @@ impl Scan {
                 ma_t12: OutMaT12(&self.readings.ma_t12),
                 sra: OutSra::of(&self.readings.sra),
             },
+            origin: self.origin.as_ref(),
         };
         let mut buf = Vec::new();
         let mut ser = serde_json::Serializer::with_formatter(&mut buf, ScanFormatter::new());
@@ -386,6 +451,8 @@ struct RawScan {
     wavelengths_nm: Vec<f64>,
     reference: OrTag<RawReference>,
     readings: RawReadings,
+    #[serde(default)]
+    origin: Option<Origin>,
 }
 
 #[derive(Deserialize)]
@@ -620,6 +687,7 @@ impl RawScan {
             sample: self.sample,
             reference,
             readings,
+            origin: self.origin,
         };
         // The checks across parts (SRA readings need the tile's) are the in-memory ones.
         scan.validate()?;
@@ -637,6 +705,8 @@ struct OutScan<'a> {
     wavelengths_nm: [u32; BANDS],
     reference: OrTag<OutReference<'a>>,
     readings: OutReadings<'a>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    origin: Option<&'a Origin>,
 }
 
 #[derive(Serialize)]
@@ -756,6 +826,7 @@ mod tests {
                 ma_t12: spectra(0.3),
                 sra: Some([3.1, 7.9]),
             },
+            origin: None,
         }
     }
 

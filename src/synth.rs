@@ -394,6 +394,7 @@ pub fn synth_scan(truth: &GroundTruth, opts: &SynthOptions) -> Result<Scan, Synt
             ma_t12,
             sra: Some(sra),
         },
+        origin: None,
     })
 }
 

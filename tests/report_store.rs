@@ -23,7 +23,7 @@ use brdfd::synth::{SynthOptions, paper_samples, synth_scan};
 fn values(readings: &brdfd::scan::DeviceReadings, g: &brdfd::geometry::Geometry) -> ReadingValues {
     match g.device {
         Device::MaT12 => ReadingValues::Spectrum(readings.ma_t12[g.index]),
-        Device::Sra => ReadingValues::Intensity(readings.sra[g.index - MA_T12_COUNT]),
+        Device::Sra => ReadingValues::Intensity(readings.sra.unwrap()[g.index - MA_T12_COUNT]),
     }
 }
 

@@ -755,6 +755,7 @@ pub fn assemble(
                 readings: ref_readings,
             }),
             readings,
+            origin: None,
         };
         scan.validate().map_err(|source| FormatError::Scan {
             file: file.to_string(),

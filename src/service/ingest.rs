@@ -686,17 +686,30 @@ impl Service {
                 )
             })
             .collect();
+        // Each scan's own origin (an instrument export's time and instrument) over the file's.
+        let origins: Vec<(Provenance, Option<i64>)> = scans
+            .iter()
+            .map(|s| match &s.origin {
+                None => Ok((provenance.clone(), None)),
+                Some(_) => super::pipeline::imported_provenance(
+                    s,
+                    provenance.source_detail.as_deref().unwrap_or("imported"),
+                ),
+            })
+            .collect::<Result<_, _>>()
+            .map_err(|e| Failure::Rejected(format!("{}: {e}", unit.main)))?;
         let imports: Vec<ImportedScan<'_>> = scans
             .iter()
             .zip(&names)
             .zip(&readings)
-            .map(|((s, name), (r, m))| ImportedScan {
+            .zip(&origins)
+            .map(|(((s, name), (r, m)), (p, taken))| ImportedScan {
                 sample_name: &s.sample,
                 reference_name: name,
-                provenance: &provenance,
+                provenance: p,
                 reference_readings: r.as_deref(),
                 readings: m,
-                taken_at_ms: None,
+                taken_at_ms: *taken,
             })
             .collect();
         let stored = self

@@ -13,8 +13,8 @@ use crate::geometry::{Device, MA_T12_COUNT};
 use crate::processing::{self, ProcessingOptions};
 use crate::scan::{DeviceReadings, Scan, ScanError};
 use crate::store::{
-    FitRunId, ImportedScan, NewFit, NewReading, Provenance, ReadingValues, ScanDetail, ScanId,
-    ScanState, Source, StoreError,
+    FitRunId, ImportedScan, InstrumentProvenance, NewFit, NewReading, Provenance, ReadingValues,
+    ScanDetail, ScanId, ScanState, Source, StoreError,
 };
 
 use super::events::Event;
@@ -143,13 +143,8 @@ impl Service {
     /// complete scan, all in one transaction, which is then processed and fitted like a
     /// measured one. Returns the scan's id and its fits.
     pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
-        // A brdfd.scan/1 file does not say which instruments measured it.
-        let provenance = Provenance {
-            source: Source::Imported,
-            source_detail: Some("brdfd.scan/1 file".into()),
-            ..Provenance::unknown()
-        };
-        self.import_scan_as(file, &provenance, None).await
+        let (provenance, taken_at_ms) = imported_provenance(file, "brdfd.scan/1 file")?;
+        self.import_scan_as(file, &provenance, taken_at_ms).await
     }
 
     /// [`Service::import_scan`] with what the file says of its origin: the instruments and
@@ -184,6 +179,40 @@ impl Service {
             .await?;
         Ok((scan, fits))
     }
+}
+
+/// The provenance of an imported scan: what its `origin` says (instruments, measurement time,
+/// source and notes), `detail` naming how it came in; unknown where the file is silent. The
+/// measurement time, ms since the epoch, is returned beside it.
+pub fn imported_provenance(
+    scan: &Scan,
+    detail: &str,
+) -> Result<(Provenance, Option<i64>), ScanError> {
+    let mut provenance = Provenance {
+        source: Source::Imported,
+        source_detail: Some(detail.to_string()),
+        ..Provenance::unknown()
+    };
+    let Some(origin) = &scan.origin else {
+        return Ok((provenance, None));
+    };
+    let instrument = |i: &crate::scan::OriginInstrument| InstrumentProvenance {
+        model: i.model.clone(),
+        serial: i.serial.clone().unwrap_or_else(|| "unknown".into()),
+        firmware: "unknown".into(),
+        simulated: Some(i.simulated),
+    };
+    if let Some(i) = &origin.ma_t12 {
+        provenance.ma_t12 = instrument(i);
+    }
+    if let Some(i) = &origin.sra {
+        provenance.sra = instrument(i);
+    }
+    let said = origin.describe();
+    if !said.is_empty() {
+        provenance.source_detail = Some(format!("{detail}; {said}"));
+    }
+    Ok((provenance, origin.measured_at_ms()?))
 }
 
 /// The longest sample or reference name accepted.

@@ -456,6 +456,7 @@ impl ScanDetail {
             sample: self.scan.sample.clone(),
             reference,
             readings: device_readings(&self.readings, "readings", geometries)?,
+            origin: None,
         };
         scan.validate()?;
         Ok(scan)
