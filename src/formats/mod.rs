@@ -13,6 +13,8 @@
 //! - [`gltf`]: glTF 2.0 materials of fitted BRDFs on a sphere (one per fit; RGB approximation).
 //! - [`mitsuba`]: Mitsuba 3 scenes of fitted materials (one per fit; SCIENCE.md §10).
 //! - [`certificate`]: the reference tile's calibration (CGATS or CxF3), for `[reference]`.
+//! - [`xrite_xlsx`]: X-Rite's quality-control `.xlsx` export of MA-T12 measurements (read
+//!   only), and the check of its L*a*b* against brdfd's colorimetry.
 //!
 //! What an export holds, per sample of a [`Study`]: the device readings of the sample and of
 //! the reference tile they are normalised by (`reading`, `reference`), the measured
@@ -41,6 +43,7 @@ pub mod mitsuba;
 pub mod sra;
 mod table;
 pub mod tidy;
+pub mod xrite_xlsx;
 
 use std::collections::BTreeMap;
 use std::fmt;
