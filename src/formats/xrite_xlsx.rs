@@ -1481,6 +1481,104 @@ mod tests {
     }
 
     #[test]
+    fn each_image_is_the_one_anchored_beside_its_geometry() {
+        // In the padded file the drawing's relationships are shuffled: the anchor in row 2
+        // (15as-45) embeds rId1, which is image3.png, and row 8 (15d) image7.png.
+        let f = "PAR_NB_NP_CC_0.xlsx";
+        let parts = unzip(&bytes(f));
+        let media = |n: &str| &parts.iter().find(|(p, _)| p == n).unwrap().1;
+        let m = &read_file(&path(f)).unwrap().measurements[0];
+        assert_eq!(m.textures[0].geometry, "15as-45");
+        assert_eq!(&m.textures[0].png, media("xl/media/image3.png"));
+        assert_eq!(&m.textures[3].png, media("xl/media/image2.png"));
+        assert_eq!(&m.textures[6].png, media("xl/media/image7.png"));
+    }
+
+    /// Copies rows `from..=to` of a sheet's XML below the last, `shift` rows down, with the
+    /// Date/Time serial `old` written as `new` and shared string `name` (the Name) as `new_name`.
+    fn append_rows(
+        xml: String,
+        from: u32,
+        to: u32,
+        shift: u32,
+        (old, new): (&str, &str),
+        name: Option<(&str, &str)>,
+    ) -> String {
+        let mut extra = String::new();
+        for r in from..=to {
+            let start = xml.find(&format!("<row r=\"{r}\"")).unwrap();
+            let end = start + xml[start..].find("</row>").unwrap() + 6;
+            let mut row =
+                xml[start..end].replace(&format!("r=\"{r}\""), &format!("r=\"{}\"", r + shift));
+            for col in ["A", "B", "C", "D", "E", "F"] {
+                row = row.replace(
+                    &format!("r=\"{col}{r}\""),
+                    &format!("r=\"{col}{}\"", r + shift),
+                );
+            }
+            let mut row = row.replace(&format!("<v>{old}</v>"), &format!("<v>{new}</v>"));
+            if let Some((from_name, to_name)) = name {
+                row = row.replacen(from_name, to_name, 1);
+            }
+            // Columns G… of Spectral Data.
+            let cols: Vec<String> = (6..34)
+                .map(|c| cell_name(0, c).trim_end_matches('1').to_string())
+                .collect();
+            for col in cols {
+                row = row.replace(
+                    &format!("r=\"{col}{r}\""),
+                    &format!("r=\"{col}{}\"", r + shift),
+                );
+            }
+            extra.push_str(&row);
+        }
+        let at = xml.find("</sheetData>").unwrap();
+        let out = format!("{}{extra}{}", &xml[..at], &xml[at..]);
+        // The used range grows: drop its declaration (the padded real file has none).
+        let d = out.find("<dimension ").unwrap();
+        let e = d + out[d..].find("/>").unwrap() + 2;
+        format!("{}{}", &out[..d], &out[e..])
+    }
+
+    #[test]
+    fn a_file_with_two_measurements_reads_both_and_matches_color_rows_by_time() {
+        let t = ("45441.7965277778", "45441.8");
+        let mut parts = unzip(&bytes(REGULAR));
+        for (part, from, to, name) in [
+            (SPECTRAL, 4, 15, None),
+            // The second measurement's Color Data rows name it otherwise (inline string).
+            (
+                COLOR,
+                5,
+                16,
+                Some((
+                    r#"t="s"><v>3</v>"#,
+                    r#"t="inlineStr"><is><t>other</t></is>"#,
+                )),
+            ),
+        ] {
+            let p = parts.iter_mut().find(|(n, _)| n == part).unwrap();
+            let x = String::from_utf8(std::mem::take(&mut p.1)).unwrap();
+            p.1 = append_rows(x, from, to, 12, t, name).into_bytes();
+        }
+        let x = read(&rezip(&parts), "two.xlsx").unwrap();
+        assert_eq!(x.measurements.len(), 2);
+        let (a, b) = (&x.measurements[0], &x.measurements[1]);
+        assert_eq!(
+            (a.name.as_str(), b.name.as_str()),
+            ("PAR_EW_RL_NG_3", "PAR_EW_RL_NG_3")
+        );
+        assert_eq!(a.measured_at.to_string(), "2024-05-29T19:07:00");
+        assert_eq!(b.measured_at.to_string(), "2024-05-29T19:12:00");
+        assert_eq!(a.color_data_name, None);
+        assert_eq!(b.color_data_name.as_deref(), Some("other"));
+        assert_eq!((a.spectra, a.lab), (b.spectra, b.lab));
+        // The images' heading names both: they belong to neither.
+        assert!(a.textures.is_empty() && b.textures.is_empty());
+        assert_eq!(x.unassigned_textures.len(), 7);
+    }
+
+    #[test]
     fn brdfd_reproduces_xrites_lab_in_every_file_to_1e3() {
         let mut report = Vec::new();
         for f in FILES {
