@@ -11,10 +11,6 @@ use crate::scan::ScanError;
 
 use super::report::StoreSelection;
 
-fn parse_format(s: &str) -> Result<Format, String> {
-    s.parse()
-}
-
 /// What `export-format` writes: an exchange file, or renderer materials (one file per fit).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExportKind {
@@ -131,17 +127,39 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What `import-format` reads: an exchange file, or X-Rite's QC `.xlsx` export.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImportFormat {
+    Exchange(Format),
+    /// X-Rite's quality-control `.xlsx` export of MA-T12 measurements.
+    XriteXlsx,
+}
+
+fn parse_import_format(s: &str) -> Result<ImportFormat, String> {
+    if s == "xrite-xlsx" {
+        return Ok(ImportFormat::XriteXlsx);
+    }
+    s.parse()
+        .map(ImportFormat::Exchange)
+        .map_err(|e: String| format!("{e}, xrite-xlsx"))
+}
+
 #[derive(Debug, clap::Args)]
+#[command(after_long_help = IMPORT_HELP)]
 pub struct ImportArgs {
-    /// The MA-T12's export (CGATS or CxF3), or a brdfd export in any format.
-    #[arg(value_name = "FILE")]
-    pub file: PathBuf,
+    /// The instrument software's export: the MA-T12's CGATS or CxF3 (with --sra), X-Rite's QC
+    /// `.xlsx` export (one or more files), or a brdfd export in any format.
+    #[arg(value_name = "FILE", required = true, num_args = 1..)]
+    pub files: Vec<PathBuf>,
 
-    /// Format of FILE; default: from its extension (.cxf → cxf3, .csv, .json, else cgats).
-    #[arg(long, value_name = "cgats|cxf3|csv|json", value_parser = parse_format)]
-    pub format: Option<Format>,
+    /// Format of FILE; default: from its extension (.xlsx → xrite-xlsx, .cxf → cxf3, .csv,
+    /// .json, else cgats).
+    #[arg(long, value_name = "cgats|cxf3|csv|json|xrite-xlsx", value_parser = parse_import_format)]
+    pub format: Option<ImportFormat>,
 
-    /// The SRA's CSV export (`sample,geometry,intensity`), needed when FILE has no SRA values.
+    /// The SRA's CSV export (`sample,geometry,intensity`), needed when FILE has no SRA values
+    /// (one FILE only). An X-Rite `.xlsx` export has none and needs none: its scans are fitted
+    /// over the 12 MA-T12 geometries.
     #[arg(long, value_name = "SRA.csv")]
     pub sra: Option<PathBuf>,
 
@@ -158,57 +176,134 @@ pub struct ImportArgs {
     #[arg(long)]
     pub force: bool,
 
-    /// Print one JSON object per scan (`{"sample", "file"}`) instead of lines.
+    /// Print one JSON object per scan (`{"sample", "file"}`, and for an `.xlsx` the colorimetry
+    /// check) instead of lines.
     #[arg(long)]
     pub json: bool,
 }
 
-fn format_of(path: &Path) -> Format {
+const IMPORT_HELP: &str = "\
+X-Rite's QC .xlsx export (Color Data, Spectral Data, Texture Images) holds the MA-T12's 12
+readings of each measurement as reflectance factor relative to the instrument's own white
+calibration; it has no Munsell N9 and no SRA readings. Each measurement becomes one scan with
+reference \"instrument calibration\" and no specular readings, keeping the measurement time,
+the job and standard names, the illuminant/observer and the file's SHA-256. The import
+recomputes X-Rite's L*a*b* from the spectra (ASTM E308 weighting under the file's
+illuminant/observer) and prints the largest ΔE00; a geometry more than 0.01 apart is a
+warning that names it.
+
+Examples:
+  brdfd import-format PAR_EW_RL_NG_3.xlsx PAR_PW_RO_NG_1.xlsx --out scans/
+  brdfd import scans/*.scan.json
+  brdfd import-format mat12.cgats.txt --sra sra.csv --out scans/";
+
+fn format_of(path: &Path) -> ImportFormat {
     match path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase)
         .as_deref()
     {
-        Some("cxf") | Some("xml") => Format::Cxf3,
-        Some("csv") => Format::Csv,
-        Some("json") => Format::Json,
-        _ => Format::Cgats,
+        Some("xlsx") => ImportFormat::XriteXlsx,
+        Some("cxf") | Some("xml") => ImportFormat::Exchange(Format::Cxf3),
+        Some("csv") => ImportFormat::Exchange(Format::Csv),
+        Some("json") => ImportFormat::Exchange(Format::Json),
+        _ => ImportFormat::Exchange(Format::Cgats),
+    }
+}
+
+/// One scan read from FILE, with what its import has to say.
+struct Imported {
+    scan: crate::scan::Scan,
+    /// The colorimetry check of an X-Rite export: (largest ΔE00, where, warning).
+    check: Option<(f64, &'static str, Option<String>)>,
+}
+
+fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>> {
+    let format = args.format.unwrap_or_else(|| format_of(file));
+    match format {
+        ImportFormat::XriteXlsx => {
+            if args.sra.is_some() {
+                anyhow::bail!(
+                    "{}: an X-Rite .xlsx export takes no --sra: its scans have no specular readings",
+                    file.display()
+                );
+            }
+            let scans = formats::xrite::read_file(file)?;
+            Ok(scans
+                .into_iter()
+                .map(|s| Imported {
+                    check: Some((s.check.largest, s.check.largest_at, s.warning())),
+                    scan: s.scan,
+                })
+                .collect())
+        }
+        ImportFormat::Exchange(format) => {
+            let text = formats::read_text(file)?;
+            let sra = match &args.sra {
+                Some(p) => Some((p.display().to_string(), formats::read_text(p)?)),
+                None => None,
+            };
+            let scans = formats::import(
+                format,
+                &file.display().to_string(),
+                &text,
+                sra.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
+                &ImportOptions {
+                    reference: args.reference.clone(),
+                },
+            )?;
+            Ok(scans
+                .into_iter()
+                .map(|scan| Imported { scan, check: None })
+                .collect())
+        }
     }
 }
 
 pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
-    let format = args.format.unwrap_or_else(|| format_of(&args.file));
-    let text = formats::read_text(&args.file)?;
-    let sra = match &args.sra {
-        Some(p) => Some((p.display().to_string(), formats::read_text(p)?)),
-        None => None,
-    };
-    let scans = formats::import(
-        format,
-        &args.file.display().to_string(),
-        &text,
-        sra.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
-        &ImportOptions {
-            reference: args.reference.clone(),
-        },
-    )?;
+    if args.sra.is_some() && args.files.len() > 1 {
+        anyhow::bail!(
+            "--sra pairs one SRA CSV with one MA-T12 export; give one FILE with it ({} given)",
+            args.files.len()
+        );
+    }
+    // Every file is read and checked before anything is written: a bad file writes nothing.
+    let mut imported = Vec::new();
+    for file in &args.files {
+        imported.extend(read_one(args, file)?);
+    }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let stems = super::distinct_file_stems(scans.iter().map(|s| s.sample.as_str()));
-    for (scan, stem) in scans.iter().zip(stems) {
+    let stems = super::distinct_file_stems(imported.iter().map(|s| s.scan.sample.as_str()));
+    for (item, stem) in imported.iter().zip(stems) {
+        let scan = &item.scan;
         let path = args.out.join(format!("{stem}.scan.json"));
         let text = scan
             .to_json_pretty()
             .map_err(|e: ScanError| anyhow::anyhow!(e))?;
         super::write_new_file(&path, text.as_bytes(), args.force)?;
+        if let Some((_, _, Some(warning))) = &item.check {
+            eprintln!("warning: {warning}");
+        }
         if args.json {
-            println!(
-                "{}",
-                serde_json::json!({ "sample": scan.sample, "file": path })
-            );
+            let mut v = serde_json::json!({ "sample": scan.sample, "file": path });
+            if let Some((largest, at, warning)) = &item.check {
+                v["colorimetry_check"] = serde_json::json!({
+                    "largest_delta_e00": largest,
+                    "at": at,
+                    "warning": warning,
+                });
+            }
+            println!("{v}");
         } else {
-            println!("{} → {}", scan.sample, path.display());
+            let what = match (&scan.reference, &item.check) {
+                (None, Some((largest, at, _))) => format!(
+                    "  (reference: instrument calibration, no specular readings; L*a*b* as the file's within ΔE00 {largest:.1e}, largest at {at})"
+                ),
+                _ => String::new(),
+            };
+            println!("{} → {}{what}", scan.sample, path.display());
         }
     }
     Ok(())

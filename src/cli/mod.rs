@@ -60,8 +60,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Export stored scans and fits as CGATS.17, X-Rite CxF3, CSV or JSON.
     ExportFormat(exchange::ExportArgs),
-    /// Turn an instrument software export (MA-T12 CGATS or CxF3 + SRA CSV) or a brdfd export
-    /// into brdfd.scan/1 files.
+    /// Turn an instrument software export (X-Rite's QC .xlsx; MA-T12 CGATS or CxF3 + SRA
+    /// CSV) or a brdfd export into brdfd.scan/1 files.
     ImportFormat(exchange::ImportArgs),
     /// Run the daemon: instruments, scan orchestrator, fit worker and the local HTTP API.
     Serve(serve::ServeArgs),

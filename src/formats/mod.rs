@@ -14,7 +14,8 @@
 //! - [`mitsuba`]: Mitsuba 3 scenes of fitted materials (one per fit; SCIENCE.md §10).
 //! - [`certificate`]: the reference tile's calibration (CGATS or CxF3), for `[reference]`.
 //! - [`xrite_xlsx`]: X-Rite's quality-control `.xlsx` export of MA-T12 measurements (read
-//!   only), and the check of its L*a*b* against brdfd's colorimetry.
+//!   only), and the check of its L*a*b* against brdfd's colorimetry; [`xrite`]: its
+//!   measurements as scans (reference: instrument calibration, no SRA readings).
 //!
 //! What an export holds, per sample of a [`Study`]: the device readings of the sample and of
 //! the reference tile they are normalised by (`reading`, `reference`), the measured
@@ -44,6 +45,7 @@ pub mod sra;
 mod table;
 pub mod tidy;
 pub mod xrite_xlsx;
+pub mod xrite;
 
 use std::collections::BTreeMap;
 use std::fmt;
