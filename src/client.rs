@@ -257,6 +257,13 @@ impl Client {
         self.json(text)
     }
 
+    /// `POST path` with a binary body (an instrument export such as an X-Rite `.xlsx`) → JSON.
+    pub fn post_bytes(&self, path: &str, body: &[u8]) -> Result<Value, ClientError> {
+        let response = self.post_request(path).send(body);
+        let text = self.finish(response)?;
+        self.json(text)
+    }
+
     /// Opens the event stream. Subscribe before making a request whose progress you want,
     /// so no event is missed.
     pub fn events(&self) -> Result<EventStream, ClientError> {

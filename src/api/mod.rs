@@ -9,7 +9,7 @@
 //! | `GET /scans?state=&sample=&limit=&before=` | list scans, newest first (`limit` ≤ 500; `before=ID` pages on) | 200 `[summary]` |
 //! | `GET /scans/{id}` | a scan, its readings, reference and fits | 200 |
 //! | `GET /scans/{id}/export` | the scan as `brdfd.scan/1` | 200 |
-//! | `POST /scans/import` (a `brdfd.scan/1` body) | import a scan, fit it | 201 `{"scan", "fits"}` |
+//! | `POST /scans/import` (a `brdfd.scan/1` body, or an X-Rite QC `.xlsx` export) | import its scans, fit them | 201 `{"scan", "fits"}` (an `.xlsx`: `"scans"` and `"colorimetry_checks"` too) |
 //! | `POST /scans/{id}/refit` [`RefitRequest`] (`sra`: `"flat"`/`"luminance"`) | queue fits again | 202 `{"fits": [id]}` |
 //! | `POST /abort` | stop the reference or scan in progress | 200 `{"aborted": …}` |
 //! | `GET /fits/{id}` | a fit run and its evaluation | 200 |
@@ -189,6 +189,10 @@ pub const MAX_LIST_LIMIT: u32 = 500;
 /// The largest request body accepted (a scan file is about 30 KiB).
 pub const MAX_BODY_BYTES: usize = 1024 * 1024;
 
+/// The largest body `POST /scans/import` accepts: an X-Rite `.xlsx` export carries camera
+/// images (1–3 MiB each file); the reader's own cap.
+pub const MAX_IMPORT_BODY_BYTES: usize = crate::formats::xrite_xlsx::MAX_FILE_BYTES as usize;
+
 /// `GET /scans/{id}`.
 #[derive(Debug, Serialize)]
 pub struct ScanView {
@@ -247,7 +251,10 @@ pub fn router(service: Service, options: &ApiOptions) -> Router {
         .route("/metrics", get(metrics))
         .route("/reference", post(reference))
         .route("/scans", post(request_scan).get(list_scans))
-        .route("/scans/import", post(import_scan))
+        .route(
+            "/scans/import",
+            post(import_scan).layer(DefaultBodyLimit::max(MAX_IMPORT_BODY_BYTES)),
+        )
         .route("/scans/{id}", get(show_scan))
         .route("/scans/{id}/export", get(export_scan))
         .route("/scans/{id}/refit", post(refit))
@@ -390,7 +397,7 @@ async fn export_scan(
 
 async fn import_scan(
     State(s): State<Service>,
-    body: Result<String, axum::extract::rejection::StringRejection>,
+    body: Result<axum::body::Bytes, axum::extract::rejection::BytesRejection>,
 ) -> Result<Response, ApiError> {
     let body = match body {
         Ok(b) => b,
@@ -398,8 +405,8 @@ async fn import_scan(
             return Ok(limit_refusal(
                 StatusCode::PAYLOAD_TOO_LARGE,
                 format!(
-                    "the scan file is larger than {MAX_BODY_BYTES} bytes; a brdfd.scan/1 file is \
-                     about 30 KiB"
+                    "the file is larger than {MAX_IMPORT_BODY_BYTES} bytes; a brdfd.scan/1 file is \
+                     about 30 KiB, an X-Rite .xlsx export a few MiB"
                 ),
             ));
         }
@@ -409,11 +416,65 @@ async fn import_scan(
             ))));
         }
     };
-    let file = Scan::from_json(body.as_bytes()).map_err(ServiceError::InvalidScan)?;
+    // An .xlsx is a zip archive; a scan file is JSON text.
+    if body.starts_with(b"PK\x03\x04") {
+        return import_xrite(&s, &body).await;
+    }
+    if body.len() > MAX_BODY_BYTES {
+        return Ok(limit_refusal(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!(
+                "the scan file is larger than {MAX_BODY_BYTES} bytes; a brdfd.scan/1 file is \
+                 about 30 KiB"
+            ),
+        ));
+    }
+    let file = Scan::from_json(&body).map_err(ServiceError::InvalidScan)?;
     let (scan, fits) = s.import_scan(&file).await?;
     Ok((
         StatusCode::CREATED,
         Json(serde_json::json!({ "scan": scan, "fits": fits })),
+    )
+        .into_response())
+}
+
+/// `POST /scans/import` of an X-Rite QC `.xlsx` export: every measurement is read and checked
+/// before any is imported; each becomes a scan (reference: instrument calibration, no
+/// specular readings), fitted like a measured one.
+async fn import_xrite(s: &Service, body: &[u8]) -> Result<Response, ApiError> {
+    let owned = body.to_vec();
+    let read = tokio::task::spawn_blocking(move || {
+        crate::formats::xrite::read(&owned, "the uploaded .xlsx")
+    })
+    .await
+    .map_err(|e| ServiceError::BadRequest(format!("reading the .xlsx failed: {e}")))?;
+    let scans = read.map_err(|e| ServiceError::BadRequest(e.to_string()))?;
+    let mut ids = Vec::with_capacity(scans.len());
+    let mut all_fits = Vec::new();
+    let mut checks = Vec::with_capacity(scans.len());
+    for x in &scans {
+        let (scan, fits) = s.import_scan(&x.scan).await?;
+        if let Some(w) = x.warning() {
+            tracing::warn!(scan = %scan, "{w}");
+        }
+        ids.push(scan);
+        all_fits.extend(fits);
+        checks.push(serde_json::json!({
+            "scan": scan,
+            "sample": x.scan.sample,
+            "largest_delta_e00": x.check.largest,
+            "at": x.check.largest_at,
+            "warning": x.warning(),
+        }));
+    }
+    Ok((
+        StatusCode::CREATED,
+        Json(serde_json::json!({
+            "scan": ids.first(),
+            "scans": ids,
+            "fits": all_fits,
+            "colorimetry_checks": checks,
+        })),
     )
         .into_response())
 }

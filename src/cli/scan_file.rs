@@ -31,7 +31,9 @@ pub struct ExportArgs {
 pub struct ImportArgs {
     #[command(flatten)]
     pub daemon: DaemonArgs,
-    /// A brdfd.scan/1 file.
+    /// A brdfd.scan/1 file, or X-Rite's QC `.xlsx` export (each measurement becomes a scan:
+    /// reference instrument calibration, no specular readings). Other instrument exports go
+    /// through `brdfd import-format` first.
     #[arg(value_name = "FILE")]
     pub file: PathBuf,
     /// Return once imported, without following the fits.
@@ -60,7 +62,56 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `brdfd import` of an X-Rite `.xlsx`: read and checked here (errors name the file), sent
+/// as it is, each scan's fits followed in turn.
+fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
+    let scans = crate::formats::xrite::read_file(&args.file)?;
+    for s in &scans {
+        if let Some(w) = s.warning() {
+            eprintln!("warning: {w}");
+        }
+    }
+    let bytes = std::fs::read(&args.file)
+        .with_context(|| format!("cannot read {}", args.file.display()))?;
+    let client = args.daemon.client()?;
+    let v = client.post_bytes("/scans/import", &bytes)?;
+    if args.json {
+        println!("{}", tagged("accepted", &v));
+    }
+    let ids: Vec<i64> = v["scans"]
+        .as_array()
+        .map(|a| a.iter().filter_map(serde_json::Value::as_i64).collect())
+        .unwrap_or_default();
+    for (scan, x) in ids.iter().zip(&scans) {
+        if !args.json {
+            println!(
+                "{} ({}) imported as scan {scan}: reference instrument calibration, no specular \
+                 readings; L*a*b* as the file's within ΔE00 {:.1e}",
+                args.file.display(),
+                x.scan.sample,
+                x.check.largest
+            );
+        }
+        if !args.detach {
+            let events = client.events()?;
+            let pending = pending_fits(&client, *scan)?;
+            if !pending.is_empty() {
+                follow_scan(&client, events, *scan, pending, args.json)?;
+            }
+            print_scan_result(&client.get(&format!("/scans/{scan}"))?, args.json);
+        }
+    }
+    Ok(())
+}
+
 pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
+    let is_xlsx = args
+        .file
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("xlsx"));
+    if is_xlsx {
+        return import_xlsx(args);
+    }
     let text = std::fs::read_to_string(&args.file)
         .with_context(|| format!("cannot read {}", args.file.display()))?;
     // Checked here too, so a bad file is named with its path before anything is sent.

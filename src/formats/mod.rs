@@ -44,8 +44,8 @@ pub mod mitsuba;
 pub mod sra;
 mod table;
 pub mod tidy;
-pub mod xrite_xlsx;
 pub mod xrite;
+pub mod xrite_xlsx;
 
 use std::collections::BTreeMap;
 use std::fmt;

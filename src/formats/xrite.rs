@@ -100,7 +100,10 @@ fn scan_of(export: &XriteExport, m: &XriteMeasurement, check: &ColorimetryCheck)
             if check.flagged.is_empty() {
                 String::new()
             } else {
-                format!("; above {COLORIMETRY_THRESHOLD} at {}", check.flagged.join(", "))
+                format!(
+                    "; above {COLORIMETRY_THRESHOLD} at {}",
+                    check.flagged.join(", ")
+                )
             }
         ),
     );

@@ -99,6 +99,8 @@ pub struct IngestStatus {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Kind {
     ScanFile,
+    /// X-Rite's QC `.xlsx` export: MA-T12 only, no SRA CSV to wait for.
+    XriteXlsx,
     Export(Format),
     SraCsv,
 }
@@ -111,6 +113,7 @@ fn kind_of(name: &str) -> Option<(Kind, String)> {
     let lower = name.to_ascii_lowercase();
     for (suffix, kind) in [
         (".scan.json", Kind::ScanFile),
+        (".xlsx", Kind::XriteXlsx),
         (".sra.csv", Kind::SraCsv),
         (".cxf", Kind::Export(Format::Cxf3)),
         (".cgats", Kind::Export(Format::Cgats)),
@@ -215,7 +218,7 @@ fn units(
     };
     for (name, kind, stem) in files {
         match kind {
-            Kind::ScanFile if ready(name) => out.push(Unit {
+            Kind::ScanFile | Kind::XriteXlsx if ready(name) => out.push(Unit {
                 main: name.clone(),
                 partner: None,
                 orphan: false,
@@ -303,6 +306,15 @@ fn read_unit(dir: &Path, unit: &Unit, reference: &str) -> Result<(String, Vec<Sc
     };
     let scans = match kind {
         Kind::ScanFile => vec![Scan::from_json(&main).map_err(|e| format!("{}: {e}", unit.main))?],
+        Kind::XriteXlsx => {
+            let scans = formats::xrite::read(&main, &unit.main).map_err(|e| e.to_string())?;
+            for s in &scans {
+                if let Some(w) = s.warning() {
+                    tracing::warn!(file = %unit.main, "{w}");
+                }
+            }
+            scans.into_iter().map(|s| s.scan).collect()
+        }
         Kind::SraCsv => {
             return Err(format!(
                 "{}: an SRA CSV with no MA-T12 export beside it; drop it together with \
@@ -666,6 +678,9 @@ impl Service {
             None if kind_of(&unit.main).is_some_and(|(k, _)| k == Kind::ScanFile) => {
                 format!("imported from {}, brdfd.scan/1 file", unit.main)
             }
+            None if kind_of(&unit.main).is_some_and(|(k, _)| k == Kind::XriteXlsx) => {
+                format!("imported from {}", unit.main)
+            }
             None => format!("imported from {}, instrument software export", unit.main),
         };
         let provenance = Provenance {
@@ -781,6 +796,10 @@ mod tests {
         );
         assert_eq!(kind_of("a.SRA.csv"), Some((Kind::SraCsv, "a".into())));
         assert_eq!(kind_of("a.scan.json"), Some((Kind::ScanFile, "a".into())));
+        assert_eq!(
+            kind_of("PAR_1.XLSX"),
+            Some((Kind::XriteXlsx, "par_1".into()))
+        );
         for ignored in [".a.cxf", "a.csv", "a.json", "a.cxf.part", ".scan.json", "x"] {
             assert_eq!(kind_of(ignored), None, "{ignored}");
         }
