@@ -3,15 +3,17 @@
 //!
 //! Over every synthetic scan — the 16 example scans in `tests/data/` (eight paper-style samples,
 //! noise-free and with 1 % noise, processed as the CLI does) and the optimiser's own 6
-//! ColorChecker cases (noise-free and 1 % noise) — × 3 cost functions × N seeds, fits with both methods and takes the best cost any run found
+//! ColorChecker cases (noise-free and 1 % noise) — and the six real MA-T12 measurements in
+//! `tests/data/real-mat12/` (X-Rite's exports: 12 geometries, normalised by the instrument's
+//! own calibration, with the misfit real paint leaves) × 3 cost functions × N seeds, fits with both methods and takes the best cost any run found
 //! as the reference. Checks that the default (separable) method ends within 1 % of it every
 //! time, and counts how often the paper GA does not. Exits non-zero on any separable miss.
 //!
 //! Run: `cargo run --release --example reliability [-- OPTIONS]`. The default is the full
 //! comparison. Options, for quicker looks while working on the optimiser:
 //! - `--seeds N`: seeds per scan and cost function (default 10).
-//! - `--scans all|examples|cases`: the example scans of `tests/data/`, the optimiser's own
-//!   cases, or both (default).
+//! - `--scans all|examples|cases|real`: the example scans of `tests/data/`, the optimiser's
+//!   own cases, the real measurements, or all of them (default).
 //! - `--costs cf1,cf2,m2`: the cost functions to fit (default all three).
 //! - `--only-separable`: skip the paper GA (≈ 95 % of the run time); the reference is then the
 //!   best of the separable runs and one generous separable fit per scan and cost function
@@ -32,6 +34,7 @@ enum Which {
     All,
     Examples,
     Cases,
+    Real,
 }
 
 /// Every scan the harness fits: (label, noise, measured BRDF).
@@ -39,6 +42,9 @@ fn scans(which: Which) -> Vec<(String, f64, MeasuredBrdf)> {
     let mut out = Vec::new();
     if which == Which::Cases {
         return cases(out);
+    }
+    if which == Which::Real {
+        return real(out);
     }
     let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
     let mut files: Vec<_> = std::fs::read_dir(&data)
@@ -60,7 +66,26 @@ fn scans(which: Which) -> Vec<(String, f64, MeasuredBrdf)> {
     if which == Which::Examples {
         return out;
     }
-    cases(out)
+    real(cases(out))
+}
+
+/// Appends the real MA-T12 measurements (X-Rite's `.xlsx` exports), labelled `real:NAME`.
+fn real(mut out: Vec<(String, f64, MeasuredBrdf)>) -> Vec<(String, f64, MeasuredBrdf)> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-mat12");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .expect("tests/data/real-mat12 holds the real exports")
+        .map(|e| e.expect("readable entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "xlsx"))
+        .collect();
+    files.sort();
+    for path in files {
+        for x in brdfd::formats::xrite::read_file(&path).expect("the real exports read") {
+            let m = process(&x.scan, &ProcessingOptions::default()).expect("real scans process");
+            // Noise unknown: the real residual is the point.
+            out.push((format!("real:{}", x.scan.sample), f64::NAN, m));
+        }
+    }
+    out
 }
 
 /// Appends the optimiser's own synthetic cases, noise-free and with 1 % noise.
@@ -109,7 +134,8 @@ fn options() -> Result<Options, String> {
                     Some("all") => Which::All,
                     Some("examples") => Which::Examples,
                     Some("cases") => Which::Cases,
-                    _ => return Err("--scans needs one of all, examples, cases".into()),
+                    Some("real") => Which::Real,
+                    _ => return Err("--scans needs one of all, examples, cases, real".into()),
                 }
             }
             "--costs" => {
@@ -125,7 +151,7 @@ fn options() -> Result<Options, String> {
             "--only-separable" => o.only_separable = true,
             other => {
                 return Err(format!(
-                    "unknown option {other}; expected --seeds N, --scans all|examples|cases, \
+                    "unknown option {other}; expected --seeds N, --scans all|examples|cases|real, \
                      --costs cf1,cf2,m2, --only-separable"
                 ));
             }
@@ -181,9 +207,12 @@ fn main() -> ExitCode {
         "sample", "noise", "cost", "best", "sep worst", med, max, miss
     );
     let mut separable_ms_all = Vec::new();
-    // Per cost function: wall time (ms) and evaluations of every separable fit.
-    let mut per_cost: Vec<(CostFunction, Vec<f64>, u64)> =
-        costs.iter().map(|&cf| (cf, Vec::new(), 0)).collect();
+    // Per cost function and kind of scan (synthetic, real): wall time (ms) and evaluations of
+    // every separable fit.
+    let mut per_cost: Vec<(CostFunction, bool, Vec<f64>, u64)> = costs
+        .iter()
+        .flat_map(|&cf| [(cf, false, Vec::new(), 0), (cf, true, Vec::new(), 0)])
+        .collect();
     let scans = scans(which);
     for (label, noise, m) in &scans {
         {
@@ -208,9 +237,12 @@ fn main() -> ExitCode {
                             Method::Separable => {
                                 separable_ms += out.wall_ms;
                                 separable_ms_all.push(out.wall_ms);
-                                if let Some(pc) = per_cost.iter_mut().find(|pc| pc.0 == cf) {
-                                    pc.1.push(out.wall_ms);
-                                    pc.2 += out.evaluations;
+                                let real = noise.is_nan();
+                                if let Some(pc) =
+                                    per_cost.iter_mut().find(|pc| pc.0 == cf && pc.1 == real)
+                                {
+                                    pc.2.push(out.wall_ms);
+                                    pc.3 += out.evaluations;
                                 }
                                 separable_evals += out.evaluations;
                                 sep.push(out.cost);
@@ -237,10 +269,15 @@ fn main() -> ExitCode {
                 separable_misses += sep_miss;
                 paper_misses += paper_miss;
                 worst_separable = worst_separable.max(sep_worst);
+                let noise = if noise.is_nan() {
+                    "real".to_string()
+                } else {
+                    format!("{}%", noise * 100.0)
+                };
                 println!(
-                    "{:<20} {:>4}% {:>4} {:>13.6e} {:>10.6} {:>10.4} {:>10.4} {:>4}/{:<2}{}",
+                    "{:<20} {:>5} {:>4} {:>13.6e} {:>10.6} {:>10.4} {:>10.4} {:>4}/{:<2}{}",
                     label,
-                    noise * 100.0,
+                    noise,
                     cf,
                     best,
                     sep_worst,
@@ -271,10 +308,14 @@ fn main() -> ExitCode {
         separable_ms_all[separable_ms_all.len() / 2],
         separable_evals / runs as u64
     );
-    for (cf, mut ms, evals) in per_cost {
+    for (cf, real, mut ms, evals) in per_cost {
+        if ms.is_empty() {
+            continue;
+        }
         ms.sort_by(f64::total_cmp);
         println!(
-            "separable {cf}: median {:.2} ms, max {:.2} ms, {} evaluations per fit",
+            "separable {cf} ({} scans): median {:.2} ms, max {:.2} ms, {} evaluations per fit",
+            if real { "real" } else { "synthetic" },
             ms[ms.len() / 2],
             ms[ms.len() - 1],
             evals / ms.len() as u64
