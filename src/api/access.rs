@@ -80,6 +80,11 @@ pub enum TokenError {
     )]
     Malformed { path: PathBuf },
     #[error(
+        "the API token file {path} is not a regular file (a pipe, device or folder); remove it \
+         and restart brdfd serve to make a new one, or set [api] token_file to a file"
+    )]
+    NotRegular { path: PathBuf },
+    #[error(
         "the API token file {path} can be read by other users (mode {mode:o}); run `chmod 600 {path}` (or 640 with brdfd's group)"
     )]
     TooOpen { path: PathBuf, mode: u32 },
@@ -105,30 +110,40 @@ impl Token {
         &self.0
     }
 
-    /// Reads the token file, checking that other users cannot read it.
+    /// Reads the token file, checking that it is a regular file (a FIFO or a device would hang
+    /// or feed the read) that other users cannot read.
     pub fn read(path: &Path) -> Result<Token, TokenError> {
-        let text = std::fs::read_to_string(path).map_err(|source| TokenError::Read {
+        use std::io::Read;
+        use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+        let read_err = |source| TokenError::Read {
             path: path.to_path_buf(),
             source,
-        })?;
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            let mode = std::fs::metadata(path)
-                .map_err(|source| TokenError::Read {
-                    path: path.to_path_buf(),
-                    source,
-                })?
-                .permissions()
-                .mode()
-                & 0o777;
-            if mode & 0o007 != 0 {
-                return Err(TokenError::TooOpen {
-                    path: path.to_path_buf(),
-                    mode,
-                });
-            }
+        };
+        crate::safe_fs::protect(path, "the API token file");
+        // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer.
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(path)
+            .map_err(read_err)?;
+        let meta = file.metadata().map_err(read_err)?;
+        if !meta.is_file() {
+            return Err(TokenError::NotRegular {
+                path: path.to_path_buf(),
+            });
         }
+        let mode = meta.permissions().mode() & 0o777;
+        if mode & 0o007 != 0 {
+            return Err(TokenError::TooOpen {
+                path: path.to_path_buf(),
+                mode,
+            });
+        }
+        let mut text = String::new();
+        // A token is 64 hex digits; a few KiB is more than any valid file.
+        file.take(4096)
+            .read_to_string(&mut text)
+            .map_err(read_err)?;
         Token::parse(&text).ok_or_else(|| TokenError::Malformed {
             path: path.to_path_buf(),
         })
@@ -147,16 +162,11 @@ impl Token {
         let token = Token::generate();
         let mut options = OpenOptions::new();
         options.write(true).create_new(true);
-        #[cfg(unix)]
         {
             use std::os::unix::fs::OpenOptionsExt;
-            // systemd sets INVOCATION_ID for every unit it starts.
-            let mode = if std::env::var_os("INVOCATION_ID").is_some() {
-                0o640
-            } else {
-                0o600
-            };
-            options.mode(mode);
+            options
+                .mode(crate::safe_fs::private_mode())
+                .custom_flags(libc::O_NOFOLLOW);
         }
         let create = |source| TokenError::Create {
             path: path.to_path_buf(),

@@ -514,7 +514,11 @@ async fn cancel_fit(
     ))
 }
 
-async fn events(State(s): State<Service>, Extension(permits): Extension<EventPermits>) -> Response {
+async fn events(
+    State(s): State<Service>,
+    Extension(permits): Extension<EventPermits>,
+    connection: Option<Extension<server::ConnectionHandle>>,
+) -> Response {
     let Ok(permit) = permits.0.clone().try_acquire_owned() else {
         return limit_refusal(
             StatusCode::SERVICE_UNAVAILABLE,
@@ -523,6 +527,10 @@ async fn events(State(s): State<Service>, Extension(permits): Extension<EventPer
                 .into(),
         );
     };
+    // From here the connection counts under max_event_subscribers, not max_connections.
+    if let Some(Extension(c)) = connection {
+        c.become_stream();
+    }
     let keep_alive = permits.1;
     tracing::debug!(open = permits.0.available_permits(), "event stream opened");
     let stream = BroadcastStream::new(s.subscribe()).map(move |r| {
@@ -572,6 +580,7 @@ impl ApiServer {
         addr: SocketAddr,
         options: ApiOptions,
     ) -> Result<ApiServer, ApiStartError> {
+        server::raise_fd_limit();
         let listener = tokio::net::TcpListener::bind(addr)
             .await
             .map_err(|source| ApiStartError::Bind { addr, source })?;

@@ -4,8 +4,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
-
 use crate::formats::{self, ExportOptions, Format, ImportOptions};
 use crate::scan::ScanError;
 
@@ -85,12 +83,10 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
                     .collect::<Vec<_>>(),
                 _ => formats::gltf::files(&study, &opts)?,
             };
-            std::fs::create_dir_all(&args.out)
-                .with_context(|| format!("creating {}", args.out.display()))?;
+            let out = super::out_dir(&args.out)?;
             let mut written = Vec::new();
             for (name, bytes) in &files {
-                let path = args.out.join(name);
-                super::write_new_file(&path, bytes, args.force)?;
+                let path = out.write(name, bytes, crate::safe_fs::Replace::force(args.force))?;
                 if !args.json {
                     println!("{}", path.display());
                 }
@@ -193,15 +189,17 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
             reference: args.reference.clone(),
         },
     )?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    let out = super::out_dir(&args.out)?;
     let stems = super::distinct_file_stems(scans.iter().map(|s| s.sample.as_str()));
     for (scan, stem) in scans.iter().zip(stems) {
-        let path = args.out.join(format!("{stem}.scan.json"));
         let text = scan
             .to_json_pretty()
             .map_err(|e: ScanError| anyhow::anyhow!(e))?;
-        super::write_new_file(&path, text.as_bytes(), args.force)?;
+        let path = out.write(
+            &format!("{stem}.scan.json"),
+            text.as_bytes(),
+            crate::safe_fs::Replace::force(args.force),
+        )?;
         if args.json {
             println!(
                 "{}",
