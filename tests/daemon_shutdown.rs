@@ -131,3 +131,58 @@ fn sigint_stops_a_long_fit_which_runs_again_at_the_next_start() {
     let _serial = serial();
     signal_stops_a_long_fit_which_runs_again_at_the_next_start("INT");
 }
+
+/// README: "SIGTERM aborts the measurement in progress". With an event stream open (as `brdfd
+/// scan` holds one) and four of the fourteen geometries still to come, well under a second of
+/// the simulated scan: the scan is aborted with the readings it had, not finished during a
+/// grace period.
+#[test]
+fn sigterm_aborts_a_scan_that_has_readings_still_to_come_at_once() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_simulated_config(dir.path(), "", "");
+    let db = dir.path().join("brdfd.db");
+    let mut d = spawn_serve(&config, &[]);
+    d.client.post("/reference", None).unwrap();
+    wait_until("the reference", || {
+        d.client.get("/status").unwrap()["busy"].is_null()
+    });
+    let events = d.client.events().unwrap();
+    let scan = d
+        .client
+        .post("/scans", Some(&json!({ "sample": "T.Stopped" })))
+        .unwrap()["scan"]
+        .as_i64()
+        .unwrap();
+    for ev in events {
+        assert!(
+            ev["type"] != "scan_complete",
+            "the scan ended before the signal"
+        );
+        if ev["type"] == "scan_reading" && ev["scan"] == scan && ev["k"].as_u64() >= Some(10) {
+            break;
+        }
+    }
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(d.child.id() as i32, libc::SIGTERM) };
+    let status = d.child.wait().unwrap();
+    assert!(status.success(), "{status}");
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let store = Store::open(&db).await.unwrap();
+        let detail = store.scan_detail(brdfd::store::ScanId(scan)).await.unwrap();
+        assert_eq!(
+            detail.scan.state.to_string(),
+            "aborted",
+            "{:?}",
+            detail.scan
+        );
+        let n = detail.readings.len();
+        assert!(n >= 10 && n < 28, "readings kept: {n}");
+        assert!(detail.scan.reason.is_some(), "{:?}", detail.scan);
+        store.close().await;
+    });
+}

@@ -149,13 +149,16 @@ impl ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = self.status();
-        if status == StatusCode::INTERNAL_SERVER_ERROR {
+        let error = if status == StatusCode::INTERNAL_SERVER_ERROR {
             tracing::error!(error = %self.0, "request failed");
-        }
+            INTERNAL_ERROR.to_string()
+        } else {
+            self.0.to_string()
+        };
         (
             status,
             Json(ErrorBody {
-                error: self.0.to_string(),
+                error,
                 kind: Some(self.kind().to_string()),
             }),
         )
@@ -164,6 +167,48 @@ impl IntoResponse for ApiError {
 }
 
 type ApiResult<T> = Result<T, ApiError>;
+
+/// A request body or query the extractor refused: the answer names the problem and says what
+/// to send, without the parser's internals (its list of expected fields, byte positions),
+/// which go to the log.
+fn rejected_body(what: &str, expected: &str, detail: &str) -> ServiceError {
+    tracing::info!(
+        request = what,
+        detail,
+        "request refused: not the expected shape"
+    );
+    ServiceError::BadRequest(format!(
+        "{what}: {}; {expected}",
+        without_parser_internals(detail)
+    ))
+}
+
+/// A serde or extractor message without its list of expected names and its position: "unknown
+/// field `x`, expected one of `a`, `b` at line 1 column 5" → "unknown field `x`".
+fn without_parser_internals(detail: &str) -> String {
+    // The extractor's prefix ("Failed to deserialize the JSON body into the target type: ").
+    let text = detail
+        .rsplit_once("target type: ")
+        .map_or(detail, |(_, t)| t);
+    let text = text.split(" at line ").next().unwrap_or(text);
+    let text = match text.find(", expected") {
+        Some(i) if text.starts_with("unknown field") || text.starts_with("unknown variant") => {
+            &text[..i]
+        }
+        _ => text,
+    };
+    let text = text.trim();
+    if text.is_empty() {
+        "not a valid request".into()
+    } else {
+        text.to_string()
+    }
+}
+
+/// The body of a 500: what happened in words for people, never the store's own error text
+/// (SQLite codes, file paths), which stays in the log.
+const INTERNAL_ERROR: &str = "the daemon could not do this because its store failed; the daemon's log says why \
+     (journalctl -u brdfd, or the terminal running brdfd serve)";
 
 /// `POST /scans` body.
 #[derive(Debug, Serialize, Deserialize)]
@@ -306,7 +351,8 @@ async fn request_scan(
     State(s): State<Service>,
     body: Result<Json<ScanRequestBody>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<impl IntoResponse> {
-    let Json(body) = body.map_err(|e| ServiceError::BadRequest(format!("POST /scans: {e}")))?;
+    let Json(body) = body
+        .map_err(|e| rejected_body("POST /scans", "send {\"sample\": \"NAME\"}", &e.body_text()))?;
     let id = s.request_scan(&body.sample).await?;
     Ok((
         StatusCode::ACCEPTED,
@@ -318,7 +364,13 @@ async fn list_scans(
     State(s): State<Service>,
     query: Result<Query<ScanQuery>, axum::extract::rejection::QueryRejection>,
 ) -> ApiResult<impl IntoResponse> {
-    let Query(q) = query.map_err(|e| ServiceError::BadRequest(format!("GET /scans: {e}")))?;
+    let Query(q) = query.map_err(|e| {
+        rejected_body(
+            "GET /scans",
+            "the parameters are state, sample, limit (a number) and before (a scan id)",
+            &e.body_text(),
+        )
+    })?;
     let state = q
         .state
         .as_deref()
@@ -424,8 +476,14 @@ async fn refit(
     body: Result<Json<RefitRequest>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<impl IntoResponse> {
     let scan: ScanId = parse_id("scan", &id)?;
-    let Json(request) =
-        body.map_err(|e| ServiceError::BadRequest(format!("POST /scans/{scan}/refit: {e}")))?;
+    let Json(request) = body.map_err(|e| {
+        rejected_body(
+            &format!("POST /scans/{scan}/refit"),
+            "send {\"cost_functions\": [\"cf1\", …], \"method\", \"seed\", \"sra\"} (each \
+                 optional; README: HTTP API)",
+            &e.body_text(),
+        )
+    })?;
     let fits = s.refit(scan, &request).await?;
     Ok((
         StatusCode::ACCEPTED,
@@ -495,10 +553,13 @@ async fn fit_preview(State(s): State<Service>, Path(id): Path<String>) -> Respon
     match drawn {
         Ok(Ok(png)) => ([(axum::http::header::CONTENT_TYPE, "image/png")], png).into_response(),
         Ok(Err(e)) => refuse(StatusCode::CONFLICT, e),
-        Err(e) => refuse(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("the preview failed: {e}"),
-        ),
+        Err(e) => {
+            tracing::error!(error = %e, %fit, "drawing a preview failed");
+            refuse(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "drawing the preview failed; the daemon's log says why".into(),
+            )
+        }
     }
 }
 
@@ -611,3 +672,25 @@ impl ApiServer {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod body_tests {
+    #[test]
+    fn refusals_keep_the_problem_and_drop_the_parser_internals() {
+        let f = super::without_parser_internals;
+        assert_eq!(
+            f(
+                "Failed to deserialize the JSON body into the target type: unknown field `sampel`, \
+               expected `sample` at line 1 column 9"
+            ),
+            "unknown field `sampel`"
+        );
+        assert_eq!(
+            f(
+                "Failed to deserialize the JSON body into the target type: cost_functions[0]: \
+               unknown cost function \"cf9\": expected cf1, cf2 or m2 at line 1 column 27"
+            ),
+            "cost_functions[0]: unknown cost function \"cf9\": expected cf1, cf2 or m2"
+        );
+    }
+}
