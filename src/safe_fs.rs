@@ -10,7 +10,8 @@
 //!   them; a name that is one of them (by path, or by device and inode: a hard link) is refused,
 //!   with or without `--force`.
 //! - **`--force` replaces only a file of brdfd's own kind:** a regular file with one link that
-//!   is not an SQLite database. The new content goes to a fresh temporary file in the same
+//!   is not an SQLite database or log (by content) and not named like a store's, lock's or
+//!   token's file (`*.db`, `*-wal`, `*-shm`, `*-journal`, `*.lock`, `*.token`, `*.sessions`). The new content goes to a fresh temporary file in the same
 //!   directory, which is then renamed over the old name: a rename replaces the name and never
 //!   writes into what it pointed at.
 //! - **Moves never replace.** [`Dir::move_to`] renames with `RENAME_NOREPLACE`.
@@ -518,13 +519,33 @@ impl Dir {
                 what: "a file with other names (a hard link)",
             });
         }
+        // Another store's files (not registered in this process): by name and by content.
+        if [
+            "-wal",
+            "-shm",
+            "-journal",
+            ".db",
+            ".lock",
+            ".token",
+            ".sessions",
+        ]
+        .iter()
+        .any(|suffix| name.ends_with(suffix))
+        {
+            return Err(FsError::NotOurs {
+                path,
+                what: "named like a store, its log, lock or token",
+            });
+        }
         let mut head = [0u8; 16];
         if let Ok(mut f) = self.open_read(name) {
             let got = f.read(&mut head).unwrap_or(0);
-            if head[..got].starts_with(b"SQLite format 3\0") {
+            let head = &head[..got];
+            let wal = head.len() >= 4 && head[..3] == [0x37, 0x7f, 0x06] && head[3] & 0xfe == 0x82;
+            if head.starts_with(b"SQLite format 3\0") || wal {
                 return Err(FsError::NotOurs {
                     path,
-                    what: "an SQLite database",
+                    what: "an SQLite database or its log",
                 });
             }
         }
@@ -837,9 +858,15 @@ mod tests {
         std::fs::hard_link(t.path().join("other"), t.path().join("b.json")).unwrap();
         let e = d.write("b.json", b"x", Replace::OwnKind).unwrap_err();
         assert!(e.to_string().contains("hard link"), "{e}");
-        std::fs::write(t.path().join("c.db"), b"SQLite format 3\0rest").unwrap();
-        let e = d.write("c.db", b"x", Replace::OwnKind).unwrap_err();
+        std::fs::write(t.path().join("c.json"), b"SQLite format 3\0rest").unwrap();
+        let e = d.write("c.json", b"x", Replace::OwnKind).unwrap_err();
         assert!(e.to_string().contains("SQLite"), "{e}");
+        std::fs::write(t.path().join("w.json"), [0x37, 0x7f, 0x06, 0x82, 0, 0]).unwrap();
+        let e = d.write("w.json", b"x", Replace::OwnKind).unwrap_err();
+        assert!(e.to_string().contains("SQLite"), "{e}");
+        std::fs::write(t.path().join("other.db-wal"), b"x").unwrap();
+        let e = d.write("other.db-wal", b"x", Replace::OwnKind).unwrap_err();
+        assert!(e.to_string().contains("named like a store"), "{e}");
         std::fs::create_dir(t.path().join("sub")).unwrap();
         assert!(d.write("sub", b"x", Replace::OwnKind).is_err());
         assert_eq!(std::fs::read(t.path().join("other")).unwrap(), b"other");

@@ -224,9 +224,10 @@ fn a_web_page_cannot_measure_abort_cancel_or_import() {
             serde_json::from_str(&body).unwrap_or_else(|_| panic!("JSON refusal: {body}"));
         assert!(!v["error"].as_str().unwrap().is_empty());
     }
-    // The 401 says where the token is.
+    // The 401 says which file the token is in, but not where on the machine.
     let (_, body) = raw(d.addr, &request("GET", "/scans", &[("host", &host)], ""));
     assert!(body.contains("brdfd.token"), "{body}");
+    assert!(!body.contains(&*d.dir.to_string_lossy()), "{body}");
     // Nothing started, nothing imported.
     let status = d.client.get("/status").unwrap();
     assert!(
@@ -769,8 +770,12 @@ fn report_and_export_never_write_through_a_link_or_onto_the_store() {
     assert_eq!(store_bytes(dir), before, "the store's file changed");
     // The store and the token are the daemon's user's only.
     use std::os::unix::fs::PermissionsExt;
-    for f in ["brdfd.db", "brdfd.token"] {
-        let mode = std::fs::metadata(dir.join(f)).unwrap().permissions().mode();
+    for f in ["brdfd.db", "brdfd.token", "brdfd.db-wal", "brdfd.db-shm"] {
+        let Ok(meta) = std::fs::metadata(dir.join(f)) else {
+            assert!(f.contains('-'), "{f} is missing");
+            continue;
+        };
+        let mode = meta.permissions().mode();
         assert_eq!(mode & 0o077, 0, "{f}: mode {mode:o}");
     }
 }
@@ -963,4 +968,124 @@ fn an_idle_connection_closes_at_the_configured_idle_timeout() {
         idle >= Duration::from_millis(900) && idle < Duration::from_secs(3),
         "an idle connection closed after {idle:?}, idle_timeout_ms = 1000"
     );
+}
+
+/// One raw request's status and its whole answer (head and body).
+fn raw_full(addr: SocketAddr, request: &str) -> (u16, String) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(STEP_TIMEOUT)).unwrap();
+    s.write_all(request.as_bytes()).unwrap();
+    let mut out = String::new();
+    let _ = s.read_to_string(&mut out);
+    let status = out
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
+    (status, out)
+}
+
+#[test]
+fn a_logged_out_session_stays_logged_out_across_a_restart() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path(), "");
+    let d = spawn_serve(&cfg, &[]);
+    let host = d.addr.to_string();
+    let cookie_of = |d: &ServeChild| {
+        let ticket = d.client.post("/session/ticket", None).unwrap()["ticket"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        let (status, answer) = raw_full(
+            d.addr,
+            &request(
+                "GET",
+                &format!("/login?ticket={ticket}"),
+                &[("host", &d.addr.to_string())],
+                "",
+            ),
+        );
+        assert_eq!(status, 303, "{answer}");
+        answer
+            .lines()
+            .find_map(|l| l.strip_prefix("set-cookie: brdfd_session="))
+            .and_then(|v| v.split(';').next())
+            .unwrap()
+            .to_string()
+    };
+    let ended = cookie_of(&d);
+    let kept = cookie_of(&d);
+    let status_with = |addr: SocketAddr, cookie: &str| {
+        raw(
+            addr,
+            &request(
+                "GET",
+                "/status",
+                &[
+                    ("host", &addr.to_string()),
+                    ("cookie", &format!("brdfd_session={cookie}")),
+                    ("sec-fetch-site", "same-origin"),
+                ],
+                "",
+            ),
+        )
+        .0
+    };
+    assert_eq!(status_with(d.addr, &ended), 200);
+    // Log out as the page does: its CSRF value from /session, then the POST.
+    let jar = format!("brdfd_session={ended}");
+    let own = ("sec-fetch-site", "same-origin");
+    let (_, body) = raw(
+        d.addr,
+        &request(
+            "GET",
+            "/session",
+            &[("host", &host), ("cookie", &jar), own],
+            "",
+        ),
+    );
+    let csrf = serde_json::from_str::<Value>(&body).unwrap()["csrf"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let (status, body) = raw(
+        d.addr,
+        &request(
+            "POST",
+            "/session/logout",
+            &[
+                ("host", &host),
+                ("cookie", &jar),
+                own,
+                ("content-type", "application/json"),
+                ("x-brdfd-csrf", &csrf),
+            ],
+            "",
+        ),
+    );
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(status_with(d.addr, &ended), 401);
+    drop(d);
+    // The next daemon on the same store and token: still logged out; the other session lives.
+    let d = spawn_serve(&cfg, &[]);
+    assert_eq!(status_with(d.addr, &ended), 401);
+    assert_eq!(status_with(d.addr, &kept), 200);
+}
+
+#[test]
+fn a_token_file_that_is_a_pipe_is_refused_at_start_without_hanging() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("brdfd.token");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: mkfifo(3) with a valid path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let cfg = config(dir.path(), "");
+    let started = Instant::now();
+    let out = run_brdfd(&["serve", "--config", cfg.to_str().unwrap()], None);
+    assert_ne!(out.status.code(), Some(0));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("not a regular file"), "{stderr}");
+    assert!(started.elapsed() < Duration::from_secs(20));
 }
