@@ -301,6 +301,17 @@ impl Dir {
         })
     }
 
+    /// A path that leads to this directory itself whatever is renamed or swapped meanwhile
+    /// (`/proc/self/fd/N` on Linux), for libraries that write to paths; elsewhere its path.
+    pub fn held_path(&self) -> PathBuf {
+        let proc = PathBuf::from(format!("/proc/self/fd/{}", self.fd.as_raw_fd()));
+        if proc.is_dir() {
+            proc
+        } else {
+            self.path.clone()
+        }
+    }
+
     /// The path it was opened as (for messages; nothing is reached through it).
     pub fn path(&self) -> &Path {
         &self.path
@@ -930,6 +941,25 @@ mod tests {
         assert_eq!(free, "f-2");
         d.move_to("f", &sub, &free).unwrap();
         assert_eq!(std::fs::read(t.path().join("done/f")).unwrap(), b"kept");
+    }
+
+    #[test]
+    fn a_held_path_follows_the_folder_not_its_name() {
+        let t = tempfile::tempdir().unwrap();
+        let d = Dir::create(&t.path().join("out")).unwrap();
+        let staging = d.staging(".s-").unwrap();
+        let held = staging.held_path();
+        // The folder swapped away under its name: writes through the held path still land in
+        // the folder brdfd created.
+        std::fs::rename(t.path().join("out"), t.path().join("moved")).unwrap();
+        std::fs::create_dir(t.path().join("out")).unwrap();
+        std::fs::write(held.join("f.png"), b"png").unwrap();
+        let name = staging.path().file_name().unwrap().to_owned();
+        assert_eq!(
+            std::fs::read(t.path().join("moved").join(&name).join("f.png")).unwrap(),
+            b"png"
+        );
+        assert_eq!(std::fs::read_dir(t.path().join("out")).unwrap().count(), 0);
     }
 
     #[test]

@@ -125,7 +125,7 @@ pub fn write_report_with(
     let out = crate::safe_fs::Dir::create(dir)?;
     let staging = out.staging(".brdfd-report-")?;
     let staged = staging.path().to_path_buf();
-    let result = draw_report(study, drawn, shown, &staged, progress);
+    let result = draw_report(study, drawn, shown, &staging.held_path(), progress);
     let published = result.and_then(|files| publish(&out, &staging, files, opts.replace));
     let staging_name = staged
         .file_name()
