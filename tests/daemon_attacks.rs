@@ -473,26 +473,30 @@ fn half_sent_headers_are_closed_and_connections_and_streams_are_capped() {
     );
     drop(held);
     // Twelve connections each with a request in flight (a body promised, not sent): the
-    // 13th is answered 503, as no connection can be closed without losing a request.
+    // 13th is answered 503, as no connection can be closed without losing a request. Each
+    // asks for `100 Continue`, which comes once the handler reads the body: the request is
+    // then provably in flight before the next connection is made.
     let bearer = format!("Bearer {}", d.token);
     let busy: Vec<TcpStream> = (0..12)
         .map(|_| {
             let mut s = TcpStream::connect(d.addr).unwrap();
+            s.set_read_timeout(Some(STEP_TIMEOUT)).unwrap();
             s.write_all(
                 format!(
                     "POST /scans/import HTTP/1.1\r\nhost: {host}\r\nauthorization: {bearer}\r\n\
-                     content-type: application/json\r\ncontent-length: 1000\r\n\r\n{{"
+                     content-type: application/json\r\ncontent-length: 1000\r\n\
+                     expect: 100-continue\r\n\r\n"
                 )
                 .as_bytes(),
             )
             .unwrap();
+            let mut buf = [0u8; 256];
+            let n = s.read(&mut buf).unwrap();
+            let head = String::from_utf8_lossy(&buf[..n]);
+            assert!(head.starts_with("HTTP/1.1 100"), "{head}");
             s
         })
         .collect();
-    wait_until("twelve requests in flight", || {
-        let (status, _) = raw(d.addr, &request("GET", "/healthz", &[("host", &host)], ""));
-        status == 503
-    });
     let (status, body) = raw(d.addr, &request("GET", "/healthz", &[("host", &host)], ""));
     assert_eq!(status, 503, "{body}");
     assert!(body.contains("max_connections"), "{body}");

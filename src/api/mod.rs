@@ -191,11 +191,13 @@ fn without_parser_internals(detail: &str) -> String {
         .rsplit_once("target type: ")
         .map_or(detail, |(_, t)| t);
     let text = text.split(" at line ").next().unwrap_or(text);
-    let text = match text.find(", expected") {
-        Some(i) if text.starts_with("unknown field") || text.starts_with("unknown variant") => {
-            &text[..i]
-        }
-        _ => text,
+    let unknown = ["unknown field", "unknown variant"]
+        .iter()
+        .filter_map(|k| text.find(k))
+        .min();
+    let text = match unknown.and_then(|at| text[at..].find(", expected").map(|i| at + i)) {
+        Some(end) => &text[..end],
+        None => text,
     };
     let text = text.trim();
     if text.is_empty() {
@@ -684,6 +686,10 @@ mod body_tests {
                expected `sample` at line 1 column 9"
             ),
             "unknown field `sampel`"
+        );
+        assert_eq!(
+            f("sampel: unknown field `sampel`, expected `sample` at line 1 column 9"),
+            "sampel: unknown field `sampel`"
         );
         assert_eq!(
             f(

@@ -157,10 +157,13 @@ fn publish(
         // Refuse before moving anything: no half-replaced report.
         for p in all {
             if let Some(name) = p.file_name().and_then(|n| n.to_str())
-                && out.entry(name)?.is_some()
+                && let Some(e) = out.entry(name)?
             {
-                return Err(crate::safe_fs::FsError::Exists {
-                    path: out.path().join(name),
+                let path = out.path().join(name);
+                return Err(if e.kind == crate::safe_fs::EntryKind::Symlink {
+                    crate::safe_fs::FsError::Symlink { path }
+                } else {
+                    crate::safe_fs::FsError::Exists { path }
                 }
                 .into());
             }
