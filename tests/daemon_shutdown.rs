@@ -147,14 +147,15 @@ fn sigterm_aborts_a_scan_that_has_readings_still_to_come_at_once() {
     wait_until("the reference", || {
         d.client.get("/status").unwrap()["busy"].is_null()
     });
-    let events = d.client.events().unwrap();
+    let mut events = d.client.events().unwrap();
     let scan = d
         .client
         .post("/scans", Some(&json!({ "sample": "T.Stopped" })))
         .unwrap()["scan"]
         .as_i64()
         .unwrap();
-    for ev in events {
+    // by_ref: the stream stays open through the signal, as `brdfd scan`'s would.
+    for ev in events.by_ref() {
         assert!(
             ev["type"] != "scan_complete",
             "the scan ended before the signal"
@@ -168,6 +169,7 @@ fn sigterm_aborts_a_scan_that_has_readings_still_to_come_at_once() {
     unsafe { libc::kill(d.child.id() as i32, libc::SIGTERM) };
     let status = d.child.wait().unwrap();
     assert!(status.success(), "{status}");
+    drop(events);
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
