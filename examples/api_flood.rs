@@ -2,8 +2,9 @@
 //! sockets that connect and send nothing, HALF sockets that send half a request header, and
 //! STREAMS `GET /events` subscribers that read nothing, all held open at once, while the
 //! operator's `GET /status` (with the token) and the web page's `GET /` are timed. Prints the
-//! latencies, how many streams were served, and the daemon's own memory (`RssAnon` of this
-//! process, which is the daemon plus the flood's sockets) before and during the flood.
+//! latencies (10 s of requests), how many streams were served, how often the flood reopened a
+//! socket the daemon closed (after its header timeout), and the daemon's own memory (`RssAnon`
+//! of this process: the daemon plus the flood's sockets) before and during the flood.
 //!
 //! `cargo run --release --example api_flood [-- SILENT STREAMS HALF]` (defaults 500 500 100).
 //! Exits non-zero if a `/status` took 1 s or more, or failed.
@@ -110,28 +111,56 @@ fn main() -> anyhow::Result<()> {
             None => refused += 1,
         }
     }
-    let silent: Vec<TcpStream> = (0..silent_count)
-        .map(|_| TcpStream::connect(addr))
-        .collect::<Result<_, _>>()?;
-    let mut half: Vec<TcpStream> = (0..half_count)
-        .map(|_| TcpStream::connect(addr))
-        .collect::<Result<_, _>>()?;
-    for s in &mut half {
-        s.write_all(b"GET /status HTTP/1.1\r\nhost: 127.0.0.1\r\nx-half: ")?;
-    }
+    let streams_took = opened.elapsed();
+    // The flood: SILENT + HALF sockets, each reopened as soon as the daemon closes it (after
+    // the header timeout), so the daemon holds them all for the whole measurement.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flood = {
+        let stop = stop.clone();
+        std::thread::spawn(move || -> anyhow::Result<(usize, usize)> {
+            let open = |half: bool| -> anyhow::Result<TcpStream> {
+                let mut s = TcpStream::connect(addr)?;
+                if half {
+                    s.write_all(b"GET /status HTTP/1.1\r\nhost: 127.0.0.1\r\nx-half: ")?;
+                }
+                s.set_nonblocking(true)?;
+                Ok(s)
+            };
+            let mut socks = Vec::new();
+            for i in 0..silent_count + half_count {
+                socks.push((open(i >= silent_count)?, i >= silent_count));
+            }
+            let mut reopened = 0;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                for (s, half) in &mut socks {
+                    let mut b = [0u8; 256];
+                    let closed = match s.read(&mut b) {
+                        Ok(_) => true,
+                        Err(e) => e.kind() != std::io::ErrorKind::WouldBlock,
+                    };
+                    if closed {
+                        *s = open(*half)?;
+                        reopened += 1;
+                    }
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Ok((socks.len(), reopened))
+        })
+    };
     println!(
-        "{} event streams served ({refused} refused), {silent_count} silent and {half_count} half-sent sockets open ({:.0} ms)",
+        "{} event streams served ({refused} refused) in {:.0} ms; flood of {silent_count} silent and {half_count} half-sent sockets started",
         streams.len(),
-        opened.elapsed().as_secs_f64() * 1e3
+        streams_took.as_secs_f64() * 1e3,
     );
-    // Let the daemon take in every connection before measuring.
-    std::thread::sleep(Duration::from_millis(500));
+    // Let the flood open its sockets before measuring.
+    std::thread::sleep(Duration::from_secs(3));
     let during = rss_anon_kib();
 
     let mut status = Vec::new();
     let mut page = Vec::new();
     let mut failures = 0;
-    let until = Instant::now() + Duration::from_secs(5);
+    let until = Instant::now() + Duration::from_secs(10);
     while Instant::now() < until {
         let t = Instant::now();
         match client.get("/status") {
@@ -153,6 +182,11 @@ fn main() -> anyhow::Result<()> {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let (held, reopened) = flood.join().expect("the flood thread")?;
+    println!(
+        "flood sockets held open throughout: {held}; reopened after the daemon closed them: {reopened}"
+    );
     status.sort_by(f64::total_cmp);
     page.sort_by(f64::total_cmp);
     let show = |name: &str, v: &[f64]| {
@@ -172,7 +206,7 @@ fn main() -> anyhow::Result<()> {
         during as f64 / 1024.0,
         (during.saturating_sub(before)) as f64 / (stream_count + silent_count + half_count) as f64
     );
-    drop((silent, half, streams));
+    drop(streams);
     rt.block_on(async {
         api.stop(Duration::from_secs(1)).await;
         service.shutdown().await;

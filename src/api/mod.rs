@@ -644,9 +644,8 @@ impl ApiServer {
         options: ApiOptions,
     ) -> Result<ApiServer, ApiStartError> {
         server::raise_fd_limit();
-        let listener = tokio::net::TcpListener::bind(addr)
-            .await
-            .map_err(|source| ApiStartError::Bind { addr, source })?;
+        let listener =
+            server::listen(addr).map_err(|source| ApiStartError::Bind { addr, source })?;
         let addr = listener
             .local_addr()
             .map_err(|source| ApiStartError::Bind { addr, source })?;
