@@ -110,6 +110,9 @@ pub struct IngestConfig {
     pub pair_wait: Duration,
     /// In an instrument's export, the object with this name is the white reference tile.
     pub reference: String,
+    /// The largest file read, in bytes (`max_file_mib`); a larger one goes to `failed/`
+    /// unread.
+    pub max_file_bytes: u64,
 }
 
 impl Default for IngestConfig {
@@ -120,6 +123,7 @@ impl Default for IngestConfig {
             poll: Duration::from_millis(defaults::INGEST_POLL_MS),
             pair_wait: Duration::from_millis(defaults::INGEST_PAIR_WAIT_MS),
             reference: crate::formats::DEFAULT_REFERENCE.to_string(),
+            max_file_bytes: defaults::INGEST_MAX_FILE_MIB << 20,
         }
     }
 }
@@ -341,9 +345,9 @@ impl FromStr for LogLevel {
 mod defaults {
     pub const STORE_PATH: &str = "brdfd.db";
     pub const LISTEN: &str = "127.0.0.1:7878";
-    pub const MAX_CONNECTIONS: usize = 64;
-    pub const MAX_EVENT_SUBSCRIBERS: usize = 16;
-    pub const HEADER_TIMEOUT_MS: u64 = 10_000;
+    pub const MAX_CONNECTIONS: usize = 1024;
+    pub const MAX_EVENT_SUBSCRIBERS: usize = 512;
+    pub const HEADER_TIMEOUT_MS: u64 = 2_000;
     pub const IDLE_TIMEOUT_MS: u64 = 60_000;
     /// The measuring commands' reply timeout of drivers/PROTOCOL.md §4.
     pub const TIMEOUT_MS: u64 = 10_000;
@@ -360,6 +364,8 @@ mod defaults {
     pub const INGEST_SETTLE_MS: u64 = 2_000;
     pub const INGEST_POLL_MS: u64 = 1_000;
     pub const INGEST_PAIR_WAIT_MS: u64 = 60_000;
+    /// An export of a whole session is a few MiB at most.
+    pub const INGEST_MAX_FILE_MIB: u64 = 32;
 }
 
 impl Default for Config {
@@ -463,6 +469,7 @@ struct RawIngest {
     poll_ms: S<u64>,
     pair_wait_ms: S<u64>,
     reference: S<String>,
+    max_file_mib: S<u64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -1014,7 +1021,7 @@ impl Checker<'_> {
                 "api.max_event_subscribers",
                 &raw.max_event_subscribers,
                 defaults::MAX_EVENT_SUBSCRIBERS as u64,
-                |n| bounded_count(n, 1, 1_000),
+                |n| bounded_count(n, 1, 10_000),
             )?,
             header_timeout: self.value(
                 "api.header_timeout_ms",
@@ -1242,6 +1249,12 @@ impl Checker<'_> {
                         Ok(r)
                     }
                 },
+            )?,
+            max_file_bytes: self.value(
+                "ingest.max_file_mib",
+                &raw.max_file_mib,
+                defaults::INGEST_MAX_FILE_MIB,
+                |n| bounded_count(n, 1, 1024).map(|n| (n as u64) << 20),
             )?,
         })
     }
@@ -1503,7 +1516,7 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 32] = [
+        const KEYS: [&str; 33] = [
             "path",
             "listen",
             "allow_remote",
@@ -1536,6 +1549,7 @@ mod tests {
             "poll_ms",
             "pair_wait_ms",
             "reference",
+            "max_file_mib",
         ];
         let lines: Vec<&str> = SHIPPED.lines().collect();
         for key in KEYS {

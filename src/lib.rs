@@ -20,6 +20,7 @@
 //! - [`report`]: study reports: the paper's figures 4–12 (PNG, SVG), statistics, HTML/Markdown.
 //! - [`formats`]: exchange formats: CGATS.17, CxF3, CSV, JSON exports; instrument-software imports.
 //! - [`render`]: spectral sphere previews of fitted materials (PNG).
+//! - [`safe_fs`]: every file written outside the store: no links followed, never onto the store.
 //!
 //! Command line:
 //! - [`cli`]: the `brdfd` subcommands (`fit`, `synth`, `demo`, …); `src/main.rs` only runs it.
@@ -47,6 +48,7 @@ pub mod optimise;
 pub mod processing;
 pub mod render;
 pub mod report;
+pub mod safe_fs;
 pub mod scan;
 pub mod service;
 pub mod spectral;

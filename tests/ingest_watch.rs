@@ -681,6 +681,7 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
                 poll: Duration::from_millis(20),
                 pair_wait: Duration::from_secs(600),
                 reference: "Munsell N9".into(),
+                max_file_bytes: 32 << 20,
             }),
             ..settings()
         };
@@ -780,6 +781,7 @@ async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
                 poll: Duration::from_millis(20),
                 pair_wait: Duration::from_secs(600),
                 reference: "Munsell N9".into(),
+                max_file_bytes: 32 << 20,
             }),
             ..settings()
         };

@@ -27,13 +27,13 @@
 //! grants. The page's own files (`/`, `/app.js`, `/app.css`) and `/login` need no credential;
 //! they hold nothing secret.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::fs::OpenOptions;
 use std::io::Write;
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
@@ -80,6 +80,11 @@ pub enum TokenError {
     )]
     Malformed { path: PathBuf },
     #[error(
+        "the API token file {path} is not a regular file (a pipe, device or folder); remove it \
+         and restart brdfd serve to make a new one, or set [api] token_file to a file"
+    )]
+    NotRegular { path: PathBuf },
+    #[error(
         "the API token file {path} can be read by other users (mode {mode:o}); run `chmod 600 {path}` (or 640 with brdfd's group)"
     )]
     TooOpen { path: PathBuf, mode: u32 },
@@ -105,30 +110,40 @@ impl Token {
         &self.0
     }
 
-    /// Reads the token file, checking that other users cannot read it.
+    /// Reads the token file, checking that it is a regular file (a FIFO or a device would hang
+    /// or feed the read) that other users cannot read.
     pub fn read(path: &Path) -> Result<Token, TokenError> {
-        let text = std::fs::read_to_string(path).map_err(|source| TokenError::Read {
+        use std::io::Read;
+        use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+        let read_err = |source| TokenError::Read {
             path: path.to_path_buf(),
             source,
-        })?;
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            let mode = std::fs::metadata(path)
-                .map_err(|source| TokenError::Read {
-                    path: path.to_path_buf(),
-                    source,
-                })?
-                .permissions()
-                .mode()
-                & 0o777;
-            if mode & 0o007 != 0 {
-                return Err(TokenError::TooOpen {
-                    path: path.to_path_buf(),
-                    mode,
-                });
-            }
+        };
+        crate::safe_fs::protect(path, "the API token file");
+        // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer.
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(path)
+            .map_err(read_err)?;
+        let meta = file.metadata().map_err(read_err)?;
+        if !meta.is_file() {
+            return Err(TokenError::NotRegular {
+                path: path.to_path_buf(),
+            });
         }
+        let mode = meta.permissions().mode() & 0o777;
+        if mode & 0o007 != 0 {
+            return Err(TokenError::TooOpen {
+                path: path.to_path_buf(),
+                mode,
+            });
+        }
+        let mut text = String::new();
+        // A token is 64 hex digits; a few KiB is more than any valid file.
+        file.take(4096)
+            .read_to_string(&mut text)
+            .map_err(read_err)?;
         Token::parse(&text).ok_or_else(|| TokenError::Malformed {
             path: path.to_path_buf(),
         })
@@ -147,16 +162,11 @@ impl Token {
         let token = Token::generate();
         let mut options = OpenOptions::new();
         options.write(true).create_new(true);
-        #[cfg(unix)]
         {
             use std::os::unix::fs::OpenOptionsExt;
-            // systemd sets INVOCATION_ID for every unit it starts.
-            let mode = if std::env::var_os("INVOCATION_ID").is_some() {
-                0o640
-            } else {
-                0o600
-            };
-            options.mode(mode);
+            options
+                .mode(crate::safe_fs::private_mode())
+                .custom_flags(libc::O_NOFOLLOW);
         }
         let create = |source| TokenError::Create {
             path: path.to_path_buf(),
@@ -201,15 +211,59 @@ pub const SESSION_LIFETIME: Duration = Duration::from_secs(12 * 3600);
 /// Login tickets outstanding at once; the oldest is dropped beyond this.
 const MAX_TICKETS: usize = 64;
 
+/// The time sessions and tickets are judged by, in Unix milliseconds: the system clock, or a
+/// clock a test moves ([`ManualClock`]).
+pub trait Clock: Send + Sync {
+    fn now_ms(&self) -> u64;
+}
+
+/// The system clock.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SystemClock;
+
+impl Clock for SystemClock {
+    fn now_ms(&self) -> u64 {
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64)
+    }
+}
+
+/// A clock that moves only when told (tests of the lifetimes).
+#[derive(Debug, Default)]
+pub struct ManualClock(std::sync::atomic::AtomicU64);
+
+impl ManualClock {
+    pub fn at(ms: u64) -> ManualClock {
+        ManualClock(std::sync::atomic::AtomicU64::new(ms))
+    }
+
+    pub fn advance(&self, by: Duration) {
+        self.0
+            .fetch_add(by.as_millis() as u64, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+impl Clock for ManualClock {
+    fn now_ms(&self) -> u64 {
+        self.0.load(std::sync::atomic::Ordering::SeqCst)
+    }
+}
+
 /// The web page's sessions: one-time login tickets (in memory, spent when used) and session
 /// cookies. A cookie is `v1.EXPIRY.NONCE.MAC`, signed with HMAC-SHA-256 under a key derived
 /// from the API token, so sessions outlive a daemon restart (the page reconnects by itself)
 /// and end when the token is replaced. Logging out revokes the cookie until it would have
-/// expired anyway (the list is in memory: a restart forgets it, the expiry still holds).
+/// expired anyway; with a revocation file ([`Sessions::with_revocation_file`]: `brdfd serve`
+/// keeps `brdfd.sessions` beside the token) the revocation survives a restart too.
 pub struct Sessions {
     key: [u8; 32],
-    tickets: Mutex<HashMap<String, Instant>>,
-    revoked: Mutex<HashSet<String>>,
+    clock: Arc<dyn Clock>,
+    /// Ticket → its expiry, Unix ms.
+    tickets: Mutex<HashMap<String, u64>>,
+    /// Revoked cookie → its expiry, Unix s.
+    revoked: Mutex<HashMap<String, u64>>,
+    revocation_file: Option<PathBuf>,
 }
 
 impl std::fmt::Debug for Sessions {
@@ -218,23 +272,99 @@ impl std::fmt::Debug for Sessions {
     }
 }
 
-fn unix_seconds() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs())
+/// Why the revocation file could not be read or written at start.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "cannot use the web sessions' revocation file {path}: {source}; it must be a regular file \
+     of brdfd's user (delete it to start afresh: sessions ended before are then accepted again \
+     until they expire)"
+)]
+pub struct RevocationFileError {
+    path: PathBuf,
+    #[source]
+    source: std::io::Error,
 }
 
 impl Sessions {
-    /// Sessions signed under a key derived from `token`.
+    /// Sessions signed under a key derived from `token`, on the system clock.
     pub fn new(token: &Token) -> Sessions {
+        Sessions::with_clock(token, Arc::new(SystemClock))
+    }
+
+    /// Sessions on a given clock.
+    pub fn with_clock(token: &Token, clock: Arc<dyn Clock>) -> Sessions {
         let mut h = Sha256::new();
         h.update(b"brdfd web session key v1\0");
         h.update(token.as_str().as_bytes());
         Sessions {
             key: h.finalize().into(),
+            clock,
             tickets: Mutex::new(HashMap::new()),
-            revoked: Mutex::new(HashSet::new()),
+            revoked: Mutex::new(HashMap::new()),
+            revocation_file: None,
         }
+    }
+
+    /// Keeps logouts in `path` (one cookie a line, appended and synced at logout) and reads
+    /// those still unexpired. The file is created private (0600) and rewritten without the
+    /// expired ones.
+    pub fn with_revocation_file(mut self, path: &Path) -> Result<Sessions, RevocationFileError> {
+        use std::io::Read;
+        use std::os::unix::fs::OpenOptionsExt;
+        let err = |source| RevocationFileError {
+            path: path.to_path_buf(),
+            source,
+        };
+        crate::safe_fs::protect(path, "the web sessions' revocation file");
+        let now = self.now_s();
+        let mut text = String::new();
+        match OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+            .open(path)
+        {
+            Ok(f) => {
+                if !f.metadata().map_err(err)?.is_file() {
+                    return Err(err(std::io::Error::other("not a regular file")));
+                }
+                // A few thousand logouts in 12 h at most; 16 MiB is far beyond that.
+                f.take(16 << 20).read_to_string(&mut text).map_err(err)?;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(err(e)),
+        }
+        let kept: HashMap<String, u64> = text
+            .lines()
+            .filter_map(|l| {
+                let c = l.trim();
+                let e = Sessions::expires_at_ms(c)? / 1000;
+                (e > now).then(|| (c.to_string(), e))
+            })
+            .collect();
+        // Rewritten without the expired: a new private file renamed over the old one.
+        let mut tmp = path.as_os_str().to_os_string();
+        tmp.push(".tmp");
+        let tmp = PathBuf::from(tmp);
+        let _ = std::fs::remove_file(&tmp);
+        let mut f = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(crate::safe_fs::private_mode())
+            .custom_flags(libc::O_NOFOLLOW)
+            .open(&tmp)
+            .map_err(err)?;
+        for c in kept.keys() {
+            writeln!(f, "{c}").map_err(err)?;
+        }
+        f.sync_all().map_err(err)?;
+        std::fs::rename(&tmp, path).map_err(err)?;
+        self.revoked = Mutex::new(kept);
+        self.revocation_file = Some(path.to_path_buf());
+        Ok(self)
+    }
+
+    fn now_s(&self) -> u64 {
+        self.clock.now_ms() / 1000
     }
 
     fn mac(&self, what: &[u8]) -> String {
@@ -249,7 +379,7 @@ impl Sessions {
         let mut bytes = [0u8; 32];
         rand::rng().fill_bytes(&mut bytes);
         let ticket = hex(&bytes);
-        let now = Instant::now();
+        let now = self.clock.now_ms();
         let mut tickets = self.tickets.lock().unwrap_or_else(|p| p.into_inner());
         tickets.retain(|_, expires| *expires > now);
         if tickets.len() >= MAX_TICKETS
@@ -260,7 +390,7 @@ impl Sessions {
         {
             tickets.remove(&oldest);
         }
-        tickets.insert(ticket.clone(), now + TICKET_LIFETIME);
+        tickets.insert(ticket.clone(), now + TICKET_LIFETIME.as_millis() as u64);
         ticket
     }
 
@@ -274,7 +404,7 @@ impl Sessions {
             .find(|t| constant_time_eq(t.as_bytes(), ticket.as_bytes()))
             .cloned()?;
         let expires = tickets.remove(&key)?;
-        (expires > Instant::now()).then(|| self.new_session(unix_seconds()))
+        (expires > self.clock.now_ms()).then(|| self.new_session(self.now_s()))
     }
 
     fn new_session(&self, now: u64) -> String {
@@ -287,7 +417,7 @@ impl Sessions {
 
     /// Whether a cookie value is a session this daemon signed, unexpired and not logged out.
     pub fn verify(&self, cookie: &str) -> bool {
-        self.verify_at(cookie, unix_seconds())
+        self.verify_at(cookie, self.now_s())
     }
 
     fn verify_at(&self, cookie: &str, now: u64) -> bool {
@@ -311,7 +441,7 @@ impl Sessions {
                 .revoked
                 .lock()
                 .unwrap_or_else(|p| p.into_inner())
-                .contains(cookie)
+                .contains_key(cookie)
     }
 
     /// When a (verified) session ends, in Unix milliseconds.
@@ -329,13 +459,37 @@ impl Sessions {
         self.mac(format!("csrf:{cookie}").as_bytes())
     }
 
-    /// Ends a session (logout).
+    /// Ends a session (logout): refused from now on and, with a revocation file, after a
+    /// restart too (the line is on disk before this returns).
     pub fn revoke(&self, cookie: &str) {
-        let now = unix_seconds();
+        let now = self.now_s();
+        // Only a live cookie this daemon signed is recorded (any other is refused anyway), so
+        // nobody without a session can grow the file.
+        if !self.verify(cookie) {
+            return;
+        }
+        let Some(expiry) = Sessions::expires_at_ms(cookie).map(|e| e / 1000) else {
+            return;
+        };
         let mut revoked = self.revoked.lock().unwrap_or_else(|p| p.into_inner());
         // Expired cookies are refused anyway: forget them.
-        revoked.retain(|c| Sessions::expires_at_ms(c).is_some_and(|e| e / 1000 > now));
-        revoked.insert(cookie.to_string());
+        revoked.retain(|_, e| *e > now);
+        revoked.insert(cookie.to_string(), expiry);
+        if let Some(path) = &self.revocation_file {
+            use std::os::unix::fs::OpenOptionsExt;
+            let written = OpenOptions::new()
+                .append(true)
+                .custom_flags(libc::O_NOFOLLOW)
+                .open(path)
+                .and_then(|mut f| {
+                    writeln!(f, "{cookie}")?;
+                    f.sync_all()
+                });
+            if let Err(e) = written {
+                tracing::error!(error = %e, file = %path.display(),
+                    "cannot record a logout: the session ends now, but a restart would accept it again");
+            }
+        }
     }
 }
 
@@ -374,9 +528,22 @@ impl Access {
         }
     }
 
-    /// Names the token file in the 401 message.
+    /// Names the token file (its name only, never its folder) in the 401 message.
     pub fn with_token_file(mut self, path: impl Into<PathBuf>) -> Access {
         self.token_file = Some(path.into());
+        self
+    }
+
+    /// The web page's sessions with their logouts kept in `path` across restarts.
+    pub fn with_revocation_file(mut self, path: &Path) -> Result<Access, RevocationFileError> {
+        let sessions = Sessions::new(&self.token).with_revocation_file(path)?;
+        self.sessions = Arc::new(sessions);
+        Ok(self)
+    }
+
+    /// The web page's sessions on another clock (tests of the lifetimes).
+    pub fn with_clock(mut self, clock: Arc<dyn Clock>) -> Access {
+        self.sessions = Arc::new(Sessions::with_clock(&self.token, clock));
         self
     }
 
@@ -445,6 +612,24 @@ fn header_str(headers: &HeaderMap, name: header::HeaderName) -> Option<&str> {
 /// The checks, in order: Host (421), Origin and fetch metadata (403), token (401), POST body
 /// type (415). Each refusal says what to do.
 pub async fn guard(State(access): State<Arc<Access>>, request: Request, next: Next) -> Response {
+    // A body promised larger than any request may be is refused before a byte of it is read,
+    // and the connection closed.
+    if let Some(len) = header_str(request.headers(), header::CONTENT_LENGTH)
+        .and_then(|v| v.trim().parse::<u64>().ok())
+        && len > super::MAX_BODY_BYTES as u64
+    {
+        let mut r = refuse(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!(
+                "the request body is {len} bytes, over the limit of {} bytes (a brdfd.scan/1 \
+                 file is about 30 KiB)",
+                super::MAX_BODY_BYTES
+            ),
+        );
+        r.headers_mut()
+            .insert(header::CONNECTION, HeaderValue::from_static("close"));
+        return r;
+    }
     if let Err(response) = check(
         &access,
         request.method(),
@@ -571,10 +756,17 @@ fn check(
         {
             check_page_request(access, method, headers, cookie)?;
         } else if !sent.is_some_and(|t| access.token.matches(t.as_bytes())) {
+            // The file's name only: an absolute path tells a stranger about the machine.
             let where_ = access
                 .token_file
                 .as_ref()
-                .map(|p| format!(" (the token is in {})", p.display()))
+                .and_then(|p| p.file_name())
+                .map(|n| {
+                    format!(
+                        " (the token is in the daemon's {} file, [api] token_file)",
+                        n.to_string_lossy()
+                    )
+                })
                 .unwrap_or_default();
             if cookie.is_some() && path != TICKET_PATH {
                 return Err(refuse(
@@ -848,6 +1040,110 @@ mod tests {
         sessions.revoke(&cookie);
         assert!(!sessions.verify(&cookie));
         assert!(sessions.verify(&other));
+    }
+
+    #[test]
+    fn tickets_last_two_minutes_and_sessions_twelve_hours_on_the_clock() {
+        let clock = Arc::new(ManualClock::at(1_800_000_000_000));
+        let sessions = Sessions::with_clock(&Token::generate(), clock.clone());
+        // A ticket works until its two minutes are over, not after.
+        let early = sessions.issue_ticket();
+        let late = sessions.issue_ticket();
+        clock.advance(TICKET_LIFETIME - Duration::from_millis(1));
+        let cookie = sessions
+            .redeem(&early)
+            .expect("a ticket just inside its lifetime");
+        clock.advance(Duration::from_millis(1));
+        assert!(sessions.redeem(&late).is_none(), "a ticket at its lifetime");
+        // The session from it lasts twelve hours from then.
+        assert!(sessions.verify(&cookie));
+        clock.advance(SESSION_LIFETIME - Duration::from_secs(2));
+        assert!(
+            sessions.verify(&cookie),
+            "a session just inside its lifetime"
+        );
+        clock.advance(Duration::from_secs(2));
+        assert!(!sessions.verify(&cookie), "a session past its lifetime");
+        assert_eq!(TICKET_LIFETIME, Duration::from_secs(120));
+        assert_eq!(SESSION_LIFETIME, Duration::from_secs(12 * 3600));
+    }
+
+    #[test]
+    fn a_logout_survives_a_restart_with_the_revocation_file() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("brdfd.db.sessions");
+        let token = Token::generate();
+        let clock = Arc::new(ManualClock::at(1_800_000_000_000));
+        let first = Sessions::with_clock(&token, clock.clone())
+            .with_revocation_file(&file)
+            .unwrap();
+        let ended = first.redeem(&first.issue_ticket()).unwrap();
+        let kept = first.redeem(&first.issue_ticket()).unwrap();
+        first.revoke(&ended);
+        // A forged cookie is not recorded.
+        first.revoke(&format!(
+            "v1.99999999999.{}.{}",
+            "0".repeat(32),
+            "0".repeat(64)
+        ));
+        drop(first);
+        let mode = std::fs::metadata(&file).unwrap().permissions().mode();
+        assert_eq!(mode & 0o077 & !0o040, 0, "{mode:o}");
+        assert_eq!(std::fs::read_to_string(&file).unwrap().lines().count(), 1);
+        // The next daemon, same token: the ended session stays ended, the other goes on.
+        let second = Sessions::with_clock(&token, clock.clone())
+            .with_revocation_file(&file)
+            .unwrap();
+        assert!(!second.verify(&ended));
+        assert!(second.verify(&kept));
+        // Without the file (the old behaviour) the restart would have let it back in.
+        assert!(Sessions::with_clock(&token, clock.clone()).verify(&ended));
+        // Once expired, the line is dropped at the next start.
+        clock.advance(SESSION_LIFETIME);
+        let _third = Sessions::with_clock(&token, clock)
+            .with_revocation_file(&file)
+            .unwrap();
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "");
+        // A FIFO (or anything but a regular file) is refused, without hanging.
+        let fifo = dir.path().join("fifo");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        assert!(Sessions::new(&token).with_revocation_file(&fifo).is_err());
+    }
+
+    #[test]
+    fn a_token_file_that_is_a_pipe_is_refused_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("brdfd.token");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let started = std::time::Instant::now();
+        let e = Token::load_or_create(&fifo).unwrap_err();
+        assert!(matches!(e, TokenError::NotRegular { .. }), "{e}");
+        assert!(e.to_string().contains("not a regular file"), "{e}");
+        assert!(started.elapsed() < Duration::from_secs(1));
+    }
+
+    #[test]
+    fn a_401_names_the_token_file_but_not_its_folder() {
+        let t = Token::generate();
+        let a = Access::new(t).with_token_file("/var/lib/brdfd/brdfd.token");
+        let r = check(
+            &a,
+            &Method::GET,
+            "/scans",
+            &headers(&[("host", "127.0.0.1:7878")]),
+        )
+        .unwrap_err();
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        let body =
+            rt.block_on(async { axum::body::to_bytes(r.into_body(), 1 << 16).await.unwrap() });
+        let body = String::from_utf8_lossy(&body);
+        assert!(body.contains("brdfd.token"), "{body}");
+        assert!(!body.contains("/var/lib"), "{body}");
     }
 
     #[test]

@@ -149,13 +149,16 @@ impl ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = self.status();
-        if status == StatusCode::INTERNAL_SERVER_ERROR {
+        let error = if status == StatusCode::INTERNAL_SERVER_ERROR {
             tracing::error!(error = %self.0, "request failed");
-        }
+            INTERNAL_ERROR.to_string()
+        } else {
+            self.0.to_string()
+        };
         (
             status,
             Json(ErrorBody {
-                error: self.0.to_string(),
+                error,
                 kind: Some(self.kind().to_string()),
             }),
         )
@@ -164,6 +167,50 @@ impl IntoResponse for ApiError {
 }
 
 type ApiResult<T> = Result<T, ApiError>;
+
+/// A request body or query the extractor refused: the answer names the problem and says what
+/// to send, without the parser's internals (its list of expected fields, byte positions),
+/// which go to the log.
+fn rejected_body(what: &str, expected: &str, detail: &str) -> ServiceError {
+    tracing::info!(
+        request = what,
+        detail,
+        "request refused: not the expected shape"
+    );
+    ServiceError::BadRequest(format!(
+        "{what}: {}; {expected}",
+        without_parser_internals(detail)
+    ))
+}
+
+/// A serde or extractor message without its list of expected names and its position: "unknown
+/// field `x`, expected one of `a`, `b` at line 1 column 5" → "unknown field `x`".
+fn without_parser_internals(detail: &str) -> String {
+    // The extractor's prefix ("Failed to deserialize the JSON body into the target type: ").
+    let text = detail
+        .rsplit_once("target type: ")
+        .map_or(detail, |(_, t)| t);
+    let text = text.split(" at line ").next().unwrap_or(text);
+    let unknown = ["unknown field", "unknown variant"]
+        .iter()
+        .filter_map(|k| text.find(k))
+        .min();
+    let text = match unknown.and_then(|at| text[at..].find(", expected").map(|i| at + i)) {
+        Some(end) => &text[..end],
+        None => text,
+    };
+    let text = text.trim();
+    if text.is_empty() {
+        "not a valid request".into()
+    } else {
+        text.to_string()
+    }
+}
+
+/// The body of a 500: what happened in words for people, never the store's own error text
+/// (SQLite codes, file paths), which stays in the log.
+const INTERNAL_ERROR: &str = "the daemon could not do this because its store failed; the daemon's log says why \
+     (journalctl -u brdfd, or the terminal running brdfd serve)";
 
 /// `POST /scans` body.
 #[derive(Debug, Serialize, Deserialize)]
@@ -313,7 +360,8 @@ async fn request_scan(
     State(s): State<Service>,
     body: Result<Json<ScanRequestBody>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<impl IntoResponse> {
-    let Json(body) = body.map_err(|e| ServiceError::BadRequest(format!("POST /scans: {e}")))?;
+    let Json(body) = body
+        .map_err(|e| rejected_body("POST /scans", "send {\"sample\": \"NAME\"}", &e.body_text()))?;
     let id = s.request_scan(&body.sample).await?;
     Ok((
         StatusCode::ACCEPTED,
@@ -325,7 +373,13 @@ async fn list_scans(
     State(s): State<Service>,
     query: Result<Query<ScanQuery>, axum::extract::rejection::QueryRejection>,
 ) -> ApiResult<impl IntoResponse> {
-    let Query(q) = query.map_err(|e| ServiceError::BadRequest(format!("GET /scans: {e}")))?;
+    let Query(q) = query.map_err(|e| {
+        rejected_body(
+            "GET /scans",
+            "the parameters are state, sample, limit (a number) and before (a scan id)",
+            &e.body_text(),
+        )
+    })?;
     let state = q
         .state
         .as_deref()
@@ -485,8 +539,14 @@ async fn refit(
     body: Result<Json<RefitRequest>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<impl IntoResponse> {
     let scan: ScanId = parse_id("scan", &id)?;
-    let Json(request) =
-        body.map_err(|e| ServiceError::BadRequest(format!("POST /scans/{scan}/refit: {e}")))?;
+    let Json(request) = body.map_err(|e| {
+        rejected_body(
+            &format!("POST /scans/{scan}/refit"),
+            "send {\"cost_functions\": [\"cf1\", …], \"method\", \"seed\", \"sra\"} (each \
+                 optional; README: HTTP API)",
+            &e.body_text(),
+        )
+    })?;
     let fits = s.refit(scan, &request).await?;
     Ok((
         StatusCode::ACCEPTED,
@@ -556,10 +616,13 @@ async fn fit_preview(State(s): State<Service>, Path(id): Path<String>) -> Respon
     match drawn {
         Ok(Ok(png)) => ([(axum::http::header::CONTENT_TYPE, "image/png")], png).into_response(),
         Ok(Err(e)) => refuse(StatusCode::CONFLICT, e),
-        Err(e) => refuse(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("the preview failed: {e}"),
-        ),
+        Err(e) => {
+            tracing::error!(error = %e, %fit, "drawing a preview failed");
+            refuse(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "drawing the preview failed; the daemon's log says why".into(),
+            )
+        }
     }
 }
 
@@ -575,7 +638,11 @@ async fn cancel_fit(
     ))
 }
 
-async fn events(State(s): State<Service>, Extension(permits): Extension<EventPermits>) -> Response {
+async fn events(
+    State(s): State<Service>,
+    Extension(permits): Extension<EventPermits>,
+    connection: Option<Extension<server::ConnectionHandle>>,
+) -> Response {
     let Ok(permit) = permits.0.clone().try_acquire_owned() else {
         return limit_refusal(
             StatusCode::SERVICE_UNAVAILABLE,
@@ -584,6 +651,10 @@ async fn events(State(s): State<Service>, Extension(permits): Extension<EventPer
                 .into(),
         );
     };
+    // From here the connection counts under max_event_subscribers, not max_connections.
+    if let Some(Extension(c)) = connection {
+        c.become_stream();
+    }
     let keep_alive = permits.1;
     tracing::debug!(open = permits.0.available_permits(), "event stream opened");
     let stream = BroadcastStream::new(s.subscribe()).map(move |r| {
@@ -633,9 +704,9 @@ impl ApiServer {
         addr: SocketAddr,
         options: ApiOptions,
     ) -> Result<ApiServer, ApiStartError> {
-        let listener = tokio::net::TcpListener::bind(addr)
-            .await
-            .map_err(|source| ApiStartError::Bind { addr, source })?;
+        server::raise_fd_limit();
+        let listener =
+            server::listen(addr).map_err(|source| ApiStartError::Bind { addr, source })?;
         let addr = listener
             .local_addr()
             .map_err(|source| ApiStartError::Bind { addr, source })?;
@@ -663,3 +734,29 @@ impl ApiServer {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod body_tests {
+    #[test]
+    fn refusals_keep_the_problem_and_drop_the_parser_internals() {
+        let f = super::without_parser_internals;
+        assert_eq!(
+            f(
+                "Failed to deserialize the JSON body into the target type: unknown field `sampel`, \
+               expected `sample` at line 1 column 9"
+            ),
+            "unknown field `sampel`"
+        );
+        assert_eq!(
+            f("sampel: unknown field `sampel`, expected `sample` at line 1 column 9"),
+            "sampel: unknown field `sampel`"
+        );
+        assert_eq!(
+            f(
+                "Failed to deserialize the JSON body into the target type: cost_functions[0]: \
+               unknown cost function \"cf9\": expected cf1, cf2 or m2 at line 1 column 27"
+            ),
+            "cost_functions[0]: unknown cost function \"cf9\": expected cf1, cf2 or m2"
+        );
+    }
+}

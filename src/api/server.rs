@@ -1,31 +1,43 @@
 //! The HTTP server under the API: an accept loop on hyper's HTTP/1.1 connection builder, so that
-//! every connection has bounds a stray or hostile client cannot lift.
+//! every connection has bounds a stray or hostile client cannot lift, and no number of silent
+//! or unauthenticated connections can keep the operator out.
 //!
-//! - **Header-read timeout** (`[api] header_timeout_ms`): a request whose header has not
+//! - **Header-read timeout** (`[api] header_timeout_ms`, 2 s): a request whose header has not
 //!   arrived whole in time closes the connection (slowloris); hyper's own timer.
 //! - **Idle timeout** (`[api] idle_timeout_ms`): no bytes in either direction for that long
 //!   closes the connection. An event stream is never idle: it sends a keep-alive comment every
 //!   15 s, or every third of the idle timeout when that is shorter (default 60 s).
-//! - **Connection cap** (`[api] max_connections`): a connection over the cap gets one
-//!   `503 Service Unavailable` JSON answer and is closed, without reaching the router.
+//! - **Connection cap, counted per kind** (`[api] max_connections`): connections that are not
+//!   event streams. Each is *waiting* (no request in flight: just connected, a header
+//!   half-sent, idle between requests) or *busy* (a request in flight). At the cap, a new
+//!   connection closes the one that has waited longest, so silent sockets only ever push each
+//!   other out, and the operator's request, once sent, is never the one closed; only when
+//!   every connection is busy is the new one answered `503` (one JSON answer, without reaching
+//!   the router). An event stream leaves this count when it starts: streams have their own cap
+//!   (`max_event_subscribers`, [`super::events`]), and need the token.
+//! - **Refusals are logged at most once per 10 s**, with how many were not logged, so a flood
+//!   does not flood the log too.
 //!
-//! axum's own `serve` has none of the three. Stopping: the listener is dropped (no new
+//! axum's own `serve` has none of these. Stopping: the listener is dropped (no new
 //! connections), every connection is asked to finish its request in flight, and
 //! [`super::ApiServer::stop`] cuts what is left (event streams) after its grace period.
 
+use std::collections::HashMap;
 use std::pin::Pin;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 
 use axum::Router;
+use axum::extract::Request;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::service::TowerToHyperService;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::{Semaphore, watch};
+use tokio::sync::{Notify, watch};
 use tokio::task::JoinSet;
+use tower::ServiceExt;
 
 /// The connection bounds of [`serve`].
 #[derive(Debug, Clone, Copy)]
@@ -35,6 +47,145 @@ pub struct ConnectionLimits {
     pub idle_timeout: Duration,
 }
 
+/// What a connection is doing, for the cap.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ConnState {
+    /// No request in flight: may be closed to make room.
+    Waiting,
+    /// A request in flight.
+    Busy,
+    /// An event stream: outside the connection count.
+    Stream,
+}
+
+#[derive(Debug)]
+struct Conn {
+    state: ConnState,
+    since: Instant,
+    close: Arc<Notify>,
+}
+
+/// The open connections and their states.
+#[derive(Debug, Default)]
+struct Registry {
+    conns: Mutex<HashMap<u64, Conn>>,
+    next: AtomicU64,
+}
+
+impl Registry {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<u64, Conn>> {
+        self.conns.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Admits a connection under `max` (closing the longest-waiting one if need be); `None`
+    /// if every counted connection is busy.
+    fn admit(&self, max: usize) -> Option<(u64, Arc<Notify>)> {
+        let mut conns = self.lock();
+        let counted = conns
+            .values()
+            .filter(|c| c.state != ConnState::Stream)
+            .count();
+        if counted >= max {
+            let oldest = conns
+                .iter()
+                .filter(|(_, c)| c.state == ConnState::Waiting)
+                .min_by_key(|(_, c)| c.since)
+                .map(|(id, _)| *id)?;
+            if let Some(c) = conns.remove(&oldest) {
+                c.close.notify_one();
+            }
+        }
+        let id = self.next.fetch_add(1, Ordering::Relaxed);
+        let close = Arc::new(Notify::new());
+        conns.insert(
+            id,
+            Conn {
+                state: ConnState::Waiting,
+                since: Instant::now(),
+                close: close.clone(),
+            },
+        );
+        Some((id, close))
+    }
+
+    /// Closes the connection that has waited longest (out of file descriptors).
+    fn close_oldest_waiting(&self) -> bool {
+        let mut conns = self.lock();
+        let oldest = conns
+            .iter()
+            .filter(|(_, c)| c.state == ConnState::Waiting)
+            .min_by_key(|(_, c)| c.since)
+            .map(|(id, _)| *id);
+        match oldest.and_then(|id| conns.remove(&id)) {
+            Some(c) => {
+                c.close.notify_one();
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn set(&self, id: u64, state: ConnState) {
+        if let Some(c) = self.lock().get_mut(&id) {
+            // A stream stays a stream until its connection ends.
+            if c.state != ConnState::Stream {
+                c.state = state;
+                c.since = Instant::now();
+            }
+        }
+    }
+
+    fn remove(&self, id: u64) {
+        self.lock().remove(&id);
+    }
+}
+
+/// A request's connection, in its extensions: the event-stream handler marks it a stream, so
+/// that it leaves the connection count ([`ConnectionLimits::max_connections`]).
+#[derive(Debug, Clone)]
+pub struct ConnectionHandle {
+    id: u64,
+    registry: Arc<Registry>,
+}
+
+impl ConnectionHandle {
+    /// This connection is now an event stream: counted under `max_event_subscribers`, not
+    /// `max_connections`, and never closed to make room.
+    pub fn become_stream(&self) {
+        self.registry.set(self.id, ConnState::Stream);
+    }
+}
+
+/// A warning logged at most once per interval, with the count of those not logged.
+#[derive(Debug)]
+struct RateLimited {
+    last: Mutex<Option<Instant>>,
+    suppressed: AtomicU64,
+    every: Duration,
+}
+
+impl RateLimited {
+    fn new(every: Duration) -> RateLimited {
+        RateLimited {
+            last: Mutex::new(None),
+            suppressed: AtomicU64::new(0),
+            every,
+        }
+    }
+
+    /// Whether to log now, and how many were not logged since the last time.
+    fn check(&self) -> Option<u64> {
+        let mut last = self.last.lock().unwrap_or_else(|p| p.into_inner());
+        let now = Instant::now();
+        if last.is_some_and(|t| now.duration_since(t) < self.every) {
+            self.suppressed.fetch_add(1, Ordering::Relaxed);
+            return None;
+        }
+        *last = Some(now);
+        Some(self.suppressed.swap(0, Ordering::Relaxed))
+    }
+}
+
 /// Serves `app` on `listener` until `stop` turns true.
 pub async fn serve(
     listener: TcpListener,
@@ -42,7 +193,8 @@ pub async fn serve(
     limits: ConnectionLimits,
     mut stop: watch::Receiver<bool>,
 ) {
-    let permits = Arc::new(Semaphore::new(limits.max_connections));
+    let registry = Arc::new(Registry::default());
+    let refusals = RateLimited::new(Duration::from_secs(10));
     let mut connections = JoinSet::new();
     loop {
         while connections.try_join_next().is_some() {}
@@ -53,24 +205,36 @@ pub async fn serve(
         let (stream, peer) = match accepted {
             Ok(a) => a,
             Err(e) => {
-                // Out of file descriptors, or a connection reset before accept: the listener
-                // itself is fine, so pause briefly instead of spinning, and go on.
-                tracing::warn!(error = %e, "accepting an API connection failed");
-                tokio::time::sleep(Duration::from_millis(50)).await;
+                // Out of file descriptors: make room by closing the connection that has waited
+                // longest. Otherwise (a connection reset before accept) the listener itself is
+                // fine: pause briefly instead of spinning, and go on.
+                let out_of_fds = matches!(e.raw_os_error(), Some(libc::EMFILE | libc::ENFILE));
+                if !(out_of_fds && registry.close_oldest_waiting()) {
+                    if let Some(missed) = refusals.check() {
+                        tracing::warn!(error = %e, missed, "accepting an API connection failed");
+                    }
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                } else {
+                    tokio::task::yield_now().await;
+                }
                 continue;
             }
         };
-        match permits.clone().try_acquire_owned() {
-            Ok(permit) => {
+        match registry.admit(limits.max_connections) {
+            Some((id, close)) => {
                 let app = app.clone();
                 let stop = stop.clone();
+                let registry = registry.clone();
                 connections.spawn(async move {
-                    serve_connection(stream, app, limits, stop).await;
-                    drop(permit);
+                    serve_connection(stream, app, limits, stop, id, close, registry.clone()).await;
+                    registry.remove(id);
                 });
             }
-            Err(_) => {
-                tracing::warn!(%peer, max = limits.max_connections, "API connection refused: at the connection cap");
+            None => {
+                if let Some(missed) = refusals.check() {
+                    tracing::warn!(%peer, max = limits.max_connections, missed,
+                        "API connection refused: every connection has a request in flight");
+                }
                 connections.spawn(refuse_over_cap(stream, limits.max_connections));
             }
         }
@@ -84,11 +248,31 @@ async fn serve_connection(
     app: Router,
     limits: ConnectionLimits,
     mut stop: watch::Receiver<bool>,
+    id: u64,
+    close: Arc<Notify>,
+    registry: Arc<Registry>,
 ) {
     let _ = stream.set_nodelay(true);
     let io = ActivityIo::new(stream);
     let activity = io.activity.clone();
-    let service = TowerToHyperService::new(app);
+    let handle = ConnectionHandle {
+        id,
+        registry: registry.clone(),
+    };
+    // Each request marks its connection busy until its answer's head is out, and carries the
+    // handle for the event-stream handler.
+    let service = tower::service_fn(move |mut request: Request<hyper::body::Incoming>| {
+        let app = app.clone();
+        let handle = handle.clone();
+        async move {
+            handle.registry.set(handle.id, ConnState::Busy);
+            request.extensions_mut().insert(handle.clone());
+            let response = app.oneshot(request.map(axum::body::Body::new)).await;
+            handle.registry.set(handle.id, ConnState::Waiting);
+            response
+        }
+    });
+    let service = TowerToHyperService::new(service);
     let conn = hyper::server::conn::http1::Builder::new()
         .timer(TokioTimer::new())
         .header_read_timeout(limits.header_timeout)
@@ -102,6 +286,10 @@ async fn serve_connection(
                 if let Err(e) = r {
                     tracing::debug!(error = %e, "API connection ended with an error");
                 }
+                return;
+            }
+            _ = close.notified() => {
+                tracing::debug!("closing a waiting API connection to make room for a new one");
                 return;
             }
             _ = tokio::time::sleep(tick) => {
@@ -122,8 +310,8 @@ async fn serve_connection(
 /// client sees the answer instead of a reset.
 async fn refuse_over_cap(mut stream: TcpStream, max: usize) {
     let body = format!(
-        "{{\"error\":\"the brdfd API is serving its maximum of {max} connections ([api] \
-         max_connections); close idle connections or try again shortly\"}}"
+        "{{\"error\":\"the brdfd API has a request in flight on each of its {max} connections \
+         ([api] max_connections); try again shortly\"}}"
     );
     let response = format!(
         "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\n\
@@ -137,6 +325,41 @@ async fn refuse_over_cap(mut stream: TcpStream, max: usize) {
         stream.shutdown().await
     })
     .await;
+}
+
+/// Binds `addr` with a listen backlog of 4096 (the kernel caps it at `net.core.somaxconn`):
+/// a burst of connections waits in the kernel's queue for the accept loop instead of having
+/// its SYNs dropped (which costs a client a second before it tries again).
+pub fn listen(addr: std::net::SocketAddr) -> std::io::Result<TcpListener> {
+    let socket = if addr.is_ipv4() {
+        tokio::net::TcpSocket::new_v4()?
+    } else {
+        tokio::net::TcpSocket::new_v6()?
+    };
+    socket.set_reuseaddr(true)?;
+    socket.bind(addr)?;
+    socket.listen(4096)
+}
+
+/// Raises this process's soft limit on open files to its hard limit (at most 65536), so that
+/// the connection caps, not the descriptor limit, bound the API. Returns the limit now.
+pub fn raise_fd_limit() -> u64 {
+    // SAFETY: getrlimit/setrlimit on this process with a valid struct.
+    unsafe {
+        let mut lim = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) != 0 {
+            return 0;
+        }
+        let want = lim.rlim_max.min(65_536);
+        if lim.rlim_cur < want {
+            lim.rlim_cur = want;
+            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
+        }
+        lim.rlim_cur as u64
+    }
 }
 
 /// When a connection last moved a byte, as milliseconds since its start.
@@ -210,5 +433,53 @@ impl AsyncWrite for ActivityIo {
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
         Pin::new(&mut self.inner).poll_shutdown(cx)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn at_the_cap_the_longest_waiting_connection_makes_room() {
+        let r = Registry::default();
+        let (a, close_a) = r.admit(2).unwrap();
+        let (b, _) = r.admit(2).unwrap();
+        r.set(b, ConnState::Busy);
+        // Full: the waiting one (a) is closed for the new one.
+        let (c, _) = r.admit(2).unwrap();
+        assert!(!r.lock().contains_key(&a));
+        // close_a was notified: a stored permit completes at once.
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        rt.block_on(async {
+            tokio::time::timeout(Duration::from_millis(100), close_a.notified())
+                .await
+                .expect("the closed connection was told");
+        });
+        // Both busy: refused.
+        r.set(c, ConnState::Busy);
+        assert!(r.admit(2).is_none());
+        // A stream leaves the count.
+        r.set(c, ConnState::Stream);
+        assert!(r.admit(2).is_some());
+        r.set(c, ConnState::Waiting);
+        assert_eq!(
+            r.lock()[&c].state,
+            ConnState::Stream,
+            "a stream stays a stream"
+        );
+    }
+
+    #[test]
+    fn refusals_are_logged_once_per_interval_with_the_count_missed() {
+        let l = RateLimited::new(Duration::from_millis(50));
+        assert_eq!(l.check(), Some(0));
+        assert_eq!(l.check(), None);
+        assert_eq!(l.check(), None);
+        std::thread::sleep(Duration::from_millis(60));
+        assert_eq!(l.check(), Some(2));
     }
 }

@@ -187,8 +187,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
             report.display(),
             scans_dir.display()
         );
-        std::fs::write(&report, &text)
-            .with_context(|| format!("cannot write {}", report.display()))?;
+        crate::safe_fs::write_file(&report, text.as_bytes(), crate::safe_fs::Replace::OwnKind)?;
         if args.json {
             let fits: Vec<&DemoRow> = result.rows.iter().flatten().collect();
             println!(
@@ -224,8 +223,8 @@ async fn write_scans(store: &Store, result: &DemoResult, dir: &Path) -> anyhow::
         let detail = store.scan_detail(*scan).await?;
         let file = scan_from_detail(&detail)?;
         let path = dir.join(format!("{}.scan.json", crate::synth::slug(sample)));
-        file.write_file(&path)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        let text = file.to_json_pretty()?;
+        crate::safe_fs::write_file(&path, text.as_bytes(), crate::safe_fs::Replace::OwnKind)?;
     }
     Ok(())
 }

@@ -4,8 +4,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
-
 use crate::formats::{self, ExportOptions, Format, ImportOptions};
 use crate::scan::ScanError;
 
@@ -81,12 +79,10 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
                     .collect::<Vec<_>>(),
                 _ => formats::gltf::files(&study, &opts)?,
             };
-            std::fs::create_dir_all(&args.out)
-                .with_context(|| format!("creating {}", args.out.display()))?;
+            let out = super::out_dir(&args.out)?;
             let mut written = Vec::new();
             for (name, bytes) in &files {
-                let path = args.out.join(name);
-                super::write_new_file(&path, bytes, args.force)?;
+                let path = out.write(name, bytes, crate::safe_fs::Replace::force(args.force))?;
                 if !args.json {
                     println!("{}", path.display());
                 }
@@ -273,16 +269,18 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     for file in &args.files {
         imported.extend(read_one(args, file)?);
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    let out = super::out_dir(&args.out)?;
     let stems = super::distinct_file_stems(imported.iter().map(|s| s.scan.sample.as_str()));
     for (item, stem) in imported.iter().zip(stems) {
         let scan = &item.scan;
-        let path = args.out.join(format!("{stem}.scan.json"));
         let text = scan
             .to_json_pretty()
             .map_err(|e: ScanError| anyhow::anyhow!(e))?;
-        super::write_new_file(&path, text.as_bytes(), args.force)?;
+        let path = out.write(
+            &format!("{stem}.scan.json"),
+            text.as_bytes(),
+            crate::safe_fs::Replace::force(args.force),
+        )?;
         if let Some((_, _, Some(warning))) = &item.check {
             eprintln!("warning: {warning}");
         }

@@ -177,30 +177,17 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 /// Writes `bytes` to a new file at `path`; an existing file is refused unless `force` (the
-/// operator asked to replace it), so an export never silently overwrites a measurement.
+/// operator asked to replace it), so an export never silently overwrites a measurement. The
+/// rules of [`crate::safe_fs`] hold: never through a link, never onto the store or the token,
+/// and `--force` replaces only a plain file.
 pub fn write_new_file(path: &std::path::Path, bytes: &[u8], force: bool) -> anyhow::Result<()> {
-    use anyhow::Context;
-    use std::io::Write;
-    let mut options = std::fs::OpenOptions::new();
-    options.write(true);
-    if force {
-        options.create(true).truncate(true);
-    } else {
-        options.create_new(true);
-    }
-    let mut file = options.open(path).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::AlreadyExists {
-            anyhow::anyhow!(
-                "{} exists already: choose another name, or pass --force to replace it",
-                path.display()
-            )
-        } else {
-            anyhow::Error::new(e).context(format!("cannot create {}", path.display()))
-        }
-    })?;
-    file.write_all(bytes)
-        .and_then(|()| file.sync_all())
-        .with_context(|| format!("cannot write {}", path.display()))
+    crate::safe_fs::write_file(path, bytes, crate::safe_fs::Replace::force(force))?;
+    Ok(())
+}
+
+/// The folder `--out DIR` names, created if missing and held open; refused if it is a link.
+pub fn out_dir(path: &std::path::Path) -> anyhow::Result<crate::safe_fs::Dir> {
+    Ok(crate::safe_fs::Dir::create(path)?)
 }
 
 /// One file name per sample, for writing several samples into one directory: the sample's

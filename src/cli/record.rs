@@ -114,6 +114,6 @@ fn add_note(path: &Path, note: &str) -> anyhow::Result<()> {
         out.push_str(&format!("note {note}\n"));
     }
     drivers::session::Session::parse(&out).context("the recorded session does not parse")?;
-    std::fs::write(path, out)?;
+    crate::safe_fs::write_file(path, out.as_bytes(), crate::safe_fs::Replace::OwnKind)?;
     Ok(())
 }

@@ -272,6 +272,11 @@ pub struct ReportArgs {
     #[arg(long, value_name = "N", default_value_t = crate::report::ReportOptions::MAX_SAMPLE_FIGURES)]
     pub max_sample_figures: usize,
 
+    /// Replace the files of an earlier report in DIR (refused otherwise). Only plain files
+    /// are replaced: never a link, the store or the token.
+    #[arg(long)]
+    pub force: bool,
+
     /// Print `{"samples", "figures", "previews", "html", "markdown"}` instead of lines.
     #[arg(long)]
     pub json: bool,
@@ -287,6 +292,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     );
     let opts = crate::report::ReportOptions {
         max_sample_figures: args.max_sample_figures,
+        replace: args.force,
     };
     let files = write_report_with(&study, &args.out, &opts, &mut |step, done, total| {
         bar.set_length(total as u64);

@@ -173,7 +173,12 @@ async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
         ServiceOptions::default(),
     )
     .await?;
-    let access = crate::api::Access::new(token).with_token_file(&token_path);
+    // Logouts of the web page's sessions, kept across restarts beside the store.
+    let mut revocations = config.store.path.as_os_str().to_os_string();
+    revocations.push(".sessions");
+    let access = crate::api::Access::new(token)
+        .with_token_file(&token_path)
+        .with_revocation_file(std::path::Path::new(&revocations))?;
     let options = crate::api::ApiOptions::from_config(&config.api, access);
     let api = ApiServer::start(service.clone(), config.api.listen, options).await?;
     service
@@ -213,9 +218,14 @@ async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
     wait_for_signal().await?;
     tracing::info!("shutting down");
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
-    // The API first, so that no request reaches a service that is closing its store.
-    api.stop(Duration::from_secs(1)).await;
-    let clean = service.shutdown().await;
+    // The measurement in progress is aborted at once (its readings kept, the scan marked
+    // aborted), while the API stops taking connections and finishes its requests in flight;
+    // the store closes only once both are done, so no request reaches a closed store.
+    let (_, clean) = tokio::join!(
+        api.stop(Duration::from_secs(1)),
+        service.stop_keeping_store()
+    );
+    service.store().close().await;
     if !clean {
         anyhow::bail!("some tasks did not stop within the grace period");
     }

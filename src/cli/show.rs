@@ -1,7 +1,6 @@
 //! `brdfd show`: one scan with its provenance, reference, readings and fits, and the fits'
 //! sphere previews on request. The fits table is also what a followed scan ends with.
 
-use anyhow::Context;
 use serde_json::Value;
 
 use super::operator::{DaemonArgs, f, id, local_time, s, terminal_safe};
@@ -85,19 +84,17 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
     }
     print_fits(&v);
     if let Some(dir) = &args.preview {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let out = super::out_dir(dir)?;
         for fit in v["fits"].as_array().into_iter().flatten() {
             let run = &fit["run"];
             if run["status"] != "done" {
                 continue;
             }
-            let path = dir.join(format!(
-                "fit-{}-{}.png",
-                id(run, "id"),
-                s(run, "cost_function")
-            ));
+            let name = format!("fit-{}-{}.png", id(run, "id"), s(run, "cost_function"));
             let png = client.get_bytes(&format!("/fits/{}/preview.png", id(run, "id")))?;
-            std::fs::write(&path, png).with_context(|| format!("writing {}", path.display()))?;
+            // A preview of the same fit is the same picture: replaced, but only if it is a
+            // plain file (never a link, the store or the token).
+            let path = out.write(&name, &png, crate::safe_fs::Replace::OwnKind)?;
             println!("preview {}", path.display());
         }
     }

@@ -72,7 +72,12 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         };
         let scan = synth_scan(truth, &opts)?;
         let (scan_name, truth_name) = file_names(truth, args.noise > 0.0);
-        scan.write_file(args.out.join(&scan_name))?;
+        let text = scan.to_json_pretty()?;
+        crate::safe_fs::write_file(
+            &args.out.join(&scan_name),
+            text.as_bytes(),
+            crate::safe_fs::Replace::OwnKind,
+        )?;
         write_truth(&args.out.join(&truth_name), truth)?;
         if !args.json {
             println!("{}  {}  {}", truth.sample, scan_name, truth_name);
@@ -136,8 +141,11 @@ fn write_sessions(
     let mut written = Vec::new();
     for (device, session) in [("ma_t12", &pair.ma_t12), ("sra", &pair.sra)] {
         let path = dir.join(format!("{stem}.{device}.session"));
-        std::fs::write(&path, session.to_text())
-            .with_context(|| format!("writing {}", path.display()))?;
+        crate::safe_fs::write_file(
+            &path,
+            session.to_text().as_bytes(),
+            crate::safe_fs::Replace::OwnKind,
+        )?;
         if !quiet {
             println!("  {}", path.display());
         }
@@ -149,5 +157,6 @@ fn write_sessions(
 fn write_truth(path: &Path, truth: &GroundTruth) -> anyhow::Result<()> {
     let mut text = serde_json::to_string_pretty(truth)?;
     text.push('\n');
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+    crate::safe_fs::write_file(path, text.as_bytes(), crate::safe_fs::Replace::OwnKind)?;
+    Ok(())
 }

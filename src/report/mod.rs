@@ -38,6 +38,10 @@ pub enum ReportError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// The directory or a file in it refused ([`crate::safe_fs`]): a link, the store, a name
+    /// that exists.
+    #[error("{0}")]
+    File(#[from] crate::safe_fs::FsError),
     /// A figure could not be drawn or saved (the message is plotters').
     #[error("cannot draw {}: {message}", path.display())]
     Figure { path: PathBuf, message: String },
@@ -63,6 +67,10 @@ pub struct ReportOptions {
     /// would otherwise draw a swatch chart tens of thousands of pixels high and thousands of
     /// spectra files; the summary says when figures show fewer samples than the tables.
     pub max_sample_figures: usize,
+    /// Replace the files of an earlier report in the directory (`--force`); otherwise a name
+    /// that exists is refused. Either way, nothing is written through a link or onto the
+    /// store ([`crate::safe_fs`]).
+    pub replace: bool,
 }
 
 impl ReportOptions {
@@ -74,6 +82,7 @@ impl Default for ReportOptions {
     fn default() -> Self {
         ReportOptions {
             max_sample_figures: ReportOptions::MAX_SAMPLE_FIGURES,
+            replace: false,
         }
     }
 }
@@ -110,10 +119,90 @@ pub fn write_report_with(
     } else {
         study
     };
-    std::fs::create_dir_all(dir).map_err(|source| ReportError::Directory {
-        path: dir.to_path_buf(),
-        source,
-    })?;
+    // Everything is drawn into a fresh private folder inside DIR (plotters and the PNG
+    // encoder write to paths), then moved to its name in DIR under the rules of safe_fs: no
+    // name in DIR is ever opened for writing, so a link planted there leads nowhere.
+    let out = crate::safe_fs::Dir::create(dir)?;
+    let staging = out.staging(".brdfd-report-")?;
+    let staged = staging.path().to_path_buf();
+    let result = draw_report(study, drawn, shown, &staging.held_path(), progress);
+    let published = result.and_then(|files| publish(&out, &staging, files, opts.replace));
+    let staging_name = staged
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or_default()
+        .to_string();
+    drop(staging);
+    if let Err(e) = out.remove_tree(&staging_name) {
+        tracing::warn!(error = %e, "cannot remove the report's staging folder");
+    }
+    published
+}
+
+/// Moves every file of a report drawn in `staging` to its name in `out`.
+fn publish(
+    out: &crate::safe_fs::Dir,
+    staging: &crate::safe_fs::Dir,
+    files: ReportFiles,
+    replace: bool,
+) -> Result<ReportFiles, ReportError> {
+    let replace = crate::safe_fs::Replace::force(replace);
+    let all = files
+        .figures
+        .iter()
+        .flatten()
+        .chain(&files.previews)
+        .chain([&files.markdown, &files.html]);
+    if replace == crate::safe_fs::Replace::Never {
+        // Refuse before moving anything: no half-replaced report.
+        for p in all {
+            if let Some(name) = p.file_name().and_then(|n| n.to_str())
+                && let Some(e) = out.entry(name)?
+            {
+                let path = out.path().join(name);
+                return Err(if e.kind == crate::safe_fs::EntryKind::Symlink {
+                    crate::safe_fs::FsError::Symlink { path }
+                } else {
+                    crate::safe_fs::FsError::Exists { path }
+                }
+                .into());
+            }
+        }
+    }
+    let moved = |p: &Path| -> Result<PathBuf, ReportError> {
+        let name = p
+            .file_name()
+            .and_then(|n| n.to_str())
+            .expect("the report names its files");
+        Ok(out.publish_from(staging, name, name, replace)?)
+    };
+    let mut figures = Vec::with_capacity(files.figures.len());
+    for [png, svg] in &files.figures {
+        figures.push([moved(png)?, moved(svg)?]);
+    }
+    let previews = files
+        .previews
+        .iter()
+        .map(|p| moved(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let markdown = moved(&files.markdown)?;
+    let html = moved(&files.html)?;
+    Ok(ReportFiles {
+        figures,
+        markdown,
+        html,
+        previews,
+    })
+}
+
+/// Draws the report's files into `dir` (the staging folder).
+fn draw_report(
+    study: &Study,
+    drawn: &Study,
+    shown: usize,
+    dir: &Path,
+    progress: &mut dyn FnMut(&str, usize, usize),
+) -> Result<ReportFiles, ReportError> {
     let analysis = Analysis::of(study);
     let figs = figures::figures(drawn);
     let total = figs.len() + 1;
@@ -265,6 +354,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let opts = ReportOptions {
             max_sample_figures: 2,
+            ..ReportOptions::default()
         };
         let files = write_report_with(&study, dir.path(), &opts, &mut |_, _, _| {}).unwrap();
         // 4, 5, 6, 6b, 7×3, 8×2 (not 3), 9, 10, 11, 11b, 12, 12b.

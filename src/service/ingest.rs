@@ -29,6 +29,15 @@
 //! again, under any name, is moved to `failed/` naming the earlier import. A store failure (a
 //! full disk) leaves the file in `.importing/` to be tried again at the next pass.
 //!
+//! **What the folder can do to the daemon.** Whoever can write into DIR can drop files, not
+//! redirect brdfd's writes: DIR and its three subfolders are opened once at start and held
+//! ([`crate::safe_fs::Dir`]); every listing, read, note and move is relative to those handles,
+//! a subfolder swapped for a link or another folder stops the folder's passes (named in
+//! `status`), moves never replace a name (`RENAME_NOREPLACE`) and notes are created with
+//! `O_EXCL | O_NOFOLLOW`. A symbolic link, a file with other names (a hard link) or anything
+//! but a regular file is moved to `failed/` unread; a file over `[ingest] max_file_mib` too,
+//! and no file is read past that bound.
+//!
 //! **Outcomes.** `DIR/done/NAME`, or `DIR/failed/NAME` with `DIR/failed/NAME.error.txt` saying
 //! why (the parser's message names file, line and field); an existing name there gets `-2`,
 //! `-3`, … before its first dot. Each file gives an [`Event::FileImported`] or
@@ -43,6 +52,7 @@ use serde::Serialize;
 use sha2::{Digest, Sha256};
 
 use crate::formats::{self, Format, ImportOptions};
+use crate::safe_fs::{Dir, EntryKind, FsError, Replace};
 use crate::scan::Scan;
 use crate::store::{FileImport, ImportedScan, Provenance, Source, StoreError};
 
@@ -64,6 +74,8 @@ pub struct IngestSettings {
     pub pair_wait: Duration,
     /// In an instrument's export, the object with this name is the reference tile.
     pub reference: String,
+    /// The largest file read.
+    pub max_file_bytes: u64,
 }
 
 impl IngestSettings {
@@ -74,6 +86,7 @@ impl IngestSettings {
             poll: c.poll,
             pair_wait: c.pair_wait,
             reference: c.reference.clone(),
+            max_file_bytes: c.max_file_bytes,
         })
     }
 }
@@ -168,31 +181,88 @@ struct Watch {
     seen: HashMap<String, Seen>,
 }
 
-/// The files of `dir` (names, kinds) with their size and modification time.
 /// A listed file: name, kind, pairing NAME, size, modification time.
 type Listed = (String, Kind, String, u64, Option<SystemTime>);
 
-fn list(dir: &Path) -> std::io::Result<Vec<Listed>> {
+/// The files of `dir` the folder reads, with their size and modification time; and the names
+/// of the folder's kinds that are not plain regular files (links, hard links, pipes, folders),
+/// with why, to be moved to `failed/` unread.
+fn list(dir: &Dir) -> Result<(Vec<Listed>, Vec<(String, String)>), FsError> {
     let mut out = Vec::new();
-    for entry in std::fs::read_dir(dir)? {
-        let entry = entry?;
-        let Ok(name) = entry.file_name().into_string() else {
-            continue;
-        };
+    let mut refused = Vec::new();
+    for (name, entry) in dir.list()? {
         let Some((kind, stem)) = kind_of(&name) else {
             continue;
         };
-        // Follows symbolic links; a file that vanished meanwhile is skipped.
-        let Ok(meta) = std::fs::metadata(entry.path()) else {
-            continue;
+        let why = match entry.kind {
+            EntryKind::File if entry.links > 1 => Some(
+                "it has other names (a hard link): the watch folder reads only files of its own",
+            ),
+            EntryKind::File => None,
+            EntryKind::Symlink => {
+                Some("it is a symbolic link: the watch folder reads only regular files in it")
+            }
+            EntryKind::Dir => continue,
+            EntryKind::Other => Some("it is not a regular file (a pipe, socket or device)"),
         };
-        if !meta.is_file() {
-            continue;
+        match why {
+            Some(why) => refused.push((name, why.to_string())),
+            None => out.push((name, kind, stem, entry.size, entry.mtime)),
         }
-        out.push((name, kind, stem, meta.len(), meta.modified().ok()));
     }
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    Ok(out)
+    Ok((out, refused))
+}
+
+/// The watch folder and its subfolders, opened once at start and held.
+#[derive(Debug)]
+pub(super) struct Folders {
+    root: Dir,
+    done: Dir,
+    failed: Dir,
+    importing: Dir,
+}
+
+impl Folders {
+    fn open(dir: &Path) -> Result<Folders, FsError> {
+        // DIR itself is the operator's setting and may be a link they made; what is inside it
+        // is not followed.
+        let root = Dir::open_following(dir)?;
+        Ok(Folders {
+            done: root.subdir(DONE)?,
+            failed: root.subdir(FAILED)?,
+            importing: root.subdir(IMPORTING)?,
+            root,
+        })
+    }
+
+    /// Whether DIR and its subfolders are still the folders opened at start; else why not.
+    fn check(&self, dir: &Path) -> Result<(), String> {
+        let same = std::fs::metadata(dir).ok().map(|m| {
+            use std::os::unix::fs::MetadataExt;
+            (m.dev(), m.ino())
+        }) == self.root.id().ok();
+        if !same {
+            return Err(format!(
+                "{} is no longer the folder watched since the start (moved or replaced);                  restore it and restart brdfd serve",
+                dir.display()
+            ));
+        }
+        for (name, held) in [
+            (DONE, &self.done),
+            (FAILED, &self.failed),
+            (IMPORTING, &self.importing),
+        ] {
+            let now = self.root.entry(name).ok().flatten();
+            let ok = now.is_some_and(|e| e.kind == EntryKind::Dir && Some(e.id) == held.id().ok());
+            if !ok {
+                return Err(format!(
+                    "{}/{name} was replaced since the start (by a link or another folder):                      nothing is imported until it is restored and brdfd serve restarted",
+                    dir.display()
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Groups the files of a listing into imports. `ready(name)` says whether a file has settled;
@@ -266,20 +336,21 @@ pub fn content_hash(main: &[u8], partner: Option<&[u8]>) -> String {
     h.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// A free name for `name` in `dir`: itself, else `STEM-2.REST`, `STEM-3.REST`, …
-fn free_name(dir: &Path, name: &str) -> PathBuf {
-    let first = dir.join(name);
-    if !first.exists() {
-        return first;
-    }
+/// A name for `name` in `failed/` such that it and its `NAME.error.txt` note are both free.
+fn free_failed_name(failed: &Dir, name: &str) -> Result<String, FsError> {
+    let mut candidate = failed.free_name(name)?;
     let (stem, rest) = match name.find('.') {
         Some(i) if i > 0 => (&name[..i], &name[i..]),
         _ => (name, ""),
     };
-    (2..)
-        .map(|n| dir.join(format!("{stem}-{n}{rest}")))
-        .find(|p| !p.exists())
-        .expect("an unused name")
+    let mut n = 1;
+    while failed.entry(&format!("{candidate}.error.txt"))?.is_some()
+        || failed.entry(&candidate)?.is_some()
+    {
+        n += 1;
+        candidate = format!("{stem}-{n}{rest}");
+    }
+    Ok(candidate)
 }
 
 /// Why a file could not be imported: its fault (moved to failed/) or the store's (tried again).
@@ -289,9 +360,22 @@ enum Failure {
 }
 
 /// The scans in a unit's files (read from `.importing/`), with their content hash.
-fn read_unit(dir: &Path, unit: &Unit, reference: &str) -> Result<(String, Vec<Scan>), String> {
-    let read =
-        |name: &str| std::fs::read(dir.join(name)).map_err(|e| format!("cannot read {name}: {e}"));
+fn read_unit(
+    dir: &Dir,
+    unit: &Unit,
+    reference: &str,
+    max: u64,
+) -> Result<(String, Vec<Scan>), String> {
+    let read = |name: &str| {
+        dir.read_bounded(name, max).map_err(|e| match e {
+            FsError::TooLarge { size, .. } => format!(
+                "{name} is {size} bytes, over the watch folder's limit of {} MiB ([ingest] \
+                 max_file_mib); nothing was read",
+                max >> 20
+            ),
+            e => format!("{name}: {e}"),
+        })
+    };
     let main = read(&unit.main)?;
     let partner = unit.partner.as_deref().map(read).transpose()?;
     let hash = content_hash(&main, partner.as_deref());
@@ -364,15 +448,13 @@ impl Service {
                 dir.display()
             )));
         }
-        for sub in [DONE, FAILED, IMPORTING] {
-            std::fs::create_dir_all(dir.join(sub)).map_err(|e| {
-                ServiceError::BadRequest(format!(
-                    "[ingest] watch = {}: cannot create {sub}/ in it: {e}; make the folder \
-                     writable by brdfd's user",
-                    dir.display()
-                ))
-            })?;
-        }
+        let folders = Folders::open(dir).map_err(|e| {
+            ServiceError::BadRequest(format!(
+                "[ingest] watch = {}: {e}; make the folder writable by brdfd's user, with \
+                 {DONE}/, {FAILED}/ and {IMPORTING}/ real folders in it",
+                dir.display()
+            ))
+        })?;
         let status = Arc::new(Mutex::new(IngestStatus {
             dir: dir.display().to_string(),
             waiting: 0,
@@ -391,7 +473,10 @@ impl Service {
             service.queue_pending_ingest_fits().await;
             let mut watch = Watch::default();
             loop {
-                service.ingest_pass(&settings, &mut watch).await;
+                match folders.check(&settings.dir) {
+                    Ok(()) => service.ingest_pass(&settings, &folders, &mut watch).await,
+                    Err(e) => service.note_error(e),
+                }
                 tokio::select! {
                     _ = tokio::time::sleep(settings.poll) => {}
                     _ = stop.recv() => break,
@@ -459,29 +544,35 @@ impl Service {
     }
 
     /// One pass: finish what is in `.importing/`, then take the files that have settled.
-    async fn ingest_pass(&self, settings: &IngestSettings, watch: &mut Watch) {
-        let dir = &settings.dir;
-        let importing = dir.join(IMPORTING);
+    async fn ingest_pass(&self, settings: &IngestSettings, f: &Folders, watch: &mut Watch) {
         // 1. In flight (left by a stopped daemon, or a store failure at the last pass).
-        match list(&importing) {
-            Ok(files) if !files.is_empty() => {
+        match list(&f.importing) {
+            Ok((files, refused)) if !files.is_empty() || !refused.is_empty() => {
+                for (name, why) in refused {
+                    self.refuse_unread(f, &f.importing, &name, &why);
+                }
                 let files: Vec<_> = files.into_iter().map(|(n, k, s, _, _)| (n, k, s)).collect();
                 let (units, _) = units(&files, |_| true, |_| true);
                 for unit in units {
                     if self.ingest_stopping() {
                         return;
                     }
-                    self.finish(settings, &unit, true).await;
+                    self.finish(settings, f, &unit, true).await;
                 }
             }
             Ok(_) => {}
-            Err(e) => self.note_error(format!("cannot list {}: {e}", importing.display())),
+            Err(e) => self.note_error(e.to_string()),
         }
         // 2. New files that have settled.
-        let listing = match list(dir) {
-            Ok(l) => l,
+        let listing = match list(&f.root) {
+            Ok((l, refused)) => {
+                for (name, why) in refused {
+                    self.refuse_unread(f, &f.root, &name, &why);
+                }
+                l
+            }
             Err(e) => {
-                self.note_error(format!("cannot list {}: {e}", dir.display()));
+                self.note_error(e.to_string());
                 return;
             }
         };
@@ -532,14 +623,18 @@ impl Service {
             }
             // A file of the same name still in flight (a store failure being retried) is not
             // replaced: this one waits until that one is done.
-            if unit.names().iter().any(|n| importing.join(n).exists()) {
+            if unit
+                .names()
+                .iter()
+                .any(|n| !matches!(f.importing.entry(n), Ok(None)))
+            {
                 continue;
             }
             // Into .importing/ first: from here on the file is the daemon's.
             let mut moved = Vec::new();
             let mut failed = None;
             for name in unit.names() {
-                match std::fs::rename(dir.join(name), importing.join(name)) {
+                match f.root.move_to(name, &f.importing, name) {
                     Ok(()) => moved.push(name),
                     Err(e) => {
                         failed = Some(format!("cannot move {name} into {IMPORTING}/: {e}"));
@@ -553,7 +648,7 @@ impl Service {
             if let Some(e) = failed {
                 // Put back what moved, to be tried again at the next pass.
                 for name in moved {
-                    if let Err(e) = std::fs::rename(importing.join(name), dir.join(name)) {
+                    if let Err(e) = f.importing.move_to(name, &f.root, name) {
                         tracing::warn!(error = %e, file = %name,
                             "cannot put the file back from .importing/ after a failed import");
                     }
@@ -561,8 +656,72 @@ impl Service {
                 self.note_error(e);
                 continue;
             }
-            self.finish(settings, &unit, false).await;
+            self.finish(settings, f, &unit, false).await;
         }
+    }
+
+    /// Moves an entry that is not a plain regular file (a link, a hard link, a pipe) from
+    /// `from` to `failed/` without reading it, beside a note saying why.
+    fn refuse_unread(&self, f: &Folders, from: &Dir, name: &str, why: &str) {
+        let reason = format!("{name} was not read: {why}");
+        match self.file_to_failed(f, from, name, &reason) {
+            Ok(()) => {
+                self.with_ingest_status(|s| {
+                    s.rejected += 1;
+                    s.last_file = Some(name.to_string());
+                    s.last_error = Some(reason.clone());
+                });
+                self.inner.events.send(Event::FileRejected {
+                    file: name.to_string(),
+                    reason,
+                });
+            }
+            Err(e) => self.note_error(format!("cannot move {name} into {FAILED}/: {e}")),
+        }
+    }
+
+    /// Writes the note `failed/NAME.error.txt` (a new file, never through a link) and moves
+    /// `name` from `from` to `failed/NAME`; both names are free ones.
+    fn file_to_failed(
+        &self,
+        f: &Folders,
+        from: &Dir,
+        name: &str,
+        reason: &str,
+    ) -> Result<(), FsError> {
+        let mut last = None;
+        // A name taken between the choice and the move (by another writer) is tried again.
+        for _ in 0..8 {
+            let to = free_failed_name(&f.failed, name)?;
+            let text = format!(
+                "{name} was not imported into the store.\n\n{reason}\n\nFix the file and drop \
+                 it into the watch folder again.\n"
+            );
+            match f
+                .failed
+                .write(&format!("{to}.error.txt"), text.as_bytes(), Replace::Never)
+                .and_then(|_| from.move_to(name, &f.failed, &to))
+            {
+                Ok(()) => return Ok(()),
+                Err(e @ (FsError::Exists { .. } | FsError::Symlink { .. })) => last = Some(e),
+                Err(e) => return Err(e),
+            }
+        }
+        Err(last.expect("tried at least once"))
+    }
+
+    /// Moves `name` from `.importing/` to a free name in `done/`, never replacing one.
+    fn file_to_done(&self, f: &Folders, name: &str) -> Result<(), FsError> {
+        let mut last = None;
+        for _ in 0..8 {
+            let to = f.done.free_name(name)?;
+            match f.importing.move_to(name, &f.done, &to) {
+                Ok(()) => return Ok(()),
+                Err(e @ FsError::Exists { .. }) => last = Some(e),
+                Err(e) => return Err(e),
+            }
+        }
+        Err(last.expect("tried at least once"))
     }
 
     fn note_error(&self, message: String) {
@@ -579,9 +738,7 @@ impl Service {
     /// Imports a unit whose files are in `.importing/`, and moves them to `done/` or
     /// `failed/`. `recovering`: the files were found in `.importing/` (a previous pass or run
     /// took them), so a recorded hash means that import committed.
-    async fn finish(&self, settings: &IngestSettings, unit: &Unit, recovering: bool) {
-        let dir = &settings.dir;
-        let importing = dir.join(IMPORTING);
+    async fn finish(&self, settings: &IngestSettings, f: &Folders, unit: &Unit, recovering: bool) {
         let outcome = if unit.orphan {
             Err(Failure::Rejected(format!(
                 "{}: an SRA CSV with no MA-T12 export beside it within {} s; drop it together \
@@ -590,13 +747,12 @@ impl Service {
                 settings.pair_wait.as_secs()
             )))
         } else {
-            self.import_unit(settings, unit, recovering).await
+            self.import_unit(settings, f, unit, recovering).await
         };
         match outcome {
             Ok(done) => {
                 for name in unit.names() {
-                    let to = free_name(&dir.join(DONE), name);
-                    if let Err(e) = std::fs::rename(importing.join(name), &to) {
+                    if let Err(e) = self.file_to_done(f, name) {
                         self.note_error(format!("cannot move {name} into {DONE}/: {e}"));
                     }
                 }
@@ -619,19 +775,8 @@ impl Service {
                 ));
             }
             Err(Failure::Rejected(reason)) => {
-                let failed = dir.join(FAILED);
                 for name in unit.names() {
-                    let to = free_name(&failed, name);
-                    let note = PathBuf::from(format!("{}.error.txt", to.display()));
-                    let text = format!(
-                        "{} was not imported into the store.\n\n{reason}\n\nFix the file and \
-                         drop it into {} again.\n",
-                        name,
-                        dir.display()
-                    );
-                    if let Err(e) = std::fs::write(&note, text)
-                        .and_then(|()| std::fs::rename(importing.join(name), &to))
-                    {
+                    if let Err(e) = self.file_to_failed(f, &f.importing, name, &reason) {
                         self.note_error(format!("cannot move {name} into {FAILED}/: {e}"));
                     }
                 }
@@ -652,15 +797,19 @@ impl Service {
     async fn import_unit(
         &self,
         settings: &IngestSettings,
+        f: &Folders,
         unit: &Unit,
         recovering: bool,
     ) -> Result<Option<(String, Vec<crate::store::ScanId>, String)>, Failure> {
-        let importing = settings.dir.join(IMPORTING);
         let (hash, scans) = {
             let unit = unit.clone();
             let reference = settings.reference.clone();
-            let dir = importing.clone();
-            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference))
+            let max = settings.max_file_bytes;
+            let dir = f
+                .importing
+                .try_clone()
+                .map_err(|e| Failure::Retry(e.to_string()))?;
+            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference, max))
                 .await
                 .map_err(|e| Failure::Retry(format!("reading the file failed: {e}")))?
                 .map_err(Failure::Rejected)?
@@ -858,14 +1007,12 @@ mod tests {
             content_hash(b"a", Some(b"bc"))
         );
         let dir = tempfile::tempdir().unwrap();
-        assert_eq!(
-            free_name(dir.path(), "p.sra.csv"),
-            dir.path().join("p.sra.csv")
-        );
+        let d = Dir::open(dir.path()).unwrap();
+        assert_eq!(free_failed_name(&d, "p.sra.csv").unwrap(), "p.sra.csv");
         std::fs::write(dir.path().join("p.sra.csv"), "").unwrap();
-        assert_eq!(
-            free_name(dir.path(), "p.sra.csv"),
-            dir.path().join("p-2.sra.csv")
-        );
+        assert_eq!(free_failed_name(&d, "p.sra.csv").unwrap(), "p-2.sra.csv");
+        // A note's name taken (a planted link) moves both on.
+        std::os::unix::fs::symlink("/nowhere", dir.path().join("p-2.sra.csv.error.txt")).unwrap();
+        assert_eq!(free_failed_name(&d, "p.sra.csv").unwrap(), "p-3.sra.csv");
     }
 }

@@ -12,6 +12,7 @@
 
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom, Write};
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 /// Why the store's lock could not be taken.
@@ -60,6 +61,7 @@ impl StoreLock {
             .write(true)
             .create(true)
             .truncate(false)
+            .mode(crate::safe_fs::private_mode())
             .open(&path)
             .map_err(io)?;
         if !try_lock_exclusive(&file).map_err(io)? {

@@ -89,6 +89,13 @@ impl Store {
             },
             held => StoreError::Locked(held),
         })?;
+        // Created private (SQLite gives -wal and -shm the same mode); nothing brdfd writes
+        // elsewhere may land on these files.
+        crate::safe_fs::protect_store(path);
+        crate::safe_fs::prepare_private_file(path).map_err(|source| StoreError::Open {
+            path: path.to_path_buf(),
+            source: sqlx::Error::Io(source),
+        })?;
         let pools = backend::open_file(path)
             .await
             .map_err(|source| StoreError::Open {
@@ -109,6 +116,7 @@ impl Store {
     /// read it).
     pub async fn open_read_only(path: impl AsRef<Path>) -> Result<Store, StoreError> {
         let path = path.as_ref();
+        crate::safe_fs::protect_store(path);
         let pool = backend::open_file_read_only(path)
             .await
             .map_err(|source| StoreError::Open {
