@@ -102,6 +102,55 @@ impl TestDb {
     }
 }
 
+impl TestDb {
+    /// The database's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// `pg_dump -Fc` of the database into `file`.
+    pub fn dump(&self, file: &Path) {
+        let out = Command::new(bindir().join("pg_dump"))
+            .args(["-Fc", "-f"])
+            .arg(file)
+            .arg(&self.url)
+            .output()
+            .expect("pg_dump runs");
+        assert!(
+            out.status.success(),
+            "pg_dump: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    /// Replaces the database by the dump `file`, as an administrator restoring a backup
+    /// would: restored beside it, then the live one dropped (its connections cut) and the
+    /// restored one renamed in its place.
+    pub fn restore(&self, file: &Path) {
+        let staging = format!("{}_restored", self.name);
+        admin_exec(&self.admin, &format!("CREATE DATABASE {staging}"));
+        let out = Command::new(bindir().join("pg_restore"))
+            .args(["--no-owner", "-d"])
+            .arg(with_database(&self.admin, &staging))
+            .arg(file)
+            .output()
+            .expect("pg_restore runs");
+        assert!(
+            out.status.success(),
+            "pg_restore: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        admin_exec(
+            &self.admin,
+            &format!("DROP DATABASE {} WITH (FORCE)", self.name),
+        );
+        admin_exec(
+            &self.admin,
+            &format!("ALTER DATABASE {staging} RENAME TO {}", self.name),
+        );
+    }
+}
+
 impl Drop for TestDb {
     fn drop(&mut self) {
         let admin = self.admin.clone();
