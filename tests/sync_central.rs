@@ -822,6 +822,44 @@ async fn a_copied_store_is_refused_and_nothing_of_it_is_mixed_in() {
         pool.close().await;
         store.close().await;
 
+        // `brdfd doctor` says which store is the station's and which is a refused copy.
+        let db_url = db.url.clone();
+        let doctor = |db: &Path| {
+            let config = dir.path().join("doctor.toml");
+            std::fs::write(
+                &config,
+                format!(
+                    "[store]\npath = \"{}\"\n[station]\nid = \"bench-f\"\n[sync]\nurl = \"{}\"\n\
+                     [devices.ma_t12]\ntransport = \"simulated\"\n\
+                     [devices.sra]\ntransport = \"simulated\"\n",
+                    db.display(),
+                    db_url
+                ),
+            )
+            .unwrap();
+            let out = run_brdfd(
+                &["doctor", "--config", config.to_str().unwrap(), "--json"],
+                None,
+            );
+            let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            v["checks"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|c| c["check"] == "central database")
+                .cloned()
+                .expect("a central database check")
+        };
+        let c = doctor(&orig);
+        assert_eq!(c["status"], "ok", "{c}");
+        assert!(
+            c["detail"].as_str().unwrap().contains("is this store's"),
+            "{c}"
+        );
+        let c = doctor(&file_copy);
+        assert_eq!(c["status"], "fail", "{c}");
+        assert!(c["fix"].as_str().unwrap().contains("--adopt"), "{c}");
+
         // `brdfd sync` of the copy: exit status 6, one line naming the way out.
         let copy = file_copy.to_str().unwrap();
         let sync = |station: &str| {

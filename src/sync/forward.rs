@@ -680,6 +680,110 @@ fn probe_target(url: &str) -> Option<(String, u16)> {
     Some((host, o.get_port()))
 }
 
+/// What `brdfd doctor` says of forwarding the store at `path` as `station`: the central
+/// database answers, and the station's standing there (registered by this store, the store's
+/// lineage accepted, how many entries wait). Changes nothing on either side: no migration, no
+/// registration, the store opened read-only.
+pub async fn diagnose(path: &Path, url: &str, station: &str) -> Result<String, SyncError> {
+    let central = Central::connect(url).await?;
+    let result = diagnose_on(&central, path, station).await;
+    central.close().await;
+    result
+}
+
+async fn diagnose_on(central: &Central, path: &Path, station: &str) -> Result<String, SyncError> {
+    let has_lineage: bool = sqlx::query_scalar(
+        "SELECT to_regclass('stations') IS NOT NULL
+            AND EXISTS (SELECT 1 FROM information_schema.columns
+                        WHERE table_name = 'stations' AND column_name = 'horizon')",
+    )
+    .fetch_one(&central.pool)
+    .await
+    .map_err(|e| central.error(e))?;
+    let row = if has_lineage {
+        sqlx::query(
+            "SELECT store_uid, cursor, horizon, incarnation,
+                    to_char(registered_at AT TIME ZONE 'UTC', 'YYYY-MM-DD HH24:MI:SS \"UTC\"'),
+                    COALESCE(host, '?')
+             FROM stations WHERE station = $1",
+        )
+        .bind(station)
+        .fetch_optional(&central.pool)
+        .await
+        .map_err(|e| central.error(e))?
+    } else {
+        None
+    };
+    if !path.exists() {
+        return Ok(format!(
+            "{} answers; no store at {} yet",
+            central.url,
+            path.display()
+        ));
+    }
+    let source = SqlitePoolOptions::new()
+        .max_connections(1)
+        .connect_with(
+            SqliteConnectOptions::new()
+                .filename(path)
+                .read_only(true)
+                .busy_timeout(Duration::from_secs(5)),
+        )
+        .await
+        .map_err(SyncError::Local)?;
+    let uid = store_uid(&source, &path.display().to_string()).await?;
+    let mut c = source.acquire().await.map_err(SyncError::Local)?;
+    let highest = highest_seq(&mut c).await.map_err(SyncError::Local)?;
+    let lineage = lineage::read(&mut *c).await.map_err(SyncError::Local)?;
+    drop(c);
+    let Some(row) = row else {
+        let waiting: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM sync_outbox")
+            .fetch_one(&source)
+            .await
+            .map_err(SyncError::Local)?;
+        source.close().await;
+        return Ok(format!(
+            "{} answers; station \"{station}\" is not registered yet (it is on first \
+             contact); {waiting} entries to forward",
+            central.url
+        ));
+    };
+    let holder: String = row.get(0);
+    let cursor: i64 = row.get(1);
+    if holder != uid {
+        source.close().await;
+        return Err(SyncError::StationTaken {
+            station: station.to_string(),
+            registered: row.get(4),
+            host: row.get(5),
+        });
+    }
+    let standing = lineage::Standing {
+        incarnation: row.get(3),
+        horizon: row.get(2),
+    };
+    let checked = lineage::check(station, &standing, &lineage, highest);
+    let waiting: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM sync_outbox WHERE seq > $1")
+        .bind(cursor)
+        .fetch_one(&source)
+        .await
+        .map_err(SyncError::Local)?;
+    source.close().await;
+    checked?;
+    if cursor > highest {
+        return Err(SyncError::StoreBehind {
+            station: station.to_string(),
+            cursor,
+            local: highest,
+        });
+    }
+    Ok(format!(
+        "{} answers; station \"{station}\" is this store's, forwarded up to entry {cursor} of \
+         {highest}, {waiting} entries waiting",
+        central.url
+    ))
+}
+
 /// One batch as read from one snapshot of the store.
 struct Batch {
     entries: Vec<Entry>,
