@@ -1045,3 +1045,166 @@ async fn brdfd_sync_keeps_forwarding_through_outages_and_resumes_at_once() {
     })
     .await;
 }
+
+/// The pooled query of README "The central database with SQL".
+const POOLED_QUERY: &str = "
+    SELECT lab_sample, cost_function, COUNT(DISTINCT station) AS stations, COUNT(*) AS fits,
+           avg(ks) AS ks, avg(alpha) AS alpha, avg(mu) AS mu,
+           avg(de00_diffuse_mean) AS de00_diffuse
+    FROM fit_results
+    WHERE lab_sample IS NOT NULL
+    GROUP BY lab_sample, cost_function
+    ORDER BY lab_sample, cost_function";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_central_views_decode_as_the_stations_and_pool_across_stations() {
+    let _serial = serial();
+    let db = TestDb::create("views");
+    bounded(async {
+        let names = ["bench-v1", "bench-v2"];
+        let mut stations = Vec::new();
+        for n in names {
+            let d = station(n, &db.url, 100).await;
+            measure(&d, 1).await;
+            drained(&d).await;
+            d.service.stop_keeping_store().await;
+            stations.push(d);
+        }
+        let pg = sqlx::PgPool::connect(&db.url).await.unwrap();
+        for (d, n) in stations.iter().zip(names) {
+            let local = sqlx::SqlitePool::connect_with(
+                sqlx::sqlite::SqliteConnectOptions::new()
+                    .filename(&d.db)
+                    .read_only(true),
+            )
+            .await
+            .unwrap();
+            // Every decoded value, bit for bit, station view vs central view.
+            for (view, id) in [
+                ("reading_values", "reading_id"),
+                ("reference_reading_values", "reading_id"),
+                ("processed_values", "processed_id"),
+            ] {
+                let band = if view == "processed_values" {
+                    "geometry_index * 31 + band"
+                } else {
+                    "band"
+                };
+                let sql = |station: bool| {
+                    format!(
+                        "SELECT {id}, {band} AS k, nm, value FROM {view} {} ORDER BY {id}, k",
+                        if station { "WHERE station = $1" } else { "" }
+                    )
+                };
+                let a: Vec<(i64, i64, Option<i64>, Option<u64>)> = sqlx::query(&sql(false))
+                    .fetch_all(&local)
+                    .await
+                    .unwrap()
+                    .iter()
+                    .map(|r| {
+                        (
+                            r.get(0),
+                            r.get(1),
+                            r.get(2),
+                            r.get::<Option<f64>, _>(3).map(f64::to_bits),
+                        )
+                    })
+                    .collect();
+                let b: Vec<(i64, i64, Option<i64>, Option<u64>)> = sqlx::query(&sql(true))
+                    .bind(n)
+                    .fetch_all(&pg)
+                    .await
+                    .unwrap()
+                    .iter()
+                    .map(|r| {
+                        (
+                            r.get(0),
+                            r.get::<i32, _>(1) as i64,
+                            r.get::<Option<i32>, _>(2).map(i64::from),
+                            r.get::<Option<f64>, _>(3).map(f64::to_bits),
+                        )
+                    })
+                    .collect();
+                assert!(!a.is_empty(), "{view}");
+                assert_eq!(a, b, "{n}: {view}, station vs central");
+            }
+            // fit_results: one row per finished fit, parameters as the station's JSON says.
+            let local_fits: Vec<(i64, String, u64, u64, u64)> = sqlx::query(
+                "SELECT id, cost_function, json_extract(params_json, '$.ks'),
+                        json_extract(params_json, '$.alpha'), json_extract(params_json, '$.ior')
+                 FROM fit_runs WHERE status = 'done' ORDER BY id",
+            )
+            .fetch_all(&local)
+            .await
+            .unwrap()
+            .iter()
+            .map(|r| {
+                (
+                    r.get(0),
+                    r.get(1),
+                    r.get::<f64, _>(2).to_bits(),
+                    r.get::<f64, _>(3).to_bits(),
+                    r.get::<f64, _>(4).to_bits(),
+                )
+            })
+            .collect();
+            let central_fits: Vec<(i64, String, u64, u64, u64)> = sqlx::query(
+                "SELECT fit_run_id, cost_function, ks, alpha, mu FROM fit_results
+                 WHERE station = $1 AND simulated AND measured_at > now() - interval '1 hour'
+                   AND de00_mean IS NOT NULL
+                 ORDER BY fit_run_id",
+            )
+            .bind(n)
+            .fetch_all(&pg)
+            .await
+            .unwrap()
+            .iter()
+            .map(|r| {
+                (
+                    r.get(0),
+                    r.get(1),
+                    r.get::<f64, _>(2).to_bits(),
+                    r.get::<f64, _>(3).to_bits(),
+                    r.get::<f64, _>(4).to_bits(),
+                )
+            })
+            .collect();
+            assert!(!local_fits.is_empty());
+            assert_eq!(local_fits, central_fits, "{n}: fit_results");
+            let kd: i64 = sqlx::query_scalar(
+                "SELECT COUNT(kd) FROM kd_values WHERE station = $1 AND kd >= 0",
+            )
+            .bind(n)
+            .fetch_one(&pg)
+            .await
+            .unwrap();
+            assert_eq!(kd, 31 * local_fits.len() as i64, "{n}: kd_values");
+            local.close().await;
+        }
+        // The lab says the two stations' first samples are the same tile; the README's query
+        // pools them.
+        sqlx::query("INSERT INTO lab_samples (lab_sample) VALUES ('L-0001')")
+            .execute(&pg)
+            .await
+            .unwrap();
+        sqlx::query(
+            "INSERT INTO sample_identities (station, sample_id, lab_sample)
+             SELECT station, id, 'L-0001' FROM samples",
+        )
+        .execute(&pg)
+        .await
+        .unwrap();
+        let pooled = sqlx::query(POOLED_QUERY).fetch_all(&pg).await.unwrap();
+        assert!(!pooled.is_empty());
+        for r in &pooled {
+            assert_eq!(r.get::<String, _>("lab_sample"), "L-0001");
+            assert_eq!(r.get::<i64, _>("stations"), 2, "pooled over both stations");
+            assert!(r.get::<f64, _>("ks").is_finite());
+        }
+        pg.close().await;
+        for d in &stations {
+            d.store.close().await;
+        }
+    })
+    .await;
+}
