@@ -204,6 +204,16 @@ impl Central {
         ))
     }
 
+    /// The station's incarnation is alive (an idle forwarder's look at its cursor).
+    pub async fn heartbeat(&self, station: &str) -> Result<(), SyncError> {
+        sqlx::query("UPDATE stations SET heartbeat_at = now() WHERE station = $1")
+            .bind(station)
+            .execute(&self.pool)
+            .await
+            .map_err(|e| self.error(e))?;
+        Ok(())
+    }
+
     /// Records that a store was refused for `station`, for the lab's administrator
     /// (`station_refusals`); best effort: the refusal itself is what matters.
     pub async fn record_refusal(&self, station: &str, uid: &str, incarnation: &str, reason: &str) {

@@ -253,6 +253,14 @@ impl Forwarder {
         Ok(f)
     }
 
+    /// The store's current incarnation (the last of its lineage).
+    async fn incarnation(&self) -> Option<String> {
+        lineage::read(&self.source)
+            .await
+            .ok()
+            .and_then(|l| l.last().map(|i| i.id.clone()))
+    }
+
     /// Compares the store with the central database (and re-sends what it lacks) before the
     /// next batch: `brdfd sync --verify` without `--once`.
     pub fn request_verify(&mut self) {
@@ -366,8 +374,15 @@ impl Forwarder {
             Err(e) => {
                 // The COMMIT may or may not have happened: read the cursor back next time.
                 self.cursor = None;
-                let refused = matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. });
-                if refused && self.last_refusal.as_deref() != Some(&e.to_string()) {
+                let refused = matches!(
+                    e,
+                    SyncError::Forked { .. }
+                        | SyncError::StoreBehind { .. }
+                        | SyncError::SecondLive { .. }
+                );
+                let recorded =
+                    matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. });
+                if recorded && self.last_refusal.as_deref() != Some(&e.to_string()) {
                     if let Some(c) = &self.central {
                         let incarnation = lineage::read(&self.source)
                             .await
@@ -429,9 +444,14 @@ impl Forwarder {
             if self.last_look.elapsed() >= LOOK {
                 self.last_look = std::time::Instant::now();
                 let central = self.central.as_ref().expect("ensure_ready connects");
-                let (_, now) = central.standing(&self.options.station).await?;
+                let (standing, now) = central.standing(&self.options.station).await?;
                 if now != cursor {
                     self.cursor = None;
+                } else if standing.incarnation.is_some()
+                    && standing.incarnation.as_deref() == self.incarnation().await.as_deref()
+                {
+                    // Still the station's: say so, so that a copy is not taken for it.
+                    central.heartbeat(&self.options.station).await?;
                 }
             }
             return Ok(None);
@@ -660,6 +680,10 @@ impl Forwarder {
     }
 }
 
+/// How long after the last sign of life of the station's incarnation another one is refused
+/// as a second live copy.
+const LIVE: Duration = Duration::from_secs(5);
+
 /// How often an idle forwarder looks at the central cursor.
 const LOOK: Duration = Duration::from_secs(1);
 
@@ -849,7 +873,8 @@ pub(super) async fn lock_station(
     let row = sqlx::query(
         "SELECT store_uid, cursor, horizon, incarnation,
                 to_char(registered_at AT TIME ZONE 'UTC', 'YYYY-MM-DD HH24:MI:SS \"UTC\"'),
-                COALESCE(host, '?')
+                COALESCE(host, '?'),
+                EXTRACT(EPOCH FROM now() - heartbeat_at)::float8
          FROM stations WHERE station = $1 FOR UPDATE",
     )
     .bind(station)
@@ -884,6 +909,17 @@ pub(super) async fn lock_station(
         horizon: row.get(2),
     };
     lineage::check(station, &standing, lineage, high)?;
+    let mine = lineage.last().map(|i| i.id.as_str());
+    let silent: Option<f64> = row.get(6);
+    if let (Some(head), Some(seconds)) = (standing.incarnation.as_deref(), silent)
+        && Some(head) != mine
+        && seconds < LIVE.as_secs_f64()
+    {
+        return Err(SyncError::SecondLive {
+            station: station.to_string(),
+            seconds,
+        });
+    }
     Ok(lineage
         .last()
         .map(|i| i.id.clone())
@@ -901,7 +937,7 @@ pub(super) async fn advance_station(
 ) -> Result<(), SyncError> {
     sqlx::query(
         "UPDATE stations SET cursor = $1, horizon = GREATEST(horizon, $2), incarnation = $3,
-                last_synced_at = now()
+                last_synced_at = now(), heartbeat_at = now()
          WHERE station = $4",
     )
     .bind(cursor)

@@ -14,10 +14,14 @@
 
 #![allow(dead_code)]
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
+
+use brdfd::sync::tables::{Kind, TABLES};
+use sqlx::Row;
 
 /// The admin URL of the test server.
 pub fn admin_url() -> String {
@@ -370,4 +374,107 @@ where
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
+}
+
+/// One column's value in a comparable form: integers and text as they are, f64 by its bits,
+/// bytes in hex.
+pub fn cell_sqlite(row: &sqlx::sqlite::SqliteRow, i: usize, kind: Kind) -> String {
+    match kind {
+        Kind::Int => format!("{:?}", row.try_get_unchecked::<Option<i64>, _>(i).unwrap()),
+        Kind::Text => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<String>, _>(i).unwrap()
+        ),
+        Kind::Real => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<f64>, _>(i)
+                .unwrap()
+                .map(f64::to_bits)
+        ),
+        Kind::Blob => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<Vec<u8>>, _>(i).unwrap()
+        ),
+    }
+}
+
+pub fn cell_pg(row: &sqlx::postgres::PgRow, i: usize, kind: Kind) -> String {
+    match kind {
+        Kind::Int => format!("{:?}", row.get::<Option<i64>, _>(i)),
+        Kind::Text => format!("{:?}", row.get::<Option<String>, _>(i)),
+        Kind::Real => format!("{:?}", row.get::<Option<f64>, _>(i).map(f64::to_bits)),
+        Kind::Blob => format!("{:?}", row.get::<Option<Vec<u8>>, _>(i)),
+    }
+}
+
+pub type Tables = BTreeMap<&'static str, Vec<Vec<String>>>;
+
+/// Every forwarded table of a station's store file, every forwarded column, in key order.
+pub async fn local_tables(db: &Path) -> Tables {
+    let pool = sqlx::SqlitePool::connect_with(
+        sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(db)
+            .read_only(true),
+    )
+    .await
+    .unwrap();
+    let mut out = BTreeMap::new();
+    for t in &TABLES {
+        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
+        let sql = format!(
+            "SELECT {} FROM {} ORDER BY {}",
+            cols.join(", "),
+            t.name,
+            t.key.join(", ")
+        );
+        let rows = sqlx::query(&sql).fetch_all(&pool).await.unwrap();
+        out.insert(
+            t.name,
+            rows.iter()
+                .map(|r| {
+                    t.columns
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (_, k))| cell_sqlite(r, i, *k))
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+    pool.close().await;
+    out
+}
+
+/// The same, of one station in the central database.
+pub async fn central_tables(url: &str, station: &str) -> Tables {
+    let pool = sqlx::PgPool::connect(url).await.unwrap();
+    let mut out = BTreeMap::new();
+    for t in &TABLES {
+        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
+        let sql = format!(
+            "SELECT {} FROM {} WHERE station = $1 ORDER BY {}",
+            cols.join(", "),
+            t.name,
+            t.key.join(", ")
+        );
+        let rows = sqlx::query(&sql)
+            .bind(station)
+            .fetch_all(&pool)
+            .await
+            .unwrap();
+        out.insert(
+            t.name,
+            rows.iter()
+                .map(|r| {
+                    t.columns
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (_, k))| cell_pg(r, i, *k))
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+    pool.close().await;
+    out
 }
