@@ -24,13 +24,13 @@ use brdfd::report::load::{Selection, from_central, from_store};
 use brdfd::service::{Devices, ServiceOptions, ServiceSettings};
 use brdfd::store::Store;
 use brdfd::store::central::CentralSelection;
-use brdfd::sync::tables::{Kind, TABLES};
+use brdfd::sync::tables::TABLES;
 use brdfd::sync::{Central, Forwarder, ForwarderOptions, SyncError};
 use drivers::Instrument;
 use sqlx::Row;
 
 use common::*;
-use pg::{Cluster, TestDb, wait_for};
+use pg::{Cluster, TestDb, central_tables, local_tables, wait_for};
 
 /// Forwarding settings for tests: small batches, quick polls and retries.
 fn forwarding(station: &str, url: &str, batch: usize) -> ForwarderOptions {
@@ -116,109 +116,6 @@ async fn drained_service(service: &brdfd::service::Service, db: &Path) {
 
 async fn drained(d: &TestDaemon) {
     drained_service(&d.service, &d.db).await;
-}
-
-/// One column's value in a comparable form: integers and text as they are, f64 by its bits,
-/// bytes in hex.
-fn cell_sqlite(row: &sqlx::sqlite::SqliteRow, i: usize, kind: Kind) -> String {
-    match kind {
-        Kind::Int => format!("{:?}", row.try_get_unchecked::<Option<i64>, _>(i).unwrap()),
-        Kind::Text => format!(
-            "{:?}",
-            row.try_get_unchecked::<Option<String>, _>(i).unwrap()
-        ),
-        Kind::Real => format!(
-            "{:?}",
-            row.try_get_unchecked::<Option<f64>, _>(i)
-                .unwrap()
-                .map(f64::to_bits)
-        ),
-        Kind::Blob => format!(
-            "{:?}",
-            row.try_get_unchecked::<Option<Vec<u8>>, _>(i).unwrap()
-        ),
-    }
-}
-
-fn cell_pg(row: &sqlx::postgres::PgRow, i: usize, kind: Kind) -> String {
-    match kind {
-        Kind::Int => format!("{:?}", row.get::<Option<i64>, _>(i)),
-        Kind::Text => format!("{:?}", row.get::<Option<String>, _>(i)),
-        Kind::Real => format!("{:?}", row.get::<Option<f64>, _>(i).map(f64::to_bits)),
-        Kind::Blob => format!("{:?}", row.get::<Option<Vec<u8>>, _>(i)),
-    }
-}
-
-type Tables = BTreeMap<&'static str, Vec<Vec<String>>>;
-
-/// Every forwarded table of a station's store file, every forwarded column, in key order.
-async fn local_tables(db: &Path) -> Tables {
-    let pool = sqlx::SqlitePool::connect_with(
-        sqlx::sqlite::SqliteConnectOptions::new()
-            .filename(db)
-            .read_only(true),
-    )
-    .await
-    .unwrap();
-    let mut out = Tables::new();
-    for t in &TABLES {
-        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
-        let sql = format!(
-            "SELECT {} FROM {} ORDER BY {}",
-            cols.join(", "),
-            t.name,
-            t.key.join(", ")
-        );
-        let rows = sqlx::query(&sql).fetch_all(&pool).await.unwrap();
-        out.insert(
-            t.name,
-            rows.iter()
-                .map(|r| {
-                    t.columns
-                        .iter()
-                        .enumerate()
-                        .map(|(i, (_, k))| cell_sqlite(r, i, *k))
-                        .collect()
-                })
-                .collect(),
-        );
-    }
-    pool.close().await;
-    out
-}
-
-/// The same, of one station in the central database.
-async fn central_tables(url: &str, station: &str) -> Tables {
-    let pool = sqlx::PgPool::connect(url).await.unwrap();
-    let mut out = Tables::new();
-    for t in &TABLES {
-        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
-        let sql = format!(
-            "SELECT {} FROM {} WHERE station = $1 ORDER BY {}",
-            cols.join(", "),
-            t.name,
-            t.key.join(", ")
-        );
-        let rows = sqlx::query(&sql)
-            .bind(station)
-            .fetch_all(&pool)
-            .await
-            .unwrap();
-        out.insert(
-            t.name,
-            rows.iter()
-                .map(|r| {
-                    t.columns
-                        .iter()
-                        .enumerate()
-                        .map(|(i, (_, k))| cell_pg(r, i, *k))
-                        .collect()
-                })
-                .collect(),
-        );
-    }
-    pool.close().await;
-    out
 }
 
 /// Rows per station in the central database, per table.
@@ -684,6 +581,527 @@ async fn a_bad_url_or_a_wrong_password_is_one_line_and_the_station_keeps_measuri
         assert!(batched > 0, "{lines:?}");
         assert_eq!(last["rows"].as_u64(), Some(batched), "{lines:?}");
         d.store.close().await;
+    })
+    .await;
+}
+
+/// A station daemon in-process on the store file `db` (opened as its owner: a new incarnation
+/// of that store), forwarding as `name`.
+async fn station_on(
+    db: &Path,
+    name: &str,
+    url: &str,
+    batch: usize,
+) -> (Store, brdfd::service::Service) {
+    let store = Store::open(db).await.unwrap();
+    let devices = Devices::simulated(
+        playlist(Instrument::MaT12),
+        playlist(Instrument::Sra),
+        &strict_fast(),
+        [None, None],
+    )
+    .unwrap();
+    let settings = ServiceSettings {
+        sync: Some(forwarding(name, url, batch)),
+        bootstrap: 5,
+        ..settings()
+    };
+    let service =
+        brdfd::service::Service::start(store.clone(), devices, settings, ServiceOptions::default())
+            .await
+            .unwrap();
+    (store, service)
+}
+
+/// `VACUUM INTO`: a consistent copy of a live store, as a backup tool takes it.
+async fn vacuum_into(db: &Path, copy: &Path) {
+    use sqlx::Connection;
+    let mut c = sqlx::SqliteConnection::connect_with(
+        &sqlx::sqlite::SqliteConnectOptions::new().filename(db),
+    )
+    .await
+    .unwrap();
+    sqlx::query(&format!("VACUUM INTO '{}'", copy.display()))
+        .execute(&mut c)
+        .await
+        .unwrap();
+    c.close().await.unwrap();
+}
+
+/// Waits until the station's forwarder says the central database refuses its store.
+async fn refused(service: &brdfd::service::Service) -> String {
+    let deadline = std::time::Instant::now() + STEP_TIMEOUT;
+    loop {
+        let s = service.status().await.unwrap().sync.unwrap();
+        if s.refused {
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the copy was not refused: {s:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    service
+        .status()
+        .await
+        .unwrap()
+        .sync
+        .unwrap()
+        .last_error
+        .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_copied_store_is_refused_and_nothing_of_it_is_mixed_in() {
+    let _serial = serial();
+    let db = TestDb::create("fork");
+    bounded(async {
+        let dir = tempfile::tempdir().unwrap();
+        let orig = dir.path().join("orig.db");
+        // The original's first life: a reference and a scan, forwarded.
+        let (store, service) = station_on(&orig, "bench-f", &db.url, 20).await;
+        measure_reference(&service).await;
+        scan_and_settle(&service, samples(1)[0]).await;
+        drained_service(&service, &orig).await;
+        // A copy of the live store (a backup tool's), then the original goes on.
+        let live_copy = dir.path().join("live-copy.db");
+        vacuum_into(&orig, &live_copy).await;
+        scan_and_settle(&service, samples(2)[1]).await;
+        drained_service(&service, &orig).await;
+
+        // The live copy starts while the original runs: the original forwarded past the
+        // point it was copied at, so the copy is refused, whatever it measures.
+        let (cs, csvc) = station_on(&live_copy, "bench-f", &db.url, 20).await;
+        measure_reference(&csvc).await;
+        scan_and_settle(&csvc, samples(1)[0]).await;
+        let e = refused(&csvc).await;
+        assert!(e.contains("copied from the station at outbox entry"), "{e}");
+        assert!(e.contains("--adopt NEW_ID"), "{e}");
+        csvc.stop_keeping_store().await;
+        cs.close().await;
+
+        // The original stops; its checkpointed file is copied; the original starts again
+        // (a new incarnation after everything it sent: accepted) and goes on.
+        service.stop_keeping_store().await;
+        store.close().await;
+        let file_copy = dir.path().join("file-copy.db");
+        std::fs::copy(&orig, &file_copy).unwrap();
+        let (store, service) = station_on(&orig, "bench-f", &db.url, 20).await;
+        measure_reference(&service).await;
+        scan_and_settle(&service, samples(1)[0]).await;
+        drained_service(&service, &orig).await;
+
+        // The file copy starts second: refused (the station went on as an incarnation this
+        // copy never had).
+        let (cs, csvc) = station_on(&file_copy, "bench-f", &db.url, 20).await;
+        measure_reference(&csvc).await;
+        scan_and_settle(&csvc, samples(1)[0]).await;
+        let e = refused(&csvc).await;
+        assert!(e.contains("never had"), "{e}");
+        let status = csvc.status().await.unwrap().sync.unwrap();
+        assert!(status.backlog > 0, "its rows wait: {status:?}");
+        csvc.stop_keeping_store().await;
+        cs.close().await;
+
+        // The original went on through it all; the central database holds its rows, exactly.
+        scan_and_settle(&service, samples(2)[1]).await;
+        drained_service(&service, &orig).await;
+        service.stop_keeping_store().await;
+        assert_same(&orig, &db.url, "bench-f").await;
+        let pool = sqlx::PgPool::connect(&db.url).await.unwrap();
+        let refusals: i64 =
+            sqlx::query_scalar("SELECT COUNT(*) FROM station_refusals WHERE station = 'bench-f'")
+                .fetch_one(&pool)
+                .await
+                .unwrap();
+        assert!(refusals >= 2, "{refusals} refusals recorded centrally");
+        pool.close().await;
+        store.close().await;
+
+        // `brdfd doctor` says which store is the station's and which is a refused copy.
+        let db_url = db.url.clone();
+        let doctor = |db: &Path| {
+            let config = dir.path().join("doctor.toml");
+            std::fs::write(
+                &config,
+                format!(
+                    "[store]\npath = \"{}\"\n[station]\nid = \"bench-f\"\n[sync]\nurl = \"{}\"\n\
+                     [devices.ma_t12]\ntransport = \"simulated\"\n\
+                     [devices.sra]\ntransport = \"simulated\"\n",
+                    db.display(),
+                    db_url
+                ),
+            )
+            .unwrap();
+            let out = run_brdfd(
+                &["doctor", "--config", config.to_str().unwrap(), "--json"],
+                None,
+            );
+            let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            v["checks"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|c| c["check"] == "central database")
+                .cloned()
+                .expect("a central database check")
+        };
+        let c = doctor(&orig);
+        assert_eq!(c["status"], "ok", "{c}");
+        assert!(
+            c["detail"].as_str().unwrap().contains("is this store's"),
+            "{c}"
+        );
+        let c = doctor(&file_copy);
+        assert_eq!(c["status"], "fail", "{c}");
+        assert!(c["fix"].as_str().unwrap().contains("--adopt"), "{c}");
+
+        // `brdfd sync` of the copy: exit status 6, one line naming the way out.
+        let copy = file_copy.to_str().unwrap();
+        let sync = |station: &str| {
+            run_brdfd(
+                &[
+                    "sync",
+                    "--db",
+                    copy,
+                    "--to",
+                    &db.url,
+                    "--station",
+                    station,
+                    "--once",
+                ],
+                None,
+            )
+        };
+        let out = sync("bench-f");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(6), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains("--adopt"), "{err}");
+        // The way out: adopt the copy as a station of its own; it then forwards everything
+        // it holds under the new id, and the original's rows are untouched.
+        let out = run_brdfd(&["sync", "--db", copy, "--adopt", "bench-f2"], None);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(String::from_utf8_lossy(&out.stdout).contains("[station] id = \"bench-f2\""));
+        let out = sync("bench-f2");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_same(&file_copy, &db.url, "bench-f2").await;
+        assert_same(&orig, &db.url, "bench-f").await;
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_central_database_restored_from_a_backup_is_caught_up() {
+    let _serial = serial();
+    let db = TestDb::create("restore");
+    bounded(async {
+        let d = station("bench-b", &db.url, 20).await;
+        measure(&d, 1).await;
+        drained(&d).await;
+        let dump = d.dir.path().join("central.dump");
+        db.dump(&dump);
+        // Two more scans, forwarded and deleted from the station's outbox.
+        for s in &samples(3)[1..] {
+            scan_and_settle(&d.service, s).await;
+        }
+        drained(&d).await;
+        // The lab restores yesterday's backup: the two scans are gone centrally.
+        db.restore(&dump);
+        // The idle daemon notices, compares and re-sends them.
+        wait_for("the comparison after the restore", STEP_TIMEOUT, || async {
+            let s = d.service.status().await.unwrap().sync.unwrap();
+            s.last_verify.is_some_and(|v| !v.contains(" 0 re-sent"))
+        })
+        .await;
+        drained(&d).await;
+        d.service.stop_keeping_store().await;
+        assert_same(&d.db, &db.url, "bench-b").await;
+        // A second comparison finds everything in place and sends nothing.
+        let out = run_brdfd(
+            &[
+                "sync",
+                "--db",
+                d.db.to_str().unwrap(),
+                "--to",
+                &db.url,
+                "--station",
+                "bench-b",
+                "--verify",
+                "--once",
+                "--json",
+            ],
+            None,
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        let verify = lines
+            .iter()
+            .find(|l| l["type"] == "verify")
+            .expect("a verify line");
+        for t in verify["tables"].as_array().unwrap() {
+            assert_eq!(t["resent"], 0, "{t}");
+            assert_eq!(t["extra"], 0, "{t}");
+            assert_eq!(t["local"], t["central"], "{t}");
+        }
+        d.store.close().await;
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn brdfd_sync_keeps_forwarding_through_outages_and_resumes_at_once() {
+    let _serial = serial();
+    let cluster = Cluster::start();
+    let db = TestDb::create_on(&cluster.admin_url(), "resume");
+    bounded(async {
+        // A stopped station's store with everything still to send.
+        let d = station("bench-s", "postgres://postgres@127.0.0.1:1/none", 50).await;
+        measure(&d, 2).await;
+        d.service.stop_keeping_store().await;
+        d.store.close().await;
+        let highest = highest_seq(&d.db).await;
+        let config = d.dir.path().join("brdfd.toml");
+        std::fs::write(
+            &config,
+            "[devices.ma_t12]\ntransport = \"simulated\"\n\
+             [devices.sra]\ntransport = \"simulated\"\n[sync]\nbatch = 1\n",
+        )
+        .unwrap();
+        // `brdfd sync` (continuous) started while the server is down.
+        cluster.stop_immediate();
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_brdfd"))
+            .args(["sync", "--config", config.to_str().unwrap(), "--db"])
+            .arg(&d.db)
+            .args(["--to", &db.url, "--station", "bench-s"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Long enough for the back-off to grow past several seconds.
+        tokio::time::sleep(Duration::from_secs(8)).await;
+        assert!(child.try_wait().unwrap().is_none(), "brdfd sync gave up");
+        let cursor = |url: String| async move {
+            let Ok(pool) = sqlx::PgPool::connect(&url).await else {
+                return -1;
+            };
+            let c: Option<i64> =
+                sqlx::query_scalar("SELECT cursor FROM stations WHERE station = 'bench-s'")
+                    .fetch_optional(&pool)
+                    .await
+                    .ok()
+                    .flatten();
+            pool.close().await;
+            c.unwrap_or(0)
+        };
+        let back = std::time::Instant::now();
+        cluster.restart();
+        wait_for("the first batch after the restart", STEP_TIMEOUT, || {
+            let url = db.url.clone();
+            async move { cursor(url).await > 0 }
+        })
+        .await;
+        let resumed = back.elapsed();
+        assert!(
+            resumed < Duration::from_millis(2500),
+            "resumed after {resumed:?}"
+        );
+        // Killed again (while catching up, or just after): it goes on once the server is
+        // back.
+        cluster.stop_immediate();
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "brdfd sync gave up while catching up"
+        );
+        cluster.restart();
+        wait_for("everything forwarded", STEP_TIMEOUT, || {
+            let url = db.url.clone();
+            async move { cursor(url).await == highest }
+        })
+        .await;
+        child.kill().unwrap();
+        child.wait().unwrap();
+        assert_same(&d.db, &db.url, "bench-s").await;
+    })
+    .await;
+}
+
+/// The pooled query of README "The central database with SQL".
+const POOLED_QUERY: &str = "
+    SELECT lab_sample, cost_function, COUNT(DISTINCT station) AS stations, COUNT(*) AS fits,
+           avg(ks) AS ks, avg(alpha) AS alpha, avg(mu) AS mu,
+           avg(de00_diffuse_mean) AS de00_diffuse
+    FROM fit_results
+    WHERE lab_sample IS NOT NULL
+    GROUP BY lab_sample, cost_function
+    ORDER BY lab_sample, cost_function";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_central_views_decode_as_the_stations_and_pool_across_stations() {
+    let _serial = serial();
+    let db = TestDb::create("views");
+    bounded(async {
+        let names = ["bench-v1", "bench-v2"];
+        let mut stations = Vec::new();
+        for n in names {
+            let d = station(n, &db.url, 100).await;
+            measure(&d, 1).await;
+            drained(&d).await;
+            d.service.stop_keeping_store().await;
+            stations.push(d);
+        }
+        let pg = sqlx::PgPool::connect(&db.url).await.unwrap();
+        for (d, n) in stations.iter().zip(names) {
+            let local = sqlx::SqlitePool::connect_with(
+                sqlx::sqlite::SqliteConnectOptions::new()
+                    .filename(&d.db)
+                    .read_only(true),
+            )
+            .await
+            .unwrap();
+            // Every decoded value, bit for bit, station view vs central view.
+            for (view, id) in [
+                ("reading_values", "reading_id"),
+                ("reference_reading_values", "reading_id"),
+                ("processed_values", "processed_id"),
+            ] {
+                let band = if view == "processed_values" {
+                    "geometry_index * 31 + band"
+                } else {
+                    "band"
+                };
+                let sql = |station: bool| {
+                    format!(
+                        "SELECT {id}, {band} AS k, nm, value FROM {view} {} ORDER BY {id}, k",
+                        if station { "WHERE station = $1" } else { "" }
+                    )
+                };
+                let a: Vec<(i64, i64, Option<i64>, Option<u64>)> = sqlx::query(&sql(false))
+                    .fetch_all(&local)
+                    .await
+                    .unwrap()
+                    .iter()
+                    .map(|r| {
+                        (
+                            r.get(0),
+                            r.get(1),
+                            r.get(2),
+                            r.get::<Option<f64>, _>(3).map(f64::to_bits),
+                        )
+                    })
+                    .collect();
+                let b: Vec<(i64, i64, Option<i64>, Option<u64>)> = sqlx::query(&sql(true))
+                    .bind(n)
+                    .fetch_all(&pg)
+                    .await
+                    .unwrap()
+                    .iter()
+                    .map(|r| {
+                        (
+                            r.get(0),
+                            r.get::<i32, _>(1) as i64,
+                            r.get::<Option<i32>, _>(2).map(i64::from),
+                            r.get::<Option<f64>, _>(3).map(f64::to_bits),
+                        )
+                    })
+                    .collect();
+                assert!(!a.is_empty(), "{view}");
+                assert_eq!(a, b, "{n}: {view}, station vs central");
+            }
+            // fit_results: one row per finished fit, parameters as the station's JSON says.
+            let local_fits: Vec<(i64, String, u64, u64, u64)> = sqlx::query(
+                "SELECT id, cost_function, json_extract(params_json, '$.ks'),
+                        json_extract(params_json, '$.alpha'), json_extract(params_json, '$.ior')
+                 FROM fit_runs WHERE status = 'done' ORDER BY id",
+            )
+            .fetch_all(&local)
+            .await
+            .unwrap()
+            .iter()
+            .map(|r| {
+                (
+                    r.get(0),
+                    r.get(1),
+                    r.get::<f64, _>(2).to_bits(),
+                    r.get::<f64, _>(3).to_bits(),
+                    r.get::<f64, _>(4).to_bits(),
+                )
+            })
+            .collect();
+            let central_fits: Vec<(i64, String, u64, u64, u64)> = sqlx::query(
+                "SELECT fit_run_id, cost_function, ks, alpha, mu FROM fit_results
+                 WHERE station = $1 AND simulated AND measured_at > now() - interval '1 hour'
+                   AND de00_mean IS NOT NULL
+                 ORDER BY fit_run_id",
+            )
+            .bind(n)
+            .fetch_all(&pg)
+            .await
+            .unwrap()
+            .iter()
+            .map(|r| {
+                (
+                    r.get(0),
+                    r.get(1),
+                    r.get::<f64, _>(2).to_bits(),
+                    r.get::<f64, _>(3).to_bits(),
+                    r.get::<f64, _>(4).to_bits(),
+                )
+            })
+            .collect();
+            assert!(!local_fits.is_empty());
+            assert_eq!(local_fits, central_fits, "{n}: fit_results");
+            let kd: i64 = sqlx::query_scalar(
+                "SELECT COUNT(kd) FROM kd_values WHERE station = $1 AND kd >= 0",
+            )
+            .bind(n)
+            .fetch_one(&pg)
+            .await
+            .unwrap();
+            assert_eq!(kd, 31 * local_fits.len() as i64, "{n}: kd_values");
+            local.close().await;
+        }
+        // The lab says the two stations' first samples are the same tile; the README's query
+        // pools them.
+        sqlx::query("INSERT INTO lab_samples (lab_sample) VALUES ('L-0001')")
+            .execute(&pg)
+            .await
+            .unwrap();
+        sqlx::query(
+            "INSERT INTO sample_identities (station, sample_id, lab_sample)
+             SELECT station, id, 'L-0001' FROM samples",
+        )
+        .execute(&pg)
+        .await
+        .unwrap();
+        let pooled = sqlx::query(POOLED_QUERY).fetch_all(&pg).await.unwrap();
+        assert!(!pooled.is_empty());
+        for r in &pooled {
+            assert_eq!(r.get::<String, _>("lab_sample"), "L-0001");
+            assert_eq!(r.get::<i64, _>("stations"), 2, "pooled over both stations");
+            assert!(r.get::<f64, _>("ks").is_finite());
+        }
+        pg.close().await;
+        for d in &stations {
+            d.store.close().await;
+        }
     })
     .await;
 }

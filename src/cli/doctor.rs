@@ -7,7 +7,8 @@
 //! answering daemon, or naming a process that has ended, is a failure), the daemon (reachable
 //! with the API token), the MA-T12 on USB (vendor id 0765 in `/sys/bus/usb/devices`, and its
 //! device node readable and writable), the SRA's serial port (present, and in a group of the
-//! user's), and the clock (not before this brdfd was built). Device checks of simulated
+//! user's), forwarding (the central database of `[sync] url` answers, and this store's standing
+//! there: registered by it, not a refused copy, how many entries wait), and the clock (not before this brdfd was built). Device checks of simulated
 //! instruments say "simulated: skipped". Nothing is changed: files are probed with a temporary
 //! file that is removed, device nodes with `access(2)`, the lock by trying it for an instant.
 //! The exit status is non-zero if any check fails; `--json` prints one JSON object.
@@ -178,6 +179,7 @@ pub fn diagnose(args: &DoctorArgs) -> Report {
             let daemon_ok = daemon.status == Outcome::Ok;
             checks.push(lock_check(&config.store.path, daemon_ok, config.api.listen));
             checks.push(daemon);
+            checks.push(central_check(config));
             checks.push(usb_check(&config.devices.ma_t12.transport));
             checks.push(serial_check(&config.devices.sra.transport));
         }
@@ -186,6 +188,7 @@ pub fn diagnose(args: &DoctorArgs) -> Report {
                 "store",
                 "store lock",
                 "daemon",
+                "central database",
                 "MA-T12 (USB)",
                 "SRA (serial)",
             ] {
@@ -470,6 +473,55 @@ fn daemon_check(config: &Config, args: &DoctorArgs) -> Check {
 pub const XRITE_VENDOR: &str = "0765";
 
 /// An X-Rite device in sysfs: (sysfs name, product id, device node).
+/// Forwarding: the central database answers, and this store's standing there as
+/// `[station] id` (src/sync/forward.rs `diagnose`: read only, on both sides).
+fn central_check(config: &Config) -> Check {
+    const NAME: &str = "central database";
+    let Some(url) = &config.sync.url else {
+        return Check::skipped(NAME, "no [sync] url: this station does not forward");
+    };
+    let rt = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            return Check::fail(
+                NAME,
+                format!("cannot start the async runtime: {e}"),
+                "retry",
+            );
+        }
+    };
+    let result = rt.block_on(crate::sync::forward::diagnose(
+        &config.store.path,
+        url,
+        &config.station.id,
+    ));
+    match result {
+        Ok(detail) => Check::ok(NAME, detail),
+        Err(e) => {
+            use crate::sync::SyncError;
+            let fix = match &e {
+                SyncError::Forked { .. } | SyncError::StoreBehind { .. } => format!(
+                    "this store is a copy of station \"{}\"'s store: stop its daemon, run \
+                     `brdfd sync --db {} --adopt NEW_ID` and set [station] id = \"NEW_ID\"",
+                    config.station.id,
+                    config.store.path.display()
+                ),
+                SyncError::StationTaken { .. } | SyncError::StoreHasOtherId { .. } => {
+                    "give this station its own [station] id in brdfd.toml".to_string()
+                }
+                SyncError::NewerSchema { .. } => "upgrade brdfd on this station".to_string(),
+                _ => "check [sync] url (host, port, user, password, database) and that the \
+                      server runs; the station keeps measuring meanwhile"
+                    .to_string(),
+            };
+            Check::fail(NAME, crate::sync::forward::describe(&e), fix)
+        }
+    }
+}
+
 fn xrite_devices(sysfs: &Path) -> Vec<(String, String, PathBuf)> {
     let Ok(entries) = std::fs::read_dir(sysfs) else {
         return Vec::new();

@@ -113,7 +113,8 @@ Exit status:
   5  not authorised: the API token is missing or wrong, or the request was refused as
      cross-origin or for a wrong Host
   6  refused: the daemon's state does not allow it (no reference, stale reference, scan not
-     complete), or no such scan or fit";
+     complete), or no such scan or fit; or the central database refused this store for its
+     station (`brdfd sync`: a copy of the station's store, a taken station id)";
 
 /// The exit statuses of [`EXIT_CODES_HELP`].
 pub mod exit {
@@ -128,7 +129,17 @@ pub mod exit {
 /// The exit status for an error of [`run`]: the first daemon answer in its chain decides.
 pub fn exit_code(err: &anyhow::Error) -> u8 {
     use crate::client::ClientError;
+    use crate::sync::SyncError;
     for cause in err.chain() {
+        if let Some(
+            SyncError::Forked { .. }
+            | SyncError::StoreBehind { .. }
+            | SyncError::StationTaken { .. }
+            | SyncError::StoreHasOtherId { .. },
+        ) = cause.downcast_ref::<SyncError>()
+        {
+            return exit::REFUSED;
+        }
         if let Some(e) = cause.downcast_ref::<ClientError>() {
             return match e {
                 ClientError::NotRunning { .. } | ClientError::Transport { .. } => exit::NO_DAEMON,

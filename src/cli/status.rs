@@ -53,16 +53,22 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
     );
     if let Some(sync) = v["sync"].as_object() {
         println!(
-            "forwarding as station {} to {}: {} rows waiting, {} forwarded since start{}",
+            "forwarding as station {} to {}: {} entries waiting, {} rows forwarded since start{}",
             sync["station"].as_str().unwrap_or("?"),
             sync["central"].as_str().unwrap_or("?"),
             sync["backlog"],
             sync["rows_forwarded"],
             match sync["last_error"].as_str() {
+                Some(e) if sync["refused"].as_bool() == Some(true) => {
+                    format!("; REFUSED, nothing of this store is forwarded: {e}")
+                }
                 Some(e) => format!("; last error: {e}"),
                 None => String::new(),
             }
         );
+        if let Some(v) = sync["last_verify"].as_str() {
+            println!("last comparison with the central database: {v}");
+        }
     }
     if let Some(ingest) = v["ingest"].as_object() {
         println!(

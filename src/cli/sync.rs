@@ -1,7 +1,9 @@
-//! `brdfd sync --db FILE --to URL [--once]`: forwards a station's store to the lab's central
-//! PostgreSQL database — the same forwarder the daemon runs with `[sync] url`, for a station
-//! that is stopped (or has no network while it runs). The store is only read: the cursor of
-//! what was sent lives in the central database, so running it twice sends nothing twice.
+//! `brdfd sync --db FILE --to URL [--once] [--verify] [--adopt NEW_ID]`: forwards a station's
+//! store to the lab's central PostgreSQL database — the same forwarder the daemon runs with
+//! `[sync] url`, for a station that is stopped (or has no network while it runs). The store is
+//! only read: the cursor of what was sent lives in the central database, so running it twice
+//! sends nothing twice. `--adopt` is the one exception: it makes a copy of a station's store a
+//! station of its own (src/sync/lineage.rs) and writes that into the store.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -9,6 +11,7 @@ use std::time::Instant;
 use anyhow::Context;
 
 use crate::config::Config;
+use crate::store::Store;
 use crate::sync::{Forwarder, ForwarderOptions};
 
 #[derive(Debug, clap::Args)]
@@ -17,12 +20,18 @@ Examples:
   brdfd sync --db brdfd.db --to postgres://lab@db.lab/brdfd --once
       send everything not yet sent, print what was sent, exit
   brdfd sync --config /etc/brdfd/brdfd.toml
-      the configured store, station id and [sync] url; keep forwarding until Ctrl-C
+      the configured store, station id and [sync] url; keep forwarding until Ctrl-C,
+      retrying with back-off whatever fails
+  brdfd sync --db brdfd.db --to postgres://lab@db.lab/brdfd --verify --once
+      compare every row with the central database, re-send what it lacks, exit
+  brdfd sync --db copy.db --adopt bench-7
+      make a copy of a station's store a station of its own (then set [station] id)
 
 The central schema is created or brought up to date on first contact. A central database
 migrated by a newer brdfd is refused, and so is a station id another store already forwards
-under. Every row is keyed by (station, local id): a resend changes nothing, a row that changed
-(a fit that finished, a scan that failed) is updated.")]
+under, and a copy of a station's store that went its own way after it was copied (exit
+status 6, the message names `--adopt`). Every row is keyed by (station, local id): a resend
+changes nothing, a row that changed (a fit that finished, a scan that failed) is updated.")]
 pub struct SyncArgs {
     /// The station's SQLite store; default: the configuration's `[store] path`.
     #[arg(long, value_name = "FILE")]
@@ -39,15 +48,30 @@ pub struct SyncArgs {
     pub station: Option<String>,
 
     /// Send what is pending, then exit (exit status 1 if it could not all be sent). Without
-    /// it, keep forwarding new rows as the store receives them, until Ctrl-C.
+    /// it, keep forwarding new rows as the store receives them, until Ctrl-C, retrying with
+    /// back-off after any failure.
     #[arg(long)]
     pub once: bool,
+
+    /// First compare every forwarded row of the store with the central database (SHA-256 per
+    /// row, per table) and re-send what is missing or different: after the central database
+    /// was restored from a backup. The daemon does it by itself when it finds the central
+    /// database behind what the store already deleted.
+    #[arg(long)]
+    pub verify: bool,
+
+    /// Make this store (a copy of a station's store, refused for that station) a station of
+    /// its own called NEW_ID: a new store id and every row queued again; then exit. The
+    /// daemon must be stopped. Set [station] id = "NEW_ID" afterwards (or pass --station).
+    #[arg(long, value_name = "NEW_ID", conflicts_with_all = ["once", "verify"])]
+    pub adopt: Option<String>,
 
     /// Configuration file for the defaults above.
     #[arg(long, value_name = "brdfd.toml")]
     pub config: Option<PathBuf>,
 
     /// NDJSON on stdout: `{"type":"start","station","store","central"}`, one
+    /// `{"type":"verify","tables":[…],"cursor"}` with --verify, one
     /// `{"type":"batch","entries","rows":{table: n},"cursor"}` per batch, and
     /// `{"type":"drained","rows","seconds"}` when nothing is pending.
     #[arg(long)]
@@ -57,6 +81,15 @@ pub struct SyncArgs {
 pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
     let config = Config::load_or_default(args.config.as_deref())?;
     let db = args.db.clone().unwrap_or_else(|| config.store.path.clone());
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    if let Some(new_id) = &args.adopt {
+        return rt
+            .block_on(adopt(&db, new_id))
+            .with_context(|| format!("adopting {}", db.display()));
+    }
     let url = match (&args.to, &config.sync.url) {
         (Some(u), _) | (None, Some(u)) => u.clone(),
         (None, None) => anyhow::bail!(
@@ -69,10 +102,6 @@ pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| config.station.id.clone());
     let mut options = ForwarderOptions::new(station.clone(), url);
     options.batch = config.sync.batch;
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
     rt.block_on(async {
         let mut forwarder = Forwarder::for_file(&db, options).await?;
         let central = forwarder
@@ -109,6 +138,48 @@ pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
                 println!("{r}");
             }
         };
+        if !args.once {
+            // Continuous: nothing stops it but Ctrl-C (the comparison, when asked for, is its
+            // first step, retried like any other).
+            if !json {
+                println!("forwarding until Ctrl-C; failures are retried with back-off");
+            }
+            if args.verify {
+                forwarder.request_verify();
+            }
+            let stop = async {
+                let _ = tokio::signal::ctrl_c().await;
+            };
+            forwarder.run(stop, &mut print).await;
+            return Ok(());
+        }
+        let mut extra = 0;
+        if args.verify {
+            let report = forwarder.verify().await?;
+            extra = report.extra();
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({
+                        "type": "verify", "tables": report.tables, "cursor": report.cursor,
+                    })
+                );
+            } else {
+                for t in &report.tables {
+                    println!(
+                        "{:<22} {:>7} rows here, {:>7} centrally, {:>6} re-sent, {} extra; \
+                         sha256 {}",
+                        t.table,
+                        t.local,
+                        t.central,
+                        t.resent,
+                        t.extra,
+                        &t.digest[..16]
+                    );
+                }
+                println!("{report}");
+            }
+        }
         let sent = forwarder.drain(&mut print).await?;
         if json {
             println!(
@@ -123,16 +194,28 @@ pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
                 started.elapsed().as_secs_f64()
             );
         }
-        if !args.once {
-            if !json {
-                println!("forwarding new rows as they are stored; Ctrl-C to stop");
-            }
-            let stop = async {
-                let _ = tokio::signal::ctrl_c().await;
-            };
-            forwarder.run(stop, &mut print).await;
+        if extra > 0 {
+            anyhow::bail!(
+                "the central database holds {extra} rows for station \"{station}\" that this \
+                 store does not have: another store forwarded under this id"
+            );
         }
         Ok::<_, anyhow::Error>(())
     })
     .with_context(|| format!("forwarding {}", db.display()))
+}
+
+async fn adopt(db: &std::path::Path, new_id: &str) -> anyhow::Result<()> {
+    if !db.exists() {
+        anyhow::bail!("no store at {}", db.display());
+    }
+    let store = Store::open(db).await?;
+    let queued = crate::sync::lineage::adopt(store.sync_pools().0).await?;
+    store.close().await;
+    println!(
+        "{} is now a store of its own ({queued} rows queued to forward); set [station] id = \
+         \"{new_id}\" in its brdfd.toml (or pass --station {new_id}) and start it",
+        db.display()
+    );
+    Ok(())
 }

@@ -103,6 +103,8 @@ impl Store {
                 source,
             })?;
         MIGRATOR.run(&pools.writer).await?;
+        // A writer opened it: a new incarnation of the store (src/sync/lineage.rs).
+        crate::sync::lineage::begin_incarnation(&pools.writer).await?;
         Ok(Store {
             writer: pools.writer,
             reader: pools.reader,

@@ -17,6 +17,7 @@ use std::time::Duration;
 use sqlx::postgres::{PgConnectOptions, PgPoolOptions};
 use sqlx::{PgPool, Row};
 
+use super::lineage::Standing;
 use super::{SyncError, redact};
 
 /// The central schema, from `migrations-central/`.
@@ -184,6 +185,52 @@ impl Central {
             .fetch_one(&self.pool)
             .await
             .map_err(|e| self.error(e))
+    }
+
+    /// The station's lineage standing (src/sync/lineage.rs) and cursor.
+    pub async fn standing(&self, station: &str) -> Result<(Standing, i64), SyncError> {
+        let row =
+            sqlx::query("SELECT incarnation, horizon, cursor FROM stations WHERE station = $1")
+                .bind(station)
+                .fetch_one(&self.pool)
+                .await
+                .map_err(|e| self.error(e))?;
+        Ok((
+            Standing {
+                incarnation: row.get(0),
+                horizon: row.get(1),
+            },
+            row.get(2),
+        ))
+    }
+
+    /// The station's incarnation is alive (an idle forwarder's look at its cursor).
+    pub async fn heartbeat(&self, station: &str) -> Result<(), SyncError> {
+        sqlx::query("UPDATE stations SET heartbeat_at = now() WHERE station = $1")
+            .bind(station)
+            .execute(&self.pool)
+            .await
+            .map_err(|e| self.error(e))?;
+        Ok(())
+    }
+
+    /// Records that a store was refused for `station`, for the lab's administrator
+    /// (`station_refusals`); best effort: the refusal itself is what matters.
+    pub async fn record_refusal(&self, station: &str, uid: &str, incarnation: &str, reason: &str) {
+        let r = sqlx::query(
+            "INSERT INTO station_refusals (station, store_uid, incarnation, host, reason)
+             VALUES ($1, $2, $3, $4, $5)",
+        )
+        .bind(station)
+        .bind(uid)
+        .bind(incarnation)
+        .bind(super::default_station_id())
+        .bind(reason)
+        .execute(&self.pool)
+        .await;
+        if let Err(e) = r {
+            tracing::debug!(error = %e, "recording a refusal in the central database");
+        }
     }
 
     /// Every station id, sorted.

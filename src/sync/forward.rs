@@ -6,7 +6,7 @@
 //! cursor, in one PostgreSQL transaction. A row named several times in a batch is sent once,
 //! as it is now. After any error the cursor is read back from the central database (a COMMIT
 //! whose acknowledgement was lost may or may not have happened), then the step is retried with
-//! back-off (1 s doubling to 30 s); acquisition never waits on any of it.
+//! back-off (0.5 s doubling to 30 s, cut short when the server answers again); acquisition never waits on any of it.
 //!
 //! The daemon's forwarder also deletes the entries the central database has acknowledged
 //! (`sync_outbox.seq <= cursor`), through the store's single writer; `brdfd sync --db FILE`
@@ -22,6 +22,7 @@ use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
 use sqlx::{QueryBuilder, Row, SqlitePool};
 
 use super::central::{Central, one_line};
+use super::lineage;
 use super::tables::{Kind, TABLES, Table, tables_for};
 use super::{SyncError, redact};
 use crate::store::Store;
@@ -71,6 +72,12 @@ pub struct SyncStatus {
     /// The last failure, until the next success.
     pub last_error: Option<String>,
     pub last_error_ms: Option<i64>,
+    /// True while the central database refuses this store for the station (a copy of the
+    /// station's store that went its own way: `last_error` says how to adopt it).
+    pub refused: bool,
+    /// The last `--verify` comparison with the central database, in one line.
+    pub last_verify: Option<String>,
+    pub last_verify_ms: Option<i64>,
 }
 
 /// What one batch did.
@@ -108,7 +115,7 @@ impl std::fmt::Display for BatchReport {
 
 /// A column value on its way from SQLite to PostgreSQL.
 #[derive(Debug, Clone, PartialEq)]
-enum Value {
+pub(super) enum Value {
     Int(Option<i64>),
     Text(Option<String>),
     Blob(Option<Vec<u8>>),
@@ -124,20 +131,27 @@ struct Entry {
 
 /// Forwards one station's store.
 pub struct Forwarder {
-    options: ForwarderOptions,
+    pub(super) options: ForwarderOptions,
     /// Read connections on the station's store.
-    source: SqlitePool,
+    pub(super) source: SqlitePool,
     /// The store's writer, to prune acknowledged entries (the daemon only).
     pruner: Option<SqlitePool>,
     /// The store's `sync_identity.uid`.
-    uid: String,
-    central: Option<Central>,
+    pub(super) uid: String,
+    pub(super) central: Option<Central>,
     /// The central cursor, when known to be current.
-    cursor: Option<i64>,
+    pub(super) cursor: Option<i64>,
     /// The last cursor the central database acknowledged (kept across errors, for the
     /// backlog).
     acknowledged: i64,
-    status: Arc<Mutex<SyncStatus>>,
+    /// The central database is behind entries this store already deleted (it was restored
+    /// from a backup): compare and re-send ([`Forwarder::verify`]) before the next batch.
+    pub(super) needs_verify: bool,
+    /// When an idle forwarder last looked at the central cursor.
+    last_look: std::time::Instant,
+    /// The last refusal recorded in the central database, so a retry does not repeat it.
+    last_refusal: Option<String>,
+    pub(super) status: Arc<Mutex<SyncStatus>>,
 }
 
 impl std::fmt::Debug for Forwarder {
@@ -184,6 +198,9 @@ impl Forwarder {
             last_forwarded_ms: None,
             last_error: None,
             last_error_ms: None,
+            refused: false,
+            last_verify: None,
+            last_verify_ms: None,
         };
         Forwarder {
             options,
@@ -193,6 +210,9 @@ impl Forwarder {
             central: None,
             cursor: None,
             acknowledged: 0,
+            needs_verify: false,
+            last_look: std::time::Instant::now(),
+            last_refusal: None,
             status: Arc::new(Mutex::new(status)),
         }
     }
@@ -233,6 +253,20 @@ impl Forwarder {
         Ok(f)
     }
 
+    /// The store's current incarnation (the last of its lineage).
+    async fn incarnation(&self) -> Option<String> {
+        lineage::read(&self.source)
+            .await
+            .ok()
+            .and_then(|l| l.last().map(|i| i.id.clone()))
+    }
+
+    /// Compares the store with the central database (and re-sends what it lacks) before the
+    /// next batch: `brdfd sync --verify` without `--once`.
+    pub fn request_verify(&mut self) {
+        self.needs_verify = true;
+    }
+
     /// The status, shared: it changes as the forwarder runs.
     pub fn status(&self) -> Arc<Mutex<SyncStatus>> {
         self.status.clone()
@@ -243,7 +277,7 @@ impl Forwarder {
         self.central.as_ref()
     }
 
-    fn set_status(&self, f: impl FnOnce(&mut SyncStatus)) {
+    pub(super) fn set_status(&self, f: impl FnOnce(&mut SyncStatus)) {
         let mut s = self.status.lock().unwrap_or_else(|p| p.into_inner());
         f(&mut s);
     }
@@ -264,20 +298,29 @@ impl Forwarder {
 
     /// Connects (once), migrates the central schema and registers the station; reads the
     /// cursor back when it is not known to be current.
-    async fn ensure_ready(&mut self) -> Result<(), SyncError> {
+    ///
+    /// On every (re)connection it also checks the store's standing: a copy of the station's
+    /// store that went its own way is refused at once, before it has anything to send
+    /// (src/sync/lineage.rs), and a central database that is behind entries this store
+    /// already deleted (restored from a backup) is compared and caught up before the next
+    /// batch ([`Forwarder::verify`]).
+    pub(super) async fn ensure_ready(&mut self) -> Result<(), SyncError> {
         if self.central.is_none() {
             let central = Central::connect_and_migrate(&self.options.url).await?;
-            let row = central.register(&self.options.station, &self.uid).await?;
-            self.cursor = Some(row.cursor);
+            central.register(&self.options.station, &self.uid).await?;
             self.central = Some(central);
+            self.cursor = None;
         }
-        if self.cursor.is_none() {
-            let central = self.central.as_ref().expect("connected above");
-            self.cursor = Some(central.cursor(&self.options.station).await?);
+        if self.cursor.is_some() {
+            return Ok(());
         }
-        let cursor = self.cursor.expect("read above");
-        self.acknowledged = cursor;
+        let central = self.central.as_ref().expect("connected above");
+        let (standing, cursor) = central.standing(&self.options.station).await?;
         let highest = self.highest_seq().await?;
+        let lineage = lineage::read(&self.source)
+            .await
+            .map_err(SyncError::Local)?;
+        lineage::check(&self.options.station, &standing, &lineage, highest)?;
         if cursor > highest {
             return Err(SyncError::StoreBehind {
                 station: self.options.station.clone(),
@@ -285,21 +328,28 @@ impl Forwarder {
                 local: highest,
             });
         }
+        if cursor < self.deleted_up_to(highest).await? {
+            self.needs_verify = true;
+        }
+        // Only a store the station accepts counts the central cursor as its own.
+        self.acknowledged = cursor;
+        self.cursor = Some(cursor);
         Ok(())
+    }
+
+    /// The outbox entries this store deleted as acknowledged reach this far.
+    async fn deleted_up_to(&self, highest: i64) -> Result<i64, SyncError> {
+        let lowest: Option<i64> = sqlx::query_scalar("SELECT MIN(seq) FROM sync_outbox")
+            .fetch_one(&self.source)
+            .await
+            .map_err(SyncError::Local)?;
+        Ok(lowest.map_or(highest, |l| l - 1))
     }
 
     /// The highest outbox number this store ever gave out (pruned entries included).
     async fn highest_seq(&self) -> Result<i64, SyncError> {
-        let from_sequence: Option<i64> =
-            sqlx::query_scalar("SELECT seq FROM sqlite_sequence WHERE name = 'sync_outbox'")
-                .fetch_optional(&self.source)
-                .await
-                .map_err(SyncError::Local)?;
-        let from_table: Option<i64> = sqlx::query_scalar("SELECT MAX(seq) FROM sync_outbox")
-            .fetch_one(&self.source)
-            .await
-            .map_err(SyncError::Local)?;
-        Ok(from_sequence.unwrap_or(0).max(from_table.unwrap_or(0)))
+        let mut c = self.source.acquire().await.map_err(SyncError::Local)?;
+        highest_seq(&mut c).await.map_err(SyncError::Local)
     }
 
     /// Forwards one batch; `None` when the outbox holds nothing after the cursor.
@@ -311,6 +361,7 @@ impl Forwarder {
                 let cursor = self.cursor;
                 self.set_status(|s| {
                     s.connected = true;
+                    s.refused = false;
                     s.cursor = cursor;
                     s.last_error = None;
                     s.last_error_ms = None;
@@ -323,6 +374,31 @@ impl Forwarder {
             Err(e) => {
                 // The COMMIT may or may not have happened: read the cursor back next time.
                 self.cursor = None;
+                let refused = matches!(
+                    e,
+                    SyncError::Forked { .. }
+                        | SyncError::StoreBehind { .. }
+                        | SyncError::SecondLive { .. }
+                );
+                let recorded =
+                    matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. });
+                if recorded && self.last_refusal.as_deref() != Some(&e.to_string()) {
+                    if let Some(c) = &self.central {
+                        let incarnation = lineage::read(&self.source)
+                            .await
+                            .ok()
+                            .and_then(|l| l.last().map(|i| i.id.clone()))
+                            .unwrap_or_default();
+                        c.record_refusal(
+                            &self.options.station,
+                            &self.uid,
+                            &incarnation,
+                            &e.to_string(),
+                        )
+                        .await;
+                    }
+                    self.last_refusal = Some(e.to_string());
+                }
                 if !e.is_transient() {
                     // A person must act (taken id, newer schema): connect afresh next time.
                     self.central = None;
@@ -330,6 +406,7 @@ impl Forwarder {
                 let message = e.to_string();
                 self.set_status(|s| {
                     s.connected = false;
+                    s.refused = refused;
                     s.last_error = Some(message);
                     s.last_error_ms = Some(crate::store::now_ms());
                 });
@@ -341,14 +418,58 @@ impl Forwarder {
 
     async fn try_step(&mut self) -> Result<Option<BatchReport>, SyncError> {
         self.ensure_ready().await?;
+        if self.needs_verify {
+            let report = self.verify().await?;
+            if report.resent() > 0 || report.extra() > 0 {
+                tracing::warn!(
+                    station = %self.options.station,
+                    "compared the store with the central database (restored from a backup?): \
+                     {report}"
+                );
+            } else {
+                tracing::info!(station = %self.options.station, "compared the store with the central database: {report}");
+            }
+        }
         let cursor = self.cursor.expect("ensure_ready sets it");
-        let (entries, rows) = self.read_batch(cursor).await?;
+        let Batch {
+            entries,
+            rows,
+            high,
+            lineage,
+        } = self.read_batch(cursor).await?;
         let Some(last) = entries.last() else {
+            // Idle: look now and then whether the central database still has the cursor
+            // where this forwarder left it (a database restored from a backup, another
+            // forwarder); if not, read it back (and compare) at the next step.
+            if self.last_look.elapsed() >= LOOK {
+                self.last_look = std::time::Instant::now();
+                let central = self.central.as_ref().expect("ensure_ready connects");
+                let (standing, now) = central.standing(&self.options.station).await?;
+                if now != cursor {
+                    self.cursor = None;
+                } else if standing.incarnation.is_some()
+                    && standing.incarnation.as_deref() == self.incarnation().await.as_deref()
+                {
+                    // Still the station's: say so, so that a copy is not taken for it.
+                    central.heartbeat(&self.options.station).await?;
+                }
+            }
             return Ok(None);
         };
         let new_cursor = last.seq;
         let central = self.central.as_ref().expect("ensure_ready connects");
         let mut tx = central.pool.begin().await.map_err(|e| central.error(e))?;
+        // Before any row: is this store still the station's (src/sync/lineage.rs)?
+        let incarnation = lock_station(
+            &mut tx,
+            central,
+            &self.options.station,
+            &self.uid,
+            cursor,
+            &lineage,
+            high,
+        )
+        .await?;
         let mut counts = Vec::new();
         for (table, table_rows) in &rows {
             if table_rows.is_empty() {
@@ -359,22 +480,15 @@ impl Forwarder {
                 .map_err(|e| central.error(e))?;
             counts.push((table.name, table_rows.len()));
         }
-        let moved = sqlx::query(
-            "UPDATE stations SET cursor = $1, last_synced_at = now()
-             WHERE station = $2 AND cursor = $3",
+        advance_station(
+            &mut tx,
+            central,
+            &self.options.station,
+            new_cursor,
+            high,
+            &incarnation,
         )
-        .bind(new_cursor)
-        .bind(&self.options.station)
-        .bind(cursor)
-        .execute(&mut *tx)
-        .await
-        .map_err(|e| central.error(e))?;
-        if moved.rows_affected() != 1 {
-            return Err(SyncError::CursorMoved {
-                station: self.options.station.clone(),
-                expected: cursor,
-            });
-        }
+        .await?;
         tx.commit().await.map_err(|e| central.error(e))?;
         let now = crate::store::now_ms();
         self.cursor = Some(new_cursor);
@@ -398,11 +512,10 @@ impl Forwarder {
     }
 
     /// The entries after `cursor` and the rows they name, from one snapshot of the store.
-    async fn read_batch(
-        &self,
-        cursor: i64,
-    ) -> Result<(Vec<Entry>, Vec<(&'static Table, Vec<Vec<Value>>)>), SyncError> {
+    async fn read_batch(&self, cursor: i64) -> Result<Batch, SyncError> {
         let mut tx = self.source.begin().await.map_err(SyncError::Local)?;
+        let high = highest_seq(&mut tx).await.map_err(SyncError::Local)?;
+        let lineage = lineage::read(&mut *tx).await.map_err(SyncError::Local)?;
         let entries: Vec<Entry> = sqlx::query(
             "SELECT seq, table_name, row_id, at_ms FROM sync_outbox
              WHERE seq > $1 ORDER BY seq LIMIT $2",
@@ -433,34 +546,18 @@ impl Forwarder {
                 .map(|e| e.row_id)
                 .filter(|id| seen.insert(*id))
                 .collect();
-            let mut rows = Vec::new();
-            // 500 placeholders per statement: well inside every SQLite's limit.
-            for chunk in ids.chunks(500) {
-                let mut q = QueryBuilder::<sqlx::Sqlite>::new("SELECT ");
-                let names: Vec<&str> = table.columns.iter().map(|(n, _)| *n).collect();
-                q.push(names.join(", "));
-                q.push(format!(
-                    " FROM {} WHERE {} IN (",
-                    table.name, table.selected_by
-                ));
-                let mut list = q.separated(", ");
-                for id in chunk {
-                    list.push_bind(*id);
-                }
-                q.push(")");
-                for row in q
-                    .build()
-                    .fetch_all(&mut *tx)
-                    .await
-                    .map_err(SyncError::Local)?
-                {
-                    rows.push(decode_row(table, &row).map_err(SyncError::Local)?);
-                }
-            }
+            let rows = read_rows(&mut tx, table, &ids)
+                .await
+                .map_err(SyncError::Local)?;
             out.push((table, rows));
         }
         tx.commit().await.map_err(SyncError::Local)?;
-        Ok((entries, out))
+        Ok(Batch {
+            entries,
+            rows: out,
+            high,
+            lineage,
+        })
     }
 
     /// Forwards batches until the outbox is empty after the cursor; `on_batch` sees each.
@@ -477,24 +574,28 @@ impl Forwarder {
     }
 
     /// Forwards for ever: a batch as soon as there is one, a look every `poll` when idle, and
-    /// after an error a retry with back-off, until `stop` resolves. Errors are logged once
-    /// each (a new message, not every retry) and kept in the status.
+    /// after an error a retry with back-off, until `stop` resolves; it never gives up by
+    /// itself, whatever the error and whatever it was doing (catching up included). Errors
+    /// are logged once each (a new message, not every retry) and kept in the status. While it
+    /// waits, the status's backlog stays live, and when the server could not be reached, its
+    /// port is probed every [`PROBE`]: forwarding resumes as soon as the server answers
+    /// again, not at the end of the back-off.
     pub async fn run(
         mut self,
         stop: impl std::future::Future<Output = ()>,
         on_batch: &mut (dyn FnMut(&BatchReport) + Send),
     ) {
         tokio::pin!(stop);
-        let mut backoff = Duration::from_secs(1);
+        let mut backoff = MIN_BACKOFF;
         let mut last_logged: Option<String> = None;
         loop {
             let result = tokio::select! {
                 _ = &mut stop => break,
                 r = self.step() => r,
             };
-            let wait = match result {
+            let (wait, unreachable) = match result {
                 Ok(Some(report)) => {
-                    backoff = Duration::from_secs(1);
+                    backoff = MIN_BACKOFF;
                     if last_logged.take().is_some() {
                         tracing::info!(central = %redact(&self.options.url), "forwarding again");
                     }
@@ -502,32 +603,366 @@ impl Forwarder {
                     continue;
                 }
                 Ok(None) => {
-                    backoff = Duration::from_secs(1);
-                    self.options.poll
+                    backoff = MIN_BACKOFF;
+                    if last_logged.take().is_some() {
+                        tracing::info!(central = %redact(&self.options.url), "forwarding again");
+                    }
+                    (self.options.poll, false)
                 }
                 Err(e) => {
                     let message = e.to_string();
                     if last_logged.as_deref() != Some(message.as_str()) {
-                        tracing::warn!("forwarding to the central database: {message}");
+                        if matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. }) {
+                            tracing::error!("forwarding to the central database: {message}");
+                        } else {
+                            tracing::warn!("forwarding to the central database: {message}");
+                        }
                         last_logged = Some(message);
                     }
                     let wait = backoff;
-                    backoff = (backoff * 2).min(self.options.max_backoff);
-                    wait
+                    backoff = (backoff * 2).min(self.options.max_backoff.max(MIN_BACKOFF));
+                    (
+                        wait,
+                        matches!(e, SyncError::Connect { .. } | SyncError::Central { .. }),
+                    )
                 }
             };
-            tokio::select! {
-                _ = &mut stop => break,
-                _ = tokio::time::sleep(wait) => {}
+            let until = tokio::time::Instant::now() + wait;
+            let probe = if unreachable {
+                probe_target(&self.options.url)
+            } else {
+                None
+            };
+            let mut down = false;
+            loop {
+                let now = tokio::time::Instant::now();
+                if now >= until {
+                    break;
+                }
+                let tick = (until - now).min(PROBE);
+                tokio::select! {
+                    _ = &mut stop => {
+                        self.close().await;
+                        return;
+                    }
+                    _ = tokio::time::sleep(tick) => {}
+                }
+                if wait > PROBE {
+                    self.refresh_backlog().await;
+                }
+                if let Some((host, port)) = &probe {
+                    let up = matches!(
+                        tokio::time::timeout(
+                            PROBE,
+                            tokio::net::TcpStream::connect((host.as_str(), *port))
+                        )
+                        .await,
+                        Ok(Ok(_))
+                    );
+                    if !up {
+                        down = true;
+                    } else if down {
+                        // The server is back: retry now, and quickly again if it is still
+                        // starting up.
+                        backoff = MIN_BACKOFF;
+                        break;
+                    }
+                }
             }
         }
+        self.close().await;
+    }
+
+    async fn close(&self) {
         if let Some(c) = &self.central {
             c.close().await;
         }
     }
 }
 
-fn decode_row(table: &Table, row: &sqlx::sqlite::SqliteRow) -> Result<Vec<Value>, sqlx::Error> {
+/// How long after the last sign of life of the station's incarnation another one is refused
+/// as a second live copy.
+const LIVE: Duration = Duration::from_secs(5);
+
+/// How often an idle forwarder looks at the central cursor.
+const LOOK: Duration = Duration::from_secs(1);
+
+/// The first wait after an error.
+const MIN_BACKOFF: Duration = Duration::from_millis(500);
+
+/// How often a forwarder waiting after a failed connection looks whether the server is back.
+const PROBE: Duration = Duration::from_millis(250);
+
+/// The TCP host and port of a central database URL (none for a Unix socket).
+fn probe_target(url: &str) -> Option<(String, u16)> {
+    use std::str::FromStr;
+    let o = sqlx::postgres::PgConnectOptions::from_str(url).ok()?;
+    let host = o.get_host().to_string();
+    if host.starts_with('/') {
+        return None;
+    }
+    Some((host, o.get_port()))
+}
+
+/// What `brdfd doctor` says of forwarding the store at `path` as `station`: the central
+/// database answers, and the station's standing there (registered by this store, the store's
+/// lineage accepted, how many entries wait). Changes nothing on either side: no migration, no
+/// registration, the store opened read-only.
+pub async fn diagnose(path: &Path, url: &str, station: &str) -> Result<String, SyncError> {
+    let central = Central::connect(url).await?;
+    let result = diagnose_on(&central, path, station).await;
+    central.close().await;
+    result
+}
+
+async fn diagnose_on(central: &Central, path: &Path, station: &str) -> Result<String, SyncError> {
+    let has_lineage: bool = sqlx::query_scalar(
+        "SELECT to_regclass('stations') IS NOT NULL
+            AND EXISTS (SELECT 1 FROM information_schema.columns
+                        WHERE table_name = 'stations' AND column_name = 'horizon')",
+    )
+    .fetch_one(&central.pool)
+    .await
+    .map_err(|e| central.error(e))?;
+    let row = if has_lineage {
+        sqlx::query(
+            "SELECT store_uid, cursor, horizon, incarnation,
+                    to_char(registered_at AT TIME ZONE 'UTC', 'YYYY-MM-DD HH24:MI:SS \"UTC\"'),
+                    COALESCE(host, '?')
+             FROM stations WHERE station = $1",
+        )
+        .bind(station)
+        .fetch_optional(&central.pool)
+        .await
+        .map_err(|e| central.error(e))?
+    } else {
+        None
+    };
+    if !path.exists() {
+        return Ok(format!(
+            "{} answers; no store at {} yet",
+            central.url,
+            path.display()
+        ));
+    }
+    let source = SqlitePoolOptions::new()
+        .max_connections(1)
+        .connect_with(
+            SqliteConnectOptions::new()
+                .filename(path)
+                .read_only(true)
+                .busy_timeout(Duration::from_secs(5)),
+        )
+        .await
+        .map_err(SyncError::Local)?;
+    let uid = store_uid(&source, &path.display().to_string()).await?;
+    let mut c = source.acquire().await.map_err(SyncError::Local)?;
+    let highest = highest_seq(&mut c).await.map_err(SyncError::Local)?;
+    let lineage = lineage::read(&mut *c).await.map_err(SyncError::Local)?;
+    drop(c);
+    let Some(row) = row else {
+        let waiting: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM sync_outbox")
+            .fetch_one(&source)
+            .await
+            .map_err(SyncError::Local)?;
+        source.close().await;
+        return Ok(format!(
+            "{} answers; station \"{station}\" is not registered yet (it is on first \
+             contact); {waiting} entries to forward",
+            central.url
+        ));
+    };
+    let holder: String = row.get(0);
+    let cursor: i64 = row.get(1);
+    if holder != uid {
+        source.close().await;
+        return Err(SyncError::StationTaken {
+            station: station.to_string(),
+            registered: row.get(4),
+            host: row.get(5),
+        });
+    }
+    let standing = lineage::Standing {
+        incarnation: row.get(3),
+        horizon: row.get(2),
+    };
+    let checked = lineage::check(station, &standing, &lineage, highest);
+    let waiting: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM sync_outbox WHERE seq > $1")
+        .bind(cursor)
+        .fetch_one(&source)
+        .await
+        .map_err(SyncError::Local)?;
+    source.close().await;
+    checked?;
+    if cursor > highest {
+        return Err(SyncError::StoreBehind {
+            station: station.to_string(),
+            cursor,
+            local: highest,
+        });
+    }
+    Ok(format!(
+        "{} answers; station \"{station}\" is this store's, forwarded up to entry {cursor} of \
+         {highest}, {waiting} entries waiting",
+        central.url
+    ))
+}
+
+/// One batch as read from one snapshot of the store.
+struct Batch {
+    entries: Vec<Entry>,
+    rows: Vec<(&'static Table, Vec<Vec<Value>>)>,
+    /// The highest outbox entry of the snapshot: the rows are as of this entry.
+    high: i64,
+    lineage: Vec<lineage::Incarnation>,
+}
+
+/// The highest outbox number the store ever gave out (pruned entries included).
+pub(super) async fn highest_seq(c: &mut sqlx::SqliteConnection) -> Result<i64, sqlx::Error> {
+    let from_sequence: Option<i64> =
+        sqlx::query_scalar("SELECT seq FROM sqlite_sequence WHERE name = 'sync_outbox'")
+            .fetch_optional(&mut *c)
+            .await?;
+    let from_table: Option<i64> = sqlx::query_scalar("SELECT MAX(seq) FROM sync_outbox")
+        .fetch_one(&mut *c)
+        .await?;
+    Ok(from_sequence.unwrap_or(0).max(from_table.unwrap_or(0)))
+}
+
+/// The rows of `table` whose `selected_by` column is one of `ids`, decoded.
+pub(super) async fn read_rows(
+    c: &mut sqlx::SqliteConnection,
+    table: &Table,
+    ids: &[i64],
+) -> Result<Vec<Vec<Value>>, sqlx::Error> {
+    let mut rows = Vec::new();
+    // 500 placeholders per statement: well inside every SQLite's limit.
+    for chunk in ids.chunks(500) {
+        let mut q = QueryBuilder::<sqlx::Sqlite>::new("SELECT ");
+        let names: Vec<&str> = table.columns.iter().map(|(n, _)| *n).collect();
+        q.push(names.join(", "));
+        q.push(format!(
+            " FROM {} WHERE {} IN (",
+            table.name, table.selected_by
+        ));
+        let mut list = q.separated(", ");
+        for id in chunk {
+            list.push_bind(*id);
+        }
+        q.push(")");
+        for row in q.build().fetch_all(&mut *c).await? {
+            rows.push(decode_row(table, &row)?);
+        }
+    }
+    Ok(rows)
+}
+
+/// Locks the station's row for the transaction `tx` and checks, before any row is written,
+/// that this store may forward for it: the same store, the cursor where this forwarder left
+/// it, and a lineage the central database accepts (src/sync/lineage.rs). Returns the
+/// incarnation to record.
+pub(super) async fn lock_station(
+    tx: &mut sqlx::PgConnection,
+    central: &Central,
+    station: &str,
+    uid: &str,
+    expected_cursor: i64,
+    lineage: &[lineage::Incarnation],
+    high: i64,
+) -> Result<String, SyncError> {
+    let row = sqlx::query(
+        "SELECT store_uid, cursor, horizon, incarnation,
+                to_char(registered_at AT TIME ZONE 'UTC', 'YYYY-MM-DD HH24:MI:SS \"UTC\"'),
+                COALESCE(host, '?'),
+                EXTRACT(EPOCH FROM now() - heartbeat_at)::float8
+         FROM stations WHERE station = $1 FOR UPDATE",
+    )
+    .bind(station)
+    .fetch_optional(&mut *tx)
+    .await
+    .map_err(|e| central.error(e))?;
+    let Some(row) = row else {
+        // The central database lost the station (restored from an older backup): register
+        // again on the next attempt.
+        return Err(central.error(format_args!(
+            "station \"{station}\" is no longer registered (the database was restored?); \
+             registering again"
+        )));
+    };
+    let holder: String = row.get(0);
+    let cursor: i64 = row.get(1);
+    if holder != uid {
+        return Err(SyncError::StationTaken {
+            station: station.to_string(),
+            registered: row.get(4),
+            host: row.get(5),
+        });
+    }
+    if cursor != expected_cursor {
+        return Err(SyncError::CursorMoved {
+            station: station.to_string(),
+            expected: expected_cursor,
+        });
+    }
+    let standing = lineage::Standing {
+        incarnation: row.get(3),
+        horizon: row.get(2),
+    };
+    lineage::check(station, &standing, lineage, high)?;
+    let mine = lineage.last().map(|i| i.id.as_str());
+    let silent: Option<f64> = row.get(6);
+    if let (Some(head), Some(seconds)) = (standing.incarnation.as_deref(), silent)
+        && Some(head) != mine
+        && seconds < LIVE.as_secs_f64()
+    {
+        return Err(SyncError::SecondLive {
+            station: station.to_string(),
+            seconds,
+        });
+    }
+    Ok(lineage
+        .last()
+        .map(|i| i.id.clone())
+        .unwrap_or_else(|| uid.to_string()))
+}
+
+/// Moves the station's cursor and horizon and records its incarnation, in `tx`.
+pub(super) async fn advance_station(
+    tx: &mut sqlx::PgConnection,
+    central: &Central,
+    station: &str,
+    cursor: i64,
+    high: i64,
+    incarnation: &str,
+) -> Result<(), SyncError> {
+    sqlx::query(
+        "UPDATE stations SET cursor = $1, horizon = GREATEST(horizon, $2), incarnation = $3,
+                last_synced_at = now(), heartbeat_at = now()
+         WHERE station = $4",
+    )
+    .bind(cursor)
+    .bind(high)
+    .bind(incarnation)
+    .bind(station)
+    .execute(&mut *tx)
+    .await
+    .map_err(|e| central.error(e))?;
+    sqlx::query(
+        "INSERT INTO station_incarnations (station, incarnation) VALUES ($1, $2)
+         ON CONFLICT (station, incarnation) DO UPDATE SET last_seen = now()",
+    )
+    .bind(station)
+    .bind(incarnation)
+    .execute(&mut *tx)
+    .await
+    .map_err(|e| central.error(e))?;
+    Ok(())
+}
+
+pub(super) fn decode_row(
+    table: &Table,
+    row: &sqlx::sqlite::SqliteRow,
+) -> Result<Vec<Value>, sqlx::Error> {
     table
         .columns
         .iter()
@@ -548,7 +983,7 @@ fn decode_row(table: &Table, row: &sqlx::sqlite::SqliteRow) -> Result<Vec<Value>
 /// PostgreSQL takes at most 65,535 bind parameters per statement.
 const MAX_PARAMS: usize = 60_000;
 
-async fn upsert(
+pub(super) async fn upsert(
     tx: &mut sqlx::PgConnection,
     station: &str,
     table: &Table,

@@ -18,6 +18,10 @@
 //! - [`tables`]: what is forwarded, column by column.
 //! - [`central`]: the central database: connection, schema (`migrations-central/`, refused when
 //!   newer than this brdfd), station registration (one store per station id).
+//! - [`lineage`]: the incarnations of a store, and the check that refuses a copy of a store
+//!   that went its own way (fork detection), before any of its rows is written.
+//! - [`verify`]: per-row digests of the store against the central database; what is missing
+//!   or different is sent again (`brdfd sync --verify`, and by itself after a central restore).
 //! - [`forward`]: the forwarder: batches, the loop with back-off, status (backlog, last error).
 //!
 //! Everything PostgreSQL-specific lives here and in `src/store/central.rs` (reading the
@@ -25,10 +29,13 @@
 
 pub mod central;
 pub mod forward;
+pub mod lineage;
 pub mod tables;
+pub mod verify;
 
 pub use central::{CENTRAL_MIGRATOR, Central};
 pub use forward::{BatchReport, Forwarder, ForwarderOptions, SyncStatus};
+pub use verify::VerifyReport;
 
 /// Why forwarding failed. Every message is one line that says what to do.
 #[derive(Debug, thiserror::Error)]
@@ -82,8 +89,9 @@ pub enum SyncError {
     /// copy (a backup restored) of the store that forwarded under this station id.
     #[error(
         "the central database has station \"{station}\" up to outbox entry {cursor}, but this \
-         store has only {local} entries: it is an older copy of that station's store; give it a \
-         new [station] id, or restore the newest copy"
+         store has only {local} entries: it is an older copy of that station's store; restore the \
+         newest copy, or make this one a station of its own with `brdfd sync --db FILE --adopt \
+         NEW_ID`"
     )]
     StoreBehind {
         station: String,
@@ -91,10 +99,32 @@ pub enum SyncError {
         local: i64,
     },
 
-    /// Two forwarders are sending for one station at once.
+    /// This store is a copy of the station's store that went its own way after the copy, or
+    /// the station went on without it (src/sync/lineage.rs): nothing of it is written.
     #[error(
-        "another forwarder moved station \"{station}\"'s cursor (expected {expected}); stop the \
-         second `brdfd sync` or daemon forwarding this station"
+        "station \"{station}\" refuses this store: {detail}; nothing of this store was sent. \
+         To keep this copy as a bench of its own, stop its daemon, run `brdfd sync --db FILE \
+         --adopt NEW_ID` and set [station] id = \"NEW_ID\""
+    )]
+    Forked { station: String, detail: String },
+
+    /// Another incarnation of this store forwarded for the station moments ago: two live
+    /// copies. Retried: a restarted daemon is accepted once its previous life is silent.
+    #[error(
+        "station \"{station}\" is being forwarded by another copy of this store (seen {seconds:.0} s \
+         ago); if that copy was stopped this one is accepted within seconds, else stop one of \
+         them (a copy to keep: `brdfd sync --db FILE --adopt NEW_ID`)"
+    )]
+    SecondLive { station: String, seconds: f64 },
+
+    /// The station's cursor is not where this forwarder left it: another forwarder of the
+    /// same store moved it, or the central database was restored from a backup. The cursor is
+    /// read back and forwarding goes on (after a comparison, when the central database is
+    /// behind what this store deleted).
+    #[error(
+        "station \"{station}\"'s cursor in the central database is not at {expected} any more \
+         (another `brdfd sync` of this store, or the database restored from a backup); reading \
+         it back"
     )]
     CursorMoved { station: String, expected: i64 },
 
@@ -120,7 +150,11 @@ impl SyncError {
     pub fn is_transient(&self) -> bool {
         matches!(
             self,
-            SyncError::Connect { .. } | SyncError::Central { .. } | SyncError::Local(_)
+            SyncError::Connect { .. }
+                | SyncError::Central { .. }
+                | SyncError::Local(_)
+                | SyncError::CursorMoved { .. }
+                | SyncError::SecondLive { .. }
         )
     }
 }

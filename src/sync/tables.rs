@@ -236,6 +236,7 @@ mod tests {
     const LOCAL_TABLES: &[&str] = &[
         "sync_outbox",
         "sync_identity",
+        "sync_lineage",
         "ingested_files",
         "ingested_scans",
         // Constants of the SQL views of migration 0013, the same on every station.

@@ -14,10 +14,14 @@
 
 #![allow(dead_code)]
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
+
+use brdfd::sync::tables::{Kind, TABLES};
+use sqlx::Row;
 
 /// The admin URL of the test server.
 pub fn admin_url() -> String {
@@ -99,6 +103,55 @@ impl TestDb {
             admin: admin.to_string(),
             name,
         }
+    }
+}
+
+impl TestDb {
+    /// The database's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// `pg_dump -Fc` of the database into `file`.
+    pub fn dump(&self, file: &Path) {
+        let out = Command::new(bindir().join("pg_dump"))
+            .args(["-Fc", "-f"])
+            .arg(file)
+            .arg(&self.url)
+            .output()
+            .expect("pg_dump runs");
+        assert!(
+            out.status.success(),
+            "pg_dump: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    /// Replaces the database by the dump `file`, as an administrator restoring a backup
+    /// would: restored beside it, then the live one dropped (its connections cut) and the
+    /// restored one renamed in its place.
+    pub fn restore(&self, file: &Path) {
+        let staging = format!("{}_restored", self.name);
+        admin_exec(&self.admin, &format!("CREATE DATABASE {staging}"));
+        let out = Command::new(bindir().join("pg_restore"))
+            .args(["--no-owner", "-d"])
+            .arg(with_database(&self.admin, &staging))
+            .arg(file)
+            .output()
+            .expect("pg_restore runs");
+        assert!(
+            out.status.success(),
+            "pg_restore: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        admin_exec(
+            &self.admin,
+            &format!("DROP DATABASE {} WITH (FORCE)", self.name),
+        );
+        admin_exec(
+            &self.admin,
+            &format!("ALTER DATABASE {staging} RENAME TO {}", self.name),
+        );
     }
 }
 
@@ -321,4 +374,107 @@ where
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
+}
+
+/// One column's value in a comparable form: integers and text as they are, f64 by its bits,
+/// bytes in hex.
+pub fn cell_sqlite(row: &sqlx::sqlite::SqliteRow, i: usize, kind: Kind) -> String {
+    match kind {
+        Kind::Int => format!("{:?}", row.try_get_unchecked::<Option<i64>, _>(i).unwrap()),
+        Kind::Text => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<String>, _>(i).unwrap()
+        ),
+        Kind::Real => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<f64>, _>(i)
+                .unwrap()
+                .map(f64::to_bits)
+        ),
+        Kind::Blob => format!(
+            "{:?}",
+            row.try_get_unchecked::<Option<Vec<u8>>, _>(i).unwrap()
+        ),
+    }
+}
+
+pub fn cell_pg(row: &sqlx::postgres::PgRow, i: usize, kind: Kind) -> String {
+    match kind {
+        Kind::Int => format!("{:?}", row.get::<Option<i64>, _>(i)),
+        Kind::Text => format!("{:?}", row.get::<Option<String>, _>(i)),
+        Kind::Real => format!("{:?}", row.get::<Option<f64>, _>(i).map(f64::to_bits)),
+        Kind::Blob => format!("{:?}", row.get::<Option<Vec<u8>>, _>(i)),
+    }
+}
+
+pub type Tables = BTreeMap<&'static str, Vec<Vec<String>>>;
+
+/// Every forwarded table of a station's store file, every forwarded column, in key order.
+pub async fn local_tables(db: &Path) -> Tables {
+    let pool = sqlx::SqlitePool::connect_with(
+        sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(db)
+            .read_only(true),
+    )
+    .await
+    .unwrap();
+    let mut out = BTreeMap::new();
+    for t in &TABLES {
+        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
+        let sql = format!(
+            "SELECT {} FROM {} ORDER BY {}",
+            cols.join(", "),
+            t.name,
+            t.key.join(", ")
+        );
+        let rows = sqlx::query(&sql).fetch_all(&pool).await.unwrap();
+        out.insert(
+            t.name,
+            rows.iter()
+                .map(|r| {
+                    t.columns
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (_, k))| cell_sqlite(r, i, *k))
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+    pool.close().await;
+    out
+}
+
+/// The same, of one station in the central database.
+pub async fn central_tables(url: &str, station: &str) -> Tables {
+    let pool = sqlx::PgPool::connect(url).await.unwrap();
+    let mut out = BTreeMap::new();
+    for t in &TABLES {
+        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
+        let sql = format!(
+            "SELECT {} FROM {} WHERE station = $1 ORDER BY {}",
+            cols.join(", "),
+            t.name,
+            t.key.join(", ")
+        );
+        let rows = sqlx::query(&sql)
+            .bind(station)
+            .fetch_all(&pool)
+            .await
+            .unwrap();
+        out.insert(
+            t.name,
+            rows.iter()
+                .map(|r| {
+                    t.columns
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (_, k))| cell_pg(r, i, *k))
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+    pool.close().await;
+    out
 }
