@@ -337,6 +337,15 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     let daemon = start_daemon(dir.path(), addr, instruments(Some(unplug_frame), 1.0)).await;
     let driver = start_chromedriver();
     let c = browser(&driver, downloads.path()).await;
+    // The study report is drawn on request: on a busy two-core machine that takes longer than
+    // WebDriver's default 30 s script timeout.
+    c.update_timeouts(fantoccini::wd::TimeoutConfiguration::new(
+        Some(Duration::from_secs(180)),
+        Some(Duration::from_secs(300)),
+        Some(Duration::ZERO),
+    ))
+    .await
+    .unwrap();
     let session_id = c.session_id().await.unwrap().unwrap();
 
     // Not signed in: the page says how to sign in.
@@ -472,8 +481,61 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     wait_js(&c, "the result view", "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')").await;
     wait_js(&c, "measured and fitted swatches", "return document.querySelectorAll('#swatches tbody tr').length === 4 && [...document.querySelectorAll('#swatches .sw')].every((s) => s.style.background !== '')").await;
     shot(&c, "3-result-1280").await;
-    c.set_window_size(800, 1100).await.unwrap();
-    shot(&c, "4-result-tablet-800").await;
+    // Previews keep the aspect ratio of the picture the daemon draws; a click enlarges one.
+    wait_js(&c, "the previews", "const imgs = [...document.querySelectorAll('.previews button.enlarge img')]; return imgs.length === 3 && imgs.every((i) => i.complete && i.naturalWidth > 0)").await;
+    let ratios = c
+        .execute(
+            "return [...document.querySelectorAll('.previews button.enlarge img')].map((i) => [i.naturalWidth / i.naturalHeight, i.clientWidth / i.clientHeight])",
+            vec![],
+        )
+        .await
+        .unwrap();
+    for r in ratios.as_array().unwrap() {
+        let (natural, shown) = (r[0].as_f64().unwrap(), r[1].as_f64().unwrap());
+        assert!(
+            (natural - shown).abs() / natural < 0.02,
+            "a preview is shown at its own aspect ratio: {ratios}"
+        );
+    }
+    click(&c, ".previews button.enlarge").await;
+    wait_js(&c, "the enlarged preview", "const d = document.getElementById('preview-dialog'); const i = d && d.querySelector('img'); return !!d && d.open && !!i && i.complete && i.clientWidth > document.querySelector('.previews button.enlarge img').clientWidth").await;
+    shot(&c, "3b-preview-enlarged").await;
+    click(&c, "#preview-dialog button[type=submit]").await;
+    // Three widths: a phone (390 px), a laptop (1280 px), a wide screen (1920 px). The page
+    // never scrolls sideways as a whole; a table wider than the screen scrolls in its own box,
+    // and every ΔE00 column can be reached.
+    for (w, name) in [(390, "4-result-phone-390"), (1920, "4b-result-wide-1920"), (1280, "4c-result-1280")] {
+        c.set_window_size(w, 1000).await.unwrap();
+        let layout = c
+            .execute(
+                "return new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => {
+                   const de = document.getElementById('de-table');
+                   const box = de.closest('.scroll');
+                   box.scrollLeft = box.scrollWidth;
+                   const last = de.querySelector('thead th:nth-child(5)').getBoundingClientRect();
+                   done({ inner: window.innerWidth, page: document.documentElement.scrollWidth,
+                          boxed: [...document.querySelectorAll('main table')].every((t) => !!t.closest('.scroll') || t.getBoundingClientRect().width <= window.innerWidth),
+                          lastRight: last.right, lastWidth: last.width,
+                          wider: [...document.querySelectorAll('body *')].filter((e) => e.getBoundingClientRect().right > window.innerWidth + 0.5 && !e.closest('.scroll'))
+                            .slice(0, 5).map((e) => `${e.tagName}#${e.id}.${e.className}`) });
+                 })))",
+                vec![],
+            )
+            .await
+            .unwrap();
+        let inner = layout["inner"].as_f64().unwrap();
+        assert!((inner - w as f64).abs() < 20.0, "the window is {w} px wide: {layout}");
+        assert!(
+            layout["page"].as_f64().unwrap() <= inner + 1.0,
+            "{w} px: the page does not overflow sideways: {layout}"
+        );
+        assert_eq!(layout["boxed"], json!(true), "{w} px: {layout}");
+        assert!(
+            layout["lastRight"].as_f64().unwrap() <= inner + 1.0 && layout["lastWidth"].as_f64().unwrap() > 0.0,
+            "{w} px: the ΔE00 'all' column can be scrolled into view: {layout}"
+        );
+        shot(&c, name).await;
+    }
     c.set_window_size(1280, 800).await.unwrap();
 
     // Download the CxF3 export.
@@ -546,6 +608,21 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         row.contains("T.Sky blue") && row.contains("complete"),
         "{row}"
     );
+    assert!(
+        row.contains("simulated — replayed from synthetic-t-sky-blue"),
+        "the list says which recording answered: {row}"
+    );
+    // The sample search matches any part of the name, in any case.
+    c.goto(&format!("http://{addr}/#/scans?sample=sky%20B"))
+        .await
+        .unwrap();
+    wait_js(&c, "the search for \"sky B\"", "const rows = document.querySelectorAll('#scan-list tbody tr'); return document.getElementById('f-sample').value === 'sky B' && rows.length === 1 && rows[0].textContent.includes('T.Sky blue')").await;
+    c.goto(&format!("http://{addr}/#/scans?sample=lavender"))
+        .await
+        .unwrap();
+    wait_js(&c, "the search for \"lavender\"", "return document.getElementById('f-sample').value === 'lavender' && document.body.innerText.includes('No scans match.')").await;
+    c.goto(&format!("http://{addr}/#/scans")).await.unwrap();
+    wait_js(&c, "the whole list again", "return document.getElementById('f-sample').value === '' && document.querySelectorAll('#scan-list tbody tr').length >= 1").await;
     shot(&c, "5-scan-list").await;
 
     // Abort a scan midway: some cells filled, then the scan is aborted and keeps them.

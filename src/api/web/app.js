@@ -177,7 +177,7 @@ const FIT_FINAL = new Set(["done", "failed", "cancelled"]);
  */
 let syncing = false;
 async function syncBench(why = "") {
-  if (syncing) return;
+  if (syncing || !session) return;
   syncing = true;
   if (!pending) pending = [];
   let answer = null;
@@ -189,6 +189,7 @@ async function syncBench(why = "") {
   const queued = pending;
   pending = null;
   syncing = false;
+  if (!session) return;
   if (answer) {
     const op = answer.operation;
     if (!op) {
@@ -341,6 +342,7 @@ function onEvent(kind, ev) {
 // ---------- status ----------
 
 async function refreshStatus() {
+  if (!session) return;   // logged out: nothing to refresh (and no 401 to show over the message)
   try {
     status = await api("/status");
   } catch (e) {
