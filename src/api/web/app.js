@@ -248,8 +248,13 @@ function onEvent(kind, ev) {
       live.readings.set(ev.geometry, ev);
       paintCell(ev.geometry, ev);
       if (typeof ev.at_ms === "number") {
-        // Committed → painted: the next frame after the cell changed.
-        requestAnimationFrame(() => metrics.readingLatencyMs.push(Date.now() - ev.at_ms));
+        // Committed → painted: the frame after the cell changed is rendered once its
+        // animation-frame callbacks are done; a message posted from one runs after that frame.
+        requestAnimationFrame(() => {
+          const ch = new MessageChannel();
+          ch.port1.onmessage = () => metrics.readingLatencyMs.push(Date.now() - ev.at_ms);
+          ch.port2.postMessage(0);
+        });
       }
       renderOp();
       return;
