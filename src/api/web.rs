@@ -694,6 +694,27 @@ mod tests {
     }
 
     #[test]
+    fn the_pages_geometry_legend_holds_the_daemons_angles() {
+        let rows: Vec<serde_json::Value> = crate::geometry::GEOMETRIES
+            .iter()
+            .map(|g| {
+                serde_json::json!([
+                    g.name,
+                    g.theta_i_deg as i64,
+                    g.theta_r_deg as i64,
+                    g.phi_r_deg as i64,
+                    g.aspecular_deg as i64
+                ])
+            })
+            .collect();
+        let line = format!(
+            "const GEOMETRY_ANGLES = {};",
+            serde_json::to_string(&rows).unwrap()
+        );
+        assert!(APP_JS.contains(&line), "app.js must hold {line}");
+    }
+
+    #[test]
     fn the_policy_allows_no_inline_script_and_no_other_origin() {
         assert!(CONTENT_SECURITY_POLICY.contains("script-src 'self';"));
         assert!(!CONTENT_SECURITY_POLICY.contains("unsafe-inline"));
