@@ -127,10 +127,11 @@ fn console_errors(driver: &Driver, session: &str) -> Vec<String> {
         .collect()
 }
 
-/// The simulated instruments of the embedded recordings at recorded timing (lenient, as
-/// `brdfd serve`), the SRA's cable pulled for good after frame `sra_unplug_after`.
-fn instruments(sra_unplug_after: Option<usize>) -> Devices {
-    let options = ReplayOptions::lenient();
+/// The simulated instruments of the embedded recordings (lenient, as `brdfd serve`) at
+/// recorded timing times `speed` (1.0: as recorded; 0.25: four times slower), the SRA's cable
+/// pulled for good after frame `sra_unplug_after`.
+fn instruments(sra_unplug_after: Option<usize>, speed: f64) -> Devices {
+    let options = ReplayOptions::lenient().speed(speed);
     let m = SimMat12::new(common::playlist(Instrument::MaT12), options.clone()).unwrap();
     let s = SimSra::new(
         common::playlist(Instrument::Sra),
@@ -333,9 +334,18 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         .flat_map(|e| e.replies.iter().map(|r| r.index))
         .nth(1)
         .unwrap();
-    let daemon = start_daemon(dir.path(), addr, instruments(Some(unplug_frame))).await;
+    let daemon = start_daemon(dir.path(), addr, instruments(Some(unplug_frame), 1.0)).await;
     let driver = start_chromedriver();
     let c = browser(&driver, downloads.path()).await;
+    // The study report is drawn on request: on a busy two-core machine that takes longer than
+    // WebDriver's default 30 s script timeout.
+    c.update_timeouts(fantoccini::wd::TimeoutConfiguration::new(
+        Some(Duration::from_secs(180)),
+        Some(Duration::from_secs(300)),
+        Some(Duration::ZERO),
+    ))
+    .await
+    .unwrap();
     let session_id = c.session_id().await.unwrap().unwrap();
 
     // Not signed in: the page says how to sign in.
@@ -471,8 +481,61 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     wait_js(&c, "the result view", "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')").await;
     wait_js(&c, "measured and fitted swatches", "return document.querySelectorAll('#swatches tbody tr').length === 4 && [...document.querySelectorAll('#swatches .sw')].every((s) => s.style.background !== '')").await;
     shot(&c, "3-result-1280").await;
-    c.set_window_size(800, 1100).await.unwrap();
-    shot(&c, "4-result-tablet-800").await;
+    // Previews keep the aspect ratio of the picture the daemon draws; a click enlarges one.
+    wait_js(&c, "the previews", "const imgs = [...document.querySelectorAll('.previews button.enlarge img')]; return imgs.length === 3 && imgs.every((i) => i.complete && i.naturalWidth > 0)").await;
+    let ratios = c
+        .execute(
+            "return [...document.querySelectorAll('.previews button.enlarge img')].map((i) => [i.naturalWidth / i.naturalHeight, i.clientWidth / i.clientHeight])",
+            vec![],
+        )
+        .await
+        .unwrap();
+    for r in ratios.as_array().unwrap() {
+        let (natural, shown) = (r[0].as_f64().unwrap(), r[1].as_f64().unwrap());
+        assert!(
+            (natural - shown).abs() / natural < 0.02,
+            "a preview is shown at its own aspect ratio: {ratios}"
+        );
+    }
+    click(&c, ".previews button.enlarge").await;
+    wait_js(&c, "the enlarged preview", "const d = document.getElementById('preview-dialog'); const i = d && d.querySelector('img'); return !!d && d.open && !!i && i.complete && i.clientWidth > document.querySelector('.previews button.enlarge img').clientWidth").await;
+    shot(&c, "3b-preview-enlarged").await;
+    click(&c, "#preview-dialog button[type=submit]").await;
+    // Three widths: a phone (390 px), a laptop (1280 px), a wide screen (1920 px). The page
+    // never scrolls sideways as a whole; a table wider than the screen scrolls in its own box,
+    // and every ΔE00 column can be reached.
+    for (w, name) in [(390, "4-result-phone-390"), (1920, "4b-result-wide-1920"), (1280, "4c-result-1280")] {
+        c.set_window_size(w, 1000).await.unwrap();
+        let layout = c
+            .execute(
+                "return new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => {
+                   const de = document.getElementById('de-table');
+                   const box = de.closest('.scroll');
+                   box.scrollLeft = box.scrollWidth;
+                   const last = de.querySelector('thead th:nth-child(5)').getBoundingClientRect();
+                   done({ inner: window.innerWidth, page: document.documentElement.scrollWidth,
+                          boxed: [...document.querySelectorAll('main table')].every((t) => !!t.closest('.scroll') || t.getBoundingClientRect().width <= window.innerWidth),
+                          lastRight: last.right, lastWidth: last.width,
+                          wider: [...document.querySelectorAll('body *')].filter((e) => e.getBoundingClientRect().right > window.innerWidth + 0.5 && !e.closest('.scroll'))
+                            .slice(0, 5).map((e) => `${e.tagName}#${e.id}.${e.className}`) });
+                 })))",
+                vec![],
+            )
+            .await
+            .unwrap();
+        let inner = layout["inner"].as_f64().unwrap();
+        assert!((inner - w as f64).abs() < 20.0, "the window is {w} px wide: {layout}");
+        assert!(
+            layout["page"].as_f64().unwrap() <= inner + 1.0,
+            "{w} px: the page does not overflow sideways: {layout}"
+        );
+        assert_eq!(layout["boxed"], json!(true), "{w} px: {layout}");
+        assert!(
+            layout["lastRight"].as_f64().unwrap() <= inner + 1.0 && layout["lastWidth"].as_f64().unwrap() > 0.0,
+            "{w} px: the ΔE00 'all' column can be scrolled into view: {layout}"
+        );
+        shot(&c, name).await;
+    }
     c.set_window_size(1280, 800).await.unwrap();
 
     // Download the CxF3 export.
@@ -545,6 +608,21 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         row.contains("T.Sky blue") && row.contains("complete"),
         "{row}"
     );
+    assert!(
+        row.contains("simulated — replayed from synthetic-t-sky-blue"),
+        "the list says which recording answered: {row}"
+    );
+    // The sample search matches any part of the name, in any case.
+    c.goto(&format!("http://{addr}/#/scans?sample=sky%20B"))
+        .await
+        .unwrap();
+    wait_js(&c, "the search for \"sky B\"", "const rows = document.querySelectorAll('#scan-list tbody tr'); return document.getElementById('f-sample').value === 'sky B' && rows.length === 1 && rows[0].textContent.includes('T.Sky blue')").await;
+    c.goto(&format!("http://{addr}/#/scans?sample=lavender"))
+        .await
+        .unwrap();
+    wait_js(&c, "the search for \"lavender\"", "return document.getElementById('f-sample').value === 'lavender' && document.body.innerText.includes('No scans match.')").await;
+    c.goto(&format!("http://{addr}/#/scans")).await.unwrap();
+    wait_js(&c, "the whole list again", "return document.getElementById('f-sample').value === '' && document.querySelectorAll('#scan-list tbody tr').length >= 1").await;
     shot(&c, "5-scan-list").await;
 
     // Abort a scan midway: some cells filled, then the scan is aborted and keeps them.
@@ -560,7 +638,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     wait_js(
         &c,
         "a first reading",
-        "return Number(document.getElementById('op').dataset.readings || 0) >= 1",
+        "const op = document.getElementById('op'); return !!op && op.textContent.includes('T.Lavender blue') && Number(op.dataset.readings || 0) >= 1",
     )
     .await;
     click(&c, "#abort:not([disabled])").await;
@@ -586,6 +664,52 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         aborted.reading_count
     );
     shot(&c, "6-bench-aborted").await;
+    // The simulated instruments answer ABORT as the drivers expect: after the abort both stay
+    // connected (no red "error"), nothing is left in the banner, and Scan's tooltip follows.
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    wait_js(&c, "both instruments connected after the abort", "return [...document.querySelectorAll('[data-device] .badge[data-state]')].every((b) => b.dataset.state === 'connected') && !!document.querySelector('#scan:not([disabled])')").await;
+    for d in daemon.service.status().await.unwrap().devices {
+        assert_eq!(d.state, "connected", "{}: {}", d.instrument, d.detail);
+    }
+    let after_abort = c
+        .execute(
+            "return [document.getElementById('banner').hidden, document.getElementById('scan').getAttribute('title')]",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert_eq!(after_abort, json!([true, null]), "no banner, no stale tooltip");
+    // The aborted scan's view: the readings it kept, why it stopped, and only what works.
+    c.goto(&format!("http://{addr}/#/scans/{}", aborted.id))
+        .await
+        .unwrap();
+    wait_js(
+        &c,
+        "the aborted scan's view",
+        "return !!document.getElementById('kept-cells') && !!document.getElementById('not-fitted')",
+    )
+    .await;
+    let view = c
+        .execute(
+            "return [document.querySelectorAll('#kept-cells [data-kept=yes]').length,
+                     document.getElementById('result-state').textContent,
+                     document.getElementById('not-fitted').textContent,
+                     !!document.getElementById('refit'), !!document.getElementById('dl-cxf3'),
+                     !!document.getElementById('dl-scan'), !!document.getElementById('no-downloads'),
+                     document.body.innerText.includes('No finished fit yet')]",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert_eq!(view[0], json!(aborted.reading_count), "every kept reading is shown: {view}");
+    assert!(view[1].as_str().unwrap().contains("aborted by the operator"), "{view}");
+    assert!(view[2].as_str().unwrap().contains("Scan the sample again"), "{view}");
+    assert_eq!(
+        &view.as_array().unwrap()[3..],
+        &[json!(false), json!(false), json!(false), json!(true), json!(false)],
+        "no refit and no download is offered for an aborted scan: {view}"
+    );
+    shot(&c, "6b-result-aborted").await;
 
     // Pull the SRA's cable: the scan of T.Pebble grey fails and the page says the SRA is gone.
     c.goto(&format!("http://{addr}/#/")).await.unwrap();
@@ -616,7 +740,9 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     )
     .await;
     shot(&c, "8-bench-daemon-gone").await;
-    let daemon = start_daemon(dir.path(), addr, instruments(None)).await;
+    // The restarted daemon's instruments are four times slower than recorded (a scan takes
+    // about ten seconds), so that a reload lands mid-scan on any machine.
+    let daemon = start_daemon(dir.path(), addr, instruments(None, 0.25)).await;
     wait_js(&c, "the reconnection", "return document.getElementById('stream').textContent === 'live' && document.getElementById('banner').textContent.includes('Reconnected')").await;
     wait_js(&c, "both instruments connected again", "return [...document.querySelectorAll('[data-device] .badge[data-state]')].every((b) => b.dataset.state === 'connected')").await;
     shot(&c, "9-bench-reconnected").await;
@@ -632,6 +758,95 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         })
         .collect();
     assert_eq!(errors, Vec::<String>::new());
+
+    // Reload mid-scan: the page rebuilds the scan from the daemon (sample, every reading
+    // stored so far), then follows it to 14 of 14; a second tab shows the same.
+    type_into(&c, "#sample", "T.Saffron yellow\u{E007}").await;
+    wait_js(
+        &c,
+        "a first reading of T.Saffron yellow",
+        "const op = document.getElementById('op'); return !!op && op.textContent.includes('T.Saffron yellow') && Number(op.dataset.readings || 0) >= 1",
+    )
+    .await;
+    c.refresh().await.unwrap();
+    wait_js(
+        &c,
+        "the bench rebuilt from the daemon",
+        "return (window.brdfdMetrics || {syncs: []}).syncs.length >= 1",
+    )
+    .await;
+    let sync = c
+        .execute("return window.brdfdMetrics.syncs[0]", vec![])
+        .await
+        .unwrap();
+    assert_eq!(sync["kind"], json!("scan"), "{sync}");
+    assert_eq!(sync["inProgress"], json!(true), "reloaded mid-scan: {sync}");
+    let before_reload = sync["readings"].as_u64().unwrap();
+    assert!(
+        (1..14).contains(&before_reload),
+        "the daemon had some readings, not all: {sync}"
+    );
+    let painted = c
+        .execute(
+            "return document.querySelectorAll('#cells .cell.done').length",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert!(
+        painted.as_u64().unwrap() >= before_reload,
+        "every reading stored before the reload is painted after it ({painted} cells, {sync})"
+    );
+    let op_text = c
+        .find(Locator::Id("op"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(op_text.contains("\"T.Saffron yellow\""), "{op_text}");
+    let first_tab = c.window().await.unwrap();
+    let second_tab = c.new_window(true).await.unwrap().handle;
+    c.switch_to_window(second_tab.clone()).await.unwrap();
+    c.goto(&format!("http://{addr}/#/")).await.unwrap();
+    for tab in [second_tab.clone(), first_tab.clone()] {
+        c.switch_to_window(tab).await.unwrap();
+        wait_js(&c, "14 of 14 readings after the reload", "const op = document.getElementById('op'); return !!op && op.dataset.readings === '14' && op.dataset.state === 'complete' && document.querySelectorAll('#cells .cell.done').length === 14 && op.textContent.includes('14 of 14 readings') && op.textContent.includes('T.Saffron yellow')").await;
+        for g in ["15as-45", "45as110"] {
+            assert_eq!(
+                cell_colour(&c, g).await,
+                recorded_colour("T.Saffron yellow", g),
+                "{g}: the rebuilt cell shows T.Saffron yellow's recording"
+            );
+        }
+        let waiting = c
+            .execute("return document.getElementById('cells').innerText.includes('waiting')", vec![])
+            .await
+            .unwrap();
+        assert_eq!(waiting, json!(false), "no cell is left waiting");
+    }
+    c.switch_to_window(second_tab).await.unwrap();
+    wait_js(
+        &c,
+        "the scan's fits in the second tab",
+        "return document.querySelectorAll('#fits tr[data-status]').length === 3",
+    )
+    .await;
+    shot(&c, "10-bench-second-tab").await;
+    c.close_window().await.unwrap();
+    c.switch_to_window(first_tab).await.unwrap();
+    shot(&c, "11-bench-after-reload").await;
+    let log = c
+        .find(Locator::Id("log"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        log.contains("T.Pebble grey"),
+        "the event log survives the reload: {log}"
+    );
 
     // A page on another loopback port, in this browser (the session cookie is set), tries
     // to make the daemon measure.

@@ -16,6 +16,15 @@
 //! without moving the position; and a recorded IDENTIFY that the driver does not send because its
 //! connection is already open (sessions replayed back to back) is skipped.
 //!
+//! ABORT, which the driver sends whenever the operator stops a measurement, is answered the same
+//! way: wherever it comes, from the recorded ABORT exchange nearest the replay position (each
+//! generated session records one after its last FETCH), without moving the position. Like the
+//! instrument, which stops measuring, the simulated one first drops every reply it still had
+//! scheduled (the aborted MEASURE-ALL's answer never comes). A recorded ABORT the driver does not
+//! send (a scan that was not aborted) is skipped, and is not counted as remaining. A recording
+//! with no ABORT exchange answers it with ERROR UNKNOWN-REQUEST, as any request nothing recorded
+//! answers.
+//!
 //! Timing ([`Timing`]): a device frame is sent after the recorded delay since the request (or
 //! since the previous device frame), scaled by the speed factor or left out. Fault delays
 //! (`slow`) are never scaled: they exist to exceed the driver's timeouts.
@@ -172,6 +181,9 @@ pub(crate) enum Out {
     Send { delay: Duration, bytes: Vec<u8> },
     /// Drop the link `delay` after the previous output. `unplug`: never come back.
     Drop { delay: Duration, unplug: bool },
+    /// Forget every reply scheduled but not yet sent (the instrument was told to ABORT); what
+    /// follows is timed from now.
+    Cancel,
 }
 
 /// What [`crate::SimMat12::cue`] / [`crate::SimSra::cue`] did.
@@ -288,6 +300,18 @@ impl Engine {
         Cue::Cued { session }
     }
 
+    /// The session the next measurement (MEASURE-ALL) is answered from: the first recorded at or
+    /// after the replay position, else the first from the start (lenient replay wraps round).
+    pub(crate) fn answering_session(&self) -> Option<usize> {
+        let ex = self.script.exchanges();
+        let at = self.cursor.min(ex.len());
+        let is_measure = |i: &usize| ex[*i].parsed == Some(Request::MeasureAll);
+        (at..ex.len())
+            .find(is_measure)
+            .or_else(|| (0..at).find(is_measure))
+            .map(|i| ex[i].session)
+    }
+
     /// The instrument was unplugged for good by [`ReplayOptions::unplug_after`].
     pub(crate) fn unplugged(&self) -> bool {
         self.unplug_fired
@@ -297,7 +321,7 @@ impl Engine {
         self.report.remaining = self.script.exchanges()
             [self.cursor.min(self.script.exchanges().len())..]
             .iter()
-            .filter(|e| e.request.is_some())
+            .filter(|e| e.request.is_some() && e.parsed != Some(Request::Abort))
             .count();
     }
 
@@ -362,9 +386,24 @@ impl Engine {
             }
             return;
         }
-        // Recorded introductions the driver does not repeat on an open connection.
+        if parsed == Some(Request::Abort) {
+            match self.abort_exchange() {
+                Some(i) => {
+                    out.push(Out::Cancel);
+                    self.serve(i, out);
+                }
+                None => self.refuse(frame, parsed, out),
+            }
+            self.update_remaining();
+            return;
+        }
+        // Recorded introductions the driver does not repeat on an open connection, and
+        // recorded ABORTs of measurements that were not aborted this time.
         while self.cursor < n
-            && self.script.exchanges()[self.cursor].parsed == Some(Request::Identify)
+            && matches!(
+                self.script.exchanges()[self.cursor].parsed,
+                Some(Request::Identify | Request::Abort)
+            )
         {
             self.cursor += 1;
         }
@@ -403,6 +442,15 @@ impl Engine {
             .rev()
             .find(is_id)
             .or_else(|| (self.cursor..ex.len()).find(is_id))
+    }
+
+    /// The recorded ABORT first at or after the replay position, else the last before it.
+    fn abort_exchange(&self) -> Option<usize> {
+        let ex = self.script.exchanges();
+        let is_abort = |i: &usize| ex[*i].parsed == Some(Request::Abort);
+        (self.cursor.min(ex.len())..ex.len())
+            .find(is_abort)
+            .or_else(|| (0..self.cursor.min(ex.len())).rev().find(is_abort))
     }
 
     fn advance(&mut self, i: usize, out: &mut Vec<Out>) {
@@ -626,6 +674,43 @@ mod tests {
         assert_eq!(strict.cursor, 0);
     }
 
+    #[test]
+    fn abort_is_answered_wherever_it_comes_and_skipped_when_not_sent() {
+        let playlist = crate::recordings::playlist(Instrument::Sra).unwrap();
+        let wire = |r: Request| wire::encode_request(Instrument::Sra, &r).unwrap();
+        let aborted = wire::encode_response(Instrument::Sra, &Response::Aborted).unwrap();
+        for options in [ReplayOptions::lenient(), ReplayOptions::strict()] {
+            let mut e = Engine::new(playlist.clone(), options.accelerated()).unwrap();
+            e.on_connect();
+            e.on_bytes(&wire(Request::Identify));
+            // MEASURE-ALL's answer is scheduled; ABORT drops it and answers ABORTED.
+            let measured = e.on_bytes(&wire(Request::MeasureAll));
+            assert_eq!(sends(&measured).len(), 1);
+            let out = e.on_bytes(&wire(Request::Abort));
+            assert_eq!(out.first(), Some(&Out::Cancel), "{out:?}");
+            assert_eq!(sends(&out), vec![(Duration::ZERO, aborted.clone())]);
+            assert!(e.report().mismatches.is_empty(), "{:?}", e.report().mismatches);
+        }
+        // A scan that is not aborted replays to the end: its recorded ABORT is skipped and not
+        // counted as remaining, and strict replay goes on into the next session.
+        let mut e = Engine::new(playlist.clone(), ReplayOptions::strict().accelerated()).unwrap();
+        e.on_connect();
+        for session in 0..2 {
+            e.on_bytes(&wire(Request::Identify));
+            e.on_bytes(&wire(Request::MeasureAll));
+            for g in drivers::protocol::SRA_GEOMETRIES {
+                let reading = e.on_bytes(&wire(Request::Fetch { geometry: g }));
+                assert_eq!(sends(&reading).len(), 1, "session {session} {g}");
+            }
+        }
+        assert!(e.report().mismatches.is_empty(), "{:?}", e.report().mismatches);
+        let per_session = 2 + drivers::protocol::SRA_GEOMETRIES.len();
+        assert_eq!(
+            e.report().remaining,
+            (playlist.session_count() - 2) * per_session
+        );
+    }
+
     /// SRA golden frames (PROTOCOL.md §3) as a small session: IDENTIFY, MEASURE-ALL, two FETCHes.
     const SESSION: &str = "\
 brdfd-session 1
@@ -649,7 +734,7 @@ note test
         out.iter()
             .filter_map(|o| match o {
                 Out::Send { delay, bytes } => Some((*delay, bytes.clone())),
-                Out::Drop { .. } => None,
+                Out::Drop { .. } | Out::Cancel => None,
             })
             .collect()
     }

@@ -8,15 +8,18 @@
 //!
 //! Each object gives one session per instrument ([`SessionPair`]); the conversation is the one
 //! PROTOCOL.md §1 describes for a scan: IDENTIFY (the connection's introduction), MEASURE-ALL,
-//! then FETCH for every geometry in SCIENCE.md §2 order.
+//! then FETCH for every geometry in SCIENCE.md §2 order; then the instrument's answer to ABORT
+//! (ABORTED), which the driver sends when the operator stops a measurement. A replay answers
+//! the recorded ABORT wherever the driver sends it, and skips it when a scan runs to its end
+//! (see the engine).
 //!
 //! Timing model (deterministic, so a regenerated recording is byte-identical):
 //! - MA-T12 on USB full speed: transfer times are negligible; the instrument answers IDENTIFY
 //!   after 2 ms, measures all 12 geometries in 2400 ms (six LEDs, two detectors), and answers a
-//!   FETCH from its buffer after 3 ms.
+//!   FETCH from its buffer after 3 ms; it stops and answers ABORT after 2 ms.
 //! - SRA on a 9600-baud 8N1 line: 10 bits per byte, so a frame of n bytes takes n / 0.96 ms on
 //!   the wire, each way; the instrument takes 5 ms to answer IDENTIFY or FETCH and 1500 ms to
-//!   measure its two geometries.
+//!   measure its two geometries; it answers ABORT after 5 ms.
 //! - brdfd sends its next request 1 ms after a reply is complete.
 //!
 //! Times are written in whole milliseconds since the session started, rounded from the exact
@@ -188,6 +191,8 @@ struct LinkTiming {
     measure_ms: f64,
     /// Time to answer a FETCH from the buffer.
     fetch_ms: f64,
+    /// Time to stop and answer ABORT.
+    abort_ms: f64,
     /// brdfd's time from a complete reply to its next request.
     host_ms: f64,
 }
@@ -197,6 +202,7 @@ const MAT12_TIMING: LinkTiming = LinkTiming {
     identify_ms: 2.0,
     measure_ms: 2400.0,
     fetch_ms: 3.0,
+    abort_ms: 2.0,
     host_ms: 1.0,
 };
 
@@ -205,10 +211,12 @@ const SRA_TIMING: LinkTiming = LinkTiming {
     identify_ms: 5.0,
     measure_ms: 1500.0,
     fetch_ms: 5.0,
+    abort_ms: 5.0,
     host_ms: 1.0,
 };
 
-/// IDENTIFY, MEASURE-ALL, FETCH × n, encoded with codec `C` the way the driver encodes them.
+/// IDENTIFY, MEASURE-ALL, FETCH × n, ABORT, encoded with codec `C` the way the driver encodes
+/// them.
 fn conversation<C: Codec>(
     notes: Vec<String>,
     identity: &Identity,
@@ -242,6 +250,12 @@ fn conversation<C: Codec>(
             timing.fetch_ms,
         ));
     }
+    exchanges.push((
+        protocol::Abort.to_bytes::<C>()?,
+        protocol::Abort.request(),
+        Response::Aborted,
+        timing.abort_ms,
+    ));
     let mut session = Session::new(C::INSTRUMENT);
     session.notes = notes;
     let mut t = 0.0_f64;
@@ -287,8 +301,9 @@ mod tests {
         let r = readings();
         let pair = generate_sample_session("T.Test grey", &r, &GenerateOptions::default()).unwrap();
         assert_eq!(pair.ma_t12.instrument, Instrument::MaT12);
-        assert_eq!(pair.ma_t12.frames.len(), 2 * (2 + 12));
-        assert_eq!(pair.sra.frames.len(), 2 * (2 + 2));
+        // IDENTIFY, MEASURE-ALL, a FETCH per geometry, ABORT: a request and a reply each.
+        assert_eq!(pair.ma_t12.frames.len(), 2 * (3 + 12));
+        assert_eq!(pair.sra.frames.len(), 2 * (3 + 2));
         assert_eq!(pair.ma_t12.notes[0], SYNTHETIC_NOTE);
         assert_eq!(sample_of(&pair.ma_t12), Some("T.Test grey"));
         assert!(!is_reference(&pair.sra));

@@ -117,6 +117,14 @@ impl SimSra {
         lock(&self.shared).engine.cue_object(sample)
     }
 
+    /// What the next measurement is answered from: the object of the recorded session that
+    /// replays next (after a [`Self::cue`], the one cued), with the session's number.
+    pub fn answering(&self) -> Option<(usize, crate::ScriptObject)> {
+        let shared = lock(&self.shared);
+        let n = shared.engine.answering_session()?;
+        Some((n, shared.engine.script().object(n).clone()))
+    }
+
     /// The script being replayed.
     pub fn script(&self) -> Script {
         lock(&self.shared).engine.script().clone()
@@ -245,6 +253,10 @@ fn serve(mut master: TTYPort, shared: Weak<Mutex<Shared>>, generation: u64, firs
                 Out::Drop { delay, .. } => {
                     t += delay;
                     pending.push_back(Pending::Drop { at: t });
+                }
+                Out::Cancel => {
+                    pending.retain(|p| matches!(p, Pending::Drop { .. }));
+                    t = Instant::now();
                 }
             }
         }

@@ -106,6 +106,14 @@ impl SimMat12 {
         self.lock().engine.cue_object(sample)
     }
 
+    /// What the next measurement is answered from: the object of the recorded session that
+    /// replays next (after a [`Self::cue`], the one cued), with the session's number.
+    pub fn answering(&self) -> Option<(usize, crate::ScriptObject)> {
+        let shared = self.lock();
+        let n = shared.engine.answering_session()?;
+        Some((n, shared.engine.script().object(n).clone()))
+    }
+
     /// The script being replayed.
     pub fn script(&self) -> Script {
         self.lock().engine.script().clone()
@@ -142,6 +150,10 @@ impl SimUsb {
                 Out::Drop { delay, .. } => {
                     t += delay;
                     self.outbox.push_back(Pending::Drop { at: t });
+                }
+                Out::Cancel => {
+                    self.outbox.retain(|p| matches!(p, Pending::Drop { .. }));
+                    t = Instant::now();
                 }
             }
         }

@@ -6,7 +6,7 @@
 //! | `GET /status` | the daemon's state | 200 [`crate::service::Status`] |
 //! | `POST /reference` | measure the white reference tile | 202 `{"reference": id}` |
 //! | `POST /scans` `{"sample": "…"}` | scan a sample | 202 `{"scan": id}` |
-//! | `GET /scans?state=&sample=&limit=&before=` | list scans, newest first (`limit` ≤ 500; `before=ID` pages on) | 200 `[summary]` |
+//! | `GET /scans?state=&sample=&sample_contains=&limit=&before=` | list scans, newest first (`sample`: that name; `sample_contains`: names holding that text, any case; `limit` ≤ 500; `before=ID` pages on) | 200 `[summary]` |
 //! | `GET /scans/{id}` | a scan, its readings, reference and fits | 200 |
 //! | `GET /scans/{id}/export` | the scan as `brdfd.scan/1` | 200 |
 //! | `POST /scans/import` (a `brdfd.scan/1` body, or an X-Rite QC `.xlsx` export) | import its scans, fit them | 201 `{"scan", "fits"}` (an `.xlsx`: `"scans"` and `"colorimetry_checks"` too) |
@@ -225,6 +225,8 @@ pub struct ScanRequestBody {
 pub struct ScanQuery {
     pub state: Option<String>,
     pub sample: Option<String>,
+    /// Only samples whose name holds this text, ignoring case.
+    pub sample_contains: Option<String>,
     pub limit: Option<u32>,
     /// Only scans with a smaller id: the last id of one page gives the next.
     pub before: Option<i64>,
@@ -397,13 +399,36 @@ async fn list_scans(
              last id of the previous page)"
         ))));
     }
-    let filter = ScanFilter {
+    let mut filter = ScanFilter {
         state,
         sample: q.sample,
         limit,
         before: q.before.map(ScanId),
     };
-    Ok(Json(s.store().list_scans(&filter).await?))
+    let Some(wanted) = q
+        .sample_contains
+        .map(|t| t.trim().to_lowercase())
+        .filter(|t| !t.is_empty())
+    else {
+        return Ok(Json(s.store().list_scans(&filter).await?));
+    };
+    // A name search pages through the scans, newest first, until `limit` match.
+    filter.limit = MAX_LIST_LIMIT;
+    let mut found = Vec::new();
+    loop {
+        let page = s.store().list_scans(&filter).await?;
+        let full = page.len() == MAX_LIST_LIMIT as usize;
+        filter.before = page.last().map(|p| p.id);
+        found.extend(
+            page.into_iter()
+                .filter(|p| p.sample.to_lowercase().contains(&wanted)),
+        );
+        if found.len() >= limit as usize || !full {
+            break;
+        }
+    }
+    found.truncate(limit as usize);
+    Ok(Json(found))
 }
 
 fn parse_id<T: std::str::FromStr>(what: &str, text: &str) -> Result<T, ApiError> {

@@ -13,6 +13,12 @@
 //! | `GET /scans/{id}/export/{format}` | the scan (and its fits) as CGATS, CxF3, CSV or JSON | token or cookie |
 //! | `GET /report.html?scans=1,2` | the study report of those scans, figures inlined | token or cookie |
 //! | `GET /scans/{id}/swatches` | measured and fitted colour per geometry ([`Swatches`]) | token or cookie |
+//! | `GET /scans/{id}/readings` | the scan's stored readings as the bench shows them (colour of a spectrum, an SRA value), also for a scan that was aborted or failed | token or cookie |
+//! | `GET /bench` | what the bench shows: the operation in progress, or the last scan measured, with its readings and fits so far ([`Bench`]) | token or cookie |
+//!
+//! The page rebuilds its bench from `GET /bench` when it loads and whenever its event stream
+//! reconnects, then applies the events that follow: a reload or a second tab mid-scan shows
+//! every reading already stored, not only those whose events it saw.
 //!
 //! Every response of the server carries the page's security headers ([`security_headers`]):
 //! a Content-Security-Policy that allows scripts, styles and connections from the daemon
@@ -63,6 +69,8 @@ pub fn routes() -> Router<Service> {
         .route("/scans/{id}/export/{format}", get(export_format))
         .route("/report.html", get(report_html))
         .route("/scans/{id}/swatches", get(swatches))
+        .route("/bench", get(bench))
+        .route("/scans/{id}/readings", get(scan_readings))
 }
 
 /// Adds the page's security headers to a response.
@@ -386,6 +394,166 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
     .into_response()
 }
 
+/// One stored reading as the bench shows it: the same fields as a `scan_reading` or
+/// `reference_reading` event.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BenchReading {
+    pub geometry: &'static str,
+    pub device: &'static str,
+    #[serde(flatten)]
+    pub shown: crate::service::ReadingShown,
+}
+
+/// One fit of the scan on the bench, with what its `fit_done` event carries once done.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BenchFit {
+    pub fit: crate::store::FitRunId,
+    pub cost_function: crate::cost::CostFunction,
+    pub status: crate::store::FitStatus,
+    pub error: Option<String>,
+    pub cost: Option<f64>,
+    pub wall_ms: Option<f64>,
+    pub delta_e00_diffuse_mean: Option<f64>,
+    pub delta_e00_specular_mean: Option<f64>,
+    pub delta_e00_mean: Option<f64>,
+}
+
+/// The reference or scan the bench shows.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BenchOperation {
+    /// `reference` or `scan`.
+    pub kind: &'static str,
+    pub id: i64,
+    /// The sample's name (for a reference, the tile's).
+    pub sample: String,
+    /// `measuring`, `complete`, `failed` or `aborted`.
+    pub state: String,
+    /// Why it failed or was aborted.
+    pub reason: Option<String>,
+    /// Whether the instruments are measuring it now.
+    pub in_progress: bool,
+    /// How its readings came in, and which recording answered a simulated one.
+    pub provenance: crate::store::Provenance,
+    /// The readings stored so far, in geometry-table order.
+    pub readings: Vec<BenchReading>,
+    /// The scan's fits, oldest first (none for a reference).
+    pub fits: Vec<BenchFit>,
+}
+
+/// `GET /bench`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Bench {
+    /// The operation in progress; when idle, the last scan the instruments measured (`None`
+    /// before the first).
+    pub operation: Option<BenchOperation>,
+}
+
+fn bench_readings(readings: &[crate::store::Reading]) -> Vec<BenchReading> {
+    readings
+        .iter()
+        .map(|r| BenchReading {
+            geometry: r.geometry.name,
+            device: r.device().key(),
+            shown: crate::service::ReadingShown::of(&r.values, r.at_ms),
+        })
+        .collect()
+}
+
+async fn bench_of_scan(
+    s: &Service,
+    scan: ScanId,
+    in_progress: bool,
+) -> Result<BenchOperation, ApiError> {
+    let detail = s.store().scan_detail(scan).await?;
+    let mut fits = Vec::new();
+    for run in s.store().fits_for_scan(scan).await? {
+        let evaluation = if run.status == crate::store::FitStatus::Done {
+            s.store().fit_detail(run.id).await?.evaluation
+        } else {
+            None
+        };
+        fits.push(BenchFit {
+            fit: run.id,
+            cost_function: run.cost_function,
+            status: run.status,
+            error: run.error.clone(),
+            cost: run.result.as_ref().map(|r| r.cost),
+            wall_ms: run.result.as_ref().map(|r| r.wall_ms),
+            delta_e00_diffuse_mean: evaluation.as_ref().map(|e| e.diffuse.mean),
+            delta_e00_specular_mean: evaluation.as_ref().and_then(|e| e.specular.map(|s| s.mean)),
+            delta_e00_mean: evaluation.as_ref().map(|e| e.all.mean),
+        });
+    }
+    Ok(BenchOperation {
+        kind: "scan",
+        id: scan.0,
+        sample: detail.scan.sample.clone(),
+        state: detail.scan.state.as_str().to_string(),
+        reason: detail.scan.reason.clone(),
+        in_progress,
+        provenance: detail.scan.provenance.clone(),
+        readings: bench_readings(&detail.readings),
+        fits,
+    })
+}
+
+async fn bench_state(s: &Service) -> Result<Bench, ApiError> {
+    use crate::service::Operation;
+    let operation = match s.current_operation() {
+        Some(Operation::Scan { scan }) => Some(bench_of_scan(s, scan, true).await?),
+        Some(Operation::Reference { reference }) => {
+            let detail = s.store().reference_detail(reference).await?;
+            Some(BenchOperation {
+                kind: "reference",
+                id: reference.0,
+                sample: detail.reference.name.clone(),
+                state: detail.reference.status.as_str().to_string(),
+                reason: detail.reference.reason.clone(),
+                in_progress: true,
+                provenance: detail.reference.provenance.clone(),
+                readings: bench_readings(&detail.readings),
+                fits: Vec::new(),
+            })
+        }
+        None => {
+            // The last scan the instruments measured (imports are not bench work).
+            let recent = s
+                .store()
+                .list_scans(&crate::store::ScanFilter {
+                    limit: 20,
+                    ..Default::default()
+                })
+                .await?;
+            match recent
+                .iter()
+                .find(|r| r.provenance.source != crate::store::Source::Imported)
+            {
+                Some(r) => Some(bench_of_scan(s, r.id, false).await?),
+                None => None,
+            }
+        }
+    };
+    Ok(Bench { operation })
+}
+
+async fn scan_readings(State(s): State<Service>, Path(id): Path<String>) -> Response {
+    let scan: ScanId = match parse_id("scan", &id) {
+        Ok(s) => s,
+        Err(e) => return e.into_response(),
+    };
+    match s.store().scan_detail(scan).await {
+        Ok(detail) => Json(bench_readings(&detail.readings)).into_response(),
+        Err(e) => ApiError::from(e).into_response(),
+    }
+}
+
+async fn bench(State(s): State<Service>) -> Response {
+    match bench_state(&s).await {
+        Ok(b) => Json(b).into_response(),
+        Err(e) => e.into_response(),
+    }
+}
+
 #[derive(Debug, Deserialize)]
 struct ReportQuery {
     scans: String,
@@ -525,6 +693,27 @@ mod tests {
         let line = format!(
             "const GEOMETRIES = {};",
             serde_json::to_string(&names).unwrap()
+        );
+        assert!(APP_JS.contains(&line), "app.js must hold {line}");
+    }
+
+    #[test]
+    fn the_pages_geometry_legend_holds_the_daemons_angles() {
+        let rows: Vec<serde_json::Value> = crate::geometry::GEOMETRIES
+            .iter()
+            .map(|g| {
+                serde_json::json!([
+                    g.name,
+                    g.theta_i_deg as i64,
+                    g.theta_r_deg as i64,
+                    g.phi_r_deg as i64,
+                    g.aspecular_deg as i64
+                ])
+            })
+            .collect();
+        let line = format!(
+            "const GEOMETRY_ANGLES = {};",
+            serde_json::to_string(&rows).unwrap()
         );
         assert!(APP_JS.contains(&line), "app.js must hold {line}");
     }

@@ -126,6 +126,15 @@ pub mod exit {
     pub const REFUSED: u8 = 6;
 }
 
+/// `BRDFD_TOKEN` is set but holds no token: an authorisation error found before any request
+/// (exit status 5, like the daemon's 401).
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "BRDFD_TOKEN does not hold an API token (64 hex digits, as in the token file); unset it to \
+     use the token file, or set it to the file's content"
+)]
+pub struct MalformedTokenEnv;
+
 /// The exit status for an error of [`run`]: the first daemon answer in its chain decides.
 pub fn exit_code(err: &anyhow::Error) -> u8 {
     use crate::client::ClientError;
@@ -139,6 +148,9 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
         ) = cause.downcast_ref::<SyncError>()
         {
             return exit::REFUSED;
+        }
+        if cause.downcast_ref::<MalformedTokenEnv>().is_some() {
+            return exit::NOT_AUTHORISED;
         }
         if let Some(e) = cause.downcast_ref::<ClientError>() {
             return match e {
@@ -339,6 +351,11 @@ mod tests {
         assert_eq!(
             exit_code(&anyhow::anyhow!("scan 3 failed: timeout")),
             exit::FAILED
+        );
+        // A malformed BRDFD_TOKEN is an authorisation error, like the daemon's 401.
+        assert_eq!(
+            exit_code(&anyhow::Error::new(MalformedTokenEnv).context("status")),
+            exit::NOT_AUTHORISED
         );
         let codes: std::collections::HashSet<u8> = [
             exit::FAILED,

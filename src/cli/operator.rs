@@ -9,7 +9,6 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-use anyhow::bail;
 use serde_json::Value;
 
 use crate::client::Client;
@@ -55,9 +54,7 @@ impl DaemonArgs {
         if let Ok(text) = std::env::var("BRDFD_TOKEN") {
             return match crate::api::Token::parse(&text) {
                 Some(t) => Ok(client.with_token(&t, "sent the token of BRDFD_TOKEN")),
-                None => bail!(
-                    "BRDFD_TOKEN does not hold an API token (64 hex digits); unset it to use the token file"
-                ),
+                None => Err(super::MalformedTokenEnv.into()),
             };
         }
         let path = self

@@ -115,8 +115,21 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(&args.file)
         .with_context(|| format!("cannot read {}", args.file.display()))?;
     // Checked here too, so a bad file is named with its path before anything is sent.
-    crate::scan::Scan::from_json(text.as_bytes())
-        .with_context(|| format!("{}", args.file.display()))?;
+    if let Err(e) = crate::scan::Scan::from_json(text.as_bytes()) {
+        use crate::scan::ScanError;
+        const OTHER_FORMATS: &str = "an instrument's export (CGATS, CxF3, the SRA's CSV) is \
+            imported with `brdfd import-format` (see `brdfd import-format --help`)";
+        let file = args.file.display();
+        return Err(match e {
+            ScanError::Syntax(json) => anyhow::anyhow!(
+                "{file} is not a brdfd.scan/1 file: it is not JSON ({json}); {OTHER_FORMATS}"
+            ),
+            e @ (ScanError::MissingFormat | ScanError::UnknownFormat { .. }) => {
+                anyhow::anyhow!("{file}: {e}; {OTHER_FORMATS}")
+            }
+            e => anyhow::Error::new(e).context(format!("{file}")),
+        });
+    }
     let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
     let v = client.post_text("/scans/import", &text)?;

@@ -47,7 +47,7 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<4} reason",
+        "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<4} reason; source of a simulated scan",
         "id", "sample", "state", "readings", "requested (local time)", "sim"
     );
     let mut last = None;
@@ -60,7 +60,14 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
             id(r, "reading_count"),
             local_time(r["requested_at_ms"].as_i64().unwrap_or(0)),
             simulated_mark(&r["provenance"]),
-            s(r, "reason")
+            [
+                r["reason"].as_str().map(super::operator::terminal_safe),
+                super::show::simulated_note(&r["provenance"]),
+            ]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>()
+            .join("; ")
         );
         last = Some(id(r, "id"));
     }

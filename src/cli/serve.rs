@@ -128,6 +128,31 @@ pub fn simulated_banner(config: &Config) -> Option<String> {
     })
 }
 
+/// The line printed once at start when any instrument is reached through a real transport (USB
+/// or a serial port): the wire protocols are brdfd's own reading of the instruments
+/// (drivers/PROTOCOL.md), checked against the simulated instruments only, never against an
+/// MA-T12 or RA-532H.
+pub fn real_transport_banner(config: &Config) -> Option<String> {
+    use crate::config::{MaT12Transport, SraTransport};
+    let mut which = Vec::new();
+    if let MaT12Transport::Usb { .. } = config.devices.ma_t12.transport {
+        which.push("MA-T12 on USB".to_string());
+    }
+    if let SraTransport::Serial { port, .. } = &config.devices.sra.transport {
+        which.push(format!("SRA on {port}"));
+    }
+    (!which.is_empty()).then(|| {
+        format!(
+            "*** UNVERIFIED PROTOCOLS ({}): brdfd's wire protocols for these instruments \
+             (drivers/PROTOCOL.md) have been tested against its simulated instruments only, \
+             never against a real MA-T12 or RA-532H. Check the first scans against the \
+             instrument's own software before trusting \
+             them. ***",
+            which.join(", ")
+        )
+    })
+}
+
 /// Files the daemon writes must be distinct: a recording named like the store would truncate
 /// the store at start, two recordings into one file would interleave.
 pub fn check_distinct_files(config: &Config, token: &Path) -> anyhow::Result<()> {
@@ -192,6 +217,10 @@ async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
         config.store.path.display(),
         token_path.display()
     );
+    if let Some(banner) = real_transport_banner(&config) {
+        eprintln!("{banner}");
+        tracing::warn!("{banner}");
+    }
     if let Some(banner) = simulated_banner(&config) {
         eprintln!("{banner}");
         tracing::warn!(
@@ -285,6 +314,21 @@ async fn wait_for_signal() -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn real_transports_are_announced_as_unverified_and_the_shipped_config_says_so() {
+        let shipped = Config::from_toml(crate::config::SHIPPED, "config/brdfd.toml").unwrap();
+        let banner = real_transport_banner(&shipped).expect("the shipped file names USB and serial");
+        assert!(banner.contains("MA-T12 on USB"), "{banner}");
+        assert!(banner.contains("SRA on /dev/ttyUSB0"), "{banner}");
+        assert!(banner.contains("drivers/PROTOCOL.md"), "{banner}");
+        assert_eq!(real_transport_banner(&Config::default()), None);
+        let head: String = crate::config::SHIPPED.lines().take(12).collect::<Vec<_>>().join("\n");
+        assert!(
+            head.contains("not been verified") && head.contains("drivers/PROTOCOL.md"),
+            "the shipped configuration's first lines say the protocols are unverified:\n{head}"
+        );
+    }
 
     /// journald's native protocol: `KEY=VALUE\n`, or `KEY\n` + 64-bit little-endian length +
     /// value + `\n` for values with line breaks.

@@ -45,10 +45,13 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
     );
     let provenance = &scan["provenance"];
     println!(
-        "measured by: MA-T12 {}; SRA {}",
-        instrument_line(&provenance["ma_t12"]),
-        instrument_line(&provenance["sra"])
+        "measured by: {}; {}",
+        instrument_line(&provenance["ma_t12"], "MA-T12"),
+        instrument_line(&provenance["sra"], "RA-532H")
     );
+    if let Some(note) = simulated_note(provenance) {
+        println!("{note}");
+    }
     println!(
         "source: {}{}",
         s(provenance, "source"),
@@ -100,19 +103,38 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
-/// One instrument's provenance as `show` prints it.
-fn instrument_line(p: &Value) -> String {
+/// One instrument's provenance as `show` prints it: its model (`kind` when it never said),
+/// serial and firmware.
+fn instrument_line(p: &Value, kind: &str) -> String {
     let simulated = match p["simulated"].as_bool() {
         Some(true) => " — SIMULATED",
         Some(false) => "",
         None => " — simulated or real: not recorded",
     };
+    let model = match p["model"].as_str() {
+        Some(m) if !m.is_empty() && m != "unknown" => terminal_safe(m),
+        _ => format!("{kind} (model not recorded)"),
+    };
     format!(
-        "{} serial {} firmware {}{simulated}",
-        s(p, "model"),
+        "{model} serial {} firmware {}{simulated}",
         s(p, "serial"),
         s(p, "firmware")
     )
+}
+
+/// "simulated — replayed from …" for a scan an instrument of which was simulated.
+pub(super) fn simulated_note(provenance: &Value) -> Option<String> {
+    let simulated = ["ma_t12", "sra"]
+        .iter()
+        .any(|k| provenance[k]["simulated"].as_bool() == Some(true));
+    if !simulated {
+        return None;
+    }
+    Some(match provenance["source_detail"].as_str() {
+        Some(d) if d.starts_with("simulated") => terminal_safe(d),
+        Some(d) => format!("simulated — {}", terminal_safe(d)),
+        None => "simulated — which recording answered was not recorded".into(),
+    })
 }
 pub(super) fn print_fits(detail: &Value) {
     let fits = detail["fits"].as_array().cloned().unwrap_or_default();

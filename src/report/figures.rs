@@ -1099,6 +1099,78 @@ fn specular_delta_l_points<DB: DrawingBackend>(
 mod tests {
     use super::*;
 
+    /// `text` drawn in the report's font at `size` px, black on white, as coverage (0–255 of
+    /// ink) per pixel, `w` × `h`.
+    fn rendered(text: &str, size: u32, w: u32, h: u32) -> Vec<Vec<u8>> {
+        register_font();
+        let mut buf = vec![255u8; (w * h * 3) as usize];
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+            root.draw(&Text::new(text.to_string(), (10, 10), font(size)))
+                .unwrap();
+            root.present().unwrap();
+        }
+        (0..h as usize)
+            .map(|y| {
+                (0..w as usize)
+                    .map(|x| 255 - buf[(y * w as usize + x) * 3])
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Ink per pixel column of `text` laid out by ab_glyph itself: each glyph at its pen
+    /// position (advances and kerning), its coverage placed by its own pixel bounds.
+    fn reference_columns(text: &str, size: f32, x0: f32, w: usize) -> Vec<f64> {
+        use ab_glyph::{Font, FontRef, ScaleFont, point};
+        let font = FontRef::try_from_slice(FONT).unwrap();
+        let scaled = font.as_scaled(size);
+        let mut cols = vec![0.0; w];
+        let mut pen = x0;
+        let mut prev = None;
+        for c in text.chars() {
+            let id = font.glyph_id(c);
+            if let Some(p) = prev {
+                pen += scaled.kern(p, id);
+            }
+            prev = Some(id);
+            let glyph = id.with_scale_and_position(size, point(pen, 40.0));
+            if let Some(q) = font.outline_glyph(glyph) {
+                let b = q.px_bounds();
+                q.draw(|x, _, v| {
+                    let col = (b.min.x as i64 + x as i64) as usize;
+                    if col < w {
+                        cols[col] += f64::from(v);
+                    }
+                });
+            }
+            pen += scaled.h_advance(id);
+        }
+        cols
+    }
+
+    /// Every glyph of a figure's text sits where the font puts it: "T.Freesia pink" drawn as
+    /// the figures draw it (16 px, the size of sample names) has its ink in the same columns as
+    /// the font's own layout. Plotters' ab_glyph text placed each glyph without its side
+    /// bearing ("T.Freesia" read "TFreesia", "M andarin"); see vendor/README.md.
+    #[test]
+    fn figure_text_is_placed_as_the_font_lays_it_out() {
+        for text in ["T.Freesia pink", "T.Mandarin orange", "reflectance factor"] {
+            let ink = rendered(text, 16, 300, 40);
+            let drawn: Vec<f64> = (0..300)
+                .map(|x| ink.iter().map(|r| f64::from(r[x]) / 255.0).sum())
+                .collect();
+            let reference = reference_columns(text, 16.0, 10.0, 300);
+            let total: f64 = reference.iter().sum();
+            let off: f64 = drawn.iter().zip(&reference).map(|(a, b)| (a - b).abs()).sum();
+            assert!(
+                off / total < 0.25,
+                "{text}: {:.0} % of the ink is in other columns than the font's layout",
+                100.0 * off / total
+            );
+        }
+    }
+
     #[test]
     fn quartiles_interpolate_like_r_type_7() {
         assert_eq!(quartiles(&[]), None);

@@ -411,6 +411,12 @@ impl Service {
                 "reconnecting",
                 format!("attempt {attempt} after {} ms", delay.as_millis()),
             ),
+            // A command cut short by the operator's abort is no fault of the instrument: it
+            // stays connected (its answer to ABORT says so).
+            drivers::Event::Error {
+                error: drivers::DriverError::Aborted { .. },
+                ..
+            } => return,
             drivers::Event::Error { instrument, error } => (instrument, "error", error.to_string()),
             drivers::Event::Measuring { instrument, .. }
             | drivers::Event::Reading { instrument, .. } => {

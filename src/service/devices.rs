@@ -61,6 +61,23 @@ pub struct Devices {
     pub recorders: Vec<Recorder>,
 }
 
+/// A recorded session's object as provenance names it: the embedded recording's file stem and
+/// its sample when it is one of those, else the sample (or tile) the session's notes name.
+fn recording_name(object: Option<&mock_devices::ScriptObject>) -> String {
+    use mock_devices::ScriptObject;
+    match object {
+        Some(ScriptObject::Sample(name)) => match mock_devices::recordings::by_name(name) {
+            Some(r) => format!("{} ({name})", r.name),
+            None => format!("the recording of \"{name}\""),
+        },
+        Some(ScriptObject::Reference) => {
+            format!("{} (reference tile)", mock_devices::recordings::reference().name)
+        }
+        Some(ScriptObject::Unknown) => "a recording whose notes name no object".into(),
+        None => "nothing (the recording has no measurement left)".into(),
+    }
+}
+
 impl Devices {
     /// Both handles from drivers started elsewhere (tests).
     pub fn new(ma_t12: DriverHandle, sra: DriverHandle) -> Devices {
@@ -201,7 +218,10 @@ impl Devices {
     /// that what the operator scans is what they see. A sample with no recording gets the
     /// next recording in the playlist, as before, and the log says so. Real instruments are
     /// not touched.
-    pub fn cue_simulators(&self, sample: Option<&str>) {
+    ///
+    /// Returns, when an instrument is simulated, which recording will answer, as the scan's
+    /// provenance says it (`simulated — replayed from synthetic-t-sky-blue (T.Sky blue)`).
+    pub fn cue_simulators(&self, sample: Option<&str>) -> Option<String> {
         let what = sample.map_or_else(
             || "the reference tile".to_string(),
             |s| format!("sample \"{s}\""),
@@ -230,6 +250,24 @@ impl Devices {
                 ),
                 Some(Cue::Strict) | None => {}
             }
+        }
+        let answering = [
+            self.simulators.ma_t12.as_ref().map(|s| s.answering()),
+            self.simulators.sra.as_ref().map(|s| s.answering()),
+        ];
+        let named: Vec<String> = answering
+            .into_iter()
+            .flatten()
+            .map(|a| recording_name(a.as_ref().map(|(_, object)| object)))
+            .collect();
+        match named.as_slice() {
+            [] => None,
+            [one] => Some(format!("simulated — replayed from {one}")),
+            [a, b] if a == b => Some(format!("simulated — replayed from {a}")),
+            [a, b] => Some(format!(
+                "simulated — replayed from {a} (MA-T12) and {b} (RA-532H)"
+            )),
+            more => Some(format!("simulated — replayed from {}", more.join(", "))),
         }
     }
 

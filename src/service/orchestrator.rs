@@ -269,10 +269,20 @@ impl Service {
                 return Err(e);
             }
         };
-        acquisition.devices().cue_simulators(match plan {
+        let replayed = acquisition.devices().cue_simulators(match plan {
             Plan::Reference => None,
             Plan::Scan { sample } => Some(sample),
         });
+        // Simulated instruments: the row says which recording answers.
+        if let Some(detail) = replayed {
+            let provenance = acquisition.provenance(Source::Measured, Some(detail));
+            if let Err(e) = self
+                .timed_store(target.set_provenance(store, &provenance))
+                .await
+            {
+                tracing::warn!(error = %e, ?target, "cannot record which recording answers");
+            }
+        }
         self.inner.events.send(started);
         let service = self.clone();
         tokio::spawn(service.run_claimed(target, claim, guard, listener));

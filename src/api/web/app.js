@@ -1,12 +1,20 @@
 // brdfd's operator page: one plain ES module, no build step, no dependency.
 //
 // Views (by the address's #fragment): the bench (#/), the scan list (#/scans?…) and one scan's
-// result (#/scans/ID). Live progress comes from the daemon's event stream (GET /events); every
-// POST carries the session's CSRF header (GET /session). Text from the daemon is always set as
-// text, never parsed as HTML.
+// result (#/scans/ID). The bench is rebuilt from the daemon (GET /bench: the operation in
+// progress, its readings and fits so far) when the page loads and whenever the event stream
+// reconnects; live progress then comes from the event stream (GET /events). Every POST carries
+// the session's CSRF header (GET /session). Text from the daemon is always set as text, never
+// parsed as HTML.
 
 /** The 14 geometries in the daemon's order (MA-T12 then SRA); a Rust test pins this list. */
 const GEOMETRIES = ["15as-45","15as-30","15as-15","15as15","15as45","15as80","45as-15","45as15","45as25","45as45","45as75","45as110","sra-20","sra-60"];
+/**
+ * Each geometry's light zenith θi, view zenith θr, view azimuth φr (180: the far side of the
+ * normal from the light, 0: the light's side) and aspecular angle, degrees (SCIENCE.md §2);
+ * a Rust test pins this table to the daemon's.
+ */
+const GEOMETRY_ANGLES = [["15as-45",60,15,180,-45],["15as-30",45,15,180,-30],["15as-15",30,15,180,-15],["15as15",0,15,180,15],["15as45",30,15,0,45],["15as80",65,15,0,80],["45as-15",60,45,180,-15],["45as15",30,45,180,15],["45as25",20,45,180,25],["45as45",0,45,180,45],["45as75",30,45,0,75],["45as110",65,45,0,110],["sra-20",20,20,180,0],["sra-60",60,60,180,0]];
 const COSTS = ["cf1", "cf2", "m2"];
 const EVENT_KINDS = [
   "reference_started", "reference_reading", "reference_complete", "reference_failed",
@@ -17,7 +25,7 @@ const EVENT_KINDS = [
 ];
 
 /** What the page measures of itself, read by the browser tests and the README's figures. */
-const metrics = { readingLatencyMs: [], firstRenderMs: null, errors: [], streamOpens: 0, streamErrors: 0 };
+const metrics = { readingLatencyMs: [], firstRenderMs: null, errors: [], streamOpens: 0, streamErrors: 0, syncs: [] };
 window.brdfdMetrics = metrics;
 window.addEventListener("error", (e) => metrics.errors.push(String(e.message)));
 
@@ -26,6 +34,7 @@ let status = null;        // GET /status
 let live = null;          // what the bench shows: {kind, id, sample, readings: Map, fits: Map, state}
 let events = null;        // the EventSource
 let streamWasDown = false;
+let pending = null;       // events that arrive while GET /bench is in flight, applied after it
 
 // ---------- small helpers ----------
 
@@ -53,6 +62,14 @@ function fill(el, ...children) {
 const $ = (id) => document.getElementById(id);
 const fmt = (v, d = 2) => (typeof v === "number" && isFinite(v) ? v.toFixed(d) : "—");
 const when = (ms) => (ms ? new Date(ms).toLocaleString() : "—");
+/** A duration in ms as people read it: "850 ms", "12.3 s", "2 min 05 s". */
+function fmtDuration(ms) {
+  if (typeof ms !== "number" || !isFinite(ms)) return "—";
+  if (ms < 1000) return `${ms.toFixed(0)} ms`;
+  const sec = ms / 1000;
+  if (sec < 60) return `${sec.toFixed(1)} s`;
+  return `${Math.floor(sec / 60)} min ${String(Math.round(sec % 60)).padStart(2, "0")} s`;
+}
 
 function setBanner(text, bad = false) {
   const b = $("banner");
@@ -117,7 +134,7 @@ function connectEvents() {
     if (streamWasDown) {
       streamWasDown = false;
       setBanner("Reconnected to the daemon; the state below is fresh.");
-      refreshStatus();
+      syncBench("reconnect");
     }
   };
   events.onerror = () => {
@@ -134,47 +151,110 @@ function connectEvents() {
     events.addEventListener(kind, (msg) => {
       let ev;
       try { ev = JSON.parse(msg.data); } catch { return; }
-      onEvent(kind, ev);
+      if (pending) pending.push([kind, ev]);
+      else onEvent(kind, ev);
     });
   }
 }
 
-let logText = "";
+// The event log survives a reload of this tab (sessionStorage holds no secret: event text).
+let logText = (() => { try { return sessionStorage.getItem("brdfd-log") || ""; } catch { return ""; } })();
 
 function logLine(text) {
   const line = `${new Date().toLocaleTimeString()}  ${text}\n`;
   logText = (line + logText).split("\n").slice(0, 40).join("\n");
+  try { sessionStorage.setItem("brdfd-log", logText); } catch { /* storage off: the log lives with the tab */ }
   const log = $("log");
   if (log) log.textContent = logText;
 }
 
+/** A fit's status as the bench shows it: a finished fit never goes back to running. */
+const FIT_FINAL = new Set(["done", "failed", "cancelled"]);
+
+/**
+ * Rebuilds the bench from the daemon (GET /bench), then applies the events that came in
+ * meanwhile (readings are keyed by geometry and fits by id, so one seen twice changes nothing).
+ */
+let syncing = false;
+async function syncBench(why = "") {
+  if (syncing || !session) return;
+  syncing = true;
+  if (!pending) pending = [];
+  let answer = null;
+  try {
+    answer = await api("/bench");
+  } catch (e) {
+    if (e.status === 401) { pending = null; syncing = false; return showLogin(e.message); }
+  }
+  const queued = pending;
+  pending = null;
+  syncing = false;
+  if (!session) return;
+  if (answer) {
+    const op = answer.operation;
+    if (!op) {
+      live = null;
+    } else {
+      live = newLive(op.kind, op.id, op.kind === "reference" ? `${op.sample} (reference)` : op.sample);
+      live.state = op.state === "requested" ? "measuring" : op.state;
+      live.reason = op.reason;
+      live.provenance = op.provenance;
+      for (const r of op.readings) live.readings.set(r.geometry, r);
+      for (const f of op.fits) {
+        live.fits.set(f.fit, {
+          fit: f.fit, cost: f.cost_function, status: f.status, error: f.error,
+          cost_value: f.cost, wall: f.wall_ms,
+          de: f.status === "done" ? [f.delta_e00_diffuse_mean, f.delta_e00_specular_mean, f.delta_e00_mean] : null,
+        });
+      }
+    }
+    metrics.syncs.push({ kind: op ? op.kind : null, id: op ? op.id : null, state: op ? op.state : null,
+      inProgress: op ? op.in_progress : false, readings: op ? op.readings.length : 0 });
+    if (why && op && op.in_progress) logLine(`${op.kind} ${op.id}${op.kind === "scan" ? ` of "${op.sample}"` : ""} in progress: ${op.readings.length} of 14 readings so far (from the daemon)`);
+  }
+  for (const [kind, ev] of queued) onEvent(kind, ev);
+  if (location.hash === "" || location.hash === "#/") renderBench();
+  refreshStatus();
+}
+
 function newLive(kind, id, sample) {
-  return { kind, id, sample, readings: new Map(), fits: new Map(), state: "measuring", reason: null };
+  return { kind, id, sample, readings: new Map(), fits: new Map(), state: "measuring", reason: null, provenance: null };
 }
 
 /** One event: update what the bench shows. */
 function onEvent(kind, ev) {
   switch (kind) {
     case "reference_started":
-      live = newLive("reference", ev.reference, "Munsell N9 (reference)");
+      if (!(live && live.kind === "reference" && live.id === ev.reference)) live = newLive("reference", ev.reference, "Munsell N9 (reference)");
       logLine(`reference ${ev.reference} started`);
       refreshStatus();
       break;
     case "scan_started":
-      live = newLive("scan", ev.scan, ev.sample);
+      if (!(live && live.kind === "scan" && live.id === ev.scan)) live = newLive("scan", ev.scan, ev.sample);
+      else live.sample = ev.sample;
       logLine(`scan ${ev.scan} of "${ev.sample}" started`);
-      refreshStatus();
+      // The daemon knows which recording a simulated instrument answers from: ask.
+      syncBench();
       break;
     case "reference_reading":
     case "scan_reading": {
       const id = kind === "scan_reading" ? ev.scan : ev.reference;
       const k = kind === "scan_reading" ? "scan" : "reference";
-      if (!live || live.kind !== k || live.id !== id) live = newLive(k, id, live ? live.sample : "");
+      if (!live || live.kind !== k || live.id !== id) {
+        // A reading of an operation this page has not seen start: ask the daemon what it is.
+        live = newLive(k, id, "");
+        syncBench();
+      }
       live.readings.set(ev.geometry, ev);
       paintCell(ev.geometry, ev);
       if (typeof ev.at_ms === "number") {
-        // Committed → painted: the next frame after the cell changed.
-        requestAnimationFrame(() => metrics.readingLatencyMs.push(Date.now() - ev.at_ms));
+        // Committed → painted: the frame after the cell changed is rendered once its
+        // animation-frame callbacks are done; a message posted from one runs after that frame.
+        requestAnimationFrame(() => {
+          const ch = new MessageChannel();
+          ch.port1.onmessage = () => metrics.readingLatencyMs.push(Date.now() - ev.at_ms);
+          ch.port2.postMessage(0);
+        });
       }
       renderOp();
       return;
@@ -222,8 +302,11 @@ function onEvent(kind, ev) {
       }
       const f = live.fits.get(ev.fit) || { fit: ev.fit, status: "queued" };
       if (ev.cost_function) f.cost = ev.cost_function;
-      f.status = { fit_queued: "queued", fit_started: "running", fit_progress: "running",
+      const next = { fit_queued: "queued", fit_started: "running", fit_progress: "running",
         fit_done: "done", fit_failed: "failed", fit_cancelled: "cancelled" }[kind];
+      // An event older than what GET /bench said (it was in flight meanwhile) changes nothing.
+      if (FIT_FINAL.has(f.status) && !FIT_FINAL.has(next)) return;
+      f.status = next;
       if (kind === "fit_progress") {
         f.generation = ev.generation; f.total = ev.generations_total; f.best = ev.best_cost;
       }
@@ -253,7 +336,7 @@ function onEvent(kind, ev) {
       return;
     case "lagged":
       logLine(`missed ${ev.missed} events; refreshing`);
-      refreshStatus();
+      syncBench();
       return;
     default:
       return;
@@ -264,6 +347,7 @@ function onEvent(kind, ev) {
 // ---------- status ----------
 
 async function refreshStatus() {
+  if (!session) return;   // logged out: nothing to refresh (and no 401 to show over the message)
   try {
     status = await api("/status");
   } catch (e) {
@@ -279,13 +363,31 @@ async function refreshStatus() {
   deviceBanner();
 }
 
+/** What an instrument's trouble means for the operator: what happened, then what to do. */
+function deviceAdvice(d) {
+  switch (d.state) {
+    case "disconnected":
+      return `${d.instrument} is disconnected (${d.detail}). Check its cable and power; brdfd reconnects by itself and the next scan can start once it is back.`;
+    case "reconnecting":
+      return `${d.instrument} is reconnecting (${d.detail}). Wait a moment; if it does not come back, check its cable and power.`;
+    case "error":
+      return `${d.instrument} reported an error: ${d.detail}. Scan again; if it happens again, switch the instrument off and on and run brdfd doctor on the lab PC.`;
+    default:
+      return `${d.instrument} is ${d.state}: ${d.detail}.`;
+  }
+}
+
+let deviceBannerText = null;   // the instruments' trouble, while the banner shows it
 function deviceBanner() {
   if (!status) return;
   const down = status.devices.filter((d) => d.state !== "connected" && d.state !== "unknown");
   if (down.length) {
-    setBanner(down.map((d) => `${d.instrument} is ${d.state}: ${d.detail}`).join(" · "), true);
-  } else if ($("banner").className === "bad" && /is (disconnected|reconnecting|error)/.test($("banner").textContent)) {
-    setBanner(null);
+    deviceBannerText = down.map(deviceAdvice).join(" · ");
+    setBanner(deviceBannerText, true);
+  } else if (deviceBannerText !== null) {
+    // The trouble is over: its message goes, any other message stays.
+    if ($("banner").textContent === deviceBannerText) setBanner(null);
+    deviceBannerText = null;
   }
 }
 
@@ -316,11 +418,14 @@ function renderBench() {
     h("section", { "aria-labelledby": "h-progress" },
       h("h2", { id: "h-progress", class: "sr" }, "Progress"),
       h("p", { id: "op", role: "status", "aria-live": "polite" }),
+      h("p", { id: "op-sim", class: "sim-note", hidden: true }),
       h("div", { class: "cells", id: "cells" },
         GEOMETRIES.map((g) => h("div", { class: `cell${g.startsWith("sra") ? " sra" : ""}`, id: `cell-${g}`, "data-geometry": g },
           h("div", { class: "g" }, g), h("div", { class: "sw", "aria-hidden": "true" }),
           h("div", { class: "num" }, "waiting")))),
-      h("table", { class: "fits", id: "fits", "aria-label": "Fits of this scan" })),
+      h("p", { class: "muted", id: "cells-note" }, "Cells show the raw readings as the instruments report them: MA-T12 as CIELAB (D65, 2°) of the reflectance factor read, SRA as its intensity in the instrument's own units; neither is normalised by the N9 reference yet (the result view shows the normalised values)."),
+      geometryLegend(),
+      h("div", { class: "scroll" }, h("table", { class: "fits", id: "fits", "aria-label": "Fits of this scan" }))),
     h("section", { "aria-labelledby": "h-log" },
       h("h3", { id: "h-log" }, "Events"), h("pre", { id: "log", "aria-live": "off" }, logText)),
   );
@@ -330,6 +435,49 @@ function renderBench() {
   if (live) for (const [g, ev] of live.readings) paintCell(g, ev);
   renderOp();
   renderFits();
+}
+
+// The SVG namespace, split so that the page holds no address of another origin.
+const SVG = ["http", "://www.w3.org/2000/svg"].join("");
+function svg(tag, attrs = {}) {
+  const el = document.createElementNS(SVG, tag);
+  for (const [k, v] of Object.entries(attrs)) el.setAttribute(k, String(v));
+  return el;
+}
+
+/** A small side view of one geometry: the surface, its normal, the light and the view. */
+function geometryDiagram(thetaI, thetaR, phiR) {
+  const W = 72, H = 40, cx = W / 2, cy = H - 4, r = 32;
+  const box = svg("svg", { viewBox: `0 0 ${W} ${H}`, width: W, height: H, role: "img",
+    "aria-label": `light at ${thetaI}°, view at ${thetaR}° ${phiR === 180 ? "on the far side" : "on the light's side"}` });
+  const ray = (deg, side, colour, dash) => {
+    const a = (deg * Math.PI) / 180;
+    const l = svg("line", { x1: cx, y1: cy, x2: cx + side * r * Math.sin(a), y2: cy - r * Math.cos(a),
+      stroke: colour, "stroke-width": 2 });
+    if (dash) l.setAttribute("stroke-dasharray", "3 2");
+    return l;
+  };
+  box.append(
+    svg("line", { x1: 2, y1: cy, x2: W - 2, y2: cy, stroke: "#57606a", "stroke-width": 2 }),
+    svg("line", { x1: cx, y1: cy, x2: cx, y2: cy - r, stroke: "#d0d7de", "stroke-width": 1 }),
+    ray(thetaI, -1, "#9a6700", false),
+    // φr = 180: the view is on the far side of the normal from the light.
+    ray(thetaR, phiR === 180 ? 1 : -1, "#0550ae", true));
+  return box;
+}
+
+/** What the geometry names mean: a table of angles, each with its diagram. */
+function geometryLegend() {
+  return h("details", { class: "legend", id: "geometry-legend" },
+    h("summary", {}, "What the geometry names mean"),
+    h("p", { class: "muted" }, "MA-T12 names are view angle, \"as\", aspecular angle: 45as-15 views at 45° from the normal, 15° from the mirror direction towards the light's side (negative) or away from it (positive). The SRA measures at the mirror direction itself, at 20° and 60°. Angles in degrees from the surface normal; in the diagrams the light is solid, the view dashed."),
+    h("div", { class: "scroll" }, h("table", { class: "data", id: "geometry-table" },
+      h("thead", {}, h("tr", {}, ["geometry", "instrument", "light θi", "view θr", "view side", "aspecular", "diagram"].map((c) => h("th", { scope: "col" }, c)))),
+      h("tbody", {}, GEOMETRY_ANGLES.map(([name, ti, tr, phi, asp]) => h("tr", { "data-geometry": name },
+        h("th", { scope: "row" }, name), h("td", {}, name.startsWith("sra") ? "RA-532H" : "MA-T12"),
+        h("td", {}, `${ti}°`), h("td", {}, `${tr}°`),
+        h("td", {}, phi === 180 ? "far side of the normal" : "light's side"), h("td", {}, `${asp}°`),
+        h("td", {}, geometryDiagram(ti, tr, phi))))))));
 }
 
 async function onScanSubmit(e) {
@@ -374,11 +522,20 @@ function renderReference() {
 function renderControls() {
   const busy = (status && status.busy) || (live && live.state === "measuring");
   const ready = status && status.devices.every((d) => d.state === "connected" || d.state === "unknown");
+  const down = status ? status.devices.filter((d) => d.state !== "connected" && d.state !== "unknown").map((d) => d.instrument) : [];
+  // Why a button is off, said on the button; nothing once it is on.
+  const why = {
+    "measure-reference": busy ? "the instruments are busy: wait, or abort" : !ready ? `not connected: ${down.join(", ")}` : "",
+    scan: busy ? "the instruments are busy: wait, or abort" : !ready ? `not connected: ${down.join(", ")}`
+      : !(status && status.reference) ? "measure the reference (Munsell N9) first" : "",
+    abort: busy ? "" : "nothing is being measured",
+  };
   for (const [id, on] of [["measure-reference", !busy], ["scan", !busy && status && status.reference], ["abort", !!busy]]) {
     const b = $(id);
-    if (b) b.disabled = !on;
+    if (!b) continue;
+    b.disabled = !on;
+    if (why[id]) b.title = why[id]; else b.removeAttribute("title");
   }
-  if (!ready && $("scan")) $("scan").title = "an instrument is not connected";
 }
 
 function paintCell(geometry, ev) {
@@ -393,8 +550,8 @@ function paintCell(geometry, ev) {
     cell.setAttribute("aria-label", `${geometry}: L* ${fmt(ev.lab[0], 1)}, a* ${fmt(ev.lab[1], 1)}, b* ${fmt(ev.lab[2], 1)}`);
   } else if (typeof ev.intensity === "number") {
     sw.style.background = "#9a9a9a";
-    num.replaceChildren("intensity", h("br"), fmt(ev.intensity, 3));
-    cell.setAttribute("aria-label", `${geometry}: intensity ${fmt(ev.intensity, 3)}`);
+    num.replaceChildren("intensity", h("br"), fmt(ev.intensity, 3), h("br"), h("span", { class: "unit" }, "device units"));
+    cell.setAttribute("aria-label", `${geometry}: intensity ${fmt(ev.intensity, 3)} in the SRA's own units (raw, not normalised)`);
   } else {
     num.textContent = "read";
   }
@@ -413,8 +570,15 @@ function renderOp() {
   let text = `${what}: ${n} of 14 readings`;
   if (live.state !== "measuring") text += ` — ${live.state}`;
   if (live.reason) text += `: ${live.reason}`;
-  op.replaceChildren(text, ...(live.kind === "scan" && live.state === "complete"
-    ? [" — ", h("a", { href: `#/scans/${live.id}` }, "open the result")] : []));
+  const ended = live.kind === "scan" && live.state !== "measuring";
+  op.replaceChildren(text, ...(ended
+    ? [" — ", h("a", { href: `#/scans/${live.id}` }, live.state === "complete" ? "open the result" : "open the scan")] : []));
+  const sim = $("op-sim");
+  if (sim) {
+    const detail = live.provenance && live.provenance.source_detail;
+    sim.textContent = detail && detail.startsWith("simulated") ? detail : "";
+    sim.hidden = !sim.textContent;
+  }
   op.dataset.state = live.state;
   op.dataset.readings = String(n);
 }
@@ -425,12 +589,12 @@ function renderFits() {
   if (!live || live.kind !== "scan" || live.fits.size === 0) { t.replaceChildren(); return; }
   const rows = [...live.fits.values()].sort((a, b) => a.fit - b.fit);
   t.replaceChildren(
-    h("thead", {}, h("tr", {}, ["fit", "cost function", "status", "progress", "ΔE00 diffuse", "ΔE00 specular", "ΔE00 all"].map((c) => h("th", { scope: "col" }, c)))),
+    h("thead", {}, h("tr", {}, ["fit", "cost function", "status", "progress / fit time", "ΔE00 diffuse (mean)", "ΔE00 specular (mean)", "ΔE00 all (mean)"].map((c) => h("th", { scope: "col" }, c)))),
     h("tbody", {}, rows.map((f) => h("tr", { "data-fit": f.fit, "data-status": f.status, "data-cost": f.cost || "" },
       h("td", {}, String(f.fit)), h("td", {}, f.cost || "?"), h("td", {}, f.status, f.error ? `: ${f.error}` : ""),
       h("td", {}, f.status === "running" && f.total
         ? [h("progress", { max: f.total, value: f.generation, "aria-label": `generation ${f.generation} of ${f.total}` }), ` ${f.generation}/${f.total}`]
-        : f.status === "done" ? `${fmt(f.wall, 0)} ms` : ""),
+        : f.status === "done" ? `took ${fmtDuration(f.wall)}` : ""),
       ...(f.de || [null, null, null]).map((v) => h("td", {}, fmt(v)))))));
 }
 
@@ -443,7 +607,8 @@ async function renderScans(params) {
   const before = params.get("before") || "";
   const q = new URLSearchParams({ limit: "25" });
   if (state) q.set("state", state);
-  if (sample) q.set("sample", sample);
+  // Any part of the name, any case ("blue" finds "T.Sky blue" and "T.Lavender blue").
+  if (sample) q.set("sample_contains", sample);
   if (before) q.set("before", before);
   let list;
   try { list = await api(`/scans?${q}`); } catch (e) {
@@ -466,7 +631,7 @@ async function renderScans(params) {
     if ($("f-state").value) p.set("state", $("f-state").value);
     location.hash = `#/scans?${p}`;
   } },
-  h("label", { for: "f-sample" }, "Sample"), h("input", { id: "f-sample", value: sample }),
+  h("label", { for: "f-sample" }, "Sample name contains"), h("input", { id: "f-sample", value: sample, type: "search" }),
   h("label", { for: "f-state" }, "State"),
   h("select", { id: "f-state" }, ["", "requested", "measuring", "complete", "failed", "aborted"].map((s) =>
     h("option", { value: s, selected: s === state }, s || "any"))),
@@ -476,14 +641,15 @@ async function renderScans(params) {
       onchange: (e) => { if (e.target.checked) selected.add(s.id); else selected.delete(s.id); updateReport(); } }) : ""),
     h("td", {}, h("a", { href: `#/scans/${s.id}` }, String(s.id))),
     h("td", {}, s.sample), h("td", {}, s.state, s.reason ? h("span", { class: "muted" }, ` — ${s.reason}`) : ""),
-    h("td", {}, when(s.requested_at_ms)), h("td", {}, `${s.reading_count}/14`)));
+    h("td", {}, when(s.requested_at_ms)), h("td", {}, `${s.reading_count}/14`),
+    h("td", { class: simulatedNote(s.provenance) ? "sim" : "" }, sourceText(s.provenance))));
   const last = list.length ? list[list.length - 1].id : null;
   const older = new URLSearchParams(params); if (last) older.set("before", String(last));
   const newest = new URLSearchParams(params); newest.delete("before");
   fill(main, 
     h("h2", {}, "Scans, newest first"), form,
     list.length ? h("div", { class: "scroll" }, h("table", { class: "data", id: "scan-list" },
-      h("thead", {}, h("tr", {}, ["", "scan", "sample", "state", "requested", "readings"].map((c) => h("th", { scope: "col" }, c)))),
+      h("thead", {}, h("tr", {}, ["", "scan", "sample", "state", "requested", "readings", "source"].map((c) => h("th", { scope: "col" }, c)))),
       h("tbody", {}, rows))) : h("p", {}, "No scans match."),
     h("div", { class: "pager" },
       before ? h("a", { href: `#/scans?${newest}` }, "← Newest") : null,
@@ -492,6 +658,69 @@ async function renderScans(params) {
 }
 
 // ---------- one scan's result ----------
+
+/** "simulated — replayed from …" of a provenance, or null when no instrument was simulated. */
+function simulatedNote(prov) {
+  if (!prov) return null;
+  const sim = (prov.ma_t12 && prov.ma_t12.simulated) || (prov.sra && prov.sra.simulated);
+  if (!sim) return null;
+  const d = prov.source_detail || "";
+  return d.startsWith("simulated") ? d : `simulated${d ? ` — ${d}` : " — the recording was not recorded"}`;
+}
+
+/** How a scan's readings came in, in one phrase for the scan list. */
+function sourceText(prov) {
+  if (!prov) return "?";
+  const sim = simulatedNote(prov);
+  if (sim) return sim;
+  if (prov.source === "imported") return `imported${prov.source_detail ? ` from ${prov.source_detail}` : ""}`;
+  return prov.source || "?";
+}
+
+/**
+ * A download that says when it fails: the file is fetched, and a refusal of the daemon is
+ * shown in the banner instead of a browser download that silently does nothing.
+ */
+async function download(e) {
+  e.preventDefault();
+  const a = e.currentTarget;
+  a.setAttribute("aria-busy", "true");
+  try {
+    const r = await fetch(a.href, { credentials: "same-origin", cache: "no-store" });
+    if (!r.ok) {
+      let msg = `HTTP ${r.status}`;
+      try { const j = await r.json(); if (j && j.error) msg = j.error; } catch { /* not JSON */ }
+      setBanner(`The download of ${a.textContent} failed: ${msg}`, true);
+      return;
+    }
+    const blob = await r.blob();
+    const disp = r.headers.get("content-disposition") || "";
+    const m = disp.match(/filename="([^"]+)"/);
+    const url = URL.createObjectURL(blob);
+    const save = h("a", { href: url, download: a.getAttribute("download") || (m ? m[1] : "brdfd-download") });
+    document.body.append(save);
+    save.click();
+    save.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 60000);
+  } catch (err) {
+    setBanner(`The download of ${a.textContent} failed: ${err.message}; is the daemon running?`, true);
+  } finally {
+    a.removeAttribute("aria-busy");
+  }
+}
+
+/** One preview: shown at the image's own aspect ratio; a click opens it at full size. */
+function previewFigure(f) {
+  const src = `/fits/${f.run.id}/preview.png`;
+  const alt = `sphere rendered from fit ${f.run.id} (${f.run.cost_function})`;
+  return h("figure", { class: "preview" },
+    h("button", { type: "button", class: "enlarge", "aria-label": `enlarge: ${alt}`, onclick: () => {
+      const dlg = $("preview-dialog");
+      fill(dlg, h("img", { src, alt }), h("form", { method: "dialog" }, h("button", { type: "submit" }, "Close")));
+      dlg.showModal();
+    } }, h("img", { src, alt, loading: "lazy" })),
+    h("figcaption", {}, `fit ${f.run.id} · ${f.run.cost_function} — click to enlarge`));
+}
 
 async function renderResult(id) {
   const main = $("main");
@@ -502,11 +731,15 @@ async function renderResult(id) {
     fill(main, h("p", { class: "stale" }, e.message));
     return;
   }
-  let sw = null;
-  if (view.scan.state === "complete") {
-    try { sw = await api(`/scans/${id}/swatches`); } catch (e) { sw = { error: e.message }; }
-  }
   const scan = view.scan;
+  const complete = scan.state === "complete";
+  let sw = null;
+  let kept = null;
+  if (complete) {
+    try { sw = await api(`/scans/${id}/swatches`); } catch (e) { sw = { error: e.message }; }
+  } else {
+    try { kept = await api(`/scans/${id}/readings`); } catch (e) { kept = { error: e.message }; }
+  }
   const ref = view.reference.reference;
   const prov = scan.provenance || {};
   const inst = (p, name) => p ? `${name}: ${p.model} · serial ${p.serial} · firmware ${p.firmware}${p.simulated ? " · SIMULATED" : ""}` : `${name}: unknown`;
@@ -516,52 +749,78 @@ async function renderResult(id) {
   for (const f of view.fits) if (f.run.status === "done") latestDone.set(f.run.cost_function, f);
   const latest = new Map();
   for (const f of view.fits) latest.set(f.run.cost_function, f);
-  fill(main, 
+  const sim = simulatedNote(prov);
+  const pendingFits = view.fits.filter((f) => f.run.status === "queued" || f.run.status === "running").length;
+  const ended = { aborted: "was aborted", failed: "failed" }[scan.state];
+  const notFitted = complete
+    ? (pendingFits ? `${pendingFits} fit(s) queued or running: this view shows them when they are done (reload).`
+      : view.reference_stale ? "Not fitted: the reference was stale when the scan was made; refit below with \"allow the stale reference\" if that is acceptable."
+      : "No finished fit: see the fits below for why, or refit.")
+    : ended ? `Not fitted: this scan ${ended} with ${scan.reading_count} of 14 readings, and only a complete scan is fitted. Scan the sample again from the bench.`
+    : "Not fitted yet: the scan is still being measured (see the bench).";
+  fill(main,
     h("h2", {}, `Scan ${scan.id}: ${scan.sample}`),
-    h("p", { id: "result-state" }, `${scan.state}${scan.reason ? ` — ${scan.reason}` : ""} · requested ${when(scan.requested_at_ms)} · ${scan.reading_count}/14 readings`),
+    sim ? h("p", { class: "sim-note", id: "result-sim" }, sim) : null,
+    h("p", { id: "result-state", "data-state": scan.state }, `${scan.state}${scan.reason ? ` — ${scan.reason}` : ""} · requested ${when(scan.requested_at_ms)} · ${scan.reading_count}/14 readings`),
+    kept && !kept.error ? h("section", { "aria-labelledby": "h-kept" },
+      h("h3", { id: "h-kept" }, `Readings kept (${kept.length} of 14, raw as the instruments reported them)`),
+      h("div", { class: "cells", id: "kept-cells" }, GEOMETRIES.map((g) => {
+        const r = kept.find((k) => k.geometry === g);
+        return h("div", { class: `cell${g.startsWith("sra") ? " sra" : ""}${r ? " done" : ""}`, "data-geometry": g, "data-kept": r ? "yes" : "no" },
+          h("div", { class: "g" }, g),
+          h("div", { class: "sw", "data-srgb": r && r.srgb ? r.srgb : null, "aria-hidden": "true" }),
+          h("div", { class: "num" }, !r ? "not measured"
+            : r.lab ? [`L* ${fmt(r.lab[0], 1)}`, h("br"), `a* ${fmt(r.lab[1], 1)}`, h("br"), `b* ${fmt(r.lab[2], 1)}`]
+            : ["intensity", h("br"), fmt(r.intensity, 3), h("br"), h("span", { class: "unit" }, "device units")]));
+      }))) : null,
+    kept && kept.error ? h("p", { class: "stale" }, `The kept readings cannot be shown: ${kept.error}`) : null,
     sw && sw.error ? h("p", { class: "stale" }, sw.error) : null,
     sw && !sw.error ? h("section", { "aria-labelledby": "h-sw" },
       h("h3", { id: "h-sw" }, "Measured and fitted colour per geometry (sRGB, D65, 2°)"),
+      h("p", { class: "muted" }, "\"measured\" is the reading normalised by the N9 reference (the BRDF the fit sees, as a reflectance factor), so it differs from the raw values the bench showed while measuring."),
       h("div", { class: "scroll" }, h("table", { class: "swatches", id: "swatches" },
         h("thead", {}, h("tr", {}, h("th", {}), sw.geometries.map((g) => h("th", { scope: "col" }, g)))),
         h("tbody", {},
-          swatchRow("measured", sw.measured),
+          swatchRow("measured (normalised by N9)", sw.measured),
           fitsDone.map((f) => swatchRow(`fitted ${f.cost_function}`, f.estimated, f.delta_e00))))),
-      h("p", { class: "muted" }, "! marks a colour outside the sRGB gamut (shown as the nearest displayable one)."))
+      h("p", { class: "muted" }, "! marks a colour outside the sRGB gamut (shown as the nearest displayable one)."),
+      geometryLegend())
       : null,
     h("section", { "aria-labelledby": "h-de" },
       h("h3", { id: "h-de" }, "ΔE00 (mean)"),
-      fitsDone.length ? h("table", { class: "data", id: "de-table" },
+      fitsDone.length ? h("div", { class: "scroll" }, h("table", { class: "data", id: "de-table" },
         h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "specular (2, vs the paper's grey spectrum)", "all (14)", "specular |ΔL*| (SRA model)", ""].map((c) => h("th", { scope: "col" }, c)))),
         h("tbody", {}, fitsDone.map((f) => h("tr", { "data-cost": f.cost_function },
           h("td", {}, f.cost_function), h("td", {}, f.method), h("td", {}, fmt(f.delta_e00_diffuse)),
           h("td", {}, fmt(f.delta_e00_specular)), h("td", {}, fmt(f.delta_e00_all)),
           h("td", {}, deltaL(latestDone.get(f.cost_function))),
-          h("td", { class: f === best ? "best" : "" }, f === best ? "★ best" : "")))))
-        : h("p", {}, "No finished fit yet.")),
-    h("section", { "aria-labelledby": "h-params" },
+          h("td", { class: f === best ? "best" : "" }, f === best ? "★ best" : ""))))))
+        : h("p", { id: "not-fitted" }, notFitted)),
+    latest.size ? h("section", { "aria-labelledby": "h-params" },
       h("h3", { id: "h-params" }, "Fitted parameters"),
-      h("table", { class: "data", id: "params" },
-        h("thead", {}, h("tr", {}, ["fit", "cost function", "status", "ks", "α", "μ", "kd at 450 / 550 / 650 nm"].map((c) => h("th", { scope: "col" }, c)))),
-        h("tbody", {}, [...latest.values()].map((f) => paramRow(f))))),
+      h("p", { class: "muted" }, "Brackets hold the 95 % interval of each parameter (bootstrap, SCIENCE.md §10), once computed; ks and kd in sr⁻¹, α (roughness) and μ (index of refraction) without unit."),
+      h("div", { class: "scroll" }, h("table", { class: "data", id: "params" },
+        h("thead", {}, h("tr", {}, ["fit", "cost function", "status", "ks [95 % interval]", "α [95 % interval]", "μ [95 % interval]", "kd at 450 / 550 / 650 nm"].map((c) => h("th", { scope: "col" }, c)))),
+        h("tbody", {}, [...latest.values()].map((f) => paramRow(f)))))) : null,
     fitsDone.length ? h("section", { class: "previews", "aria-labelledby": "h-prev" },
       h("h3", { id: "h-prev" }, "Previews"),
-      [...latest.values()].filter((f) => f.run.status === "done").map((f) =>
-        h("img", { src: `/fits/${f.run.id}/preview.png`, alt: `sphere rendered from fit ${f.run.id} (${f.run.cost_function})`, width: 160, height: 160 }))) : null,
+      h("div", { class: "preview-row" }, [...latest.values()].filter((f) => f.run.status === "done").map(previewFigure)),
+      h("dialog", { id: "preview-dialog", "aria-label": "preview at full size" })) : null,
     h("section", { "aria-labelledby": "h-prov" },
       h("h3", { id: "h-prov" }, "Reference and instruments"),
       h("p", {}, `${ref.name} (reference ${ref.id}), measured ${when(ref.completed_at_ms)}, ${fmt(view.reference_age_hours, 1)} h before the scan`,
         view.reference_stale ? h("span", { class: "stale" }, " — stale") : ""),
       h("p", {}, inst(prov.ma_t12, "MA-T12")), h("p", {}, inst(prov.sra, "SRA")),
       h("p", { class: "muted" }, `source: ${prov.source || "?"}${prov.source_detail ? ` (${prov.source_detail})` : ""}`)),
-    scan.state === "complete" ? refitForm(scan.id, view.reference_stale) : null,
+    complete ? refitForm(scan.id, view.reference_stale) : null,
     h("section", { class: "downloads", "aria-labelledby": "h-dl" },
       h("h3", { id: "h-dl" }, "Downloads"),
-      h("a", { href: `/scans/${scan.id}/export`, download: `scan-${scan.id}.scan.json` }, "scan file (brdfd.scan/1)"),
-      scan.state === "complete" ? [
-        ["cgats", "CGATS"], ["cxf3", "CxF3"], ["csv", "CSV"], ["json", "JSON"],
-      ].map(([f, name]) => h("a", { href: `/scans/${scan.id}/export/${f}`, id: `dl-${f}` }, name)) : null,
-      scan.state === "complete" ? h("a", { href: `/report.html?scans=${scan.id}`, id: "dl-report" }, "study report") : null),
+      complete ? [
+        h("a", { href: `/scans/${scan.id}/export`, id: "dl-scan", download: `scan-${scan.id}.scan.json`, onclick: download }, "scan file (brdfd.scan/1)"),
+        [["cgats", "CGATS"], ["cxf3", "CxF3"], ["csv", "CSV"], ["json", "JSON"]].map(([f, name]) =>
+          h("a", { href: `/scans/${scan.id}/export/${f}`, id: `dl-${f}`, onclick: download }, name)),
+        h("a", { href: `/report.html?scans=${scan.id}`, id: "dl-report", onclick: download }, "study report"),
+      ] : h("p", { id: "no-downloads" }, `No downloads: exports and the report need a complete scan (this one ${ended || "is still being measured"}); its ${scan.reading_count} readings stay in the store (brdfd show ${scan.id}).`)),
   );
 }
 
@@ -583,7 +842,7 @@ function paramRow(f) {
   const r = f.run.result;
   const p = r && r.params;
   const u = f.uncertainty;
-  const iv = (v, range) => (range ? `${fmt(v, 3)} [${fmt(range[0], 3)}, ${fmt(range[1], 3)}]` : fmt(v, 3));
+  const iv = (v, range) => (range ? `${fmt(v, 3)} [${fmt(range[0], 3)}, ${fmt(range[1], 3)}]` : `${fmt(v, 3)}${p && f.run.status === "done" ? " (interval not computed yet)" : ""}`);
   return h("tr", { "data-fit": f.run.id },
     h("td", {}, h("a", { href: `/fits/${f.run.id}` }, String(f.run.id))),
     h("td", {}, f.run.cost_function), h("td", {}, f.run.status, f.run.error ? `: ${f.run.error}` : ""),
@@ -672,12 +931,12 @@ async function start() {
   new MutationObserver(() => paintSwatches($("main"))).observe($("main"), { childList: true, subtree: true });
   window.addEventListener("hashchange", route);
   try { status = await api("/status"); } catch { status = null; }
-  if (status && status.busy) {
-    const op = status.busy.operation;
-    live = op.kind === "scan" ? newLive("scan", op.scan, "") : newLive("reference", op.reference, "");
-  }
+  // Subscribe first, then ask for the state: events between the two are held and applied
+  // after it, so nothing falls in the gap.
+  pending = [];
   connectEvents();
   await route();
+  await syncBench("load");
   requestAnimationFrame(() => {
     const paint = performance.getEntriesByType("paint").find((p) => p.name === "first-contentful-paint");
     metrics.firstRenderMs = paint ? paint.startTime : performance.now();
