@@ -259,7 +259,15 @@ impl Client {
 
     /// `POST path` with a binary body (an instrument export such as an X-Rite `.xlsx`) → JSON.
     pub fn post_bytes(&self, path: &str, body: &[u8]) -> Result<Value, ClientError> {
-        let response = self.post_request(path).send(body);
+        let r = self
+            .agent
+            .post(&self.url(path))
+            .header("content-type", crate::api::access::XLSX_MEDIA_TYPE);
+        let r = match &self.authorization {
+            Some(a) => r.header("authorization", a),
+            None => r,
+        };
+        let response = r.send(body);
         let text = self.finish(response)?;
         self.json(text)
     }

@@ -504,7 +504,11 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     // Three widths: a phone (390 px), a laptop (1280 px), a wide screen (1920 px). The page
     // never scrolls sideways as a whole; a table wider than the screen scrolls in its own box,
     // and every ΔE00 column can be reached.
-    for (w, name) in [(390, "4-result-phone-390"), (1920, "4b-result-wide-1920"), (1280, "4c-result-1280")] {
+    for (w, name) in [
+        (390, "4-result-phone-390"),
+        (1920, "4b-result-wide-1920"),
+        (1280, "4c-result-1280"),
+    ] {
         c.set_window_size(w, 1000).await.unwrap();
         let layout = c
             .execute(
@@ -524,14 +528,18 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
             .await
             .unwrap();
         let inner = layout["inner"].as_f64().unwrap();
-        assert!((inner - w as f64).abs() < 20.0, "the window is {w} px wide: {layout}");
+        assert!(
+            (inner - w as f64).abs() < 20.0,
+            "the window is {w} px wide: {layout}"
+        );
         assert!(
             layout["page"].as_f64().unwrap() <= inner + 1.0,
             "{w} px: the page does not overflow sideways: {layout}"
         );
         assert_eq!(layout["boxed"], json!(true), "{w} px: {layout}");
         assert!(
-            layout["lastRight"].as_f64().unwrap() <= inner + 1.0 && layout["lastWidth"].as_f64().unwrap() > 0.0,
+            layout["lastRight"].as_f64().unwrap() <= inner + 1.0
+                && layout["lastWidth"].as_f64().unwrap() > 0.0,
             "{w} px: the ΔE00 'all' column can be scrolled into view: {layout}"
         );
         shot(&c, name).await;
@@ -678,7 +686,11 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         )
         .await
         .unwrap();
-    assert_eq!(after_abort, json!([true, null]), "no banner, no stale tooltip");
+    assert_eq!(
+        after_abort,
+        json!([true, null]),
+        "no banner, no stale tooltip"
+    );
     // The aborted scan's view: the readings it kept, why it stopped, and only what works.
     c.goto(&format!("http://{addr}/#/scans/{}", aborted.id))
         .await
@@ -701,12 +713,31 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         )
         .await
         .unwrap();
-    assert_eq!(view[0], json!(aborted.reading_count), "every kept reading is shown: {view}");
-    assert!(view[1].as_str().unwrap().contains("aborted by the operator"), "{view}");
-    assert!(view[2].as_str().unwrap().contains("Scan the sample again"), "{view}");
+    assert_eq!(
+        view[0],
+        json!(aborted.reading_count),
+        "every kept reading is shown: {view}"
+    );
+    assert!(
+        view[1]
+            .as_str()
+            .unwrap()
+            .contains("aborted by the operator"),
+        "{view}"
+    );
+    assert!(
+        view[2].as_str().unwrap().contains("Scan the sample again"),
+        "{view}"
+    );
     assert_eq!(
         &view.as_array().unwrap()[3..],
-        &[json!(false), json!(false), json!(false), json!(true), json!(false)],
+        &[
+            json!(false),
+            json!(false),
+            json!(false),
+            json!(true),
+            json!(false)
+        ],
         "no refit and no download is offered for an aborted scan: {view}"
     );
     shot(&c, "6b-result-aborted").await;
@@ -820,7 +851,10 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
             );
         }
         let waiting = c
-            .execute("return document.getElementById('cells').innerText.includes('waiting')", vec![])
+            .execute(
+                "return document.getElementById('cells').innerText.includes('waiting')",
+                vec![],
+            )
             .await
             .unwrap();
         assert_eq!(waiting, json!(false), "no cell is left waiting");

@@ -689,7 +689,11 @@ mod tests {
             let out = e.on_bytes(&wire(Request::Abort));
             assert_eq!(out.first(), Some(&Out::Cancel), "{out:?}");
             assert_eq!(sends(&out), vec![(Duration::ZERO, aborted.clone())]);
-            assert!(e.report().mismatches.is_empty(), "{:?}", e.report().mismatches);
+            assert!(
+                e.report().mismatches.is_empty(),
+                "{:?}",
+                e.report().mismatches
+            );
         }
         // A scan that is not aborted replays to the end: its recorded ABORT is skipped and not
         // counted as remaining, and strict replay goes on into the next session.
@@ -703,7 +707,11 @@ mod tests {
                 assert_eq!(sends(&reading).len(), 1, "session {session} {g}");
             }
         }
-        assert!(e.report().mismatches.is_empty(), "{:?}", e.report().mismatches);
+        assert!(
+            e.report().mismatches.is_empty(),
+            "{:?}",
+            e.report().mismatches
+        );
         let per_session = 2 + drivers::protocol::SRA_GEOMETRIES.len();
         assert_eq!(
             e.report().remaining,

@@ -609,21 +609,30 @@ fn header_str(headers: &HeaderMap, name: header::HeaderName) -> Option<&str> {
     headers.get(name).and_then(|v| v.to_str().ok())
 }
 
+/// The media type of an X-Rite `.xlsx` export, which `POST /scans/import` takes.
+pub const XLSX_MEDIA_TYPE: &str =
+    "application/vnd.openxmlformats-officedocument.spreadsheetml.sheet";
+
 /// The checks, in order: Host (421), Origin and fetch metadata (403), token (401), POST body
 /// type (415). Each refusal says what to do.
 pub async fn guard(State(access): State<Arc<Access>>, request: Request, next: Next) -> Response {
     // A body promised larger than any request may be is refused before a byte of it is read,
     // and the connection closed.
+    // `POST /scans/import` also takes an instrument export (an X-Rite .xlsx, a few MiB).
+    let limit = if request.uri().path() == "/scans/import" {
+        super::MAX_IMPORT_BODY_BYTES
+    } else {
+        super::MAX_BODY_BYTES
+    };
     if let Some(len) = header_str(request.headers(), header::CONTENT_LENGTH)
         .and_then(|v| v.trim().parse::<u64>().ok())
-        && len > super::MAX_BODY_BYTES as u64
+        && len > limit as u64
     {
         let mut r = refuse(
             StatusCode::PAYLOAD_TOO_LARGE,
             format!(
-                "the request body is {len} bytes, over the limit of {} bytes (a brdfd.scan/1 \
-                 file is about 30 KiB)",
-                super::MAX_BODY_BYTES
+                "the request body is {len} bytes, over the limit of {limit} bytes (a brdfd.scan/1 \
+                 file is about 30 KiB, an X-Rite .xlsx export a few MiB)"
             ),
         );
         r.headers_mut()
@@ -792,11 +801,14 @@ fn check(
         }
     }
     if method == Method::POST {
-        let json = header_str(headers, header::CONTENT_TYPE).is_some_and(|ct| {
-            ct.split(';')
-                .next()
-                .is_some_and(|m| m.trim().eq_ignore_ascii_case("application/json"))
-        });
+        // JSON, or an X-Rite .xlsx to `POST /scans/import`: neither is a type a plain HTML
+        // form can send, and a script needs a CORS preflight for them, which brdfd never grants.
+        let allowed = |m: &str| {
+            m.eq_ignore_ascii_case("application/json")
+                || (path == "/scans/import" && m.eq_ignore_ascii_case(XLSX_MEDIA_TYPE))
+        };
+        let json = header_str(headers, header::CONTENT_TYPE)
+            .is_some_and(|ct| ct.split(';').next().is_some_and(|m| allowed(m.trim())));
         if !json {
             return Err(refuse(
                 StatusCode::UNSUPPORTED_MEDIA_TYPE,

@@ -318,12 +318,17 @@ mod tests {
     #[test]
     fn real_transports_are_announced_as_unverified_and_the_shipped_config_says_so() {
         let shipped = Config::from_toml(crate::config::SHIPPED, "config/brdfd.toml").unwrap();
-        let banner = real_transport_banner(&shipped).expect("the shipped file names USB and serial");
+        let banner =
+            real_transport_banner(&shipped).expect("the shipped file names USB and serial");
         assert!(banner.contains("MA-T12 on USB"), "{banner}");
         assert!(banner.contains("SRA on /dev/ttyUSB0"), "{banner}");
         assert!(banner.contains("drivers/PROTOCOL.md"), "{banner}");
         assert_eq!(real_transport_banner(&Config::default()), None);
-        let head: String = crate::config::SHIPPED.lines().take(12).collect::<Vec<_>>().join("\n");
+        let head: String = crate::config::SHIPPED
+            .lines()
+            .take(12)
+            .collect::<Vec<_>>()
+            .join("\n");
         assert!(
             head.contains("not been verified") && head.contains("drivers/PROTOCOL.md"),
             "the shipped configuration's first lines say the protocols are unverified:\n{head}"

@@ -1162,7 +1162,11 @@ mod tests {
                 .collect();
             let reference = reference_columns(text, 16.0, 10.0, 300);
             let total: f64 = reference.iter().sum();
-            let off: f64 = drawn.iter().zip(&reference).map(|(a, b)| (a - b).abs()).sum();
+            let off: f64 = drawn
+                .iter()
+                .zip(&reference)
+                .map(|(a, b)| (a - b).abs())
+                .sum();
             assert!(
                 off / total < 0.25,
                 "{text}: {:.0} % of the ink is in other columns than the font's layout",

@@ -71,7 +71,10 @@ fn recording_name(object: Option<&mock_devices::ScriptObject>) -> String {
             None => format!("the recording of \"{name}\""),
         },
         Some(ScriptObject::Reference) => {
-            format!("{} (reference tile)", mock_devices::recordings::reference().name)
+            format!(
+                "{} (reference tile)",
+                mock_devices::recordings::reference().name
+            )
         }
         Some(ScriptObject::Unknown) => "a recording whose notes name no object".into(),
         None => "nothing (the recording has no measurement left)".into(),
