@@ -61,17 +61,33 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
             .unwrap_or_default()
     );
     let reference = &v["reference"]["reference"];
-    println!(
-        "reference {} ({}), measured {:.1} h before the scan{}",
-        id(reference, "id"),
-        s(reference, "name"),
-        f(&v, "reference_age_hours"),
-        if v["reference_stale"].as_bool() == Some(true) {
-            " — older than the configured limit: not fitted automatically"
-        } else {
-            ""
+    let no_sra = v["scan"]["specular_readings"].as_bool() == Some(false);
+    if reference["instrument_calibration"].as_bool() == Some(true) {
+        println!(
+            "reference: instrument calibration (the MA-T12's reflectance factor as exported, \
+             relative to its calibrated white standard){}",
+            if no_sra {
+                "; no specular readings (fitted over the 12 MA-T12 geometries)"
+            } else {
+                ""
+            }
+        );
+    } else {
+        if no_sra {
+            println!("no specular readings (fitted over the 12 MA-T12 geometries)");
         }
-    );
+        println!(
+            "reference {} ({}), measured {:.1} h before the scan{}",
+            id(reference, "id"),
+            s(reference, "name"),
+            f(&v, "reference_age_hours"),
+            if v["reference_stale"].as_bool() == Some(true) {
+                " — older than the configured limit: not fitted automatically"
+            } else {
+                ""
+            }
+        );
+    }
     for r in v["readings"].as_array().into_iter().flatten() {
         let values = &r["values"];
         let text = match values.as_array() {
