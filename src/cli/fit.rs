@@ -46,9 +46,10 @@ pub struct FitArgs {
     #[arg(long, value_name = "ratio|paper-eq9", default_value_t = SpecularStrategy::Ratio)]
     pub specular: SpecularStrategy,
 
-    /// Cosine in the Schlick Fresnel term: `incidence` (cos θi, as the paper writes Eq. 2) or
-    /// `light-half` (l·h, textbook Schlick).
-    #[arg(long, value_name = "incidence|light-half", default_value = "incidence", value_parser = parse_fresnel)]
+    /// The lobe's Fresnel factor: Schlick on `incidence` (cos θi, as the paper writes Eq. 2) or
+    /// on `light-half` (l·h, textbook Schlick), or `exact` (the exact dielectric Fresnel on l·h,
+    /// what renderers evaluate; a fit with it exports to Mitsuba without approximation).
+    #[arg(long, value_name = "incidence|light-half|exact", default_value = "incidence", value_parser = parse_fresnel)]
     pub fresnel: FresnelCosine,
 
     /// Standard observer for L*a*b* and ΔE00: `2` (CIE 1931, the paper's) or `10` (CIE 1964,
@@ -92,15 +93,12 @@ pub struct FitArgs {
     pub json: bool,
 }
 
-/// Parses a Fresnel cosine name as the settings and reports spell it.
+/// Parses a Fresnel choice as the settings and reports spell it.
 pub fn parse_fresnel(s: &str) -> Result<FresnelCosine, String> {
-    match s {
-        "incidence" => Ok(FresnelCosine::Incidence),
-        "light-half" => Ok(FresnelCosine::LightHalf),
-        _ => Err(format!(
-            "unknown Fresnel cosine \"{s}\"; valid: incidence, light-half"
-        )),
-    }
+    FresnelCosine::ALL
+        .into_iter()
+        .find(|f| f.name() == s)
+        .ok_or_else(|| format!("unknown Fresnel choice \"{s}\"; valid: incidence, light-half, exact"))
 }
 
 impl FitArgs {
@@ -241,10 +239,7 @@ pub fn table(r: &FitReport) -> String {
 }
 
 fn parse_name(f: FresnelCosine) -> &'static str {
-    match f {
-        FresnelCosine::Incidence => "incidence",
-        FresnelCosine::LightHalf => "light-half",
-    }
+    f.name()
 }
 
 #[cfg(test)]
@@ -253,7 +248,7 @@ mod tests {
 
     #[test]
     fn fresnel_names_round_trip() {
-        for f in [FresnelCosine::Incidence, FresnelCosine::LightHalf] {
+        for f in FresnelCosine::ALL {
             assert_eq!(parse_fresnel(parse_name(f)).unwrap(), f);
             // Same spelling as the settings' serde form.
             assert_eq!(
@@ -264,7 +259,7 @@ mod tests {
         assert!(
             parse_fresnel("half")
                 .unwrap_err()
-                .contains("valid: incidence, light-half")
+                .contains("valid: incidence, light-half, exact")
         );
     }
 }
