@@ -320,7 +320,11 @@ mod tests {
         // Normal incidence: f0; glass (1.5) at 45°: Rs 0.0920, Rp 0.0085, mean 0.0502;
         // Brewster's angle: Rp = 0, so half of Rs; grazing: 1.
         close(fresnel_dielectric(1.0, 1.5), f0_from_ior(1.5), 1e-12);
-        close(fresnel_dielectric(std::f64::consts::FRAC_1_SQRT_2, 1.5), 0.0502399, 1e-6);
+        close(
+            fresnel_dielectric(std::f64::consts::FRAC_1_SQRT_2, 1.5),
+            0.0502399,
+            1e-6,
+        );
         let brewster = 1.5f64.atan().cos();
         let c = brewster;
         let ct = (1.0 - (1.0 - c * c) / 2.25).sqrt();

@@ -216,7 +216,10 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
             for f in &s.fits {
                 let d = f.done().unwrap();
                 let p = &d.params;
-                assert_eq!(d.fresnel, [FresnelCosine::Incidence, FresnelCosine::Exact][i]);
+                assert_eq!(
+                    d.fresnel,
+                    [FresnelCosine::Incidence, FresnelCosine::Exact][i]
+                );
                 let brdfd_model = model::evaluate(p, d.fresnel, &geos);
                 for (gi, g) in geos.iter().enumerate() {
                     let lobe = brdfd_model[gi][0] - p.kd[0];
@@ -240,8 +243,7 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
                         // The bound SCIENCE.md §11 states: |f_Mitsuba − f_brdfd| ≤ |r − 1|·lobe.
                         let diff = (m - brdfd_model[gi][b]).abs();
                         assert!(diff <= (ratio - 1.0).abs() * lobe + 2e-5 * m);
-                        worst_diff_in_lobes[i] =
-                            worst_diff_in_lobes[i].max(diff / lobe.max(1e-12));
+                        worst_diff_in_lobes[i] = worst_diff_in_lobes[i].max(diff / lobe.max(1e-12));
                         if d.fresnel == FresnelCosine::Exact {
                             worst_exact = worst_exact.max(diff / brdfd_model[gi][b]);
                         }

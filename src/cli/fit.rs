@@ -63,11 +63,11 @@ pub struct FitArgs {
     #[arg(long, value_name = "summation|astm-e308", default_value_t = Weighting::default())]
     pub weighting: Weighting,
 
-    /// How the SRA's one achromatic reading per geometry enters the cost: `flat` (the paper's:
-    /// a grey spectrum, compared band by band) or `luminance` (the sample's luminous
-    /// reflectance Y under CIE illuminant C and the 2° V(λ), as ISO 2813 specifies; compared
-    /// with the model's Y). SCIENCE.md §5.1.
-    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::default())]
+    /// How the SRA's one achromatic reading per geometry enters the cost: `luminance` (the
+    /// default for a measured scan: the sample's luminous reflectance Y under CIE illuminant C
+    /// and the 2° V(λ), as ISO 2813 specifies; compared with the model's Y) or `flat` (the
+    /// paper's: a grey spectrum, compared band by band). SCIENCE.md §5.1, §10.
+    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::Luminance)]
     pub sra: SraModel,
 
     /// Illuminant of the SRA's luminance (the `luminance` model's cost and the specular |ΔL*|
@@ -98,7 +98,9 @@ pub fn parse_fresnel(s: &str) -> Result<FresnelCosine, String> {
     FresnelCosine::ALL
         .into_iter()
         .find(|f| f.name() == s)
-        .ok_or_else(|| format!("unknown Fresnel choice \"{s}\"; valid: incidence, light-half, exact"))
+        .ok_or_else(|| {
+            format!("unknown Fresnel choice \"{s}\"; valid: incidence, light-half, exact")
+        })
 }
 
 impl FitArgs {
@@ -183,14 +185,35 @@ pub fn table(r: &FitReport) -> String {
     if let Some(u) = &r.uncertainty {
         let _ = writeln!(
             t,
-            "95 % intervals   ks [{:.5}, {:.5}]  alpha [{:.5}, {:.5}]  ior [{:.5}, {:.5}]",
-            u.ks[0], u.ks[1], u.alpha[0], u.alpha[1], u.ior[0], u.ior[1]
+            "{}ks [{:.5}, {:.5}]  alpha [{:.5}, {:.5}]  ior [{:.5}, {:.5}]",
+            if u.calibrated {
+                "95 % intervals   "
+            } else {
+                "intervals (not calibrated 95 %)  "
+            },
+            u.ks[0],
+            u.ks[1],
+            u.alpha[0],
+            u.alpha[1],
+            u.ior[0],
+            u.ior[1]
         );
         let _ = writeln!(
             t,
             "                 ({}, {} resamples, noise σ {:.4} per value; ΔE00 mean [{:.4}, {:.4}])",
             u.method, u.resamples, u.noise, u.delta_e00_mean[0], u.delta_e00_mean[1]
         );
+        match &u.note {
+            Some(note) if !u.calibrated => {
+                let _ = writeln!(t, "                 NOT calibrated: {note}");
+            }
+            _ => {
+                let _ = writeln!(
+                    t,
+                    "                 calibrated: coverage measured ≥ 90 % for this cost function and SRA model"
+                );
+            }
+        }
     }
     let _ = writeln!(t, "kd (sr⁻¹)");
     if let Some(u) = &r.uncertainty {
