@@ -9,15 +9,46 @@ use serde::{Deserialize, Serialize};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, Geometry, Vec3};
 use crate::spectral::{BANDS, Spectrum};
 
-/// Which cosine the Schlick Fresnel term uses.
+/// The Fresnel factor of the lobe: the paper's Schlick approximation on one of two cosines, or
+/// the exact dielectric Fresnel (`brdfd fit --fresnel`, SCIENCE.md §4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FresnelCosine {
-    /// cos θi, as the paper writes Eq. 2 (the default).
+    /// Schlick on cos θi, as the paper writes Eq. 2 (the default).
     #[default]
     Incidence,
-    /// l·h, textbook Schlick. Equal to the paper's at the mirror direction.
+    /// Schlick on l·h, textbook Schlick. Equal to the paper's at the mirror direction.
     LightHalf,
+    /// The exact unpolarised Fresnel reflectance of a dielectric of index μ on the microfacet
+    /// normal (l·h), what physically based renderers evaluate ([`fresnel_dielectric`]).
+    Exact,
+}
+
+impl FresnelCosine {
+    /// Every choice, the default first.
+    pub const ALL: [FresnelCosine; 3] = [
+        FresnelCosine::Incidence,
+        FresnelCosine::LightHalf,
+        FresnelCosine::Exact,
+    ];
+
+    /// The name on the command line, in the settings and in reports (the serde form).
+    pub const fn name(self) -> &'static str {
+        match self {
+            FresnelCosine::Incidence => "incidence",
+            FresnelCosine::LightHalf => "light-half",
+            FresnelCosine::Exact => "exact",
+        }
+    }
+
+    /// The Fresnel factor for index `ior` at a geometry.
+    pub fn factor(self, ior: f64, g: &SpecularGeometry) -> f64 {
+        match self {
+            FresnelCosine::Incidence => fresnel_schlick(f0_from_ior(ior), g.cos_i),
+            FresnelCosine::LightHalf => fresnel_schlick(f0_from_ior(ior), g.l_dot_h),
+            FresnelCosine::Exact => fresnel_dielectric(g.l_dot_h, ior),
+        }
+    }
 }
 
 /// The 34 model parameters.
@@ -105,6 +136,18 @@ pub fn fresnel_schlick(f0: f64, cos: f64) -> f64 {
     f0 + (1.0 - f0) * (1.0 - cos).powi(5)
 }
 
+/// The exact Fresnel reflectance of a smooth dielectric of index `ior` (light arriving from
+/// air), unpolarised: the mean of the s and p reflectances at incidence cosine `cos`. Equals
+/// Schlick's f0 at normal incidence and 1 at grazing incidence.
+pub fn fresnel_dielectric(cos: f64, ior: f64) -> f64 {
+    let c = cos.clamp(0.0, 1.0);
+    let sin_t2 = (1.0 - c * c) / (ior * ior);
+    let cos_t = (1.0 - sin_t2).max(0.0).sqrt();
+    let rs = (c - ior * cos_t) / (c + ior * cos_t);
+    let rp = (ior * c - cos_t) / (ior * c + cos_t);
+    0.5 * (rs * rs + rp * rp)
+}
+
 /// GGX normal distribution (Eq. 3) for `cos θh = h·n`.
 pub fn ggx_d(alpha: f64, cos_theta_h: f64) -> f64 {
     if cos_theta_h <= 0.0 {
@@ -166,12 +209,7 @@ pub fn specular_term(
     fresnel: FresnelCosine,
     g: &SpecularGeometry,
 ) -> f64 {
-    let f0 = f0_from_ior(ior);
-    let cos_f = match fresnel {
-        FresnelCosine::Incidence => g.cos_i,
-        FresnelCosine::LightHalf => g.l_dot_h,
-    };
-    let f = fresnel_schlick(f0, cos_f);
+    let f = fresnel.factor(ior, g);
     let d = ggx_d(alpha, g.cos_h);
     let gg = smith_g1(alpha, g.cos_i, g.l_dot_h) * smith_g1(alpha, g.cos_r, g.v_dot_h);
     ks * f * d * gg / (std::f64::consts::PI * g.cos_i * g.cos_r)
@@ -275,6 +313,43 @@ mod tests {
         let a = specular_term(1.0, 0.3, 1.5, FresnelCosine::Incidence, &geo);
         let b = specular_term(1.0, 0.3, 1.5, FresnelCosine::LightHalf, &geo);
         assert!((a - b).abs() > 1e-6);
+    }
+
+    #[test]
+    fn exact_fresnel_matches_the_textbook_values() {
+        // Normal incidence: f0; glass (1.5) at 45°: Rs 0.0920, Rp 0.0085, mean 0.0502;
+        // Brewster's angle: Rp = 0, so half of Rs; grazing: 1.
+        close(fresnel_dielectric(1.0, 1.5), f0_from_ior(1.5), 1e-12);
+        close(
+            fresnel_dielectric(std::f64::consts::FRAC_1_SQRT_2, 1.5),
+            0.0502399,
+            1e-6,
+        );
+        let brewster = 1.5f64.atan().cos();
+        let c = brewster;
+        let ct = (1.0 - (1.0 - c * c) / 2.25).sqrt();
+        let rs = (c - 1.5 * ct) / (c + 1.5 * ct);
+        close(fresnel_dielectric(brewster, 1.5), 0.5 * rs * rs, 1e-12);
+        close(fresnel_dielectric(0.0, 1.5), 1.0, 1e-12);
+        // μ = 1: no interface, no reflection.
+        assert_eq!(fresnel_dielectric(0.6, 1.0), 0.0);
+        // In the lobe: the exact factor on l·h, everything else as the paper's.
+        for geo in SpecularGeometry::all() {
+            let schlick = specular_term(1.0, 0.3, 1.5, FresnelCosine::LightHalf, &geo);
+            let exact = specular_term(1.0, 0.3, 1.5, FresnelCosine::Exact, &geo);
+            let f0 = f0_from_ior(1.5);
+            close(
+                exact / schlick,
+                fresnel_dielectric(geo.l_dot_h, 1.5) / fresnel_schlick(f0, geo.l_dot_h),
+                1e-12,
+            );
+        }
+        for f in FresnelCosine::ALL {
+            assert_eq!(
+                serde_json::to_string(&f).unwrap(),
+                format!("\"{}\"", f.name())
+            );
+        }
     }
 
     #[test]

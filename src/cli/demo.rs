@@ -82,6 +82,8 @@ pub async fn run_demo(store: &Store, args: &DemoArgs) -> anyhow::Result<DemoResu
         method: args.method,
         seed: args.seed,
         max_concurrent_fits: jobs,
+        // The paper's SRA model: the demo reproduces the paper.
+        sra: crate::sra_reading::SraModel::Flat,
         ..ServiceSettings::default()
     };
     let setup = ReplaySetup {

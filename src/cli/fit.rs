@@ -46,9 +46,10 @@ pub struct FitArgs {
     #[arg(long, value_name = "ratio|paper-eq9", default_value_t = SpecularStrategy::Ratio)]
     pub specular: SpecularStrategy,
 
-    /// Cosine in the Schlick Fresnel term: `incidence` (cos θi, as the paper writes Eq. 2) or
-    /// `light-half` (l·h, textbook Schlick).
-    #[arg(long, value_name = "incidence|light-half", default_value = "incidence", value_parser = parse_fresnel)]
+    /// The lobe's Fresnel factor: Schlick on `incidence` (cos θi, as the paper writes Eq. 2) or
+    /// on `light-half` (l·h, textbook Schlick), or `exact` (the exact dielectric Fresnel on l·h,
+    /// what renderers evaluate; a fit with it exports to Mitsuba without approximation).
+    #[arg(long, value_name = "incidence|light-half|exact", default_value = "incidence", value_parser = parse_fresnel)]
     pub fresnel: FresnelCosine,
 
     /// Standard observer for L*a*b* and ΔE00: `2` (CIE 1931, the paper's) or `10` (CIE 1964,
@@ -62,11 +63,11 @@ pub struct FitArgs {
     #[arg(long, value_name = "summation|astm-e308", default_value_t = Weighting::default())]
     pub weighting: Weighting,
 
-    /// How the SRA's one achromatic reading per geometry enters the cost: `flat` (the paper's:
-    /// a grey spectrum, compared band by band) or `luminance` (the sample's luminous
-    /// reflectance Y under CIE illuminant C and the 2° V(λ), as ISO 2813 specifies; compared
-    /// with the model's Y). SCIENCE.md §5.1.
-    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::default())]
+    /// How the SRA's one achromatic reading per geometry enters the cost: `luminance` (the
+    /// default for a measured scan: the sample's luminous reflectance Y under CIE illuminant C
+    /// and the 2° V(λ), as ISO 2813 specifies; compared with the model's Y) or `flat` (the
+    /// paper's: a grey spectrum, compared band by band). SCIENCE.md §5.1, §10.
+    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::Luminance)]
     pub sra: SraModel,
 
     /// Illuminant of the SRA's luminance (the `luminance` model's cost and the specular |ΔL*|
@@ -92,15 +93,14 @@ pub struct FitArgs {
     pub json: bool,
 }
 
-/// Parses a Fresnel cosine name as the settings and reports spell it.
+/// Parses a Fresnel choice as the settings and reports spell it.
 pub fn parse_fresnel(s: &str) -> Result<FresnelCosine, String> {
-    match s {
-        "incidence" => Ok(FresnelCosine::Incidence),
-        "light-half" => Ok(FresnelCosine::LightHalf),
-        _ => Err(format!(
-            "unknown Fresnel cosine \"{s}\"; valid: incidence, light-half"
-        )),
-    }
+    FresnelCosine::ALL
+        .into_iter()
+        .find(|f| f.name() == s)
+        .ok_or_else(|| {
+            format!("unknown Fresnel choice \"{s}\"; valid: incidence, light-half, exact")
+        })
 }
 
 impl FitArgs {
@@ -195,14 +195,35 @@ pub fn table(r: &FitReport) -> String {
     if let Some(u) = &r.uncertainty {
         let _ = writeln!(
             t,
-            "95 % intervals   ks [{:.5}, {:.5}]  alpha [{:.5}, {:.5}]  ior [{:.5}, {:.5}]",
-            u.ks[0], u.ks[1], u.alpha[0], u.alpha[1], u.ior[0], u.ior[1]
+            "{}ks [{:.5}, {:.5}]  alpha [{:.5}, {:.5}]  ior [{:.5}, {:.5}]",
+            if u.calibrated {
+                "95 % intervals   "
+            } else {
+                "intervals (not calibrated 95 %)  "
+            },
+            u.ks[0],
+            u.ks[1],
+            u.alpha[0],
+            u.alpha[1],
+            u.ior[0],
+            u.ior[1]
         );
         let _ = writeln!(
             t,
             "                 ({}, {} resamples, noise σ {:.4} per value; ΔE00 mean [{:.4}, {:.4}])",
             u.method, u.resamples, u.noise, u.delta_e00_mean[0], u.delta_e00_mean[1]
         );
+        match &u.note {
+            Some(note) if !u.calibrated => {
+                let _ = writeln!(t, "                 NOT calibrated: {note}");
+            }
+            _ => {
+                let _ = writeln!(
+                    t,
+                    "                 calibrated: coverage measured ≥ 90 % for this cost function and SRA model"
+                );
+            }
+        }
     }
     let _ = writeln!(t, "kd (sr⁻¹)");
     if let Some(u) = &r.uncertainty {
@@ -272,10 +293,7 @@ pub fn table(r: &FitReport) -> String {
 }
 
 fn parse_name(f: FresnelCosine) -> &'static str {
-    match f {
-        FresnelCosine::Incidence => "incidence",
-        FresnelCosine::LightHalf => "light-half",
-    }
+    f.name()
 }
 
 #[cfg(test)]
@@ -284,7 +302,7 @@ mod tests {
 
     #[test]
     fn fresnel_names_round_trip() {
-        for f in [FresnelCosine::Incidence, FresnelCosine::LightHalf] {
+        for f in FresnelCosine::ALL {
             assert_eq!(parse_fresnel(parse_name(f)).unwrap(), f);
             // Same spelling as the settings' serde form.
             assert_eq!(
@@ -295,7 +313,7 @@ mod tests {
         assert!(
             parse_fresnel("half")
                 .unwrap_err()
-                .contains("valid: incidence, light-half")
+                .contains("valid: incidence, light-half, exact")
         );
     }
 }

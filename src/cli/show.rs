@@ -225,13 +225,25 @@ fn print_fit_extras(fit: &Value) {
                 u[k][1].as_f64().unwrap_or(f64::NAN)
             )
         };
+        let calibrated = u["calibrated"].as_bool() == Some(true);
         println!(
-            "       95 % intervals ({} resamples): ks {}  alpha {}  ior {}  ΔE00 mean {}",
+            "       {} ({} resamples): ks {}  alpha {}  ior {}  ΔE00 mean {}",
+            if calibrated {
+                "95 % intervals"
+            } else {
+                "intervals, not calibrated 95 %"
+            },
             u["resamples"],
             iv("ks"),
             iv("alpha"),
             iv("ior"),
             iv("delta_e00_mean")
         );
+        if !calibrated {
+            println!(
+                "       ({})",
+                u["note"].as_str().unwrap_or("no calibration recorded")
+            );
+        }
     }
 }

@@ -1,6 +1,13 @@
 //! Mitsuba 3 scenes of fitted materials (`brdfd export-format --format mitsuba`): one XML
 //! scene per finished fit, with the material, a unit sphere, an orthographic camera and the
-//! preview's light ([`crate::render`]), so `mitsuba scene.xml` draws what `brdfd render` draws.
+//! preview's light ([`crate::render`]), so `mitsuba -m scalar_spectral scene.xml` draws what
+//! `brdfd render` draws, on the same brightness scale.
+//!
+//! The variant: the 31-band kd needs a spectral variant, and Mitsuba 3 has no way to name one
+//! inside a scene file (its XML carries only the format version; the variant is chosen by the
+//! program that loads it, and a bare `mitsuba scene.xml` picks the first RGB variant whose
+//! backend is available, `llvm_ad_rgb` where LLVM is installed). Each scene's opening comment
+//! gives the command with `-m scalar_spectral`, the variant the tests load it in.
 //!
 //! The material, SCIENCE.md §11: brdfd's `f = kd(λ) + ks·F·D·G/(π cosθi cosθr)` as Mitsuba's
 //! `blendbsdf` at weight ½ of
@@ -11,16 +18,20 @@
 //!   `specular_reflectance` = `2·ks·4/π`: Mitsuba's lobe is `F·D·G/(4 cosθi cosθr)`, so the 4
 //!   vs π denominator and the blend's ½ are folded into this weight.
 //!
-//! What remains different is the Fresnel factor: Mitsuba's is the exact dielectric Fresnel on
-//! the microfacet normal (l·h), brdfd's the paper's Schlick on cosθi. Mitsuba's value is
-//! brdfd's with the lobe scaled by `F_exact(l·h; μ) / F_Schlick(cosθi; f0)`; SCIENCE.md §11
-//! tabulates that ratio at the 14 geometries, and `tests/export_mitsuba.rs` checks both in
-//! Mitsuba itself. D and G are the same functions in both (GGX, Smith–Walter G1).
+//! Mitsuba's Fresnel factor is the exact dielectric Fresnel on the microfacet normal (l·h):
+//! brdfd's `--fresnel exact` ([`FresnelCosine::Exact`]). A fit made with it exports without
+//! approximation. A fit made with the paper's Schlick on cosθi (or on l·h) is exported with its
+//! lobe scaled, in effect, by `F_exact(l·h; μ) / F_Schlick(cos; f0)`; SCIENCE.md §11 tabulates
+//! that ratio at the 14 geometries, the scene's comment says which case it is, and
+//! `tests/export_mitsuba.rs` checks both in Mitsuba itself. D and G are the same functions in
+//! both (GGX, Smith–Walter G1).
 //!
-//! The light: Mitsuba's `directional` emitter with the `d65` spectrum along −l (l =
-//! [`crate::render::DEFAULT_LIGHT`]) and a `constant` D65 environment of radiance
-//! `AMBIENT / π` times the light's irradiance unit, which gives a diffuse surface the preview's
-//! ambient; Mitsuba's ambient also reaches the lobe (the preview leaves that out).
+//! The light and the brightness scale: the preview shows the radiance factor, π·radiance per
+//! unit irradiance. The scene's `directional` emitter (the `d65` spectrum along −l, l =
+//! [`crate::render::DEFAULT_LIGHT`]) therefore has irradiance π, and the `constant` D65
+//! environment radiance [`AMBIENT`] (irradiance π·AMBIENT on an unshadowed surface), so a pixel
+//! of Mitsuba's film holds the preview's linear value: a white diffuser facing the light renders
+//! 1, as in the preview. Mitsuba's ambient also reaches the lobe (the preview leaves that out).
 
 use std::fmt::Write as _;
 
@@ -67,17 +78,30 @@ pub fn scene(
     }
     let mut t = String::new();
     let _ = writeln!(t, r#"<?xml version="1.0" encoding="utf-8"?>"#);
+    let fresnel_note = match fit.fresnel {
+        FresnelCosine::Exact => {
+            "Fresnel: exact dielectric Fresnel on l·h in both, so Mitsuba's BSDF is brdfd's model"
+                .to_string()
+        }
+        f => format!(
+            "Remaining difference: Mitsuba's exact Fresnel on l·h against brdfd's Schlick on {} \
+             (brdfd's SCIENCE.md §11); a fit with the Fresnel choice `exact` exports without it",
+            if f == FresnelCosine::Incidence {
+                "cosθi"
+            } else {
+                "l·h"
+            }
+        ),
+    };
     let _ = writeln!(
         t,
-        "<!-- {}: sample \"{}\", cost function {cost}, method {method}, Fresnel cosine {}; written {}.\n     {}.\n     brdfd's model f = kd + ks·F·D·G/(π cosθi cosθr) as blendbsdf(½ diffuse 2π·kd, ½ roughconductor GGX with specular_reflectance 2·ks·4/π).\n     Remaining difference: Mitsuba's exact Fresnel on l·h against brdfd's Schlick on cosθi (brdfd's SCIENCE.md §11). -->",
+        "<!-- {}: sample \"{}\", cost function {cost}, method {method}, Fresnel {}; written {}.\n     {}.\n     Render with a spectral variant: mitsuba -m scalar_spectral this-file.xml (a scene file cannot name its variant; a bare `mitsuba` picks an RGB one).\n     The film holds brdfd's preview values: linear sRGB radiance factor (light irradiance π, so a white diffuser facing it is 1).\n     brdfd's model f = kd + ks·F·D·G/(π cosθi cosθr) as blendbsdf(½ diffuse 2π·kd, ½ roughconductor GGX with specular_reflectance 2·ks·4/π).\n     {}. -->",
         esc(&opts.originator),
         esc(&sample.name),
-        match fit.fresnel {
-            FresnelCosine::Incidence => "incidence",
-            FresnelCosine::LightHalf => "light-half",
-        },
+        fit.fresnel.name(),
         esc(&opts.created),
         esc(&sample.scale().describe()),
+        esc(&fresnel_note),
     );
     let _ = writeln!(t, r#"<scene version="3.0.0">"#);
     // Resolution and samples per pixel can be overridden: `mitsuba -D res=64 -D spp=16`.
@@ -130,7 +154,9 @@ pub fn scene(
         t,
         r#"    <emitter type="directional">
         <vector name="direction" x="{}" y="{}" z="{}"/>
-        <spectrum type="d65" name="irradiance"/>
+        <spectrum type="d65" name="irradiance">
+            <float name="scale" value="{}"/>
+        </spectrum>
     </emitter>
     <emitter type="constant">
         <spectrum type="d65" name="radiance">
@@ -157,7 +183,8 @@ pub fn scene(
         -lx,
         -ly,
         -lz,
-        AMBIENT / std::f64::consts::PI,
+        std::f64::consts::PI,
+        AMBIENT,
         s = f64::from(SPHERE_PX) / 2.0 / radius_px,
     );
     Ok(t)
@@ -213,6 +240,32 @@ mod tests {
             specular_weight(d.params.ks)
         )));
         assert!(xml.contains(r#"<shape type="sphere">"#));
+        // The preview's scale: light irradiance π, ambient radiance AMBIENT; the variant named.
+        assert!(xml.contains(&format!(
+            r#"<spectrum type="d65" name="irradiance">
+            <float name="scale" value="{}"/>"#,
+            std::f64::consts::PI
+        )));
+        assert!(xml.contains(&format!(
+            r#"<spectrum type="d65" name="radiance">
+            <float name="scale" value="{AMBIENT}"/>"#
+        )));
+        assert!(xml.contains("mitsuba -m scalar_spectral"));
+        assert!(xml.contains("Remaining difference: Mitsuba's exact Fresnel"));
+        let exact = DoneFit {
+            fresnel: FresnelCosine::Exact,
+            ..d.clone()
+        };
+        let xml = scene(
+            &s,
+            crate::cost::CostFunction::Cf1,
+            "separable",
+            &exact,
+            &ExportOptions::default(),
+        )
+        .unwrap();
+        assert!(xml.contains("Fresnel exact"));
+        assert!(xml.contains("so Mitsuba's BSDF is brdfd's model"));
         let names: Vec<String> = scenes(
             &crate::report::Study {
                 samples: vec![s.clone()],

@@ -920,6 +920,8 @@ pub(crate) mod tests {
             delta_e00_mean: [0.1, 0.2],
             delta_e00_diffuse_mean: [0.1, 0.2],
             delta_e00_specular_mean: Some([1.0, 2.0]),
+            calibrated: true,
+            note: None,
         });
         study
     }

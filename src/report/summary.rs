@@ -202,17 +202,18 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
                     cell(p.ior, u.ior),
                     cell(d.evaluation.all.mean, u.delta_e00_mean),
                     u.resamples.to_string(),
+                    if u.calibrated { "yes" } else { "no" }.to_string(),
                 ])
             })
         })
         .collect();
     if !with_intervals.is_empty() {
         b.push(Block::Heading(
-            "Fitted lobe parameters with 95 % intervals".into(),
+            "Fitted lobe parameters with bootstrap intervals".into(),
         ));
         b.push(Block::Table {
-            caption: "Table 4. Fitted ks, α, μ (ior) and mean ΔE00, each with its 95 % bootstrap interval [low, high]: the measured BRDF perturbed with the noise the scan shows, refitted per resample (parametric bootstrap, SCIENCE.md §10). The ΔE00 interval is the spread of each resample's fit against its resample. Fig. 8 draws the kd intervals as error bars.".into(),
-            head: ["sample", "cost", "ks", "α", "μ", "mean ΔE00", "resamples"]
+            caption: "Table 4. Fitted ks, α, μ (ior) and mean ΔE00, each with its 95 % bootstrap interval [low, high]: the measured BRDF perturbed with the noise the scan shows, refitted per resample (parametric bootstrap, SCIENCE.md §10). The ΔE00 interval is the spread of each resample's fit against its resample. Fig. 8 draws the kd intervals as error bars. Calibrated: whether intervals of that cost function and SRA model were measured to hold the truth in ≥ 90 % of synthetic trials (SCIENCE.md §10); where \"no\", they are bootstrap intervals, not calibrated 95 % intervals.".into(),
+            head: ["sample", "cost", "ks", "α", "μ", "mean ΔE00", "resamples", "calibrated"]
                 .map(String::from)
                 .to_vec(),
             rows: with_intervals,

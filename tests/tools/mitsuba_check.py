@@ -7,7 +7,8 @@ JSON on stdout, what tests/export_mitsuba.rs compares against brdfd's own model:
   in a Mitsuba render at the requested resolution and sample count.
 
 Request (JSON on stdin): {"scenes": [path, ...], "pairs": [[[vx,vy,vz],[lx,ly,lz]], ...],
-"wavelengths": [400, ..., 700], "render": {"res": 64, "spp": 16} or null}.
+"wavelengths": [400, ..., 700], "render": {"res": 64, "spp": 16, "only": [scene index, ...]}
+or null}; "mean_rgb" holds null for a scene not rendered ("only" absent: every scene).
 """
 import json
 import sys
@@ -68,12 +69,15 @@ def mean_rgb(path, res, spp):
 def main():
     request = json.load(sys.stdin)
     out = {"bsdf": [], "mean_rgb": []}
-    for path in request["scenes"]:
+    render = request.get("render")
+    for i, path in enumerate(request["scenes"]):
         scene = mi.load_file(path)
         out["bsdf"].append(bsdf_values(scene, request["pairs"], request["wavelengths"]))
-        if request.get("render"):
-            rgb, n = mean_rgb(path, request["render"]["res"], request["render"]["spp"])
+        if render and ("only" not in render or i in render["only"]):
+            rgb, n = mean_rgb(path, render["res"], render["spp"])
             out["mean_rgb"].append({"rgb": rgb, "pixels": n})
+        else:
+            out["mean_rgb"].append(None)
     json.dump(out, sys.stdout)
 
 

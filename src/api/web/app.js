@@ -842,8 +842,10 @@ function paramRow(f) {
   const r = f.run.result;
   const p = r && r.params;
   const u = f.uncertainty;
-  const iv = (v, range) => (range ? `${fmt(v, 3)} [${fmt(range[0], 3)}, ${fmt(range[1], 3)}]` : `${fmt(v, 3)}${p && f.run.status === "done" ? " (interval not computed yet)" : ""}`);
-  return h("tr", { "data-fit": f.run.id },
+  // Intervals whose coverage was not measured to hold are marked, with the reason as a tooltip.
+  const rated = u && u.calibrated ? "" : " (not 95 %)";
+  const iv = (v, range) => (range ? `${fmt(v, 3)} [${fmt(range[0], 3)}, ${fmt(range[1], 3)}]${rated}` : `${fmt(v, 3)}${p && f.run.status === "done" ? " (interval not computed yet)" : ""}`);
+  return h("tr", { "data-fit": f.run.id, "data-calibrated": u ? String(Boolean(u.calibrated)) : null, title: u && !u.calibrated ? u.note || "" : null },
     h("td", {}, h("a", { href: `/fits/${f.run.id}` }, String(f.run.id))),
     h("td", {}, f.run.cost_function), h("td", {}, f.run.status, f.run.error ? `: ${f.run.error}` : ""),
     h("td", {}, p ? iv(p.ks, u && u.ks) : "—"), h("td", {}, p ? iv(p.alpha, u && u.alpha) : "—"),
