@@ -14,6 +14,10 @@
 //! `fault_soak` (ignored; `cargo test --release --test sync_soak -- --ignored`) injects
 //! `BRDFD_SOAK_FAULTS` (default 100) random ones, seeded by `BRDFD_SOAK_SEED` (default 1).
 
+// `common::serial()` is a process-wide std mutex held for a whole test on purpose: each
+// `#[tokio::test]` has its own runtime, so no task of the same runtime waits for it.
+#![allow(clippy::await_holding_lock)]
+
 mod common;
 #[path = "common/pg.rs"]
 mod pg;
