@@ -47,6 +47,10 @@ GEOMETRIES: List[Dict[str, Any]] = [
 
 def geometries() -> List[str]:
     """The 14 geometry names in table order (12 MA-T12 ones, then the SRA's two)."""
+    return _geometry_names()
+
+
+def _geometry_names() -> List[str]:
     return [g["name"] for g in GEOMETRIES]
 
 
@@ -127,9 +131,10 @@ class FitResult:
     def reflectance(self, geometry: str, which: str = "measured") -> np.ndarray:
         """The reflectance factor π·f at one geometry, 31 bands: ``which`` is ``"measured"`` or
         ``"fitted"`` (the columns ``measured`` and ``estimated_<cost>`` of the tidy export)."""
-        i = geometries().index(geometry) if geometry in geometries() else None
-        if i is None:
-            raise ValueError(f"unknown geometry {geometry!r}; valid: {', '.join(geometries())}")
+        names = _geometry_names()
+        if geometry not in names:
+            raise ValueError(f"unknown geometry {geometry!r}; valid: {', '.join(names)}")
+        i = names.index(geometry)
         if which == "measured":
             row = self.measured[i]
             if np.isnan(row).all():
@@ -226,7 +231,7 @@ def evaluate(
     if isinstance(params, FitResult):
         return params.evaluate(geometries, wavelengths)
     geos = [g if isinstance(g, str) else tuple(float(a) for a in g)
-            for g in (globals()["geometries"]() if geometries is None else geometries)]
+            for g in (_geometry_names() if geometries is None else geometries)]
     wl = WAVELENGTHS.tolist() if wavelengths is None else [int(w) for w in wavelengths]
     rows = _native.evaluate([float(k) for k in params["kd"]], float(params["ks"]),
                             float(params["alpha"]), float(params["ior"]), geos, wl, fresnel)
