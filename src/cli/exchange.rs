@@ -209,13 +209,15 @@ fn format_of(path: &Path) -> ImportFormat {
 }
 
 /// One scan read from FILE, with what its import has to say.
-struct Imported {
-    scan: crate::scan::Scan,
+pub struct Imported {
+    pub scan: crate::scan::Scan,
     /// The colorimetry check of an X-Rite export: (largest ΔE00, where, warning).
-    check: Option<(f64, &'static str, Option<String>)>,
+    pub check: Option<(f64, &'static str, Option<String>)>,
 }
 
-fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>> {
+/// The scans `brdfd import-format` reads from `file` with these options (its `files`, `out`,
+/// `force` and `json` are not read); the Python package's `brdfd.import_export` calls it too.
+pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>> {
     let format = args.format.unwrap_or_else(|| format_of(file));
     match format {
         ImportFormat::XriteXlsx => {

@@ -133,7 +133,20 @@ impl FitArgs {
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let scan = Scan::read_file(&args.input)?;
-    let mut report = fit_scan(&scan, &args.request())
+    let report = fit_with(&scan, args)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!("{}", table(&report));
+    }
+    Ok(())
+}
+
+/// The fit `brdfd fit` makes of `scan` with these options (`args.input` names it in errors),
+/// bootstrap included; what the Python package's `brdfd.fit` calls too, so both give the same
+/// numbers to the last bit.
+pub fn fit_with(scan: &Scan, args: &FitArgs) -> anyhow::Result<FitReport> {
+    let mut report = fit_scan(scan, &args.request())
         .with_context(|| format!("fitting {}", args.input.display()))?;
     if args.bootstrap > 0 {
         let opts = BootstrapOptions {
@@ -146,12 +159,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             .with_uncertainty(&opts, &AtomicBool::new(false))
             .with_context(|| format!("bootstrapping the fit of {}", args.input.display()))?;
     }
-    if args.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        print!("{}", table(&report));
-    }
-    Ok(())
+    Ok(report)
 }
 
 /// The human-readable form of a fit.
