@@ -343,8 +343,13 @@ pub struct FittedSwatches {
 pub struct Swatches {
     pub scan: ScanId,
     pub sample: String,
-    /// The 14 geometries, MA-T12 then SRA.
+    /// The geometries the scan measured, MA-T12 then SRA (12 without specular readings);
+    /// every list below is in this order.
     pub geometries: Vec<&'static str>,
+    /// What the readings are normalised by: the tile's name, or "instrument calibration".
+    pub reference: String,
+    /// Whether the scan has the SRA's specular readings.
+    pub specular_readings: bool,
     pub measured: Vec<Swatch>,
     /// One entry per cost function with a finished fit.
     pub fits: Vec<FittedSwatches>,
@@ -366,6 +371,14 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
         )))
         .into_response();
     };
+    let set = sample.measured.geometries;
+    let only = |xs: Vec<Swatch>| -> Vec<Swatch> {
+        xs.into_iter()
+            .enumerate()
+            .filter(|(g, _)| set.contains(*g))
+            .map(|(_, x)| x)
+            .collect()
+    };
     let fits = crate::cost::CostFunction::ALL
         .into_iter()
         .filter_map(|c| {
@@ -374,10 +387,8 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
             Some(FittedSwatches {
                 cost_function: c,
                 method: fit.method.clone(),
-                estimated: done.estimated.iter().map(Swatch::of_brdf).collect(),
-                delta_e00: (0..crate::geometry::GEOMETRY_COUNT)
-                    .map(|g| done.evaluation.at(g))
-                    .collect(),
+                estimated: only(done.estimated.iter().map(Swatch::of_brdf).collect()),
+                delta_e00: set.iter().map(|g| done.evaluation.at(g.index)).collect(),
                 delta_e00_diffuse: done.evaluation.diffuse.mean,
                 delta_e00_specular: done.evaluation.specular.map(|s| s.mean),
                 delta_e00_all: done.evaluation.all.mean,
@@ -387,8 +398,10 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
     Json(Swatches {
         scan,
         sample: sample.name.clone(),
-        geometries: crate::geometry::GEOMETRIES.iter().map(|g| g.name).collect(),
-        measured: sample.measured.values.iter().map(Swatch::of_brdf).collect(),
+        geometries: set.iter().map(|g| g.name).collect(),
+        reference: sample.scan.reference_label().to_string(),
+        specular_readings: set.has_sra(),
+        measured: only(sample.measured.values.iter().map(Swatch::of_brdf).collect()),
         fits,
     })
     .into_response()

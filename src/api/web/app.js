@@ -777,11 +777,16 @@ async function renderResult(id) {
     sw && sw.error ? h("p", { class: "stale" }, sw.error) : null,
     sw && !sw.error ? h("section", { "aria-labelledby": "h-sw" },
       h("h3", { id: "h-sw" }, "Measured and fitted colour per geometry (sRGB, D65, 2°)"),
-      h("p", { class: "muted" }, "\"measured\" is the reading normalised by the N9 reference (the BRDF the fit sees, as a reflectance factor), so it differs from the raw values the bench showed while measuring."),
+      h("p", { id: "result-reference" }, sw.reference === "instrument calibration"
+        ? `Reference: instrument calibration — the MA-T12's reflectance factor as its software exported it, relative to the instrument's own white standard (no N9 tile).${sw.specular_readings ? "" : " No specular readings: fitted over the 12 MA-T12 geometries."}`
+        : `Reference: ${sw.reference}.${sw.specular_readings ? "" : " No specular readings: fitted over the 12 MA-T12 geometries."}`),
+      h("p", { class: "muted" }, sw.reference === "instrument calibration"
+        ? "\"measured\" is the reflectance factor as exported (the BRDF the fit sees)."
+        : "\"measured\" is the reading normalised by the N9 reference (the BRDF the fit sees, as a reflectance factor), so it differs from the raw values the bench showed while measuring."),
       h("div", { class: "scroll" }, h("table", { class: "swatches", id: "swatches" },
         h("thead", {}, h("tr", {}, h("th", {}), sw.geometries.map((g) => h("th", { scope: "col" }, g)))),
         h("tbody", {},
-          swatchRow("measured (normalised by N9)", sw.measured),
+          swatchRow(sw.reference === "instrument calibration" ? "measured (as exported)" : "measured (normalised by N9)", sw.measured),
           fitsDone.map((f) => swatchRow(`fitted ${f.cost_function}`, f.estimated, f.delta_e00))))),
       h("p", { class: "muted" }, "! marks a colour outside the sRGB gamut (shown as the nearest displayable one)."),
       geometryLegend())
@@ -792,7 +797,7 @@ async function renderResult(id) {
         h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "specular (2, vs the paper's grey spectrum)", "all (14)", "specular |ΔL*| (SRA model)", ""].map((c) => h("th", { scope: "col" }, c)))),
         h("tbody", {}, fitsDone.map((f) => h("tr", { "data-cost": f.cost_function },
           h("td", {}, f.cost_function), h("td", {}, f.method), h("td", {}, fmt(f.delta_e00_diffuse)),
-          h("td", {}, fmt(f.delta_e00_specular)), h("td", {}, fmt(f.delta_e00_all)),
+          h("td", {}, f.delta_e00_specular === null ? "no specular readings" : fmt(f.delta_e00_specular)), h("td", {}, fmt(f.delta_e00_all)),
           h("td", {}, deltaL(latestDone.get(f.cost_function))),
           h("td", { class: f === best ? "best" : "" }, f === best ? "★ best" : ""))))))
         : h("p", { id: "not-fitted" }, notFitted)),
