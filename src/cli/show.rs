@@ -167,7 +167,7 @@ pub(super) fn print_fits(detail: &Value) {
         let e = &fit["evaluation"];
         let result = &run["result"];
         println!(
-            "{:>5}  {:<4} {:<9} {:<9} {:>11.4e} {:>8.3} {:>8.3} {:>8.3} {:>9.1}{}",
+            "{:>5}  {:<4} {:<9} {:<9} {:>11.4e} {:>8.3} {:>8.3} {:>8} {:>9.1}{}",
             id(run, "id"),
             s(run, "cost_function"),
             s(run, "method"),
@@ -175,7 +175,12 @@ pub(super) fn print_fits(detail: &Value) {
             f(result, "cost"),
             f(&e["all"], "mean"),
             f(&e["diffuse"], "mean"),
-            f(&e["specular"], "mean"),
+            // No specular readings: no specular mean.
+            if e["specular"].is_null() && !e.is_null() {
+                "none".to_string()
+            } else {
+                format!("{:.3}", f(&e["specular"], "mean"))
+            },
             f(result, "wall_ms"),
             run["error"]
                 .as_str()

@@ -237,6 +237,23 @@ pub fn figures(study: &Study) -> Vec<Figure> {
         kind: Kind::MeanDeltaL,
         size: (1000, 700),
     });
+    // A study whose scans have no specular readings (MA-T12-only instrument exports) has
+    // nothing to draw in the SRA figures: they are left out, not drawn empty.
+    if !study
+        .samples
+        .iter()
+        .any(|s| s.measured.geometries.has_sra())
+    {
+        out.retain(|f| {
+            !matches!(
+                f.kind,
+                Kind::LightnessSpecular
+                    | Kind::LuminanceSpecular
+                    | Kind::SpecularDeltaL
+                    | Kind::MeanDeltaL
+            )
+        });
+    }
     out
 }
 
