@@ -72,6 +72,14 @@ impl Evaluation {
             .collect()
     }
 
+    /// The ΔE00 of every geometry evaluated, in table order (12 or 14 values).
+    pub fn evaluated(&self) -> Vec<f64> {
+        self.geometries
+            .iter()
+            .map(|g| self.per_geometry[g.index])
+            .collect()
+    }
+
     /// ΔE00 at the geometry of table index `g`, `None` where it was not evaluated.
     pub fn at(&self, g: usize) -> Option<f64> {
         self.geometries.contains(g).then(|| self.per_geometry[g])

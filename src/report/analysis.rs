@@ -124,7 +124,7 @@ impl Analysis {
                 let paired = |c: CostFunction| -> Vec<f64> {
                     included
                         .iter()
-                        .flat_map(|&i| evaluation(i, c).per_geometry)
+                        .flat_map(|&i| evaluation(i, c).evaluated())
                         .collect()
                 };
                 sign_tests.push(SignRow {

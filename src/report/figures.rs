@@ -576,7 +576,12 @@ fn spectra<DB: DrawingBackend>(
     )?;
     let panels = titled.split_evenly((4, 4));
     let nm = wavelengths_nm();
-    for (g, panel) in GEOMETRIES.iter().zip(&panels) {
+    // A scan without specular readings gets no SRA panels (nothing was measured there).
+    for (g, panel) in GEOMETRIES
+        .iter()
+        .filter(|g| s.measured.geometries.contains(g.index))
+        .zip(&panels)
+    {
         let measured = brdf_to_reflectance(&s.measured.values[g.index]);
         let estimates: Vec<(CostFunction, Spectrum)> = s
             .fits
@@ -826,7 +831,7 @@ fn box_plots<DB: DrawingBackend>(
     let costs = study.cost_functions();
     let values: Vec<f64> = study
         .done_fits()
-        .flat_map(|d| d.evaluation.per_geometry)
+        .flat_map(|d| d.evaluation.evaluated())
         .collect();
     let mut chart = per_sample_chart(
         root,
@@ -846,7 +851,7 @@ fn box_plots<DB: DrawingBackend>(
         let mut first = true;
         for (i, s) in study.samples.iter().enumerate() {
             let Some(d) = s.done(c) else { continue };
-            let Some([min, q1, med, q3, max]) = quartiles(&d.evaluation.per_geometry) else {
+            let Some([min, q1, med, q3, max]) = quartiles(&d.evaluation.evaluated()) else {
                 continue;
             };
             let x = i as f64 + offset;
