@@ -359,10 +359,9 @@ mod defaults {
     pub const REFERENCE_MAX_AGE_HOURS: f64 = 24.0;
     pub const SEED: u64 = 1;
     pub const BOOTSTRAP: u32 = 200;
-    /// A measured scan's SRA readings are read as luminance (SCIENCE.md §5.1, §10): the model
-    /// can reproduce them, and its bootstrap intervals come far closer to calibrated than under
-    /// the paper's flat model.
-    pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::Luminance;
+    /// The paper's flat SRA model. The shipped `config/brdfd.toml` sets `luminance`, which the
+    /// measured coverage favours (SCIENCE.md §10); the built-in default stays the paper's.
+    pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::Flat;
     pub const LEVEL: &str = "info";
     pub const SYNC_BATCH: u64 = 500;
     pub const INGEST_SETTLE_MS: u64 = 2_000;
@@ -1860,7 +1859,7 @@ mod tests {
     #[test]
     fn sra_setting() {
         use crate::sra_reading::SraModel;
-        assert_eq!(parse("").unwrap().fit.sra, SraModel::Luminance);
+        assert_eq!(parse("").unwrap().fit.sra, SraModel::Flat);
         let c = parse("[fit]\nsra = \"flat\"\n").unwrap();
         assert_eq!(c.fit.sra, SraModel::Flat);
         let e = parse("[fit]\nsra = \"grey\"\n").unwrap_err().to_string();
