@@ -359,8 +359,8 @@ mod defaults {
     pub const REFERENCE_MAX_AGE_HOURS: f64 = 24.0;
     pub const SEED: u64 = 1;
     pub const BOOTSTRAP: u32 = 200;
-    /// The paper's flat SRA model. The shipped `config/brdfd.toml` sets `luminance`, which the
-    /// measured coverage favours (SCIENCE.md §10); the built-in default stays the paper's.
+    /// The paper's flat SRA model; the measured coverage favours `luminance` (SCIENCE.md §10),
+    /// which a lab sets in `[fit] sra`.
     pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::Flat;
     pub const LEVEL: &str = "info";
     pub const SYNC_BATCH: u64 = 500;
