@@ -288,7 +288,7 @@ fn replay_from_the_cli_fails_on_a_mismatch_unless_lenient_and_keeps_recorded_tim
     let (out, err) = text(&strict);
     assert_eq!(strict.status.code(), Some(1), "{out}\n{err}");
     assert!(
-        err.contains("(SRA): request did not match the recording: expected frame 12, FETCH sra-60"),
+        err.contains("(SRA): request did not match the recording: expected frame 14, FETCH sra-60"),
         "{out}\n{err}"
     );
     assert!(err.contains("received FETCH sra-20"), "{err}");
