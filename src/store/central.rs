@@ -97,7 +97,7 @@ pub async fn load_scans(
         &format!(
             "{SELECTED}
          SELECT s.station, s.id, s.sample_id, sa.name AS sample, s.reference_id, s.state,
-                s.reason, s.requested_at_ms, s.started_at_ms, s.finished_at_ms,
+                s.reason, s.requested_at_ms, s.started_at_ms, s.finished_at_ms, s.geometries,
                 (SELECT COUNT(*) FROM readings r WHERE r.station = s.station AND r.scan_id = s.id)
                     AS reading_count,
                 {provenance_s}
@@ -135,7 +135,7 @@ pub async fn load_scans(
         &format!(
             "{SELECTED}
          SELECT r.station, r.id, r.name, r.status, r.reason, r.rho_ref, r.taken_at_ms,
-                r.completed_at_ms,
+                r.completed_at_ms, r.kind,
                 (SELECT COUNT(*) FROM reference_readings rr
                  WHERE rr.station = r.station AND rr.reference_id = r.id) AS reading_count,
                 {provenance_r}
