@@ -50,8 +50,15 @@ async fn recorded_timing_is_kept_and_a_speed_factor_scales_it() {
     let script = recording.script(Instrument::Sra).unwrap();
     // The device's share of the recorded time from MEASURE-ALL on: each reply's delay after its
     // request. (brdfd's own gaps and request wire times are the driver's, not replayed.)
+    // The session's closing ABORT exchange (`$AB*…`, drivers/PROTOCOL.md) is not part of the
+    // measurement.
     let recorded_ms: u64 = script.exchanges()[1..]
         .iter()
+        .filter(|e| {
+            !e.request
+                .as_ref()
+                .is_some_and(|r| r.bytes.starts_with(b"$AB*"))
+        })
         .map(|e| e.replies[0].t_ms - e.request.as_ref().unwrap().t_ms)
         .sum();
     let want = script.readings();
