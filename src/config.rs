@@ -243,6 +243,9 @@ pub enum SraTransport {
     Simulated { session: Option<PathBuf> },
     /// A serial port, e.g. `/dev/ttyUSB0`.
     Serial { port: String, baud: u32 },
+    /// No SRA (`transport = "off"`): a lab with only an MA-T12. References and scans are
+    /// measured on the 12 MA-T12 geometries and fitted over them (SCIENCE.md §3).
+    Off,
 }
 
 /// `[scan]`
@@ -675,8 +678,9 @@ impl Checker<'_> {
 /// instruments, loudly: that is the try-it-out default.)
 const REQUIRED_TRANSPORT_MA_T12: &str = "must be set: \"usb\" for the instrument, or \"simulated\" \
      to replay a recording (no instrument; every scan is then marked simulated)";
-const REQUIRED_TRANSPORT_SRA: &str = "must be set: \"serial\" for the instrument, or \"simulated\" \
-     to replay a recording (no instrument; every scan is then marked simulated)";
+const REQUIRED_TRANSPORT_SRA: &str = "must be set: \"serial\" for the instrument, \"simulated\" \
+     to replay a recording (no instrument; every scan is then marked simulated), or \"off\" \
+     when the lab has no SRA (scans then have the 12 MA-T12 geometries only)";
 
 fn bounded_count(n: u64, lo: u64, hi: u64) -> Result<usize, String> {
     if (lo..=hi).contains(&n) {
@@ -1277,8 +1281,12 @@ impl Checker<'_> {
     /// chosen), then the keys every instrument has.
     fn sra(&self, raw: &RawSra) -> Result<SraConfig, ConfigError> {
         const KEYS: DeviceKeys = device_keys!("devices.sra");
-        let serial =
-            self.real_transport(&KEYS, &raw.transport, "serial", REQUIRED_TRANSPORT_SRA)?;
+        let off = raw
+            .transport
+            .as_ref()
+            .is_some_and(|t| t.get_ref().trim() == "off");
+        let serial = !off
+            && self.real_transport(&KEYS, &raw.transport, "serial", REQUIRED_TRANSPORT_SRA)?;
         let port = self.value(
             "devices.sra.port",
             &raw.port,
@@ -1298,7 +1306,9 @@ impl Checker<'_> {
                 Err(format!("{b} is not a serial speed: 50 to 4000000 baud"))
             }
         })?;
-        let transport = if serial {
+        let transport = if off {
+            SraTransport::Off
+        } else if serial {
             SraTransport::Serial { port, baud }
         } else {
             SraTransport::Simulated {
@@ -1322,6 +1332,9 @@ impl Checker<'_> {
             "" => Ok(false),
             "simulated" => Ok(false),
             t if t == real => Ok(true),
+            other if keys.transport == "devices.sra.transport" => Err(format!(
+                "unknown transport \"{other}\": expected \"simulated\", \"{real}\" or \"off\""
+            )),
             other => Err(format!(
                 "unknown transport \"{other}\": expected \"simulated\" or \"{real}\""
             )),
@@ -1789,8 +1802,13 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "test.toml:2: devices.sra.transport: unknown transport \"rs232\": expected \
-             \"simulated\" or \"serial\""
+             \"simulated\", \"serial\" or \"off\""
         );
+        // A lab with only an MA-T12 turns the SRA off; the serial keys are still checked.
+        let c = parse("[devices.sra]\ntransport = \"off\"\n").unwrap();
+        assert_eq!(c.devices.sra.transport, SraTransport::Off);
+        let e = parse("[devices.sra]\ntransport = \"off\"\nbaud = 3\n").unwrap_err();
+        assert!(e.to_string().contains("devices.sra.baud"), "{e}");
         let e = parse("[devices.ma_t12]\n\ntimeout_ms = 0\n").unwrap_err();
         assert!(
             matches!(

@@ -643,6 +643,7 @@ fn serial_check(transport: &SraTransport) -> Check {
     const NAME: &str = "SRA (serial)";
     let port = match transport {
         SraTransport::Simulated { .. } => return Check::skipped(NAME, "simulated: skipped"),
+        SraTransport::Off => return Check::skipped(NAME, "turned off: skipped"),
         SraTransport::Serial { port, .. } => port,
     };
     let path = Path::new(port);

@@ -108,17 +108,20 @@ impl Follower<'_> {
                 device,
                 geometry,
                 k,
+                n,
                 ..
-            } if mine => self.reading("reading", device, geometry, *k),
+            } if mine => self.reading("reading", device, geometry, *k, *n),
             Event::ReferenceReading {
                 device,
                 geometry,
                 k,
+                n,
                 ..
-            } if mine => self.reading("reference reading", device, geometry, *k),
+            } if mine => self.reading("reference reading", device, geometry, *k, *n),
             Event::ScanComplete { scan } if mine => {
                 readings.finish_with_message("complete");
-                p.line(&format!("scan {scan} complete: 14 readings stored"));
+                let stored = readings.position();
+                p.line(&format!("scan {scan} complete: {stored} readings stored"));
                 self.measuring = false;
                 // The fits are queued right after; their events follow.
                 if let Ok(pending) = pending_fits(self.client, scan.0) {
@@ -230,14 +233,16 @@ impl Follower<'_> {
         Step::Continue
     }
 
-    /// Reading `k` of 14 stored: the bar moves, and without a terminal a line says so.
-    fn reading(&self, label: &str, device: &str, geometry: &str, k: usize) {
+    /// Reading `k` of `n` (14, or 12 with the SRA turned off) stored: the bar moves, and
+    /// without a terminal a line says so.
+    fn reading(&self, label: &str, device: &str, geometry: &str, k: usize, n: usize) {
         let (device, geometry) = (terminal_safe(device), terminal_safe(geometry));
+        self.readings.set_length(n as u64);
         self.readings.set_position(k as u64);
         self.readings.set_message(format!("{device} {geometry}"));
         if !self.progress.tty {
             self.progress
-                .line(&format!("{label} {k}/14: {device} {geometry}"));
+                .line(&format!("{label} {k}/{n}: {device} {geometry}"));
         }
     }
 

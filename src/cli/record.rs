@@ -57,13 +57,21 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
             format!("{REFERENCE_NOTE}{REFERENCE_NAME}"),
         ),
     };
+    if config.devices.sra.transport == crate::config::SraTransport::Off {
+        bail!(
+            "the SRA is turned off ([devices.sra] transport = \"off\"), and a recording is a \
+             pair of sessions, one per instrument: set [devices.sra] transport to \"serial\" \
+             (or \"simulated\") to record"
+        );
+    }
     let [m_path, s_path] = session_paths(&args.out, &object);
     config.devices.ma_t12.record = Some(m_path.clone());
     config.devices.sra.record = Some(s_path.clone());
     let readings = crate::cli::serve::runtime()?.block_on(async {
         let devices =
             Devices::from_config(&config.devices, &mock_devices::ReplayOptions::lenient())?;
-        let (m, s) = tokio::join!(devices.ma_t12.measure_all(), devices.sra.measure_all());
+        let sra = devices.sra.as_ref().expect("the SRA is on (checked above)");
+        let (m, s) = tokio::join!(devices.ma_t12.measure_all(), sra.measure_all());
         let recorders = devices.recorders.clone();
         devices.shutdown().await?;
         drop(recorders);

@@ -153,6 +153,22 @@ pub fn real_transport_banner(config: &Config) -> Option<String> {
     })
 }
 
+/// The line printed at start when the SRA is turned off: every reference and scan this daemon
+/// measures then has the 12 MA-T12 geometries only, and its fits say "no specular readings".
+pub fn sra_off_banner(config: &Config) -> Option<String> {
+    matches!(
+        config.devices.sra.transport,
+        crate::config::SraTransport::Off
+    )
+    .then(|| {
+        "*** SRA TURNED OFF ([devices.sra] transport = \"off\"): references and scans are \
+         measured on the 12 MA-T12 geometries only and fitted without specular readings, so \
+         the specular lobe is pinned weakly (see the fits' intervals). Set [devices.sra] \
+         transport to \"serial\" when an RA-532H is connected. ***"
+            .to_string()
+    })
+}
+
 /// Files the daemon writes must be distinct: a recording named like the store would truncate
 /// the store at start, two recordings into one file would interleave.
 pub fn check_distinct_files(config: &Config, token: &Path) -> anyhow::Result<()> {
@@ -218,6 +234,10 @@ async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
         token_path.display()
     );
     if let Some(banner) = real_transport_banner(&config) {
+        eprintln!("{banner}");
+        tracing::warn!("{banner}");
+    }
+    if let Some(banner) = sra_off_banner(&config) {
         eprintln!("{banner}");
         tracing::warn!("{banner}");
     }
@@ -324,6 +344,14 @@ mod tests {
         assert!(banner.contains("SRA on /dev/ttyUSB0"), "{banner}");
         assert!(banner.contains("drivers/PROTOCOL.md"), "{banner}");
         assert_eq!(real_transport_banner(&Config::default()), None);
+        assert_eq!(sra_off_banner(&Config::default()), None);
+        let off = Config::from_toml(
+            "[devices.ma_t12]\ntransport = \"simulated\"\n[devices.sra]\ntransport = \"off\"\n",
+            "off.toml",
+        )
+        .unwrap();
+        assert!(sra_off_banner(&off).is_some_and(|b| b.contains("12 MA-T12 geometries")));
+        assert_eq!(real_transport_banner(&off), None);
         let head: String = crate::config::SHIPPED
             .lines()
             .take(12)

@@ -71,8 +71,8 @@ pub struct DeviceStatus {
     pub device: &'static str,
     /// The instrument's name for people.
     pub instrument: String,
-    /// `unknown` (not heard from since start), `connected`, `disconnected`, `reconnecting` or
-    /// `error`.
+    /// `unknown` (not heard from since start), `connected`, `disconnected`, `reconnecting`,
+    /// `error`, or `off` (the SRA turned off in the configuration).
     pub state: &'static str,
     /// What the driver said with the state (identity, reason, attempt).
     pub detail: String,
@@ -227,7 +227,7 @@ impl Acquisition {
 
     /// Sends ABORT to both instruments without waiting for the answers.
     pub(crate) fn abort_devices(&self) {
-        for h in [&self.devices.ma_t12, &self.devices.sra] {
+        for h in self.devices.handles() {
             let h = h.clone();
             tokio::spawn(async move {
                 if let Err(e) = h.abort().await {
@@ -266,7 +266,17 @@ impl Acquisition {
             .into_iter()
             .enumerate()
             .map(|(i, instrument)| {
-                let (state, detail, since_ms) = states[i].clone();
+                let (state, detail, since_ms) = if self.devices.handle(instrument).is_none() {
+                    (
+                        "off",
+                        "turned off ([devices.sra] transport = \"off\"): scans have the 12 \
+                         MA-T12 geometries only"
+                            .to_string(),
+                        states[i].2,
+                    )
+                } else {
+                    states[i].clone()
+                };
                 let id = ids[i].as_ref();
                 DeviceStatus {
                     device: instrument.key(),
@@ -348,11 +358,11 @@ impl Service {
         let service = self.clone();
         let devices = self.inner.acquisition.devices();
         let mut rx_m = devices.ma_t12.subscribe();
-        let mut rx_s = devices.sra.subscribe();
+        let mut rx_s = devices.sra.as_ref().map(|h| h.subscribe());
         tokio::spawn(async move {
             // The drivers connected before anyone subscribed: ask who is there.
             let devices = service.inner.acquisition.devices();
-            for h in [devices.ma_t12.clone(), devices.sra.clone()] {
+            for h in devices.handles().cloned() {
                 let s = service.clone();
                 tokio::spawn(async move {
                     match h.identify().await {
@@ -368,11 +378,11 @@ impl Service {
                     }
                 });
             }
-            let (mut m_open, mut s_open) = (true, true);
+            let (mut m_open, mut s_open) = (true, rx_s.is_some());
             while m_open || s_open {
                 let ev = tokio::select! {
                     ev = rx_m.recv(), if m_open => ev,
-                    ev = rx_s.recv(), if s_open => ev,
+                    ev = super::devices::recv_if_present(&mut rx_s), if s_open => ev,
                     _ = stop.recv() => break,
                 };
                 match ev {

@@ -54,7 +54,9 @@ pub struct Simulators {
 #[derive(Debug, Clone)]
 pub struct Devices {
     pub ma_t12: DriverHandle,
-    pub sra: DriverHandle,
+    /// `None` when the SRA is turned off (`[devices.sra] transport = "off"`): measurements
+    /// then have the 12 MA-T12 geometries only.
+    pub sra: Option<DriverHandle>,
     /// The simulated instruments, where simulated.
     pub simulators: Simulators,
     /// The recording taps' session writers, to be finished at shutdown.
@@ -86,13 +88,46 @@ impl Devices {
     pub fn new(ma_t12: DriverHandle, sra: DriverHandle) -> Devices {
         Devices {
             ma_t12,
-            sra,
+            sra: Some(sra),
             simulators: Simulators {
                 ma_t12: None,
                 sra: None,
             },
             recorders: Vec::new(),
         }
+    }
+
+    /// Simulated instruments replaying the given scripts, with the drivers' default
+    /// timeouts, and no SRA (`sra` = `None`), or both ([`Devices::simulated`]).
+    pub fn simulated_mat12_only(
+        ma_t12: Script,
+        options: &ReplayOptions,
+    ) -> Result<Devices, DeviceSetupError> {
+        let sim_m = SimMat12::new(ma_t12, options.clone()).map_err(|source| {
+            DeviceSetupError::Simulation {
+                instrument: Instrument::MaT12,
+                source,
+            }
+        })?;
+        Ok(Devices {
+            ma_t12: spawn_mat12_with(sim_m.factory(), DriverConfig::default(), None),
+            sra: None,
+            simulators: Simulators {
+                ma_t12: Some(sim_m),
+                sra: None,
+            },
+            recorders: Vec::new(),
+        })
+    }
+
+    /// Whether the SRA takes part in measurements (it is not turned off).
+    pub fn has_sra(&self) -> bool {
+        self.sra.is_some()
+    }
+
+    /// The driver handles of the instruments in use, MA-T12 first.
+    pub fn handles(&self) -> impl Iterator<Item = &DriverHandle> {
+        std::iter::once(&self.ma_t12).chain(self.sra.as_ref())
     }
 
     /// Simulated instruments replaying the given scripts, with the drivers' default timeouts.
@@ -126,7 +161,7 @@ impl Devices {
         );
         Ok(Devices {
             ma_t12,
-            sra,
+            sra: Some(sra),
             simulators: Simulators {
                 ma_t12: Some(sim_m),
                 sra: Some(sim_s),
@@ -181,8 +216,12 @@ impl Devices {
             max_resends: s.retries,
             ..DriverConfig::default()
         };
-        let s_rec = recorder(Instrument::Sra, s.record.as_deref(), &mut recorders)?;
+        let s_rec = match s.transport {
+            SraTransport::Off => None,
+            _ => recorder(Instrument::Sra, s.record.as_deref(), &mut recorders)?,
+        };
         let sra = match &s.transport {
+            SraTransport::Off => None,
             SraTransport::Simulated { session } => {
                 let script = script(Instrument::Sra, session.as_deref())?;
                 let sim = SimSra::new(script, options.clone()).map_err(|source| {
@@ -193,11 +232,15 @@ impl Devices {
                 })?;
                 let handle = spawn_sra_with(sim.factory(), s_cfg, s_rec);
                 simulators.sra = Some(sim);
-                handle
+                Some(handle)
             }
             SraTransport::Serial { port, baud } => {
                 let (port, baud) = (port.clone(), *baud);
-                spawn_sra_with(move || open_serial(&port, baud), s_cfg, s_rec)
+                Some(spawn_sra_with(
+                    move || open_serial(&port, baud),
+                    s_cfg,
+                    s_rec,
+                ))
             }
         };
         Ok(Devices {
@@ -208,11 +251,11 @@ impl Devices {
         })
     }
 
-    /// The handle for one instrument.
-    pub fn handle(&self, instrument: Instrument) -> &DriverHandle {
+    /// The handle for one instrument; `None` for the SRA when it is turned off.
+    pub fn handle(&self, instrument: Instrument) -> Option<&DriverHandle> {
         match instrument {
-            Instrument::MaT12 => &self.ma_t12,
-            Instrument::Sra => &self.sra,
+            Instrument::MaT12 => Some(&self.ma_t12),
+            Instrument::Sra => self.sra.as_ref(),
         }
     }
 
@@ -290,7 +333,9 @@ impl Devices {
     /// finishes the recordings. Returns the first recording error, if any.
     pub async fn shutdown(self) -> std::io::Result<()> {
         self.ma_t12.shutdown().await;
-        self.sra.shutdown().await;
+        if let Some(sra) = self.sra {
+            sra.shutdown().await;
+        }
         let mut first = Ok(());
         for r in &self.recorders {
             let done = r.finish();
@@ -317,6 +362,17 @@ fn script(instrument: Instrument, session: Option<&Path>) -> Result<Script, Devi
                 })?;
             Script::parse(&text).map_err(sim_err)
         }
+    }
+}
+
+/// The next event of a driver's channel, or never when there is no driver (the SRA turned
+/// off), for a `select!` branch over an optional instrument.
+pub(crate) async fn recv_if_present(
+    rx: &mut Option<tokio::sync::broadcast::Receiver<drivers::Event>>,
+) -> Result<drivers::Event, tokio::sync::broadcast::error::RecvError> {
+    match rx {
+        Some(rx) => rx.recv().await,
+        None => std::future::pending().await,
     }
 }
 

@@ -16,8 +16,8 @@
 //!   traffic and store an empty frame.
 //! - One instrument failing does not stop the other: its readings are stored too, and the scan
 //!   fails with every device's reason.
-//! - A scan is complete only through `Store::complete_scan`, which refuses fewer than 14
-//!   readings; an abort or shutdown marks it `aborted` with the reason (a reference set, which
+//! - A scan is complete only through `Store::complete_scan`, which refuses fewer readings than
+//!   its geometries (14, or the 12 MA-T12 ones when the SRA is turned off); an abort or shutdown marks it `aborted` with the reason (a reference set, which
 //!   has no such state, `failed`).
 
 use std::collections::HashSet;
@@ -117,6 +117,8 @@ impl Target {
 /// How the instruments' part of a measurement went.
 #[derive(Debug, Default)]
 struct Acquired {
+    /// How many geometries the measurement takes (14, or 12 with the SRA turned off).
+    geometries: usize,
     /// Geometries stored.
     stored: HashSet<&'static str>,
     /// Device and store errors, each naming its instrument and geometry.
@@ -217,12 +219,15 @@ impl Service {
         let acquisition = &self.inner.acquisition;
         acquisition.check_idle()?;
         let store = &self.inner.store;
+        // With the SRA turned off, references and scans have the 12 MA-T12 geometries.
+        let with_sra = acquisition.devices().has_sra();
         let (target, started) = match plan {
             Plan::Reference => {
                 let reference = self
-                    .timed_store(store.begin_reference(
+                    .timed_store(store.begin_reference_of(
                         "Munsell N9",
                         self.inner.settings.reference_reflectance.as_ref(),
+                        with_sra,
                     ))
                     .await?;
                 (
@@ -235,7 +240,7 @@ impl Service {
                     .reference_in_force()
                     .ok_or(ServiceError::NoReference)?;
                 let scan = self
-                    .timed_store(store.request_scan(sample, reference))
+                    .timed_store(store.request_scan_of(sample, reference, with_sra))
                     .await?;
                 let started = Event::ScanStarted {
                     scan,
@@ -418,14 +423,26 @@ impl Service {
         let devices = self.inner.acquisition.devices();
         // Subscribe before the commands go out, so no reading event can be missed.
         let mut rx_m = devices.ma_t12.subscribe();
-        let mut rx_s = devices.sra.subscribe();
+        let mut rx_s = devices.sra.as_ref().map(|h| h.subscribe());
         let m = devices.ma_t12.measure_all_received();
-        let s = devices.sra.measure_all_received();
+        let s = async {
+            match &devices.sra {
+                Some(h) => h.measure_all_received().await,
+                None => Ok(Vec::new()),
+            }
+        };
         tokio::pin!(m, s);
         let mut m_done: Option<Result<Vec<ReceivedReading>, DriverError>> = None;
         let mut s_done: Option<Result<Vec<ReceivedReading>, DriverError>> = None;
-        let (mut m_open, mut s_open) = (true, true);
-        let mut acquired = Acquired::default();
+        let (mut m_open, mut s_open) = (true, rx_s.is_some());
+        let mut acquired = Acquired {
+            geometries: if devices.has_sra() {
+                GEOMETRY_COUNT
+            } else {
+                geometry::MA_T12_COUNT
+            },
+            ..Acquired::default()
+        };
         while m_done.is_none() || s_done.is_none() {
             tokio::select! {
                 // Events first: a reading is stored before the command's end is looked at.
@@ -433,7 +450,7 @@ impl Service {
                 ev = rx_m.recv(), if m_open => {
                     m_open = self.on_event(target, ev, &mut acquired).await;
                 }
-                ev = rx_s.recv(), if s_open => {
+                ev = super::devices::recv_if_present(&mut rx_s), if s_open => {
                     s_open = self.on_event(target, ev, &mut acquired).await;
                 }
                 r = &mut m, if m_done.is_none() => m_done = Some(r),
@@ -449,7 +466,7 @@ impl Service {
             }
         }
         // Events sent before the commands returned are still in the channels.
-        for rx in [&mut rx_m, &mut rx_s] {
+        for rx in std::iter::once(&mut rx_m).chain(rx_s.as_mut()) {
             while let Ok(ev) = rx.try_recv() {
                 self.on_event(target, Ok(ev), &mut acquired).await;
             }
@@ -535,7 +552,7 @@ impl Service {
         match stored {
             Ok(_) => {
                 acquired.stored.insert(geometry.name);
-                let (k, n) = (acquired.stored.len(), GEOMETRY_COUNT);
+                let (k, n) = (acquired.stored.len(), acquired.geometries);
                 let device = device.key().to_string();
                 let geometry = geometry.name.to_string();
                 let reading = ReadingShown::of(&values, crate::store::now_ms());

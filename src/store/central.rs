@@ -135,7 +135,7 @@ pub async fn load_scans(
         &format!(
             "{SELECTED}
          SELECT r.station, r.id, r.name, r.status, r.reason, r.rho_ref, r.taken_at_ms,
-                r.completed_at_ms, r.kind,
+                r.completed_at_ms, r.kind, r.geometries,
                 (SELECT COUNT(*) FROM reference_readings rr
                  WHERE rr.station = r.station AND rr.reference_id = r.id) AS reading_count,
                 {provenance_r}

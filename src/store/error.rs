@@ -54,14 +54,16 @@ pub enum StoreError {
         action: &'static str,
     },
 
-    /// `complete_scan` on a scan that does not hold all 14 readings.
+    /// `complete_scan` on a scan that does not hold a reading at each of its geometries (14,
+    /// or the 12 MA-T12 ones of a scan without SRA readings).
     #[error(
-        "scan {scan} holds {have} of 14 readings (missing {missing}): cannot complete it; \
+        "scan {scan} holds {have} of {want} readings (missing {missing}): cannot complete it; \
          measure the missing geometries, or fail or abort the scan"
     )]
     ScanIncomplete {
         scan: ScanId,
         have: usize,
+        want: usize,
         missing: String,
     },
 
@@ -74,16 +76,36 @@ pub enum StoreError {
         action: &'static str,
     },
 
-    /// `complete_reference` on a reference set that does not hold all 14 readings.
+    /// `complete_reference` on a reference set that does not hold a reading at each of its
+    /// geometries (14, or the 12 MA-T12 ones of a tile measured with the SRA turned off).
     #[error(
-        "reference {reference} holds {have} of 14 readings (missing {missing}): cannot complete \
-         it; measure the missing geometries on the reference tile"
+        "reference {reference} holds {have} of {want} readings (missing {missing}): cannot \
+         complete it; measure the missing geometries on the reference tile"
     )]
     ReferenceIncomplete {
         reference: ReferenceId,
         have: usize,
+        want: usize,
         missing: String,
     },
+
+    /// An SRA reading for a scan or reference set that measures the 12 MA-T12 geometries only.
+    #[error(
+        "{owner} measures the 12 MA-T12 geometries only (the SRA was turned off when it was \
+         started): it takes no reading at {geometry}"
+    )]
+    GeometryNotMeasured {
+        owner: String,
+        geometry: &'static str,
+    },
+
+    /// A scan with SRA readings asked for against a reference set measured without the SRA.
+    #[error(
+        "reference {reference} was measured without the SRA (12 MA-T12 geometries), so it \
+         cannot normalise a scan with SRA readings: measure the reference tile again \
+         (`brdfd reference`) with the SRA connected"
+    )]
+    ReferenceWithoutSpecular { reference: ReferenceId },
 
     /// A fit verb was called in a status that does not allow it.
     #[error("fit run {fit} is {status}, not {expected}: cannot {action}")]

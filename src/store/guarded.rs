@@ -153,8 +153,8 @@ pub(super) trait ReadingOwner: Guarded {
     /// The state in which it takes readings.
     const MEASURING: Self::State;
 
-    /// The error of completing an owner that holds only `have` readings.
-    fn incomplete(self, have: usize, missing: String) -> StoreError;
+    /// The error of completing an owner that holds only `have` of its `want` readings.
+    fn incomplete(self, have: usize, want: usize, missing: String) -> StoreError;
 }
 
 impl ReadingOwner for ScanId {
@@ -165,10 +165,11 @@ impl ReadingOwner for ScanId {
     const POSITIVE: bool = false;
     const MEASURING: ScanState = ScanState::Measuring;
 
-    fn incomplete(self, have: usize, missing: String) -> StoreError {
+    fn incomplete(self, have: usize, want: usize, missing: String) -> StoreError {
         StoreError::ScanIncomplete {
             scan: self,
             have,
+            want,
             missing,
         }
     }
@@ -182,10 +183,11 @@ impl ReadingOwner for ReferenceId {
     const POSITIVE: bool = true;
     const MEASURING: ReferenceStatus = ReferenceStatus::Measuring;
 
-    fn incomplete(self, have: usize, missing: String) -> StoreError {
+    fn incomplete(self, have: usize, want: usize, missing: String) -> StoreError {
         StoreError::ReferenceIncomplete {
             reference: self,
             have,
+            want,
             missing,
         }
     }
@@ -219,12 +221,14 @@ impl Store {
         let name = || format!("{} {owner}", O::WHAT);
         let geometry = codec::check_reading(&name, device, geometry, values, O::POSITIVE)?;
         // The state test and the insert are one statement, so a verb of another task (a fail,
-        // an abort) cannot slip in between and the owner cannot gain a reading afterwards.
+        // an abort) cannot slip in between and the owner cannot gain a reading afterwards. An
+        // owner that measures the MA-T12 geometries only takes no SRA reading.
         let sql = format!(
             "INSERT INTO {readings}
                  ({owner_column}, device, geometry, values_f64le, raw_frame, {at})
              SELECT $1, $2, $3, $4, $5, $6
-             WHERE EXISTS (SELECT 1 FROM {table} WHERE id = $1 AND {column} = 'measuring')
+             WHERE EXISTS (SELECT 1 FROM {table} WHERE id = $1 AND {column} = 'measuring'
+                           AND (geometries = 'all' OR $2 = 'ma_t12'))
              RETURNING id",
             readings = O::READINGS,
             owner_column = O::OWNER_COLUMN,
@@ -243,6 +247,12 @@ impl Store {
             .await;
         match inserted {
             Ok(Some(id)) => Ok(ReadingId(id)),
+            Ok(None) if device == Device::Sra && !self.measures_sra(owner).await? => {
+                Err(StoreError::GeometryNotMeasured {
+                    owner: name(),
+                    geometry: geometry.name,
+                })
+            }
             Ok(None) => Err(refused(&self.writer, owner, "measuring", "add a reading to it").await),
             Err(e) if backend::is_unique_violation(&e) => Err(StoreError::DuplicateReading {
                 owner: name(),
@@ -252,15 +262,30 @@ impl Store {
         }
     }
 
-    /// measuring → complete for `owner`; refused unless it is `measuring` and holds all 14
-    /// readings (the error then lists the missing geometries).
+    /// Whether `owner` measures the SRA geometries (its `geometries` is `all`).
+    async fn measures_sra<O: ReadingOwner>(&self, owner: O) -> Result<bool, StoreError> {
+        let geometries: Option<String> = sqlx::query_scalar(&format!(
+            "SELECT geometries FROM {} WHERE id = $1",
+            O::TABLE
+        ))
+        .bind(owner.key())
+        .fetch_optional(&self.writer)
+        .await?;
+        Ok(geometries.is_none_or(|g| g == super::scans::GEOMETRIES_ALL))
+    }
+
+    /// measuring → complete for `owner`; refused unless it is `measuring` and holds a reading
+    /// at each of its geometries — all 14, or the 12 MA-T12 ones when its `geometries` says so
+    /// (the error then lists the missing geometries).
     pub(super) async fn complete_owner<O: ReadingOwner>(&self, owner: O) -> Result<(), StoreError> {
         // The CHECKs of the readings tables pin each row to a distinct one of the 14
-        // geometries, so a count of 14 means every geometry is present.
+        // geometries, and an MA-T12-only owner takes no SRA reading, so a count of 14 (12)
+        // means every geometry is present.
         let sql = format!(
             "UPDATE {table} SET {column} = 'complete', {completed} = $2
              WHERE id = $1 AND {column} = 'measuring'
-               AND (SELECT COUNT(*) FROM {readings} WHERE {owner_column} = $1) = $3",
+               AND (SELECT COUNT(*) FROM {readings} WHERE {owner_column} = $1)
+                   = CASE geometries WHEN 'all' THEN $3 ELSE $4 END",
             table = O::TABLE,
             column = O::COLUMN,
             completed = O::COMPLETED_AT_COLUMN,
@@ -271,6 +296,7 @@ impl Store {
             .bind(owner.key())
             .bind(now_ms())
             .bind(GEOMETRY_COUNT as i64)
+            .bind(crate::geometry::MA_T12_COUNT as i64)
             .execute(&self.writer)
             .await?;
         if done.rows_affected() == 1 {
@@ -288,6 +314,14 @@ impl Store {
         .bind(owner.key())
         .fetch_all(&self.writer)
         .await?;
-        Err(owner.incomplete(present.len(), codec::missing_geometries(&present)))
+        let have = present.len();
+        let mut covered = present;
+        let want = if self.measures_sra(owner).await? {
+            GEOMETRY_COUNT
+        } else {
+            covered.extend(crate::geometry::sra().iter().map(|g| g.name.to_string()));
+            crate::geometry::MA_T12_COUNT
+        };
+        Err(owner.incomplete(have, want, codec::missing_geometries(&covered)))
     }
 }

@@ -224,6 +224,10 @@ pub struct ReferenceSummary {
     /// No tile: the instrument's own white calibration (an instrument-software export; the
     /// set has no readings and the MA-T12 values are taken as they are, SCIENCE.md §3).
     pub instrument_calibration: bool,
+    /// Whether the set has (or is to have) the SRA's two readings of the tile; without them it
+    /// has the 12 MA-T12 geometries (a tile measured with the SRA turned off, or imported with
+    /// MA-T12-only scans) and normalises scans without SRA readings only.
+    pub specular_readings: bool,
     pub reading_count: usize,
     /// Which instruments measured it, and how its readings came in.
     pub provenance: Provenance,

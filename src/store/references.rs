@@ -33,6 +33,7 @@ pub(super) struct ReferenceRow {
     taken_at_ms: i64,
     completed_at_ms: Option<i64>,
     kind: String,
+    geometries: String,
     reading_count: i64,
     #[sqlx(flatten)]
     provenance: ProvenanceRow,
@@ -42,7 +43,7 @@ pub(super) struct ReferenceRow {
 static REFERENCE_SUMMARY: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
     format!(
         "SELECT r.id, r.name, r.status, r.reason, r.rho_ref, r.taken_at_ms, r.completed_at_ms,
-                r.kind,
+                r.kind, r.geometries,
                 (SELECT COUNT(*) FROM reference_readings rr WHERE rr.reference_id = r.id)
                     AS reading_count,
                 {}
@@ -78,6 +79,11 @@ impl ReferenceRow {
                 "tile" => false,
                 INSTRUMENT_CALIBRATION => true,
                 other => return Err(corrupt(format!("unknown kind \"{other}\""))),
+            },
+            specular_readings: match self.geometries.as_str() {
+                super::scans::GEOMETRIES_ALL => true,
+                super::scans::GEOMETRIES_MA_T12 => false,
+                other => return Err(corrupt(format!("unknown geometries \"{other}\""))),
             },
             reading_count: self.reading_count as usize,
             provenance: self.provenance.into_provenance().map_err(corrupt)?,
@@ -137,13 +143,25 @@ impl Store {
             .collect()
     }
 
-    /// Starts a reference set for the tile `name` (e.g. "Munsell N9"), status `measuring`.
-    /// `rho_ref` is the tile's calibrated reflectance factor, if known; every value must be
-    /// positive and finite.
+    /// Starts a reference set for the tile `name` (e.g. "Munsell N9"), status `measuring`, on
+    /// all 14 geometries. `rho_ref` is the tile's calibrated reflectance factor, if known;
+    /// every value must be positive and finite.
     pub async fn begin_reference(
         &self,
         name: &str,
         rho_ref: Option<&Spectrum>,
+    ) -> Result<ReferenceId, StoreError> {
+        self.begin_reference_of(name, rho_ref, true).await
+    }
+
+    /// [`Store::begin_reference`] with (`specular_readings`) or without the SRA's two readings
+    /// of the tile: without them the set completes with the 12 MA-T12 readings, and normalises
+    /// scans without SRA readings only.
+    pub async fn begin_reference_of(
+        &self,
+        name: &str,
+        rho_ref: Option<&Spectrum>,
+        specular_readings: bool,
     ) -> Result<ReferenceId, StoreError> {
         if name.trim().is_empty() {
             return Err(StoreError::Empty {
@@ -163,12 +181,13 @@ impl Store {
             }
         }
         let id: i64 = sqlx::query_scalar(
-            "INSERT INTO reference_sets (name, status, rho_ref, taken_at_ms)
-             VALUES ($1, 'measuring', $2, $3) RETURNING id",
+            "INSERT INTO reference_sets (name, status, rho_ref, taken_at_ms, geometries)
+             VALUES ($1, 'measuring', $2, $3, $4) RETURNING id",
         )
         .bind(name)
         .bind(rho_ref.map(|r| codec::encode_f64s(r)))
         .bind(now_ms())
+        .bind(super::scans::geometries_key(specular_readings))
         .fetch_one(&self.writer)
         .await?;
         Ok(ReferenceId(id))
@@ -188,7 +207,8 @@ impl Store {
             .await
     }
 
-    /// Marks a reference set `complete`. It must be `measuring` and hold all 14 readings.
+    /// Marks a reference set `complete`. It must be `measuring` and hold a reading at each of
+    /// its geometries (all 14, or the 12 MA-T12 ones of a tile measured without the SRA).
     pub async fn complete_reference(&self, reference: ReferenceId) -> Result<(), StoreError> {
         self.complete_owner(reference).await
     }

@@ -145,11 +145,24 @@ impl ProcessedRow {
 
 impl Store {
     /// Asks for a scan of the sample `sample_name` (created on first use), to be normalised by
-    /// reference set `reference`, which must be complete. The scan starts `requested`.
+    /// reference set `reference`, which must be complete. The scan starts `requested` and
+    /// measures all 14 geometries.
     pub async fn request_scan(
         &self,
         sample_name: &str,
         reference: ReferenceId,
+    ) -> Result<ScanId, StoreError> {
+        self.request_scan_of(sample_name, reference, true).await
+    }
+
+    /// [`Store::request_scan`] for a scan with (`specular_readings`) or without the SRA's two
+    /// readings: without them it completes with the 12 MA-T12 readings. A scan with SRA
+    /// readings needs a reference set that has them too.
+    pub async fn request_scan_of(
+        &self,
+        sample_name: &str,
+        reference: ReferenceId,
+        specular_readings: bool,
     ) -> Result<ScanId, StoreError> {
         if sample_name.trim().is_empty() {
             return Err(StoreError::Empty {
@@ -166,6 +179,14 @@ impl Store {
                 action: "scan against it",
             });
         }
+        let reference_geometries: String =
+            sqlx::query_scalar("SELECT geometries FROM reference_sets WHERE id = $1")
+                .bind(reference.0)
+                .fetch_one(&mut *tx)
+                .await?;
+        if specular_readings && reference_geometries != GEOMETRIES_ALL {
+            return Err(StoreError::ReferenceWithoutSpecular { reference });
+        }
         let now = now_ms();
         let sample: i64 = sqlx::query_scalar(backend::UPSERT_SAMPLE)
             .bind(sample_name)
@@ -173,12 +194,13 @@ impl Store {
             .fetch_one(&mut *tx)
             .await?;
         let id: i64 = sqlx::query_scalar(
-            "INSERT INTO scans (sample_id, reference_id, state, requested_at_ms)
-             VALUES ($1, $2, 'requested', $3) RETURNING id",
+            "INSERT INTO scans (sample_id, reference_id, state, requested_at_ms, geometries)
+             VALUES ($1, $2, 'requested', $3, $4) RETURNING id",
         )
         .bind(sample)
         .bind(reference.0)
         .bind(now)
+        .bind(geometries_key(specular_readings))
         .fetch_one(&mut *tx)
         .await?;
         tx.commit().await?;
@@ -316,7 +338,8 @@ impl Store {
         Ok(ids)
     }
 
-    /// measuring → complete. Refused unless the scan is `measuring` and holds all 14 readings.
+    /// measuring → complete. Refused unless the scan is `measuring` and holds a reading at each
+    /// of its geometries (all 14, or the 12 MA-T12 ones of a scan without SRA readings).
     pub async fn complete_scan(&self, scan: ScanId) -> Result<(), StoreError> {
         self.complete_owner(scan).await
     }
@@ -600,16 +623,19 @@ impl ImportedScan<'_> {
                     present.extend(crate::geometry::sra().iter().map(|g| g.name.to_string()));
                 }
                 let missing = codec::missing_geometries(&present);
+                let have = set.len();
                 return Err(if is_reference {
                     StoreError::ReferenceIncomplete {
                         reference: ReferenceId(0),
-                        have: present.len(),
+                        have,
+                        want,
                         missing,
                     }
                 } else {
                     StoreError::ScanIncomplete {
                         scan: ScanId(0),
-                        have: present.len(),
+                        have,
+                        want,
                         missing,
                     }
                 });
@@ -626,18 +652,21 @@ impl ImportedScan<'_> {
         now: i64,
     ) -> Result<(ReferenceId, ScanId), StoreError> {
         let checked = self.checked()?;
-        let kind = match self.reference_readings {
-            Some(_) => "tile",
-            None => crate::scan::INSTRUMENT_CALIBRATION,
+        let (kind, reference_geometries) = match self.reference_readings {
+            Some(set) => ("tile", geometries_key(sra_count(set) > 0)),
+            // No readings: the instrument's calibration covers every geometry the scan has.
+            None => (crate::scan::INSTRUMENT_CALIBRATION, GEOMETRIES_ALL),
         };
         let taken = self.taken_at_ms.unwrap_or(now);
         let reference: i64 = sqlx::query_scalar(
-            "INSERT INTO reference_sets (name, status, taken_at_ms, completed_at_ms, kind)
-             VALUES ($1, 'complete', $2, $2, $3) RETURNING id",
+            "INSERT INTO reference_sets
+                 (name, status, taken_at_ms, completed_at_ms, kind, geometries)
+             VALUES ($1, 'complete', $2, $2, $3, $4) RETURNING id",
         )
         .bind(self.reference_name)
         .bind(taken)
         .bind(kind)
+        .bind(reference_geometries)
         .fetch_one(&mut **tx)
         .await?;
         super::write_provenance(

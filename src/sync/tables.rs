@@ -89,6 +89,8 @@ pub static TABLES: [Table; 10] = [
             ("completed_at_ms", Int),
             // A tile, or the instrument's own calibration (no readings).
             ("kind", Text),
+            // All 14 geometries, or the 12 MA-T12 ones (a tile measured without the SRA).
+            ("geometries", Text),
         ],
     },
     Table {

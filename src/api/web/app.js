@@ -210,7 +210,7 @@ async function syncBench(why = "") {
     }
     metrics.syncs.push({ kind: op ? op.kind : null, id: op ? op.id : null, state: op ? op.state : null,
       inProgress: op ? op.in_progress : false, readings: op ? op.readings.length : 0 });
-    if (why && op && op.in_progress) logLine(`${op.kind} ${op.id}${op.kind === "scan" ? ` of "${op.sample}"` : ""} in progress: ${op.readings.length} of 14 readings so far (from the daemon)`);
+    if (why && op && op.in_progress) logLine(`${op.kind} ${op.id}${op.kind === "scan" ? ` of "${op.sample}"` : ""} in progress: ${op.readings.length} of ${geometriesMeasuredNow()} readings so far (from the daemon)`);
   }
   for (const [kind, ev] of queued) onEvent(kind, ev);
   if (location.hash === "" || location.hash === "#/") renderBench();
@@ -363,6 +363,17 @@ async function refreshStatus() {
   deviceBanner();
 }
 
+/** How many geometries a scan measures: 14, or the 12 MA-T12 ones without SRA readings. */
+function geometryCount(scan) {
+  return scan && scan.specular_readings === false ? 12 : 14;
+}
+
+/** How many geometries a measurement started now takes: 12 while the SRA is turned off. */
+function geometriesMeasuredNow() {
+  const off = status && status.devices.some((d) => d.device === "sra" && d.state === "off");
+  return off ? 12 : 14;
+}
+
 /** What an instrument's trouble means for the operator: what happened, then what to do. */
 function deviceAdvice(d) {
   switch (d.state) {
@@ -380,7 +391,8 @@ function deviceAdvice(d) {
 let deviceBannerText = null;   // the instruments' trouble, while the banner shows it
 function deviceBanner() {
   if (!status) return;
-  const down = status.devices.filter((d) => d.state !== "connected" && d.state !== "unknown");
+  // An instrument turned off in the configuration is no trouble: the bench says so instead.
+  const down = status.devices.filter((d) => !["connected", "unknown", "off"].includes(d.state));
   if (down.length) {
     deviceBannerText = down.map(deviceAdvice).join(" · ");
     setBanner(deviceBannerText, true);
@@ -567,7 +579,7 @@ function renderOp() {
   }
   const what = live.kind === "scan" ? `Scan ${live.id} of "${live.sample}"` : `Reference ${live.id}`;
   const n = live.readings.size;
-  let text = `${what}: ${n} of 14 readings`;
+  let text = `${what}: ${n} of ${geometriesMeasuredNow()} readings`;
   if (live.state !== "measuring") text += ` — ${live.state}`;
   if (live.reason) text += `: ${live.reason}`;
   const ended = live.kind === "scan" && live.state !== "measuring";
@@ -641,7 +653,7 @@ async function renderScans(params) {
       onchange: (e) => { if (e.target.checked) selected.add(s.id); else selected.delete(s.id); updateReport(); } }) : ""),
     h("td", {}, h("a", { href: `#/scans/${s.id}` }, String(s.id))),
     h("td", {}, s.sample), h("td", {}, s.state, s.reason ? h("span", { class: "muted" }, ` — ${s.reason}`) : ""),
-    h("td", {}, when(s.requested_at_ms)), h("td", {}, `${s.reading_count}/14`),
+    h("td", {}, when(s.requested_at_ms)), h("td", {}, `${s.reading_count}/${geometryCount(s)}`),
     h("td", { class: simulatedNote(s.provenance) ? "sim" : "" }, sourceText(s.provenance))));
   const last = list.length ? list[list.length - 1].id : null;
   const older = new URLSearchParams(params); if (last) older.set("before", String(last));
@@ -756,14 +768,14 @@ async function renderResult(id) {
     ? (pendingFits ? `${pendingFits} fit(s) queued or running: this view shows them when they are done (reload).`
       : view.reference_stale ? "Not fitted: the reference was stale when the scan was made; refit below with \"allow the stale reference\" if that is acceptable."
       : "No finished fit: see the fits below for why, or refit.")
-    : ended ? `Not fitted: this scan ${ended} with ${scan.reading_count} of 14 readings, and only a complete scan is fitted. Scan the sample again from the bench.`
+    : ended ? `Not fitted: this scan ${ended} with ${scan.reading_count} of ${geometryCount(scan)} readings, and only a complete scan is fitted. Scan the sample again from the bench.`
     : "Not fitted yet: the scan is still being measured (see the bench).";
   fill(main,
     h("h2", {}, `Scan ${scan.id}: ${scan.sample}`),
     sim ? h("p", { class: "sim-note", id: "result-sim" }, sim) : null,
-    h("p", { id: "result-state", "data-state": scan.state }, `${scan.state}${scan.reason ? ` — ${scan.reason}` : ""} · requested ${when(scan.requested_at_ms)} · ${scan.reading_count}/14 readings`),
+    h("p", { id: "result-state", "data-state": scan.state }, `${scan.state}${scan.reason ? ` — ${scan.reason}` : ""} · requested ${when(scan.requested_at_ms)} · ${scan.reading_count}/${geometryCount(scan)} readings`),
     kept && !kept.error ? h("section", { "aria-labelledby": "h-kept" },
-      h("h3", { id: "h-kept" }, `Readings kept (${kept.length} of 14, raw as the instruments reported them)`),
+      h("h3", { id: "h-kept" }, `Readings kept (${kept.length} of ${geometryCount(scan)}, raw as the instruments reported them)`),
       h("div", { class: "cells", id: "kept-cells" }, GEOMETRIES.map((g) => {
         const r = kept.find((k) => k.geometry === g);
         return h("div", { class: `cell${g.startsWith("sra") ? " sra" : ""}${r ? " done" : ""}`, "data-geometry": g, "data-kept": r ? "yes" : "no" },
