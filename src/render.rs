@@ -473,7 +473,7 @@ pub(crate) mod tests {
                 });
                 let want = xyz_to_srgb_unclipped(reflectance_to_xyz(&r));
                 for c in 0..3 {
-                    // The issue asks for 1/255 before clipping; the evaluation is exact, so
+                    // 1/255 before clipping is the requirement; the evaluation is exact, so
                     // the difference is rounding only.
                     assert!(
                         (got[c] - want[c]).abs() < 1e-9,
