@@ -1,15 +1,15 @@
 //! Fit benchmarks (criterion): how long one scan takes to fit, and the floor under that.
 //!
 //! - `fit/<cost>`: the default (separable) method on one synthetic 14-geometry scan with 1 %
-//!   noise, for each cost function. Targets (issue 12): cf2 ≤ 10 ms and m2 ≤ 5 ms median on
+//!   noise, for each cost function. Targets: cf2 ≤ 10 ms and m2 ≤ 5 ms median on
 //!   one core, release. A cf2 fit includes its continuation stages (cf1, then weighted L1;
 //!   `optimise::separable`), which are what make it reliable (2 405 evaluations over the three
-//!   stages). The README ("The optimiser", Speed) quotes the figures before and after issue
-//!   12's two rounds of speed work; `examples/fit_times.rs` times the eight example scans.
+//!   stages). BENCHMARKS.md ("Fitting") quotes the figures; `examples/fit_times.rs` times the
+//!   eight example scans.
 //! - `fit_paper/cf2`: the paper GA with its default settings on the same scan (fewer samples:
 //!   it is slow, which is part of the point).
 //! - `bootstrap/all_costs_200`: the bootstrap intervals (SCIENCE.md §10) of the three fits of the
-//!   same scan, 200 resamples each, on 2 threads — the figure the issue sets at ≤ 2 s wall.
+//!   same scan, 200 resamples each, on 2 threads — the target is ≤ 2 s wall.
 //!   `bootstrap/<cost>_200`: one cost function's, on one thread.
 //! - `cost_eval/<cost>`: one model evaluation (14 specular terms, 434 values) plus one cost,
 //!   through the public API — the price of one GA individual.

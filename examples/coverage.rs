@@ -17,7 +17,7 @@
 //!
 //! Run: `cargo run --release --example coverage [-- --trials 200 --resamples 200 --noise 0.01
 //! --costs cf1,cf2,m2 --sra luminance --threads 2 --require 0.9]` (defaults shown, but for
-//! `--require`, off by default). The README quotes its output.
+//! `--require`, off by default). SCIENCE.md §12.3 quotes its output.
 
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;

@@ -1,6 +1,6 @@
 //! Fit times on the eight example scans (`tests/data/`, the paper samples of
 //! `brdfd::synth::paper_samples`, noise-free and with 1 % noise), default method and settings,
-//! one thread: the figures issue 12 sets (cf2 ≤ 10 ms, m2 ≤ 5 ms median on one core).
+//! one thread: the speed targets (cf2 ≤ 10 ms, m2 ≤ 5 ms median on one core; BENCHMARKS.md).
 //!
 //! Each scan is fitted `--reps` times per cost function; a scan's time is the median of its
 //! repetitions (machine noise), and the table gives the median and maximum over the scans.

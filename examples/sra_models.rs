@@ -1,5 +1,5 @@
-//! The two SRA reading models against ground truth (issue 16, SCIENCE.md §5.1): the README's
-//! "flat vs luminance" table.
+//! The two SRA reading models against ground truth (SCIENCE.md §5.1): the
+//! "flat vs luminance" table of SCIENCE.md §12.2.
 //!
 //! Trial `t` simulates the paper sample `t mod 8` (`brdfd::synth`) with multiplicative N(1, σ)
 //! noise on every reading, seed `t`, once per SRA response of the simulated instrument (band
@@ -16,7 +16,7 @@
 //!   spread into.
 //!
 //! Run: `cargo run --release --example sra_models [-- --trials 40 --noise 0.01]` (defaults
-//! shown). The README quotes its output.
+//! shown). SCIENCE.md §12.2 quotes its output, BENCHMARKS.md its run time.
 
 use std::fmt::Write as _;
 use std::time::Instant;

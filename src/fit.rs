@@ -529,7 +529,7 @@ mod tests {
         assert!(!report.outcome.best_cost_per_generation.is_empty());
     }
 
-    /// Issue 16's check: scans whose SRA reads the luminance (illuminant C, 2° V(λ)), fitted
+    /// The luminance model's check: scans whose SRA reads the luminance (illuminant C, 2° V(λ)), fitted
     /// with the luminance model under cf2, recover ks, α, μ and kd to 1e-6 and match the
     /// measured luminance at the SRA geometries to |ΔL*| < 0.01, while the paper's ΔE00 against
     /// the grey spectrum calls the same exact fits poor. Under cf1 the flat model on the same

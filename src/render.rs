@@ -377,7 +377,7 @@ pub fn preview(sample: &SampleStudy, costs: &[CostFunction]) -> Result<Picture, 
         let (k, on) = clip_total;
         let lines = [
             "light: directional D65 from the upper left, 45° from the view (l = (−½, ½, 1/√2), camera along +z, orthographic); ambient: uniform D65, 8 % (diffuse term only)".to_string(),
-            "pixel = π·f(λ)·cosθi + 0.08·π·kd(λ), XYZ by CIE 15 sums over 400–700 nm, sRGB as the swatches; background 18 % grey".to_string(),
+            "pixel = π·f(λ)·cosθi + 0.08·π·kd(λ), XYZ by CIE 15 sums over 400–700 nm, sRGB as the swatches; on an 18 % grey background".to_string(),
             format!(
                 "magenta hatching: clipped, outside sRGB ({:.1} % of the sphere pixels shown)",
                 100.0 * k as f64 / on.max(1) as f64
@@ -473,7 +473,7 @@ pub(crate) mod tests {
                 });
                 let want = xyz_to_srgb_unclipped(reflectance_to_xyz(&r));
                 for c in 0..3 {
-                    // The issue asks for 1/255 before clipping; the evaluation is exact, so
+                    // 1/255 before clipping is the requirement; the evaluation is exact, so
                     // the difference is rounding only.
                     assert!(
                         (got[c] - want[c]).abs() < 1e-9,

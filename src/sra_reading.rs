@@ -1,5 +1,5 @@
-//! What one SRA reading says about the sample, chosen per fit and recorded with it (issue 16,
-//! SCIENCE.md §5.1).
+//! What one SRA reading says about the sample, chosen per fit and recorded with it
+//! (SCIENCE.md §5.1).
 //!
 //! The Canon SRA reports one achromatic number per geometry. Processing spreads it flat over the
 //! 31 bands (`crate::processing`); how the fit and the evaluation then read that flat spectrum

@@ -153,7 +153,7 @@ const fn row(
 /// Measured coverage per cost function and SRA reading model: `cargo run --release --example
 /// coverage -- --resamples 100 --sra luminance` (200 trials) and `-- --trials 96 --resamples
 /// 100 --sra flat` (1 % noise per reading, the paper's Fresnel; the simulated SRA reads what
-/// the model assumes: the luminance, or the band mean). SCIENCE.md §10 and README quote the
+/// the model assumes: the luminance, or the band mean). SCIENCE.md §12.3 quotes the
 /// same runs.
 pub const CALIBRATION: [Coverage; 6] = [
     row(

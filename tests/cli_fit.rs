@@ -165,7 +165,7 @@ fn bad_cost_fails_with_one_line() {
     assert!(err.contains("unknown cost function \"cf9\""), "{err}");
 }
 
-/// Every subcommand of `brdfd`, as `--help` lists them (README.md teaches each one).
+/// Every subcommand of `brdfd`, as `--help` lists them (README.md and GUIDE.md teach them).
 const SUBCOMMANDS: [&str; 24] = [
     "fit",
     "synth",
@@ -199,7 +199,7 @@ fn help_lists_subcommands_and_explains_fit_options() {
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
     // The first word of every line of the "Commands:" section, compared whole (so "fit" is not
-    // found inside "refit"), in the order the README teaches them.
+    // found inside "refit"), in the order `--help` lists them.
     let listed: Vec<&str> = text
         .split("Commands:\n")
         .nth(1)

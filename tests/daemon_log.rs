@@ -1,4 +1,4 @@
-//! The daemon's log on stderr, as README.md "Running the daemon" describes it: text by default,
+//! The daemon's log on stderr, as GUIDE.md "Running the daemon" describes it: text by default,
 //! one JSON object per line with `[log] json = true`, the level from `[log] level` unless
 //! `RUST_LOG` overrides it. (Under systemd the log goes to journald instead:
 //! `src/cli/serve.rs`'s journald tests.)

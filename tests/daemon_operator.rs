@@ -130,7 +130,7 @@ fn ok(out: &std::process::Output, what: &str) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-/// Exit status `code` (README "Exit status": 1 failed, 6 refused by the daemon's state) with
+/// Exit status `code` (GUIDE.md "Exit status": 1 failed, 6 refused by the daemon's state) with
 /// exactly one line on stderr, starting `error: ` and containing `want`.
 fn fails(out: &std::process::Output, code: i32, want: &str, what: &str) {
     let stderr = String::from_utf8_lossy(&out.stderr);

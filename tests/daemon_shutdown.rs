@@ -1,4 +1,4 @@
-//! README: "SIGTERM … stops the fits at their next generation (they run again at the next
+//! GUIDE.md ("What happens to a scan"): "SIGTERM … stops the fits at their next generation (they run again at the next
 //! start)", and the daemon runs "until SIGTERM or SIGINT". `brdfd serve` as a child process
 //! (simulated instruments, the store and its token in a temporary directory, the API on a free
 //! loopback port) runs a long fit — the paper GA at its default 98,100 evaluations, seconds in a
@@ -132,7 +132,7 @@ fn sigint_stops_a_long_fit_which_runs_again_at_the_next_start() {
     signal_stops_a_long_fit_which_runs_again_at_the_next_start("INT");
 }
 
-/// README: "SIGTERM aborts the measurement in progress". With an event stream open (as `brdfd
+/// GUIDE.md: "SIGTERM aborts the measurement in progress". With an event stream open (as `brdfd
 /// scan` holds one), SIGTERM once the SRA's two readings are stored and the MA-T12's twelve
 /// are still to come (about 0.8 s later in the recorded timing): the scan is aborted with the
 /// readings it had, not finished during the API's one-second grace for open streams.

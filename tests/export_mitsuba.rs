@@ -10,7 +10,7 @@
 //! is |r_g − 1| · lobe, the bound SCIENCE.md states; for the exact-Fresnel fits r_g = 1 and
 //! Mitsuba's BSDF is brdfd's model. A Mitsuba render of each sample's cf1 scenes and brdfd's
 //! preview agree, on the same brightness scale (no factor applied to Mitsuba's film), in mean
-//! colour within the ΔE00 README and SCIENCE.md §11 state, and in mean luminance within 2 %.
+//! colour within the ΔE00 GUIDE.md and SCIENCE.md §11 state, and in mean luminance within 2 %.
 
 use std::io::Write as _;
 use std::path::PathBuf;
@@ -54,7 +54,7 @@ fn fresnel_exact(c: f64, eta: f64) -> f64 {
     0.5 * (rs * rs + rp * rp)
 }
 
-/// The mean-colour ΔE00 between a Mitsuba render and brdfd's preview that README and
+/// The mean-colour ΔE00 between a Mitsuba render and brdfd's preview that GUIDE.md and
 /// SCIENCE.md §11 state.
 const MEAN_COLOUR_DE00: f64 = 0.6;
 

@@ -7,9 +7,9 @@
 //!   up to the optimiser's stopping tolerance (1e-6 relative): an optimiser that ends above the
 //!   truth has stopped in a worse place than a known point;
 //! - `cf2`, noise-free: kd within 1e-6 and ks, α, μ within 1e-4 of the truth (relative), and
-//!   diffuse mean ΔE00 below 5e-5 (README: "0.0000", "exact (0.00 %)");
-//! - `cf2`, 1 % noise: every sample's diffuse mean ΔE00 < 0.6 and their mean < 0.3 (README:
-//!   "0.27 (max 0.57)");
+//!   diffuse mean ΔE00 below 5e-5 (SCIENCE.md §12.1: "0.0000", "exact (0.00 %)");
+//! - `cf2`, 1 % noise: every sample's diffuse mean ΔE00 < 0.6 and their mean < 0.3 (SCIENCE.md
+//!   §12.1: "0.27 (max 0.57)");
 //! - `cf1`, noise-free: kd is the true kd pulled toward its band mean by exactly the share of
 //!   the two flat SRA spectra in the cosine weights, and ks, α, μ are exact.
 
@@ -46,7 +46,7 @@ fn examples(noisy: bool) -> Vec<(Scan, GroundTruth)> {
             // The committed files must still be what the generator makes.
             assert_eq!(
                 &truth, t,
-                "{s}.truth.json is stale: regenerate tests/data (README)"
+                "{s}.truth.json is stale: regenerate tests/data (tests/data/README.md)"
             );
             (scan, truth)
         })
@@ -129,7 +129,7 @@ fn fit_and_report(noisy: bool, cf: CostFunction) -> Vec<(FitReport, GroundTruth)
 
 #[test]
 fn cf2_recovers_the_noise_free_truth() {
-    // README: "0.0000" diffuse ΔE00 and "exact (0.00 %)" on ks, α, μ. Checked as kd within
+    // SCIENCE.md §12.1: "0.0000" diffuse ΔE00 and "exact (0.00 %)" on ks, α, μ. Checked as kd within
     // 1e-6 relative in every band, the lobe within 1e-4 relative and the diffuse mean ΔE00
     // below 5e-5 (what prints as 0.0000).
     let mut worst = (0.0f64, 0.0f64);
@@ -161,8 +161,8 @@ fn cf2_recovers_the_noise_free_truth() {
 }
 
 #[test]
-fn cf2_with_one_percent_noise_stays_within_the_readme_figures() {
-    // README: "0.27 (max 0.57)". Checked as the mean over samples below 0.3 and every
+fn cf2_with_one_percent_noise_stays_within_the_documented_figures() {
+    // SCIENCE.md §12.1: "0.27 (max 0.57)". Checked as the mean over samples below 0.3 and every
     // sample's diffuse mean ΔE00 below 0.6.
     let fits = fit_and_report(true, CostFunction::Cf2);
     for (r, truth) in &fits {

@@ -943,7 +943,7 @@ async fn brdfd_sync_keeps_forwarding_through_outages_and_resumes_at_once() {
     .await;
 }
 
-/// The pooled query of README "The central database with SQL".
+/// The pooled query of GUIDE.md "The central database with SQL".
 const POOLED_QUERY: &str = "
     SELECT lab_sample, cost_function, COUNT(DISTINCT station) AS stations, COUNT(*) AS fits,
            avg(ks) AS ks, avg(alpha) AS alpha, avg(mu) AS mu,
@@ -1078,7 +1078,7 @@ async fn the_central_views_decode_as_the_stations_and_pool_across_stations() {
             assert_eq!(kd, 31 * local_fits.len() as i64, "{n}: kd_values");
             local.close().await;
         }
-        // The lab says the two stations' first samples are the same tile; the README's query
+        // The lab says the two stations' first samples are the same tile; GUIDE.md's query
         // pools them.
         sqlx::query("INSERT INTO lab_samples (lab_sample) VALUES ('L-0001')")
             .execute(&pg)

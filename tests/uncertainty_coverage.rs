@@ -1,6 +1,6 @@
 //! The bootstrap intervals are calibrated, not decorative (SCIENCE.md §10): a reduced, debug-build
 //! check beside `examples/coverage.rs` (whose full output, 200 trials × 3 cost functions × 200
-//! resamples under each SRA model, is in the README, and which CI runs in release for cf1, cf2
+//! resamples under each SRA model, is in SCIENCE.md §12.3, and which CI runs in release for cf1, cf2
 //! and m2 under the luminance SRA model). Here: cf1 under the paper's flat SRA model (simulated
 //! SRA reading the band mean), 40 trials (the 8 example samples × 5 noise draws, 1 % noise per
 //! reading), 50 resamples each.

@@ -568,7 +568,7 @@ async fn refit(
         rejected_body(
             &format!("POST /scans/{scan}/refit"),
             "send {\"cost_functions\": [\"cf1\", …], \"method\", \"seed\", \"sra\"} (each \
-                 optional; README: HTTP API)",
+                 optional; GUIDE.md: The HTTP API)",
             &e.body_text(),
         )
     })?;

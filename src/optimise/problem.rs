@@ -17,13 +17,13 @@
 //! rounding (cf2 uses a fast cube root accurate to a few ulps, see [`pow23`], and m2 an inline `ln_1p` within 1 ulp
 //! of libm's, see [`ln_1p_recip`]).
 //!
-//! Speed (issue 12): a profile is the inner loop of every fit and of every bootstrap refit, so
+//! Speed: a profile is the inner loop of every fit and of every bootstrap refit, so
 //! its per-band solves are written to run in SIMD lanes, all 31 bands at once with the band
 //! the innermost loop — cf1's closed form and its sums, cf2 and L1 over the 91 pairwise terms,
 //! m2's Newton–Halley passes (each band's solve in its own lane, the few bands that need a
 //! third pass finishing alone) — and [`Problem::profile`] is compiled a second time for AVX2,
 //! chosen at run time. The arithmetic on each value is the same in both compilations, so fits
-//! do not depend on the CPU. `examples/fit_times.rs` times the fits; the README quotes the
+//! do not depend on the CPU. `examples/fit_times.rs` times the fits; BENCHMARKS.md quotes the
 //! figures.
 
 // Numeric loops index parallel per-geometry and per-band arrays; `for g in 0..G` reads

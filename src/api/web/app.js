@@ -24,7 +24,7 @@ const EVENT_KINDS = [
   "shutting_down", "lagged",
 ];
 
-/** What the page measures of itself, read by the browser tests and the README's figures. */
+/** What the page measures of itself, read by the browser tests (BENCHMARKS.md quotes them). */
 const metrics = { readingLatencyMs: [], firstRenderMs: null, errors: [], streamOpens: 0, streamErrors: 0, syncs: [] };
 window.brdfdMetrics = metrics;
 window.addEventListener("error", (e) => metrics.errors.push(String(e.message)));
