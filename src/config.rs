@@ -1285,8 +1285,8 @@ impl Checker<'_> {
             .transport
             .as_ref()
             .is_some_and(|t| t.get_ref().trim() == "off");
-        let serial = !off
-            && self.real_transport(&KEYS, &raw.transport, "serial", REQUIRED_TRANSPORT_SRA)?;
+        let serial =
+            !off && self.real_transport(&KEYS, &raw.transport, "serial", REQUIRED_TRANSPORT_SRA)?;
         let port = self.value(
             "devices.sra.port",
             &raw.port,

@@ -41,11 +41,20 @@ async fn with_the_sra_off_a_reference_and_a_scan_have_12_readings_and_fit_with_i
         let r = d.store.reference_detail(reference).await.unwrap();
         assert_eq!(r.readings.len(), MA_T12_COUNT);
         assert!(!r.reference.specular_readings);
-        assert!(r.readings.iter().all(|x| x.geometry.device == Device::MaT12));
+        assert!(
+            r.readings
+                .iter()
+                .all(|x| x.geometry.device == Device::MaT12)
+        );
 
         let scan = scan_and_settle(service, "T.Sky blue").await;
         let detail = d.store.scan_detail(scan).await.unwrap();
-        assert_eq!(detail.scan.state, ScanState::Complete, "{:?}", detail.scan.reason);
+        assert_eq!(
+            detail.scan.state,
+            ScanState::Complete,
+            "{:?}",
+            detail.scan.reason
+        );
         assert!(!detail.scan.specular_readings);
         assert_eq!(detail.readings.len(), MA_T12_COUNT);
 
@@ -53,7 +62,13 @@ async fn with_the_sra_off_a_reference_and_a_scan_have_12_readings_and_fit_with_i
         assert_eq!(fits.len(), 3, "one fit per cost function");
         let deadline = Instant::now() + Duration::from_secs(120);
         for fit in &fits {
-            assert_eq!(fit.status, FitStatus::Done, "fit {}: {:?}", fit.id, fit.error);
+            assert_eq!(
+                fit.status,
+                FitStatus::Done,
+                "fit {}: {:?}",
+                fit.id,
+                fit.error
+            );
             // The intervals come after the fit, from the bootstrap.
             let detail = loop {
                 let detail = d.store.fit_detail(fit.id).await.unwrap();
@@ -109,11 +124,26 @@ async fn with_the_sra_off_a_reference_and_a_scan_have_12_readings_and_fit_with_i
         }
         // A new reference with the SRA makes scanning possible again.
         let full = measure_reference(&again).await;
-        assert!(store.reference_detail(full).await.unwrap().reference.specular_readings);
-        let scan = again.request_scan("T.Sky blue").await.expect("scan accepted");
+        assert!(
+            store
+                .reference_detail(full)
+                .await
+                .unwrap()
+                .reference
+                .specular_readings
+        );
+        let scan = again
+            .request_scan("T.Sky blue")
+            .await
+            .expect("scan accepted");
         assert!(again.wait_settled(scan, STEP_TIMEOUT).await.unwrap());
         let detail = store.scan_detail(scan).await.unwrap();
-        assert_eq!(detail.scan.state, ScanState::Complete, "{:?}", detail.scan.reason);
+        assert_eq!(
+            detail.scan.state,
+            ScanState::Complete,
+            "{:?}",
+            detail.scan.reason
+        );
         assert!(detail.scan.specular_readings);
         assert_eq!(detail.readings.len(), 14);
         again.shutdown().await;
@@ -126,7 +156,9 @@ async fn with_the_sra_off_a_reference_and_a_scan_have_12_readings_and_fit_with_i
 #[tokio::test]
 async fn the_store_keeps_an_ma_t12_only_scan_to_its_12_geometries() {
     let dir = tempfile::tempdir().unwrap();
-    let store = brdfd::store::Store::open(&dir.path().join("s.db")).await.unwrap();
+    let store = brdfd::store::Store::open(&dir.path().join("s.db"))
+        .await
+        .unwrap();
     let reference = store
         .begin_reference_of("Munsell N9", None, false)
         .await
@@ -161,7 +193,10 @@ async fn the_store_keeps_an_ma_t12_only_scan_to_its_12_geometries() {
         .unwrap();
     store.complete_reference(reference).await.unwrap();
     let e = store.request_scan("a", reference).await.unwrap_err();
-    assert!(matches!(e, StoreError::ReferenceWithoutSpecular { .. }), "{e}");
+    assert!(
+        matches!(e, StoreError::ReferenceWithoutSpecular { .. }),
+        "{e}"
+    );
     let scan = store.request_scan_of("a", reference, false).await.unwrap();
     store.start_measuring(scan).await.unwrap();
     let e = store

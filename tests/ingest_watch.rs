@@ -631,6 +631,7 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
                     reference_readings: Some(&r),
                     readings: &m,
                     taken_at_ms: None,
+                    textures: &[],
                 }],
             )
             .await
@@ -654,6 +655,7 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
                     reference_readings: Some(&r),
                     readings: &m,
                     taken_at_ms: None,
+                    textures: &[],
                 }],
             )
             .await

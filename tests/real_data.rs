@@ -153,6 +153,19 @@ fn the_daemon_imports_real_exports_by_watch_folder_and_http_and_fits_them() {
     let list = daemon.client.get("/scans").unwrap();
     let scans = list.as_array().unwrap();
     assert_eq!(scans.len(), 6, "{list}");
+    let expected_textures: Vec<(String, Vec<(String, Vec<u8>)>)> = FILES
+        .iter()
+        .flat_map(|f| brdfd::formats::xrite::read_file(&real(f)).unwrap())
+        .map(|x| {
+            let t = x
+                .textures
+                .into_iter()
+                .map(|t| (t.geometry, t.png))
+                .collect();
+            (x.scan.sample, t)
+        })
+        .collect();
+    let mut any_texture = false;
     wait_for("every fit done", || {
         let status = daemon.client.get("/status").unwrap();
         status["fits_queued"] == 0 && status["fits_running"] == 0
@@ -184,5 +197,31 @@ fn the_daemon_imports_real_exports_by_watch_folder_and_http_and_fits_them() {
             let mean = f["evaluation"]["all"]["mean"].as_f64().unwrap();
             assert!(mean > 0.0 && mean < 10.0, "{f}");
         }
+        // The instrument camera's images are kept with the scan, byte for byte as the file
+        // holds them, in its order, by either path.
+        let sample = d["scan"]["sample"].as_str().unwrap();
+        let textures = d["textures"].as_array().unwrap();
+        let want = &expected_textures
+            .iter()
+            .find(|(name, _)| name == sample)
+            .unwrap_or_else(|| panic!("no file measured {sample}"))
+            .1;
+        assert_eq!(textures.len(), want.len(), "{sample}: {d}");
+        for (t, (label, png)) in textures.iter().zip(want) {
+            assert_eq!(t["label"], label.as_str(), "{t}");
+            let n = t["position"].as_u64().unwrap();
+            let got = daemon
+                .client
+                .get_bytes(&format!("/scans/{id}/textures/{n}.png"))
+                .unwrap();
+            assert!(&got == png, "{sample} texture {n} differs from the file's");
+        }
+        any_texture |= !textures.is_empty();
     }
+    assert!(any_texture, "the shared exports carry texture images");
+    let e = daemon
+        .client
+        .get_bytes(&format!("/scans/{}/textures/99.png", scans[0]["id"]))
+        .unwrap_err();
+    assert!(e.to_string().contains("texture image"), "{e}");
 }

@@ -148,7 +148,11 @@ fn instruments(sra_unplug_after: Option<usize>, speed: f64) -> Devices {
     };
     Devices {
         ma_t12: brdfd::service::devices::spawn_mat12_with(m.factory(), config.clone(), None),
-        sra: Some(brdfd::service::devices::spawn_sra_with(s.factory(), config, None)),
+        sra: Some(brdfd::service::devices::spawn_sra_with(
+            s.factory(),
+            config,
+            None,
+        )),
         simulators: Simulators {
             ma_t12: Some(m),
             sra: Some(s),

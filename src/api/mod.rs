@@ -9,6 +9,7 @@
 //! | `GET /scans?state=&sample=&sample_contains=&limit=&before=` | list scans, newest first (`sample`: that name; `sample_contains`: names holding that text, any case; `limit` ≤ 500; `before=ID` pages on) | 200 `[summary]` |
 //! | `GET /scans/{id}` | a scan, its readings, reference and fits | 200 |
 //! | `GET /scans/{id}/export` | the scan as `brdfd.scan/1` | 200 |
+//! | `GET /scans/{id}/textures/{n}.png` | the instrument camera's image `n` kept with an imported scan (listed in the scan's `textures`) | 200 `image/png` |
 //! | `POST /scans/import` (a `brdfd.scan/1` body, or an X-Rite QC `.xlsx` export) | import its scans, fit them | 201 `{"scan", "fits"}` (an `.xlsx`: `"scans"` and `"colorimetry_checks"` too) |
 //! | `POST /scans/{id}/refit` [`RefitRequest`] (`sra`: `"flat"`/`"luminance"`) | queue fits again | 202 `{"fits": [id]}` |
 //! | `POST /abort` | stop the reference or scan in progress | 200 `{"aborted": …}` |
@@ -253,6 +254,9 @@ pub struct ScanView {
     pub reference_age_hours: f64,
     /// Whether that is over `[scan] reference_max_age_hours` (the scan is not fitted then).
     pub reference_stale: bool,
+    /// The instrument camera's images kept with an imported scan, in the export's order
+    /// (`GET /scans/{id}/textures/{position}.png`); empty for most scans.
+    pub textures: Vec<crate::store::TextureSummary>,
 }
 
 /// Everything [`ApiServer`] needs besides the service: who may call, and the bounds.
@@ -307,6 +311,7 @@ pub fn router(service: Service, options: &ApiOptions) -> Router {
         .route("/scans/{id}", get(show_scan))
         .route("/scans/{id}/export", get(export_scan))
         .route("/scans/{id}/refit", post(refit))
+        .route("/scans/{id}/textures/{position}", get(scan_texture))
         .route("/abort", post(abort))
         .route("/fits/{id}", get(show_fit))
         .route("/fits/{id}/cancel", post(cancel_fit))
@@ -458,7 +463,38 @@ async fn show_scan(
         fits,
         reference_age_hours: age_ms as f64 / 3.6e6,
         reference_stale,
+        textures: s.store().scan_textures(scan).await?,
     }))
+}
+
+/// `GET /scans/{id}/textures/{position}.png`: one of the instrument camera's images kept with
+/// an imported scan (`textures` in `GET /scans/{id}` lists them), as stored.
+async fn scan_texture(
+    State(s): State<Service>,
+    Path((id, position)): Path<(String, String)>,
+) -> ApiResult<impl IntoResponse> {
+    let scan: ScanId = parse_id("scan", &id)?;
+    let position: u32 = position
+        .strip_suffix(".png")
+        .and_then(|p| p.parse().ok())
+        .ok_or_else(|| {
+            ServiceError::BadRequest(format!(
+                "\"{position}\" is not a texture image: ask for /scans/{scan}/textures/N.png, N \
+                 from the scan's \"textures\" list"
+            ))
+        })?;
+    let png = s.store().scan_texture_png(scan, position).await?;
+    Ok((
+        [
+            (axum::http::header::CONTENT_TYPE, "image/png"),
+            // The same position of the same scan is always the same image.
+            (
+                axum::http::header::CACHE_CONTROL,
+                "private, max-age=86400, immutable",
+            ),
+        ],
+        png,
+    ))
 }
 
 async fn export_scan(
@@ -532,7 +568,12 @@ async fn import_xrite(s: &Service, body: &[u8]) -> Result<Response, ApiError> {
     let mut all_fits = Vec::new();
     let mut checks = Vec::with_capacity(scans.len());
     for x in &scans {
-        let (scan, fits) = s.import_scan(&x.scan).await?;
+        let (provenance, taken_at_ms) =
+            crate::service::imported_provenance(&x.scan, "uploaded X-Rite QC .xlsx export")
+                .map_err(ServiceError::InvalidScan)?;
+        let (scan, fits) = s
+            .import_scan_as(&x.scan, &provenance, taken_at_ms, &x.textures)
+            .await?;
         if let Some(w) = x.warning() {
             tracing::warn!(scan = %scan, "{w}");
         }

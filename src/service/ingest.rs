@@ -51,13 +51,14 @@ use std::time::{Duration, Instant, SystemTime};
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
+use crate::formats::xrite_xlsx::TextureImage;
 use crate::formats::{self, Format, ImportOptions};
 use crate::safe_fs::{Dir, EntryKind, FsError, Replace};
 use crate::scan::Scan;
-use crate::store::{FileImport, ImportedScan, Provenance, Source, StoreError};
+use crate::store::{FileImport, ImportedScan, NewTexture, Provenance, Source, StoreError};
 
 use super::events::Event;
-use super::pipeline::{IMPORTED_SUFFIX, check_name, new_readings};
+use super::pipeline::{IMPORTED_SUFFIX, check_name, new_readings, new_textures};
 use super::{RefitRequest, Service, ServiceError};
 
 /// Where finished files go, and the folder of files being imported.
@@ -359,13 +360,13 @@ enum Failure {
     Retry(String),
 }
 
-/// The scans in a unit's files (read from `.importing/`), with their content hash.
-fn read_unit(
-    dir: &Dir,
-    unit: &Unit,
-    reference: &str,
-    max: u64,
-) -> Result<(String, Vec<Scan>), String> {
+/// What a unit's files hold: their content hash, the scans, and each scan's texture images
+/// (the instrument camera's, from an X-Rite `.xlsx`; none from other files).
+type UnitContent = (String, Vec<Scan>, Vec<Vec<TextureImage>>);
+
+/// The scans in a unit's files (read from `.importing/`), with their content hash and texture
+/// images.
+fn read_unit(dir: &Dir, unit: &Unit, reference: &str, max: u64) -> Result<UnitContent, String> {
     let read = |name: &str| {
         dir.read_bounded(name, max).map_err(|e| match e {
             FsError::TooLarge { size, .. } => format!(
@@ -397,7 +398,8 @@ fn read_unit(
                     tracing::warn!(file = %unit.main, "{w}");
                 }
             }
-            scans.into_iter().map(|s| s.scan).collect()
+            let (scans, textures) = scans.into_iter().map(|s| (s.scan, s.textures)).unzip();
+            return Ok((hash, scans, textures));
         }
         Kind::SraCsv => {
             return Err(format!(
@@ -433,7 +435,8 @@ fn read_unit(
             })?
         }
     };
-    Ok((hash, scans))
+    let textures = vec![Vec::new(); scans.len()];
+    Ok((hash, scans, textures))
 }
 
 impl Service {
@@ -801,7 +804,7 @@ impl Service {
         unit: &Unit,
         recovering: bool,
     ) -> Result<Option<(String, Vec<crate::store::ScanId>, String)>, Failure> {
-        let (hash, scans) = {
+        let (hash, scans, textures) = {
             let unit = unit.clone();
             let reference = settings.reference.clone();
             let max = settings.max_file_bytes;
@@ -862,18 +865,21 @@ impl Service {
             })
             .collect::<Result<_, _>>()
             .map_err(|e| Failure::Rejected(format!("{}: {e}", unit.main)))?;
+        let textures: Vec<Vec<NewTexture<'_>>> = textures.iter().map(|t| new_textures(t)).collect();
         let imports: Vec<ImportedScan<'_>> = scans
             .iter()
             .zip(&names)
             .zip(&readings)
             .zip(&origins)
-            .map(|(((s, name), (r, m)), (p, taken))| ImportedScan {
+            .zip(&textures)
+            .map(|((((s, name), (r, m)), (p, taken)), t)| ImportedScan {
                 sample_name: &s.sample,
                 reference_name: name,
                 provenance: p,
                 reference_readings: r.as_deref(),
                 readings: m,
                 taken_at_ms: *taken,
+                textures: t,
             })
             .collect();
         let stored = self

@@ -9,12 +9,13 @@
 //! when their 14th reading is stored, imported ones from [`Service::import_scan`] (the API,
 //! `brdfd import`, the watch folder).
 
+use crate::formats::xrite_xlsx::TextureImage;
 use crate::geometry::{Device, MA_T12_COUNT};
 use crate::processing::{self, ProcessingOptions};
 use crate::scan::{DeviceReadings, Scan, ScanError};
 use crate::store::{
-    FitRunId, ImportedScan, InstrumentProvenance, NewFit, NewReading, Provenance, ReadingValues,
-    ScanDetail, ScanId, ScanState, Source, StoreError,
+    FitRunId, ImportedScan, InstrumentProvenance, NewFit, NewReading, NewTexture, Provenance,
+    ReadingValues, ScanDetail, ScanId, ScanState, Source, StoreError,
 };
 
 use super::events::Event;
@@ -144,16 +145,19 @@ impl Service {
     /// measured one. Returns the scan's id and its fits.
     pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
         let (provenance, taken_at_ms) = imported_provenance(file, "brdfd.scan/1 file")?;
-        self.import_scan_as(file, &provenance, taken_at_ms).await
+        self.import_scan_as(file, &provenance, taken_at_ms, &[])
+            .await
     }
 
     /// [`Service::import_scan`] with what the file says of its origin: the instruments and
-    /// source (`provenance`) and when the readings were taken (`taken_at_ms`, else now).
+    /// source (`provenance`), when the readings were taken (`taken_at_ms`, else now), and the
+    /// instrument camera's images of the measurement, kept with the scan.
     pub async fn import_scan_as(
         &self,
         file: &Scan,
         provenance: &Provenance,
         taken_at_ms: Option<i64>,
+        textures: &[TextureImage],
     ) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
         file.validate()?;
         check_name("sample name", &file.sample)?;
@@ -162,6 +166,7 @@ impl Service {
         let name = format!("{}{IMPORTED_SUFFIX}", file.reference_label());
         let reference_readings = file.reference.as_ref().map(|r| new_readings(&r.readings));
         let readings = new_readings(&file.readings);
+        let textures = new_textures(textures);
         // One transaction: a failure leaves no half-imported reference or scan behind.
         let (_reference, scan) = self
             .timed_store(store.import(&ImportedScan {
@@ -171,6 +176,7 @@ impl Service {
                 reference_readings: reference_readings.as_deref(),
                 readings: &readings,
                 taken_at_ms,
+                textures: &textures,
             }))
             .await?;
         self.inner.events.send(Event::ScanComplete { scan });
@@ -179,6 +185,18 @@ impl Service {
             .await?;
         Ok((scan, fits))
     }
+}
+
+/// An export's texture images as the store takes them.
+pub(crate) fn new_textures(textures: &[TextureImage]) -> Vec<NewTexture<'_>> {
+    textures
+        .iter()
+        .map(|t| NewTexture {
+            label: &t.geometry,
+            anchor: &t.anchor,
+            png: &t.png,
+        })
+        .collect()
 }
 
 /// The provenance of an imported scan: what its `origin` says (instruments, measurement time,

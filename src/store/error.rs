@@ -99,6 +99,10 @@ pub enum StoreError {
         geometry: &'static str,
     },
 
+    /// A texture image handed in that is not a PNG file.
+    #[error("{what} is not a PNG file: the export's image is damaged; export the file again")]
+    NotPng { what: String },
+
     /// A scan with SRA readings asked for against a reference set measured without the SRA.
     #[error(
         "reference {reference} was measured without the SRA (12 MA-T12 geometries), so it \

@@ -37,6 +37,7 @@ pub mod lock;
 pub mod records;
 mod references;
 mod scans;
+mod textures;
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
@@ -55,6 +56,7 @@ pub use records::{
     ScanSummary, Source,
 };
 pub use scans::ImportedScan;
+pub use textures::{NewTexture, TextureSummary};
 
 use backend::Pool;
 

@@ -317,6 +317,7 @@ impl Store {
             reference_readings: Some(reference_readings),
             readings,
             taken_at_ms: None,
+            textures: &[],
         };
         import.check()?;
         let mut tx = self.writer.begin().await?;
@@ -557,6 +558,8 @@ pub struct ImportedScan<'a> {
     /// When the instrument took the readings, ms since the epoch, if the file says so (else the
     /// import time is recorded).
     pub taken_at_ms: Option<i64>,
+    /// The instrument camera's images of the measurement, kept with the scan (each PNG once).
+    pub textures: &'a [super::NewTexture<'a>],
 }
 
 /// The number of SRA readings in a set.
@@ -582,6 +585,7 @@ impl ImportedScan<'_> {
                 return Err(StoreError::Empty { field });
             }
         }
+        super::textures::check_textures(self.textures)?;
         self.checked().map(|_| ())
     }
 
@@ -714,6 +718,7 @@ impl ImportedScan<'_> {
                 .execute(&mut **tx)
                 .await?;
         }
+        super::textures::insert_textures(tx, scan, self.textures).await?;
         Ok((ReferenceId(reference), ScanId(scan)))
     }
 }

@@ -1204,6 +1204,7 @@ async fn instrument_calibration_scans_without_sra_readings() {
         reference_readings: None,
         readings: &readings,
         taken_at_ms: Some(1_723_000_000_000),
+        textures: &[],
     };
     let (reference, scan) = store.import(&import).await.unwrap();
     let detail = store.scan_detail(scan).await.unwrap();

@@ -241,6 +241,10 @@ mod tests {
         "sync_lineage",
         "ingested_files",
         "ingested_scans",
+        // The instrument camera's texture images of imported scans stay on the station; the
+        // central database has the scans' readings, fits and evaluations.
+        "texture_images",
+        "scan_textures",
         // Constants of the SQL views of migration 0013, the same on every station.
         "view_bands",
         "view_pow2",

@@ -803,6 +803,12 @@ async function renderResult(id) {
       h("p", { class: "muted" }, "! marks a colour outside the sRGB gamut (shown as the nearest displayable one)."),
       geometryLegend())
       : null,
+    view.textures && view.textures.length ? h("section", { "aria-labelledby": "h-tex" },
+      h("h3", { id: "h-tex" }, "The instrument camera's images (kept from the export)"),
+      h("div", { class: "textures", id: "textures" }, view.textures.map((t) => h("figure", { "data-label": t.label },
+        h("img", { src: `/scans/${id}/textures/${t.position}.png`, alt: `the MA-T12 camera's image at ${t.label}`, loading: "lazy", width: "120", height: "120" }),
+        h("figcaption", {}, t.label)))))
+      : null,
     h("section", { "aria-labelledby": "h-de" },
       h("h3", { id: "h-de" }, "ΔE00 (mean)"),
       fitsDone.length ? h("div", { class: "scroll" }, h("table", { class: "data", id: "de-table" },
