@@ -947,6 +947,47 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     assert!(daemon.service.status().await.unwrap().busy.is_none());
     hostile_task.abort();
 
+    // A real X-Rite export with the instrument camera's images: the result view shows them
+    // beside the swatches, loaded through the page's session like every other request.
+    let real_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-mat12");
+    let x = std::fs::read_dir(&real_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "xlsx"))
+        .flat_map(|p| brdfd::formats::xrite::read_file(&p).unwrap())
+        .find(|x| !x.textures.is_empty())
+        .expect("a shared export with texture images");
+    let (provenance, taken) = brdfd::service::imported_provenance(&x.scan, "test import").unwrap();
+    let (imported, _) = daemon
+        .service
+        .import_scan_as(&x.scan, &provenance, taken, &x.textures)
+        .await
+        .unwrap();
+    c.goto(&format!("http://{addr}/#/scans/{imported}"))
+        .await
+        .unwrap();
+    wait_js(
+        &c,
+        "the camera's images, loaded",
+        "const i = document.querySelectorAll('#textures img');
+         return i.length > 0 && [...i].every((e) => e.complete && e.naturalWidth > 0)",
+    )
+    .await;
+    let labels = c
+        .execute(
+            "return [...document.querySelectorAll('#textures figcaption')].map((f) => f.textContent)",
+            vec![],
+        )
+        .await
+        .unwrap();
+    let want: Vec<&str> = x.textures.iter().map(|t| t.geometry.as_str()).collect();
+    assert_eq!(
+        labels,
+        json!(want),
+        "one captioned image per texture, in the file's order"
+    );
+    shot(&c, "result-textures").await;
+
     // Log out: the session is over, the page asks for a new link.
     c.goto(&format!("http://{addr}/#/")).await.unwrap();
     wait_js(
