@@ -218,6 +218,22 @@ async fn export_then_import_gives_the_same_scan_and_fits_and_keeps_the_reference
         let sample = mock_devices::recordings::samples()[0].sample.unwrap();
         let scan = scan_and_settle(service, sample).await;
         let exported = service.export_scan(scan).await.unwrap();
+        // The file says its readings are a replayed recording, and which.
+        let origin = exported
+            .origin
+            .as_ref()
+            .expect("an exported scan says where it came from");
+        let source = origin.source.as_deref().unwrap_or_default();
+        assert!(source.starts_with("simulated — replayed from"), "{source}");
+        assert!(
+            origin.ma_t12.as_ref().is_some_and(|i| i.simulated),
+            "{origin:?}"
+        );
+        assert!(
+            origin.sra.as_ref().is_some_and(|i| i.simulated),
+            "{origin:?}"
+        );
+        assert!(origin.measured_at.is_some());
         // Through the file format, as `brdfd export` / `brdfd import` do.
         let text = exported.to_json_pretty().unwrap();
         let file = brdfd::scan::Scan::from_json(text.as_bytes()).unwrap();

@@ -181,6 +181,10 @@ pub fn document(
                     "created": opts.created,
                     "scale": sample.scale().name(),
                     "scale_note": sample.scale().describe(),
+                    // How the readings came in: "simulated — replayed from …" for a simulated
+                    // instrument's, so a file read later cannot pass for a measurement.
+                    "provenance": sample.provenance_summary(),
+                    "simulated": sample.simulated(),
                     "approximation": notes,
                     "kd_sr-1": p.kd.to_vec(),
                     "wavelengths_nm": crate::spectral::wavelengths_nm().to_vec(),
@@ -306,5 +310,36 @@ mod tests {
         let (pos, idx) = sphere();
         assert_eq!(pos.len(), ((LAT + 1) * (LON + 1)) as usize);
         assert_eq!(idx.len(), (3 * 2 * LON * (LAT - 1)) as usize);
+    }
+    /// The file says how its readings came in: "simulated — replayed from …" for a simulated
+    /// instrument's, so a glTF read later cannot pass for a measurement.
+    #[test]
+    fn the_document_says_whether_the_readings_were_simulated() {
+        let mut s = crate::render::tests::sample(false);
+        let d = s.done(crate::cost::CostFunction::Cf1).unwrap().clone();
+        let opts = ExportOptions::default();
+        let doc = document(&s, crate::cost::CostFunction::Cf1, "separable", &d, &opts);
+        assert_eq!(doc["asset"]["extras"]["brdfd"]["simulated"], false);
+        assert!(doc["asset"]["extras"]["brdfd"]["provenance"].is_null());
+        s.origin = Some(crate::report::Origin {
+            station: None,
+            measured_at_ms: 0,
+            provenance: crate::store::Provenance {
+                sra: crate::store::InstrumentProvenance {
+                    simulated: Some(true),
+                    ..crate::store::InstrumentProvenance::unknown()
+                },
+                source: crate::store::Source::Measured,
+                source_detail: Some("simulated — replayed from synthetic-t-sky-blue".into()),
+                ..crate::store::Provenance::unknown()
+            },
+        });
+        let doc = document(&s, crate::cost::CostFunction::Cf1, "separable", &d, &opts);
+        let brdfd = &doc["asset"]["extras"]["brdfd"];
+        assert_eq!(brdfd["simulated"], true);
+        assert_eq!(
+            brdfd["provenance"],
+            "simulated — replayed from synthetic-t-sky-blue"
+        );
     }
 }

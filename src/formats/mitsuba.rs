@@ -95,13 +95,16 @@ pub fn scene(
     };
     let _ = writeln!(
         t,
-        "<!-- {}: sample \"{}\", cost function {cost}, method {method}, Fresnel {}; written {}.\n     {}.\n     Render with a spectral variant: mitsuba -m scalar_spectral this-file.xml (a scene file cannot name its variant; a bare `mitsuba` picks an RGB one).\n     The film holds brdfd's preview values: linear sRGB radiance factor (light irradiance π, so a white diffuser facing it is 1).\n     brdfd's model f = kd + ks·F·D·G/(π cosθi cosθr) as blendbsdf(½ diffuse 2π·kd, ½ roughconductor GGX with specular_reflectance 2·ks·4/π).\n     {}. -->",
+        "<!-- {}: sample \"{}\", cost function {cost}, method {method}, Fresnel {}; written {}.\n     {}.\n     Render with a spectral variant: mitsuba -m scalar_spectral this-file.xml (a scene file cannot name its variant; a bare `mitsuba` picks an RGB one).\n     The film holds brdfd's preview values: linear sRGB radiance factor (light irradiance π, so a white diffuser facing it is 1).\n     brdfd's model f = kd + ks·F·D·G/(π cosθi cosθr) as blendbsdf(½ diffuse 2π·kd, ½ roughconductor GGX with specular_reflectance 2·ks·4/π).\n     {}.\n     Readings: {}. -->",
         esc(&opts.originator),
         esc(&sample.name),
         fit.fresnel.name(),
         esc(&opts.created),
         esc(&sample.scale().describe()),
         esc(&fresnel_note),
+        esc(&sample
+            .provenance_summary()
+            .unwrap_or_else(|| "provenance not recorded (a study made in memory)".into())),
     );
     let _ = writeln!(t, r#"<scene version="3.0.0">"#);
     // Resolution and samples per pixel can be overridden: `mitsuba -D res=64 -D spp=16`.
@@ -252,6 +255,35 @@ mod tests {
         )));
         assert!(xml.contains("mitsuba -m scalar_spectral"));
         assert!(xml.contains("Remaining difference: Mitsuba's exact Fresnel"));
+        assert!(xml.contains("Readings: provenance not recorded"));
+        // A simulated scan's scene says so, with the recording that answered.
+        let mut simulated = s.clone();
+        simulated.origin = Some(crate::report::Origin {
+            station: None,
+            measured_at_ms: 0,
+            provenance: crate::store::Provenance {
+                ma_t12: crate::store::InstrumentProvenance {
+                    simulated: Some(true),
+                    ..crate::store::InstrumentProvenance::unknown()
+                },
+                source: crate::store::Source::Measured,
+                source_detail: Some("simulated — replayed from synthetic-t-sky-blue".into()),
+                ..crate::store::Provenance::unknown()
+            },
+        });
+        let xml = scene(
+            &simulated,
+            crate::cost::CostFunction::Cf1,
+            "separable",
+            d,
+            &ExportOptions::default(),
+        )
+        .unwrap();
+        roxmltree::Document::parse(&xml).unwrap();
+        assert!(
+            xml.contains("Readings: simulated — replayed from synthetic-t-sky-blue."),
+            "{xml}"
+        );
         let exact = DoneFit {
             fresnel: FresnelCosine::Exact,
             ..d.clone()

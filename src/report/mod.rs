@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use crate::cost::CostFunction;
 
 pub use analysis::Analysis;
-pub use study::{DoneFit, FitState, FitStudy, SampleStudy, Study};
+pub use study::{DoneFit, FitState, FitStudy, Origin, SampleStudy, Study};
 
 /// Why a report could not be written.
 #[derive(Debug, thiserror::Error)]

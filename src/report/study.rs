@@ -65,6 +65,21 @@ pub struct Origin {
     pub provenance: Provenance,
 }
 
+impl SampleStudy {
+    /// How the sample's readings came in, for exports and captions ([`Provenance::summary`]);
+    /// `None` for a study made in memory (no store, no provenance).
+    pub fn provenance_summary(&self) -> Option<String> {
+        self.origin.as_ref().map(|o| o.provenance.summary())
+    }
+
+    /// Whether a simulated instrument produced the sample's readings, as far as is known.
+    pub fn simulated(&self) -> bool {
+        self.origin
+            .as_ref()
+            .is_some_and(|o| o.provenance.simulated())
+    }
+}
+
 /// The fit of one sample under one cost function.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitStudy {

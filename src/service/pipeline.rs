@@ -33,7 +33,33 @@ pub fn scan_from_detail(detail: &ScanDetail) -> Result<Scan, ScanError> {
     if let Some(reference) = scan.reference.as_mut() {
         reference.name = reference.name.trim_end_matches(IMPORTED_SUFFIX).to_string();
     }
+    scan.origin = Some(origin_of(&detail.scan));
     Ok(scan)
+}
+
+/// What a scan file exported from the store says of where its readings came from: when they
+/// were taken, the instruments as they identified themselves (simulated or not), and how they
+/// came in ("simulated — replayed from …" for a simulated instrument's), so that the file,
+/// read or imported elsewhere, cannot pass for a measurement.
+fn origin_of(scan: &crate::store::ScanSummary) -> crate::scan::Origin {
+    let p = &scan.provenance;
+    let instrument = |i: &InstrumentProvenance| {
+        (i.model != "unknown" || i.simulated.is_some()).then(|| crate::scan::OriginInstrument {
+            model: i.model.clone(),
+            serial: (i.serial != "unknown").then(|| i.serial.clone()),
+            simulated: i.simulated == Some(true),
+        })
+    };
+    let at = scan.started_at_ms.unwrap_or(scan.requested_at_ms);
+    crate::scan::Origin {
+        measured_at: jiff::Timestamp::from_millisecond(at)
+            .ok()
+            .map(|t| t.to_string()),
+        ma_t12: instrument(&p.ma_t12),
+        sra: scan.specular_readings.then(|| instrument(&p.sra)).flatten(),
+        source: Some(p.source_detail.clone().unwrap_or_else(|| p.summary())),
+        notes: Default::default(),
+    }
 }
 
 impl Service {
@@ -144,7 +170,12 @@ impl Service {
     /// complete scan, all in one transaction, which is then processed and fitted like a
     /// measured one. Returns the scan's id and its fits.
     pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
-        let (provenance, taken_at_ms) = imported_provenance(file, "brdfd.scan/1 file")?;
+        let (mut provenance, taken_at_ms) = imported_provenance(file, "brdfd.scan/1 file")?;
+        // A file that says where its readings came from (every scan file brdfd exports does)
+        // keeps that account as it is, so that export → import → export gives the same file.
+        if let Some(origin) = file.origin.as_ref().filter(|o| o.source.is_some()) {
+            provenance.source_detail = Some(origin.describe());
+        }
         self.import_scan_as(file, &provenance, taken_at_ms, &[])
             .await
     }

@@ -319,6 +319,25 @@ impl Provenance {
     pub fn real(&self) -> bool {
         self.ma_t12.simulated == Some(false) && self.sra.simulated == Some(false)
     }
+
+    /// One line for people, as exports and the report carry it: whether a simulated
+    /// instrument produced the readings and which recording answered ("simulated — replayed
+    /// from synthetic-t-sky-blue (T.Sky blue)"), the file they were imported from, or the
+    /// instruments that measured them.
+    pub fn summary(&self) -> String {
+        match (self.simulated(), self.source_detail.as_deref()) {
+            (true, Some(d)) if d.starts_with("simulated") => d.to_string(),
+            (true, Some(d)) => format!("simulated — {d}"),
+            (true, None) => "simulated — replayed from a recording".into(),
+            (false, Some(d)) => format!("{}: {d}", self.source),
+            (false, None) => format!(
+                "{} by {} and {}",
+                self.source,
+                self.ma_t12.describe(),
+                self.sra.describe()
+            ),
+        }
+    }
 }
 
 /// The provenance columns as a row (the same names on `reference_sets` and `scans`).
