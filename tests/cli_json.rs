@@ -86,3 +86,79 @@ fn offline_commands_print_json_naming_what_they_wrote() {
     assert_eq!(imported[0]["sample"], synth[0]["sample"]);
     exists(&imported[0]["file"]);
 }
+
+/// `import-format --help` shows a CGATS and a CxF3 export and names the committed examples;
+/// each example command in it runs from the source tree, and the scan it writes keeps what the
+/// file says of its origin: the creation time as the measurement time, and the instrument.
+#[test]
+fn the_import_help_examples_run_and_keep_the_exports_time_and_instrument() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let help = Command::new(env!("CARGO_BIN_EXE_brdfd"))
+        .args(["import-format", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8(help.stdout).unwrap();
+    assert!(
+        help.contains("BEGIN_DATA_FORMAT") && help.contains("ReflectanceSpectrum"),
+        "{help}"
+    );
+    let examples: Vec<&str> = help
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with("brdfd import-format tests/data/instrument-exports/"))
+        .collect();
+    assert_eq!(examples.len(), 2, "a CGATS and a CxF3 example:\n{help}");
+    for example in examples {
+        let out = tempfile::tempdir().unwrap();
+        let mut args: Vec<String> = example
+            .split_whitespace()
+            .skip(1)
+            .map(|a| {
+                if a == "scans/" {
+                    out.path().display().to_string()
+                } else {
+                    a.to_string()
+                }
+            })
+            .collect();
+        args.push("--json".into());
+        let run = Command::new(env!("CARGO_BIN_EXE_brdfd"))
+            .args(&args)
+            .current_dir(root)
+            .env_remove("BRDFD_CONFIG")
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{example}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let written: Value =
+            serde_json::from_slice(run.stdout.split(|b| *b == b'\n').next().unwrap()).unwrap();
+        let file = std::fs::read(written["file"].as_str().unwrap()).unwrap();
+        let scan = brdfd::scan::Scan::from_json(&file).unwrap();
+        assert_eq!(scan.sample, "T.Sky blue");
+        assert!(
+            scan.readings.sra.is_some(),
+            "{example}: the SRA CSV's readings"
+        );
+        let origin = scan
+            .origin
+            .unwrap_or_else(|| panic!("{example}: no origin"));
+        assert_eq!(
+            origin.measured_at.as_deref(),
+            Some("2024-05-29T16:37:15Z"),
+            "{example}"
+        );
+        let mat12 = origin.ma_t12.unwrap();
+        assert_eq!(
+            (mat12.model.as_str(), mat12.serial.as_deref()),
+            ("MA-T12", Some("12345"))
+        );
+        assert!(!mat12.simulated);
+        assert_eq!(
+            origin.notes.get("originator").map(String::as_str),
+            Some("MA-T12 software")
+        );
+    }
+}

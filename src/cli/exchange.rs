@@ -188,10 +188,37 @@ recomputes X-Rite's L*a*b* from the spectra (ASTM E308 weighting under the file'
 illuminant/observer) and prints the largest ΔE00; a geometry more than 0.01 apart is a
 warning that names it.
 
+The MA-T12's CGATS.17 or CxF3 export of a session holds the N9 tile (by --reference name) and
+the samples, 12 spectra each, 400-700 nm; the SRA's two readings per object come from its CSV
+(--sra, columns sample,geometry,intensity). The import keeps what the file says of its origin:
+CGATS CREATED and INSTRUMENTATION (and SERIAL_NUMBER, ORIGINATOR), CxF3 Object CreationDate,
+Device Model and SerialNumber, and FileInformation Creator. A CGATS export reads like this
+(one data set per line, fields by name):
+
+  CGATS.17
+  ORIGINATOR \"MA-T12 software\"
+  CREATED \"2024-05-29T16:37:15\"
+  INSTRUMENTATION \"MA-T12\"
+  KEYWORD \"GEOMETRY\"
+  BEGIN_DATA_FORMAT
+  SAMPLE_ID SAMPLE_NAME GEOMETRY SPECTRAL_NM400 SPECTRAL_NM410 ... SPECTRAL_NM700
+  END_DATA_FORMAT
+  BEGIN_DATA
+  1 \"Munsell N9\" \"15as-45\" 0.79768 0.79768 ... 0.79768
+  ...
+  13 \"T.Sky blue\" \"15as-45\" 0.205024 0.247581 ... 0.116043
+  END_DATA
+
+A CxF3 export has one Object per tile or sample with one ReflectanceSpectrum per geometry, each
+naming a ColorSpecification whose MeasurementSpec gives the MultiAngle BRDFAngle (its Notation
+the geometry, e.g. 15as-45) and WavelengthRange StartWL=\"400\" Increment=\"10\". Complete
+examples of both, with their SRA CSV, are in the source tree's tests/data/instrument-exports/.
+
 Examples:
   brdfd import-format PAR_EW_RL_NG_3.xlsx PAR_PW_RO_NG_1.xlsx --out scans/
   brdfd import scans/*.scan.json
-  brdfd import-format mat12.cgats.txt --sra sra.csv --out scans/";
+  brdfd import-format tests/data/instrument-exports/mat12-session.cgats.txt --sra tests/data/instrument-exports/mat12-session.sra.csv --out scans/
+  brdfd import-format tests/data/instrument-exports/mat12-session.cxf --sra tests/data/instrument-exports/mat12-session.sra.csv --out scans/";
 
 fn format_of(path: &Path) -> ImportFormat {
     match path

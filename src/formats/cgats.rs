@@ -186,6 +186,7 @@ pub(crate) fn parse(file: &str, text: &str) -> Result<Table, FormatError> {
     let mut fields: Vec<String> = Vec::new();
     let mut header_line = 0;
     let mut rows = Vec::new();
+    let mut keywords = Vec::new();
     let mut last = 0;
     for (i, line) in text.lines().enumerate() {
         let n = i + 1;
@@ -217,6 +218,10 @@ pub(crate) fn parse(file: &str, text: &str) -> Result<Table, FormatError> {
                         ));
                     }
                     state = State::Data;
+                } else if state == State::Header {
+                    // A header keyword and its value (`CREATED "2024-05-29T16:37:15"`).
+                    let value = toks[1..].join(" ");
+                    keywords.push((first.clone(), value));
                 }
             }
             State::Format => {
@@ -246,6 +251,7 @@ pub(crate) fn parse(file: &str, text: &str) -> Result<Table, FormatError> {
                         header_line,
                         fields,
                         rows,
+                        keywords,
                     });
                 }
                 if toks.len() != fields.len() {

@@ -114,6 +114,7 @@ pub(crate) fn parse(file: &str, text: &str) -> Result<Table, FormatError> {
         header_line: 1,
         fields,
         rows,
+        keywords: Vec::new(),
     })
 }
 

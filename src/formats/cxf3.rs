@@ -23,7 +23,7 @@
 //! reference if named like the tile, else a sample. Bands are placed by `StartWL` (the spectrum's,
 //! else its specification's `WavelengthRange`, else 400) and the 10 nm increment.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 
 use super::{
@@ -368,6 +368,85 @@ impl Lines {
 }
 
 /// The readings in a CxF3 document (objects of kind `measured` and `estimated` are skipped).
+/// What an instrument's CxF3 export says of where each sample's readings came from, by sample
+/// name: the object's `CreationDate` (the measurement time), the file's `Creator` (the
+/// software) and the MA-T12 `Device` model and serial its colour specifications name. Objects
+/// of brdfd's own exports (tagged `brdfd`) carry their provenance in their tags and get none;
+/// a file that does not parse gets none (`observations` says why).
+pub(crate) fn origins(file: &str, text: &str) -> BTreeMap<String, crate::scan::Origin> {
+    let mut out = BTreeMap::new();
+    let Ok(doc) = roxmltree::Document::parse(text) else {
+        return out;
+    };
+    let root = doc.root_element();
+    let creator = root
+        .descendants()
+        .find(|n| is(n, "FileInformation"))
+        .and_then(|f| child(f, "Creator"))
+        .and_then(|c| c.text())
+        .map(|t| t.trim().to_string())
+        .filter(|t| !t.is_empty());
+    // The MA-T12 named by a MultiAngle colour specification's Device, if any.
+    let device = root
+        .descendants()
+        .filter(|n| is(n, "Device"))
+        .find(|d| {
+            child(*d, "Model")
+                .and_then(|m| m.text())
+                .is_some_and(|m| m.contains("MA-T"))
+        })
+        .map(|d| crate::scan::OriginInstrument {
+            model: child(d, "Model")
+                .and_then(|m| m.text())
+                .unwrap_or("MA-T12")
+                .trim()
+                .to_string(),
+            serial: child(d, "SerialNumber")
+                .and_then(|s| s.text())
+                .map(|s| s.trim().to_string())
+                .filter(|s| !s.is_empty()),
+            simulated: false,
+        });
+    for object in root.descendants().filter(|n| is(n, "Object")) {
+        let tagged = object
+            .children()
+            .any(|c| is(&c, "TagCollection") && c.attribute("Name") == Some("brdfd"));
+        let Some(name) = object.attribute("Name").map(str::trim) else {
+            continue;
+        };
+        if tagged || name.is_empty() {
+            continue;
+        }
+        let mut origin = crate::scan::Origin {
+            source: Some(format!("CxF3 export {}", super::file_name(file))),
+            ma_t12: device.clone(),
+            ..Default::default()
+        };
+        if let Some(created) = child(object, "CreationDate").and_then(|c| c.text()) {
+            match super::export_time(created) {
+                Some((at, offset)) => {
+                    origin.measured_at = Some(at);
+                    if !offset {
+                        origin
+                            .notes
+                            .insert("time zone".into(), "none stated; taken as UTC".into());
+                    }
+                }
+                None => {
+                    origin
+                        .notes
+                        .insert("created".into(), created.trim().to_string());
+                }
+            }
+        }
+        if let Some(c) = &creator {
+            origin.notes.insert("originator".into(), c.clone());
+        }
+        out.insert(name.to_string(), origin);
+    }
+    out
+}
+
 pub(crate) fn observations(
     file: &str,
     text: &str,

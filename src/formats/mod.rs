@@ -55,7 +55,7 @@ use std::str::FromStr;
 use crate::cost::CostFunction;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, MA_T12_COUNT};
 use crate::report::study::{DoneFit, SampleStudy, Study};
-use crate::scan::{DeviceReadings, Reference, Scan, ScanError};
+use crate::scan::{DeviceReadings, Origin, OriginInstrument, Reference, Scan, ScanError};
 use crate::spectral::{BANDS, Spectrum};
 use crate::store::Provenance;
 
@@ -220,16 +220,104 @@ pub fn import(
     sra: Option<(&str, &str)>,
     opts: &ImportOptions,
 ) -> Result<Vec<Scan>, FormatError> {
+    // What an instrument's export says of where its readings came from: one account for the
+    // whole file (a CGATS header), or one per sample (CxF3 objects).
+    let mut file_origin = None;
+    let mut sample_origins = BTreeMap::new();
     let mut obs = match format {
-        Format::Cgats => table::observations(&cgats::parse(file, text)?, opts)?,
+        Format::Cgats => {
+            let t = cgats::parse(file, text)?;
+            file_origin = cgats_origin(file, &t);
+            table::observations(&t, opts)?
+        }
         Format::Csv => table::observations(&csv::parse(file, text)?, opts)?,
-        Format::Cxf3 => cxf3::observations(file, text, opts)?,
+        Format::Cxf3 => {
+            sample_origins = cxf3::origins(file, text);
+            cxf3::observations(file, text, opts)?
+        }
         Format::Json => return json::parse(file, text),
     };
     if let Some((sra_file, sra_text)) = sra {
         obs.extend(sra::observations(sra_file, sra_text, opts)?);
     }
-    assemble(file, obs, opts)
+    let mut scans = assemble(file, obs, opts)?;
+    for scan in &mut scans {
+        if scan.origin.is_none() {
+            scan.origin = sample_origins
+                .get(&scan.sample)
+                .cloned()
+                .or_else(|| file_origin.clone());
+        }
+    }
+    Ok(scans)
+}
+
+/// The last component of a file's path as given (provenance names the file, not where it was).
+pub(crate) fn file_name(file: &str) -> &str {
+    Path::new(file)
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or(file)
+}
+
+/// A time as an instrument's export writes it, as RFC 3339 UTC: RFC 3339 itself, or a civil
+/// ISO 8601 date and time without an offset, which is taken as UTC (`None` otherwise).
+pub(crate) fn export_time(text: &str) -> Option<(String, bool)> {
+    let text = text.trim();
+    if let Ok(t) = text.parse::<jiff::Timestamp>() {
+        return Some((t.to_string(), true));
+    }
+    let civil: jiff::civil::DateTime = text.parse().ok()?;
+    let t = jiff::tz::TimeZone::UTC.to_timestamp(civil).ok()?;
+    Some((t.to_string(), false))
+}
+
+/// What an instrument's CGATS export says in its header of where its readings came from:
+/// `CREATED` (when it was written, as the measurement time), `INSTRUMENTATION` (the
+/// instrument: a real one) and `ORIGINATOR` (the software). brdfd's own exports (with a
+/// `DATA_KIND` column) carry their provenance per row and get none.
+fn cgats_origin(file: &str, t: &table::Table) -> Option<Origin> {
+    if t.is_brdfd_export() {
+        return None;
+    }
+    let mut origin = Origin {
+        source: Some(format!("CGATS export {}", file_name(file))),
+        ..Origin::default()
+    };
+    if let Some(created) = t.keyword("CREATED") {
+        match export_time(created) {
+            Some((at, offset)) => {
+                origin.measured_at = Some(at);
+                if !offset {
+                    origin
+                        .notes
+                        .insert("time zone".into(), "none stated; taken as UTC".into());
+                }
+            }
+            None => {
+                origin.notes.insert("created".into(), created.to_string());
+            }
+        }
+    }
+    if let Some(instrument) = t
+        .keyword("INSTRUMENTATION")
+        .filter(|i| !i.trim().is_empty())
+    {
+        origin.ma_t12 = Some(OriginInstrument {
+            model: instrument.trim().to_string(),
+            serial: t
+                .keyword("SERIAL_NUMBER")
+                .map(|s| s.trim().to_string())
+                .filter(|s| !s.is_empty()),
+            simulated: false,
+        });
+    }
+    if let Some(originator) = t.keyword("ORIGINATOR") {
+        origin
+            .notes
+            .insert("originator".into(), originator.to_string());
+    }
+    Some(origin)
 }
 
 /// Reads a file into a string, naming it on failure.

@@ -23,6 +23,25 @@ pub(crate) struct Table {
     pub fields: Vec<String>,
     /// (line, one value per field).
     pub rows: Vec<(usize, Vec<String>)>,
+    /// The file's header keywords and their values, in file order (CGATS: `CREATED`,
+    /// `INSTRUMENTATION`, `ORIGINATOR`, …; CSV has none).
+    pub keywords: Vec<(String, String)>,
+}
+
+impl Table {
+    /// The value of header keyword `name` (case-insensitive), if the file has it.
+    pub(crate) fn keyword(&self, name: &str) -> Option<&str> {
+        self.keywords
+            .iter()
+            .find(|(k, _)| k.eq_ignore_ascii_case(name))
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// Whether the table is brdfd's own export (it has a `DATA_KIND` column), not an
+    /// instrument's.
+    pub(crate) fn is_brdfd_export(&self) -> bool {
+        self.column(&["DATA_KIND"]).is_some()
+    }
 }
 
 impl Table {
