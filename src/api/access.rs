@@ -33,7 +33,7 @@ use std::io::Write;
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
@@ -95,7 +95,7 @@ impl Token {
     pub fn generate() -> Token {
         let mut bytes = [0u8; 32];
         rand::rng().fill_bytes(&mut bytes);
-        Token(bytes.iter().map(|b| format!("{b:02x}")).collect())
+        Token(hex::encode(bytes))
     }
 
     /// A token from text (a file's content or `BRDFD_TOKEN`): at least 32 hex digits.
@@ -189,15 +189,11 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
 /// `n` random bytes as hex (names of temporary files).
 pub fn random_hex(n: usize) -> String {
     let mut bytes = vec![0u8; n];
     rand::rng().fill_bytes(&mut bytes);
-    hex(&bytes)
+    hex::encode(&bytes)
 }
 
 /// The web page's session cookie.
@@ -223,9 +219,7 @@ pub struct SystemClock;
 
 impl Clock for SystemClock {
     fn now_ms(&self) -> u64 {
-        SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map_or(0, |d| d.as_millis() as u64)
+        crate::store::now_ms().max(0) as u64
     }
 }
 
@@ -371,14 +365,14 @@ impl Sessions {
         let mut m = <Hmac<Sha256> as Mac>::new_from_slice(&self.key)
             .expect("HMAC takes a key of any length");
         m.update(what);
-        hex(&m.finalize().into_bytes())
+        hex::encode(&m.finalize().into_bytes())
     }
 
     /// A new one-time login ticket (256 random bits in hex), valid for [`TICKET_LIFETIME`].
     pub fn issue_ticket(&self) -> String {
         let mut bytes = [0u8; 32];
         rand::rng().fill_bytes(&mut bytes);
-        let ticket = hex(&bytes);
+        let ticket = hex::encode(&bytes);
         let now = self.clock.now_ms();
         let mut tickets = self.tickets.lock().unwrap_or_else(|p| p.into_inner());
         tickets.retain(|_, expires| *expires > now);
@@ -410,7 +404,11 @@ impl Sessions {
     fn new_session(&self, now: u64) -> String {
         let mut nonce = [0u8; 16];
         rand::rng().fill_bytes(&mut nonce);
-        let body = format!("v1.{}.{}", now + SESSION_LIFETIME.as_secs(), hex(&nonce));
+        let body = format!(
+            "v1.{}.{}",
+            now + SESSION_LIFETIME.as_secs(),
+            hex::encode(&nonce)
+        );
         let mac = self.mac(body.as_bytes());
         format!("{body}.{mac}")
     }

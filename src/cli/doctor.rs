@@ -699,10 +699,7 @@ fn serial_check(transport: &SraTransport) -> Check {
 }
 
 fn now_unix() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs() as i64)
-        .unwrap_or(0)
+    crate::store::now_ms() / 1000
 }
 
 /// When this brdfd was built (seconds since the epoch; `build.rs`).

@@ -862,11 +862,7 @@ pub fn assemble(
 
 /// The current time as RFC 3339 UTC, whole seconds (`2024-05-01T12:00:00Z`).
 pub fn rfc3339_utc_now() -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs() as i64)
-        .unwrap_or(0);
-    rfc3339_utc(secs)
+    rfc3339_utc(crate::store::now_ms() / 1000)
 }
 
 /// Seconds since the Unix epoch → RFC 3339 UTC, whole seconds (e.g. `2024-05-01T12:00:00Z`).

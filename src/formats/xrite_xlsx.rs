@@ -424,10 +424,7 @@ pub fn read(bytes: &[u8], file_name: &str) -> Result<XriteExport, XlsxError> {
 
     Ok(XriteExport {
         file_name: file,
-        sha256_hex: Sha256::digest(bytes)
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect(),
+        sha256_hex: hex::encode(Sha256::digest(bytes)),
         measurements: out,
         unassigned_textures: unassigned,
     })
@@ -1457,10 +1454,7 @@ mod tests {
         );
         assert_eq!(m.lab[11].l, 31.3605540607635);
         // The SHA-256 is of the file's bytes.
-        let want: String = Sha256::digest(bytes(REGULAR))
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
+        let want = hex::encode(Sha256::digest(bytes(REGULAR)));
         assert_eq!(x.sha256_hex, want);
         // Texture 15as15 is drawing rId4's image, anchored in row 5 (as the drawing says).
         assert_eq!(m.textures[3].geometry, "15as15");

@@ -334,7 +334,7 @@ pub fn content_hash(main: &[u8], partner: Option<&[u8]>) -> String {
             }
         }
     }
-    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    hex::encode(h.finalize())
 }
 
 /// A name for `name` in `failed/` such that it and its `NAME.error.txt` note are both free.

@@ -411,7 +411,7 @@ impl Service {
 
     fn in_force_view(&self, r: &ReferenceSummary) -> ReferenceInForce {
         let done = r.completed_at_ms.unwrap_or(r.taken_at_ms);
-        let age_hours = (crate_now_ms() - done).max(0) as f64 / 3.6e6;
+        let age_hours = (crate::store::now_ms() - done).max(0) as f64 / 3.6e6;
         ReferenceInForce {
             id: r.id,
             name: r.name.clone(),
@@ -547,14 +547,6 @@ impl Service {
         }
         all_ended
     }
-}
-
-/// Now, ms since the Unix epoch (the store's clock).
-fn crate_now_ms() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_millis() as i64)
-        .unwrap_or(0)
 }
 
 #[cfg(test)]

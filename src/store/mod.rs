@@ -345,8 +345,9 @@ where
     }
 }
 
-/// Now, in milliseconds since the Unix epoch (UTC).
-pub(crate) fn now_ms() -> i64 {
+/// Now, in milliseconds since the Unix epoch (UTC): the one clock of the store, the service and
+/// every timestamp brdfd writes.
+pub fn now_ms() -> i64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map(|d| d.as_millis() as i64)

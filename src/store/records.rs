@@ -146,12 +146,7 @@ pub struct NewReading<'a> {
 }
 
 fn hex<S: Serializer>(bytes: &[u8], s: S) -> Result<S::Ok, S::Error> {
-    use std::fmt::Write;
-    let mut out = String::with_capacity(bytes.len() * 2);
-    for b in bytes {
-        let _ = write!(out, "{b:02x}");
-    }
-    s.serialize_str(&out)
+    s.serialize_str(&hex::encode(bytes))
 }
 
 /// A stored reading of a scan or of a reference set. Its instrument is its geometry's

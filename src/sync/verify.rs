@@ -133,10 +133,6 @@ fn key_and_digest(table: &Table, row: &[Value]) -> (Vec<u8>, [u8; 32]) {
     (key, Sha256::digest(&all).into())
 }
 
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
 impl Forwarder {
     /// Compares every forwarded table of the store with what the central database holds for
     /// the station, re-sends what is missing or different, and moves the cursor to the
@@ -260,7 +256,7 @@ impl Forwarder {
                 central: theirs.len(),
                 resent,
                 extra,
-                digest: hex(&fingerprint.finalize()),
+                digest: hex::encode(&fingerprint.finalize()),
             });
         }
         let cursor = expected.max(high);
