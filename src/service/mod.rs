@@ -292,10 +292,7 @@ impl Service {
         }
         // The newest measured reference: a newer one that came with an imported scan is never
         // in force.
-        let reference = store
-            .latest_reference_not_ending(IMPORTED_SUFFIX)
-            .await?
-            .map(|r| r.id);
+        let reference = store.latest_measured_reference().await?.map(|r| r.id);
         let (fits, fit_rx) = FitWorker::new(options.fit_fn.unwrap_or_else(default_fit_fn));
         let inner = Arc::new(Inner {
             store,

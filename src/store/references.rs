@@ -9,7 +9,8 @@ use super::backend;
 use super::codec::{self, ReadingRow};
 use super::ids::{InstrumentId, ReadingId, ReferenceId};
 use super::records::{
-    Instrument, ProvenanceRow, ReadingValues, ReferenceDetail, ReferenceSummary, provenance_columns,
+    Instrument, ProvenanceRow, ReadingValues, ReferenceDetail, ReferenceSummary, Source,
+    provenance_columns,
 };
 use super::{Store, StoreError, now_ms};
 
@@ -249,20 +250,16 @@ impl Store {
         row.map(ReferenceRow::into_summary).transpose()
     }
 
-    /// The most recently completed reference set whose name does not end in `suffix` (the
-    /// daemon passes the suffix it gives the reference sets that came with imported scans, so
-    /// that an import never becomes the reference in force, also across a restart).
-    pub async fn latest_reference_not_ending(
-        &self,
-        suffix: &str,
-    ) -> Result<Option<ReferenceSummary>, StoreError> {
+    /// The most recently completed reference set that did not come with an imported scan (its
+    /// provenance `source` is not `imported`): the daemon's reference in force at start, so
+    /// that an import never becomes it, also across a restart.
+    pub async fn latest_measured_reference(&self) -> Result<Option<ReferenceSummary>, StoreError> {
         let row: Option<ReferenceRow> = sqlx::query_as(&format!(
-            "{} WHERE r.status = 'complete'
-               AND (length(r.name) < length($1) OR substr(r.name, -length($1)) <> $1)
+            "{} WHERE r.status = 'complete' AND r.source <> $1
              ORDER BY r.completed_at_ms DESC, r.id DESC LIMIT 1",
             *REFERENCE_SUMMARY
         ))
-        .bind(suffix)
+        .bind(Source::Imported.as_str())
         .fetch_optional(&self.reader)
         .await?;
         row.map(ReferenceRow::into_summary).transpose()

@@ -825,26 +825,39 @@ async fn the_newest_measured_reference_skips_imported_ones() {
             .await
             .unwrap();
     }
+    store
+        .set_reference_provenance(
+            imported,
+            &Provenance {
+                source: Source::Imported,
+                ..Provenance::unknown()
+            },
+        )
+        .await
+        .unwrap();
     store.complete_reference(imported).await.unwrap();
     assert_eq!(
         store.latest_reference().await.unwrap().unwrap().id,
         imported
     );
-    let latest = store
-        .latest_reference_not_ending(" (imported)")
-        .await
-        .unwrap()
-        .unwrap();
+    // The import is known by its provenance, not its name.
+    let latest = store.latest_measured_reference().await.unwrap().unwrap();
     assert_eq!(latest.id, measured);
-    // A suffix longer than every name excludes nothing.
-    assert_eq!(
+    let also_measured = store
+        .begin_reference("N9 (imported) by name only", None)
+        .await
+        .unwrap();
+    for g in &GEOMETRIES {
+        let v = values_for(g, &mut rng);
         store
-            .latest_reference_not_ending(&"x".repeat(80))
+            .add_reference_reading(also_measured, g.device, g, &v, b"")
             .await
-            .unwrap()
-            .unwrap()
-            .id,
-        imported
+            .unwrap();
+    }
+    store.complete_reference(also_measured).await.unwrap();
+    assert_eq!(
+        store.latest_measured_reference().await.unwrap().unwrap().id,
+        also_measured
     );
 }
 
