@@ -163,20 +163,13 @@ impl FitReport {
     }
 
     /// L*a*b* of the measured and the fitted BRDF at every geometry the scan measured, under
-    /// the colorimetry the fit was evaluated with.
+    /// the colorimetry the fit was evaluated with, and their difference.
     pub fn lab(&self) -> LabPerGeometry {
-        let measured = lab_per_geometry_with(&self.measured.values, self.request.colorimetry);
-        let fitted = lab_per_geometry_with(&self.estimated, self.request.colorimetry);
-        LabPerGeometry(
-            self.measured
-                .geometries
-                .iter()
-                .map(|g| LabPair {
-                    geometry: g.name.to_string(),
-                    measured: lab_array(measured[g.index]),
-                    fitted: lab_array(fitted[g.index]),
-                })
-                .collect(),
+        LabPerGeometry::of(
+            &self.measured,
+            &self.estimated,
+            self.request.colorimetry,
+            &std::array::from_fn(|g| self.evaluation.at(g).unwrap_or(f64::NAN)),
         )
     }
 
@@ -310,18 +303,83 @@ fn lab_array(lab: Lab) -> [f64; 3] {
     [lab.l, lab.a, lab.b]
 }
 
-/// Measured and fitted L*a*b* at one geometry.
+/// Measured and fitted L*a*b* at one geometry, and where the model misses there.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LabPair {
     #[serde(skip)]
     pub geometry: String,
     pub measured: [f64; 3],
     pub fitted: [f64; 3],
+    /// Measured minus fitted; absent in documents written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual: Option<Residual>,
 }
 
-/// `{"<geometry>": {"measured": [L, a, b], "fitted": [L, a, b]}, …}` in table order.
+/// Measured minus fitted colour at one geometry (SCIENCE.md §7): the lightness, chroma and
+/// hue differences of CIELAB (ΔH*ab = 2·√(C*m·C*f)·sin(Δh/2), signed like Δh) and the ΔE00.
+/// A positive ΔL* is a fit too dark there, a negative one too bright.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Residual {
+    #[serde(rename = "dL")]
+    pub dl: f64,
+    #[serde(rename = "dC")]
+    pub dc: f64,
+    #[serde(rename = "dH")]
+    pub dh: f64,
+    #[serde(rename = "dE00")]
+    pub de00: f64,
+}
+
+impl Residual {
+    /// `measured` minus `fitted`, with the ΔE00 between them (computed by the evaluation).
+    pub fn of(measured: Lab, fitted: Lab, de00: f64) -> Residual {
+        let chroma = |c: Lab| c.a.hypot(c.b);
+        let (cm, cf) = (chroma(measured), chroma(fitted));
+        let mut dh_angle = measured.b.atan2(measured.a) - fitted.b.atan2(fitted.a);
+        if dh_angle > std::f64::consts::PI {
+            dh_angle -= 2.0 * std::f64::consts::PI;
+        } else if dh_angle < -std::f64::consts::PI {
+            dh_angle += 2.0 * std::f64::consts::PI;
+        }
+        Residual {
+            dl: measured.l - fitted.l,
+            dc: cm - cf,
+            dh: 2.0 * (cm * cf).sqrt() * (dh_angle / 2.0).sin(),
+            de00,
+        }
+    }
+}
+
+/// `{"<geometry>": {"measured": [L, a, b], "fitted": [L, a, b], "residual": {"dL", "dC",
+/// "dH", "dE00"}}, …}` in table order.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct LabPerGeometry(pub Vec<LabPair>);
+
+impl LabPerGeometry {
+    /// At every geometry `measured` has, under `colorimetry`; `delta_e00` per geometry in table
+    /// order (the evaluation's).
+    pub fn of(
+        measured: &MeasuredBrdf,
+        estimated: &[Spectrum; GEOMETRY_COUNT],
+        colorimetry: Colorimetry,
+        delta_e00: &[f64; GEOMETRY_COUNT],
+    ) -> LabPerGeometry {
+        let m = lab_per_geometry_with(&measured.values, colorimetry);
+        let f = lab_per_geometry_with(estimated, colorimetry);
+        LabPerGeometry(
+            measured
+                .geometries
+                .iter()
+                .map(|g| LabPair {
+                    geometry: g.name.to_string(),
+                    measured: lab_array(m[g.index]),
+                    fitted: lab_array(f[g.index]),
+                    residual: Some(Residual::of(m[g.index], f[g.index], delta_e00[g.index])),
+                })
+                .collect(),
+        )
+    }
+}
 
 impl Serialize for LabPerGeometry {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
@@ -698,5 +756,44 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert_eq!(e, "unknown geometry \"15as99\"");
+    }
+
+    /// The residual is measured minus fitted in CIELAB terms: ΔL*, ΔC*ab and a signed ΔH*ab
+    /// whose square makes up ΔE*ab with the other two (CIE 15:2018 §8.2.1.3).
+    #[test]
+    fn the_residual_splits_the_colour_difference_into_lightness_chroma_and_hue() {
+        let m = Lab {
+            l: 50.0,
+            a: 20.0,
+            b: 10.0,
+        };
+        let f = Lab {
+            l: 48.0,
+            a: 15.0,
+            b: 14.0,
+        };
+        let r = Residual::of(m, f, 1.5);
+        assert_eq!(r.dl, 2.0);
+        assert!((r.dc - (20f64.hypot(10.0) - 15f64.hypot(14.0))).abs() < 1e-12);
+        let de76_sq = 2f64.powi(2) + 5f64.powi(2) + 4f64.powi(2);
+        assert!((r.dl.powi(2) + r.dc.powi(2) + r.dh.powi(2) - de76_sq).abs() < 1e-9);
+        // The measured hue angle is below the fitted one: ΔH* is negative.
+        assert!(r.dh < 0.0);
+        assert_eq!(r.de00, 1.5);
+        // Across the ±180° seam the hue difference takes the short way.
+        let r = Residual::of(
+            Lab {
+                l: 50.0,
+                a: -20.0,
+                b: 1.0,
+            },
+            Lab {
+                l: 50.0,
+                a: -20.0,
+                b: -1.0,
+            },
+            0.0,
+        );
+        assert!(r.dh < 0.0 && r.dh > -3.0, "{r:?}");
     }
 }

@@ -485,6 +485,16 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     wait_js(&c, "the result view", "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')").await;
     wait_js(&c, "measured and fitted swatches", "return document.querySelectorAll('#swatches tbody tr').length === 4 && [...document.querySelectorAll('#swatches .sw')].every((s) => s.style.background !== '')").await;
     shot(&c, "3-result-1280").await;
+    // Where the model misses: one row of signed ΔL* per finished fit, one cell per geometry,
+    // each value the measured minus the fitted L* the daemon computed.
+    wait_js(
+        &c,
+        "the residuals",
+        "const rows = document.querySelectorAll('#residuals tbody tr');
+         return rows.length === 3 && [...rows].every((r) => r.querySelectorAll('td').length === 14
+           && [...r.querySelectorAll('td')].every((td) => /^[+-]\\d+\\.\\d\\d$/.test(td.textContent)))",
+    )
+    .await;
     // Previews keep the aspect ratio of the picture the daemon draws; a click enlarges one.
     wait_js(&c, "the previews", "const imgs = [...document.querySelectorAll('.previews button.enlarge img')]; return imgs.length === 3 && imgs.every((i) => i.complete && i.naturalWidth > 0)").await;
     let ratios = c

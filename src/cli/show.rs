@@ -193,6 +193,22 @@ pub(super) fn print_fits(detail: &Value) {
 /// Under a fit's row: the colorimetry of its ΔE00 and, once the bootstrap has run, the 95 %
 /// intervals of the lobe parameters (SCIENCE.md §7.1, §10).
 fn print_fit_extras(fit: &Value) {
+    // Where the model misses: measured minus fitted L* at each geometry.
+    if let Some(lab) = fit["lab"].as_object().filter(|l| !l.is_empty()) {
+        // In the geometry table's order (a JSON object's keys come sorted).
+        let dl: Vec<String> = crate::geometry::GEOMETRIES
+            .iter()
+            .filter_map(|g| {
+                let p = lab.get(g.name)?;
+                Some(format!(
+                    "{} {:+.2}",
+                    g.name,
+                    p["residual"]["dL"].as_f64().unwrap_or(f64::NAN)
+                ))
+            })
+            .collect();
+        println!("       ΔL* measured − fitted: {}", dl.join("  "));
+    }
     let c = &fit["colorimetry"];
     if c.is_object() {
         println!(

@@ -7,7 +7,9 @@
 use crate::colour::Colorimetry;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, GeometrySet, MA_T12_COUNT};
 use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
-use crate::sra_reading::{SpecularDeltaL, SraReading, specular_delta_l};
+use crate::processing::MeasuredBrdf;
+use crate::spectral::Spectrum;
+use crate::sra_reading::{SraReading, specular_delta_l};
 use crate::uncertainty::Uncertainty;
 
 use super::codec;
@@ -494,7 +496,22 @@ impl Store {
                 },
             })
         };
-        let (sra, specular_delta_l) = self.specular_luminance(&run).await?;
+        let (sra, derived) = self.derived(&run).await?;
+        let (specular_delta_l, lab) = match (derived, &evaluation, colorimetry) {
+            (Some((measured, estimated)), Some(e), Some(c)) => (
+                measured
+                    .geometries
+                    .has_sra()
+                    .then(|| specular_delta_l(&measured.values, &estimated, sra)),
+                Some(crate::fit::LabPerGeometry::of(
+                    &measured,
+                    &estimated,
+                    c,
+                    &e.per_geometry,
+                )),
+            ),
+            _ => (None, None),
+        };
         Ok(FitDetail {
             run,
             evaluation,
@@ -502,15 +519,23 @@ impl Store {
             uncertainty,
             sra,
             specular_delta_l,
+            lab,
         })
     }
 
     /// A fit's SRA reading model (its settings' `sra`, the paper's flat model when absent) and,
-    /// when it is done, the |ΔL*| of its model against its processed BRDF at the SRA geometries.
-    async fn specular_luminance(
+    /// when it is done, the processed BRDF it fitted and its model's BRDF at the fitted
+    /// parameters, from which its specular |ΔL*| and its L*a*b* residuals are derived.
+    async fn derived(
         &self,
         run: &FitRun,
-    ) -> Result<(SraReading, Option<SpecularDeltaL>), StoreError> {
+    ) -> Result<
+        (
+            SraReading,
+            Option<(MeasuredBrdf, [Spectrum; GEOMETRY_COUNT])>,
+        ),
+        StoreError,
+    > {
         let sra: SraReading = match run.settings.get("sra") {
             None => SraReading::default(),
             Some(v) => serde_json::from_value(v.clone()).map_err(|e| StoreError::Corrupt {
@@ -532,13 +557,7 @@ impl Store {
             .and_then(|v| serde_json::from_value(v.clone()).ok())
             .unwrap_or_default();
         let measured = self.processed(run.processed).await?.brdf;
-        if !measured.geometries.has_sra() {
-            return Ok((sra, None));
-        }
         let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
-        Ok((
-            sra,
-            Some(specular_delta_l(&measured.values, &estimated, sra)),
-        ))
+        Ok((sra, Some((measured, estimated))))
     }
 }

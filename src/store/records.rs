@@ -680,6 +680,10 @@ pub struct FitDetail {
     /// Specular |ΔL*| between model and measured luminance (SCIENCE.md §7.2), for a done fit;
     /// derived from the stored processed BRDF and parameters, as the report derives it.
     pub specular_delta_l: Option<crate::sra_reading::SpecularDeltaL>,
+    /// Measured and fitted L*a*b* at each geometry the scan measured and where the model misses
+    /// (measured minus fitted ΔL*, ΔC*, ΔH*, ΔE00), under the fit's colorimetry, for a done fit;
+    /// derived like `specular_delta_l`.
+    pub lab: Option<crate::fit::LabPerGeometry>,
 }
 
 #[cfg(test)]

@@ -803,6 +803,7 @@ async function renderResult(id) {
       h("p", { class: "muted" }, "! marks a colour outside the sRGB gamut (shown as the nearest displayable one)."),
       geometryLegend())
       : null,
+    residualSection(view.fits),
     view.textures && view.textures.length ? h("section", { "aria-labelledby": "h-tex" },
       h("h3", { id: "h-tex" }, "The instrument camera's images (kept from the export)"),
       h("div", { class: "textures", id: "textures" }, view.textures.map((t) => h("figure", { "data-label": t.label },
@@ -851,6 +852,33 @@ async function renderResult(id) {
 function deltaL(fit) {
   if (!fit || !fit.specular_delta_l) return "—";
   return `${fmt(fit.specular_delta_l.mean, 3)} (${fit.sra ? fit.sra.model : "flat"})`;
+}
+
+/** Where the model misses: measured minus fitted ΔL* (and ΔC*, ΔH*, ΔE00 on hover) per
+ * geometry, one row per finished fit, signed and shaded (blue: the fit is too bright there,
+ * red: too dark). */
+function residualSection(fits) {
+  const done = (fits || []).filter((f) => f.lab && Object.keys(f.lab).length);
+  if (!done.length) return null;
+  const geometries = GEOMETRIES.filter((g) => done.some((f) => f.lab[g]));
+  const cell = (r) => {
+    if (!r) return h("td", {}, "—");
+    const t = Math.min(1, Math.abs(r.dL) / 3);
+    const bg = r.dL >= 0 ? `rgba(207, 34, 46, ${0.45 * t})` : `rgba(9, 105, 218, ${0.45 * t})`;
+    const td = h("td", { title: `ΔL* ${fmt(r.dL, 2)} · ΔC* ${fmt(r.dC, 2)} · ΔH* ${fmt(r.dH, 2)} · ΔE00 ${fmt(r.dE00, 2)}` },
+      `${r.dL >= 0 ? "+" : ""}${fmt(r.dL, 2)}`);
+    // Through the CSSOM: the page's Content-Security-Policy allows no inline style attribute.
+    td.style.background = bg;
+    return td;
+  };
+  return h("section", { "aria-labelledby": "h-res" },
+    h("h3", { id: "h-res" }, "Where the model misses: measured − fitted ΔL* per geometry"),
+    h("p", { class: "muted" }, "Positive (red): the fit is too dark there; negative (blue): too bright. Hover a value for ΔC*, ΔH* and ΔE00."),
+    h("div", { class: "scroll" }, h("table", { class: "data residuals", id: "residuals" },
+      h("thead", {}, h("tr", {}, h("th", { scope: "col" }, "fit"), geometries.map((g) => h("th", { scope: "col" }, g)))),
+      h("tbody", {}, done.map((f) => h("tr", { "data-cost": f.run.cost_function },
+        h("th", { scope: "row" }, `${f.run.cost_function} (fit ${f.run.id})`),
+        geometries.map((g) => cell(f.lab[g] && f.lab[g].residual))))))));
 }
 
 function swatchRow(label, swatches, de) {
