@@ -108,6 +108,25 @@ pub fn write_report_with(
     if study.samples.is_empty() {
         return Err(ReportError::Empty);
     }
+    // A recording replayed more than once counts once (analysis::Repeat): the report covers
+    // the scans that count, and lists the others.
+    let full = Analysis::of(study);
+    let counted_study;
+    let study: &Study = if full.repeats.is_empty() {
+        study
+    } else {
+        let left_out: Vec<&str> = full.repeats.iter().map(|r| r.sample.as_str()).collect();
+        counted_study = Study {
+            samples: study
+                .samples
+                .iter()
+                .filter(|s| !left_out.contains(&s.name.as_str()))
+                .cloned()
+                .collect(),
+        };
+        &counted_study
+    };
+    let repeats = full.repeats;
     // The samples the per-sample figures show.
     let shown = opts.max_sample_figures.max(1).min(study.samples.len());
     let subset;
@@ -125,7 +144,7 @@ pub fn write_report_with(
     let out = crate::safe_fs::Dir::create(dir)?;
     let staging = out.staging(".brdfd-report-")?;
     let staged = staging.path().to_path_buf();
-    let result = draw_report(study, drawn, shown, &staging.held_path(), progress);
+    let result = draw_report(study, drawn, shown, repeats, &staging.held_path(), progress);
     let published = result.and_then(|files| publish(&out, &staging, files, opts.replace));
     let staging_name = staged
         .file_name()
@@ -200,11 +219,13 @@ fn draw_report(
     study: &Study,
     drawn: &Study,
     shown: usize,
+    repeats: Vec<analysis::Repeat>,
     dir: &Path,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<ReportFiles, ReportError> {
-    let analysis = Analysis::of(study);
-    let figs = figures::figures(drawn);
+    let mut analysis = Analysis::of(study);
+    analysis.repeats = repeats;
+    let figs = figures::figures_for(drawn, study);
     let total = figs.len() + 1;
     let mut written = Vec::new();
     for (i, f) in figs.iter().enumerate() {
@@ -228,11 +249,14 @@ fn draw_report(
                 message: e.to_string(),
             }
         })?;
-        let caption = format!(
+        let mut caption = format!(
             "{}: the fitted material per cost function on a sphere, 31 bands under a directional D65 light with a weak ambient (brdfd render); {}.",
             s.name,
             s.scale().describe()
         );
+        if let Some(note) = s.simulated_note() {
+            caption.push_str(&format!(" The scan is {note}, not a measurement."));
+        }
         md_previews.push_str(&format!("![{name}]({name})\n\n{caption}\n\n"));
         html_previews.push_str(&format!(
             "<figure>\n<img src=\"{name}\" alt=\"preview of {0}\">\n<figcaption>{1}</figcaption>\n</figure>\n",
