@@ -308,6 +308,57 @@ mod tests {
         assert_eq!(a.per_cost[0].specular_delta_l.unwrap().n, 4);
     }
 
+    /// The demo run twice: 8 recordings replayed twice each make 16 scans of 8 samples. Each
+    /// recording counts once (the later replay), so n is 8, not 16, and the sign tests pair 8
+    /// samples' geometries.
+    #[test]
+    fn a_recording_replayed_twice_counts_once() {
+        let study = super::super::study::tests::replayed_twice(8);
+        assert_eq!(study.samples.len(), 16);
+        let a = Analysis::of(&study);
+        assert_eq!(a.included, (8..16).collect::<Vec<_>>());
+        assert!(a.excluded.is_empty());
+        assert_eq!(a.repeats.len(), 8);
+        assert_eq!(a.repeats[0].sample, "T.Freesia pink (scan 1)");
+        assert_eq!(a.repeats[0].counted_as, "T.Freesia pink (scan 9)");
+        assert_eq!(
+            a.repeats[0].shared,
+            "the recording synthetic-t-freesia-pink (T.Freesia pink)"
+        );
+        assert_eq!(a.per_cost[0].all.unwrap().n, 8);
+        let t = a.sign_tests[0].test;
+        assert_eq!(t.n + t.ties, 8 * 14);
+        // The same as the study of one run.
+        let once = Analysis::of(&study_from_truth(8, None));
+        assert_eq!(a.per_cost, once.per_cost);
+        assert!(a.rescanned.is_empty());
+    }
+
+    /// A sample measured twice with different readings is two measurements: both count, and the
+    /// analysis names it so the report can say that n counts scans.
+    #[test]
+    fn a_sample_scanned_again_counts_per_scan_and_is_named() {
+        let mut study = study_from_truth(3, None);
+        let mut again = study.samples[0].clone();
+        again.scan.readings.ma_t12[0][0] *= 1.01;
+        study.samples[0].name = "T.Freesia pink (scan 1)".into();
+        again.name = "T.Freesia pink (scan 4)".into();
+        study.samples.push(again);
+        let a = Analysis::of(&study);
+        assert_eq!(a.included.len(), 4);
+        assert!(a.repeats.is_empty());
+        assert_eq!(
+            a.rescanned,
+            vec![Rescan {
+                sample: "T.Freesia pink".into(),
+                scans: vec![
+                    "T.Freesia pink (scan 1)".into(),
+                    "T.Freesia pink (scan 4)".into()
+                ],
+            }]
+        );
+    }
+
     #[test]
     fn p_values_print_readably() {
         assert_eq!(format_p(0.0703125), "0.0703");

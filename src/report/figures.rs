@@ -116,7 +116,12 @@ fn marker_at<DB: DrawingBackend>(
             col.filled(),
         )),
         Marker::Diamond => area.draw(&Polygon::new(
-            vec![(x, y - r - 1), (x + r + 1, y), (x, y + r + 1), (x - r - 1, y)],
+            vec![
+                (x, y - r - 1),
+                (x + r + 1, y),
+                (x, y + r + 1),
+                (x - r - 1, y),
+            ],
             col.filled(),
         )),
         Marker::Cross => {
@@ -297,14 +302,21 @@ fn simulated_texts(samples: &[SampleStudy]) -> Option<(String, [String; 2])> {
     } else {
         format!(
             " Of the scans shown, {} {} {said}, not measurements.",
-            sims.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "),
+            sims.iter()
+                .map(|s| s.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
             if sims.len() == 1 { "is" } else { "are" }
         )
     };
     let long = if all {
         said.clone()
     } else {
-        format!("{} of the {} scans shown: {said}", sims.len(), samples.len())
+        format!(
+            "{} of the {} scans shown: {said}",
+            sims.len(),
+            samples.len()
+        )
     };
     let short = format!(
         "{}simulated — replayed from {recordings} recording{} (named in the report's caption and Table 5)",
@@ -408,7 +420,9 @@ fn figure_list(study: &Study) -> Vec<Figure> {
             " No error bars: none of this sample's fits has bootstrap intervals (the summary says why)."
                 .to_string()
         } else if with < done {
-            format!(" Error bars: the 95 % bootstrap intervals of the estimates, for the {with} of its {done} fits that have them.")
+            format!(
+                " Error bars: the 95 % bootstrap intervals of the estimates, for the {with} of its {done} fits that have them."
+            )
         } else {
             " Error bars: the 95 % bootstrap intervals of the estimates.".to_string()
         };
@@ -779,7 +793,10 @@ fn lightness_lines<DB: DrawingBackend>(
     let legend_font = font(15);
     let widest = styles
         .iter()
-        .map(|(name, _)| root.estimate_text_size(name, &legend_font).map_or(0, |s| s.0))
+        .map(|(name, _)| {
+            root.estimate_text_size(name, &legend_font)
+                .map_or(0, |s| s.0)
+        })
         .max()
         .unwrap_or(0) as i32;
     let legend_w = widest + 70;
@@ -885,7 +902,10 @@ fn coinciding_estimates(s: &SampleStudy) -> Vec<(CostFunction, CostFunction, f64
         .flat_map(|g| {
             brdf_to_reflectance(&s.measured.values[g.index])
                 .into_iter()
-                .chain(est.iter().flat_map(|(_, e)| brdf_to_reflectance(&e[g.index])))
+                .chain(
+                    est.iter()
+                        .flat_map(|(_, e)| brdf_to_reflectance(&e[g.index])),
+                )
         })
         .fold(0.0f64, f64::max);
     let mut out = Vec::new();
@@ -1003,7 +1023,12 @@ fn spectra<DB: DrawingBackend>(
         ));
     }
     let done = s.fits.iter().filter(|f| f.done().is_some()).count();
-    if done > 0 && !s.fits.iter().any(|f| f.done().is_some_and(|d| d.uncertainty.is_some())) {
+    if done > 0
+        && !s
+            .fits
+            .iter()
+            .any(|f| f.done().is_some_and(|d| d.uncertainty.is_some()))
+    {
         notes.push("no error bars: these fits have no bootstrap intervals".into());
     }
     let (w, _) = legend.dim_in_pixel();
@@ -1355,7 +1380,11 @@ fn mean_ci_groups<DB: DrawingBackend>(
         .x_label_formatter(&|x| {
             let i = x.round();
             if (x - i).abs() < 1e-6 && i >= 0.0 {
-                names.get(i as usize).copied().unwrap_or_default().to_string()
+                names
+                    .get(i as usize)
+                    .copied()
+                    .unwrap_or_default()
+                    .to_string()
             } else {
                 String::new()
             }
@@ -1379,7 +1408,11 @@ fn mean_ci_groups<DB: DrawingBackend>(
             .draw_series(pts.iter().map(|(x, ci)| {
                 ErrorBar::new_vertical(*x, ci.lo, ci.mean, ci.hi, col.stroke_width(2), 14)
             }))?
-            .label(format!("{} ({})", summary.cost, study.method_of(summary.cost)))
+            .label(format!(
+                "{} ({})",
+                summary.cost,
+                study.method_of(summary.cost)
+            ))
             .legend(move |(x, y)| Circle::new((x + 8, y), 6, col.filled()));
         chart.draw_series(
             pts.iter()
@@ -1593,6 +1626,347 @@ mod tests {
                 "{text}: {:.0} % of the ink is in other columns than the font's layout",
                 100.0 * off / total
             );
+        }
+    }
+
+    use crate::report::study::tests::study_from_truth;
+
+    /// One element of an SVG figure: its tag and attributes, and its text for `<text>`.
+    #[derive(Debug)]
+    struct El {
+        tag: String,
+        attrs: Vec<(String, String)>,
+        text: String,
+    }
+
+    impl El {
+        fn get(&self, k: &str) -> &str {
+            self.attrs
+                .iter()
+                .find(|(a, _)| a == k)
+                .map_or("", |(_, v)| v.as_str())
+        }
+        fn num(&self, k: &str) -> f64 {
+            self.get(k).parse().unwrap_or(f64::NAN)
+        }
+    }
+
+    fn svg_elements(path: &Path) -> Vec<El> {
+        let svg = std::fs::read_to_string(path).unwrap();
+        let mut out = Vec::new();
+        for chunk in svg.split('<').skip(1) {
+            let Some(end) = chunk.find('>') else { continue };
+            let head = &chunk[..end];
+            if head.starts_with('/') || head.starts_with('?') || head.starts_with('!') {
+                continue;
+            }
+            let tag: String = head.chars().take_while(|c| c.is_alphanumeric()).collect();
+            let mut attrs = Vec::new();
+            for part in head[tag.len()..].split('"').collect::<Vec<_>>().chunks(2) {
+                if let [k, v] = part {
+                    attrs.push((k.trim().trim_end_matches('=').to_string(), v.to_string()));
+                }
+            }
+            let text = chunk[end + 1..]
+                .trim()
+                .replace("&quot;", "\"")
+                .replace("&amp;", "&");
+            out.push(El { tag, attrs, text });
+        }
+        out
+    }
+
+    /// The legend entries of an SVG figure: every left-anchored text with a small coloured
+    /// key (line, circle, square, polygon) just left of it on its line, as (text, colour).
+    fn legend_entries(els: &[El]) -> Vec<(String, String)> {
+        let mut out = Vec::new();
+        for t in els
+            .iter()
+            .filter(|e| e.tag == "text" && e.get("text-anchor") == "start")
+        {
+            let (tx, ty) = (t.num("x"), t.num("y"));
+            let ty = if t.get("dy") == "0.76em" {
+                ty + 0.4 * t.num("font-size") * 1.24
+            } else {
+                ty
+            };
+            let key = els.iter().find_map(|e| {
+                let (x0, x1, y, colour) = match e.tag.as_str() {
+                    "circle" => {
+                        let (cx, r) = (e.num("cx"), e.num("r"));
+                        (cx - r, cx + r, e.num("cy"), e.get("fill"))
+                    }
+                    "rect" if e.num("width") < 30.0 && e.get("fill") != "none" => (
+                        e.num("x"),
+                        e.num("x") + e.num("width"),
+                        e.num("y") + e.num("height") / 2.0,
+                        e.get("fill"),
+                    ),
+                    "polyline" => {
+                        let pts: Vec<f64> = e
+                            .get("points")
+                            .split([' ', ','])
+                            .filter_map(|v| v.parse().ok())
+                            .collect();
+                        if pts.len() != 4 || pts[1] != pts[3] || pts[2] - pts[0] > 40.0 {
+                            return None;
+                        }
+                        (pts[0], pts[2], pts[1], e.get("stroke"))
+                    }
+                    _ => return None,
+                };
+                (x1 <= tx && x1 >= tx - 45.0 && (y - ty).abs() <= 8.0 && x0 < x1)
+                    .then(|| colour.to_string())
+            });
+            if let Some(c) = key {
+                out.push((t.text.clone(), c));
+            }
+        }
+        out
+    }
+
+    fn hex(c: RGBColor) -> String {
+        format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2)
+    }
+
+    /// Colours are matched to names, one colour map for the whole report: every name a legend
+    /// gives (a sample, a cost function, "measured") has one colour in every figure, no colour
+    /// stands for two names, and a sample's colour is its own colour (the line of "T.Sky blue"
+    /// is blue). Fig. 5 drew the samples in palette order — "T.Sky blue" black, "T.Freesia
+    /// pink" in cf1's blue — and Fig. 12 drew its diffuse and specular groups in cf1's and
+    /// cf2's colours.
+    #[test]
+    fn colours_are_matched_to_names_across_the_figures() {
+        let study = study_from_truth(8, None);
+        let analysis = Analysis::of(&study);
+        let dir = tempfile::tempdir().unwrap();
+        let mut by_name: std::collections::BTreeMap<String, (String, String)> = Default::default();
+        let mut by_colour: std::collections::BTreeMap<String, (String, String)> =
+            Default::default();
+        for fig in figures(&study) {
+            let [_, svg] = render(&fig, &study, &analysis, dir.path()).unwrap();
+            let els = svg_elements(&svg);
+            let entries = legend_entries(&els);
+            if matches!(
+                fig.kind,
+                Kind::LightnessDiffuse | Kind::MeanCi | Kind::Spectra(0)
+            ) {
+                assert!(
+                    entries.len() >= 3,
+                    "{}: legend not found: {entries:?}",
+                    fig.stem
+                );
+            }
+            for (label, colour) in entries {
+                let name = label
+                    .strip_prefix("estimated, ")
+                    .unwrap_or(&label)
+                    .split(' ')
+                    .next()
+                    .filter(|w| ["cf1", "cf2", "m2"].contains(w))
+                    .map_or(label.clone(), str::to_string);
+                if let Some((c, at)) = by_name.get(&name) {
+                    assert_eq!(c, &colour, "{name}: {colour} in {}, {c} in {at}", fig.stem);
+                }
+                by_name.insert(name.clone(), (colour.clone(), fig.stem.clone()));
+                if let Some((n, at)) = by_colour.get(&colour) {
+                    assert_eq!(n, &name, "{colour} is {name} in {}, {n} in {at}", fig.stem);
+                }
+                by_colour.insert(colour, (name, fig.stem.clone()));
+            }
+        }
+        // Each sample's colour has its own hue, and its line is drawn in it.
+        let fig5 = figures(&study)
+            .into_iter()
+            .find(|f| f.kind == Kind::LightnessDiffuse)
+            .unwrap();
+        let els = svg_elements(&dir.path().join(format!("{}.svg", fig5.stem)));
+        for s in &study.samples {
+            let (colour, _) = by_name.get(&s.name).unwrap_or_else(|| panic!("{}", s.name));
+            let rgb = |h: &str| -> [f64; 3] {
+                [1, 3, 5].map(|i| f64::from(u8::from_str_radix(&h[i..i + 2], 16).unwrap()))
+            };
+            let [r, g, b] = rgb(colour);
+            let own = srgb(&{
+                let mut m = [0.0; crate::spectral::BANDS];
+                for gm in GEOMETRIES.iter().filter(|g| g.device == Device::MaT12) {
+                    for (k, v) in s.measured.values[gm.index].iter().enumerate() {
+                        m[k] += v / 12.0;
+                    }
+                }
+                m
+            })
+            .0;
+            let [r0, g0, b0] = [own.0, own.1, own.2].map(f64::from);
+            // Same chromaticity: the drawn colour is the sample's own, darkened.
+            let (sum, sum0) = (r + g + b, r0 + g0 + b0);
+            assert!(sum > 0.0 && sum0 > 0.0, "{}", s.name);
+            for (a, b) in [
+                (r / sum, r0 / sum0),
+                (g / sum, g0 / sum0),
+                (b / sum, b0 / sum0),
+            ] {
+                assert!(
+                    (a - b).abs() < 0.06,
+                    "{} drawn {colour}, its colour is {}",
+                    s.name,
+                    hex(own)
+                );
+            }
+            let lines = els
+                .iter()
+                .filter(|e| e.tag == "polyline" && e.get("stroke") == colour)
+                .filter(|e| e.get("points").split(' ').filter(|p| !p.is_empty()).count() == 12)
+                .count();
+            assert_eq!(lines, 1, "{}: no line of 12 geometries in {colour}", s.name);
+        }
+        let blue = by_name.get("T.Sky blue").unwrap().0.clone();
+        let [r, _, b] = [1, 3, 5].map(|i| u8::from_str_radix(&blue[i..i + 2], 16).unwrap());
+        assert!(b > r + 40, "T.Sky blue is drawn {blue}");
+    }
+
+    /// Estimates that coincide are all visible: with cf1 and m2 fitted to the same parameters
+    /// (the same estimate to the last bit), the cf1 line still shows in every panel of Fig. 8,
+    /// and the figure says that the two coincide. m2 was drawn over cf1, hiding it.
+    #[test]
+    fn coinciding_estimates_stay_visible_in_fig_8() {
+        let mut study = study_from_truth(1, None);
+        let cf1 = study.samples[0].fits[0].clone();
+        study.samples[0].fits[2].state = cf1.state.clone();
+        assert_eq!(
+            study.samples[0].done(CostFunction::Cf1).unwrap().estimated,
+            study.samples[0].done(CostFunction::M2).unwrap().estimated
+        );
+        register_font();
+        let analysis = Analysis::of(&study);
+        let fig = figures(&study)
+            .into_iter()
+            .find(|f| f.kind == Kind::Spectra(0))
+            .unwrap();
+        let (w, h) = fig.size;
+        let mut buf = vec![255u8; (w * h * 3) as usize];
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+            draw(&fig, &study, &analysis, &root).unwrap();
+            root.present().unwrap();
+        }
+        let colour = |c: RGBColor, x0: u32, y0: u32, x1: u32, y1: u32| -> usize {
+            let mut n = 0;
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let i = ((y * w + x) * 3) as usize;
+                    if buf[i..i + 3] == [c.0, c.1, c.2] {
+                        n += 1;
+                    }
+                }
+            }
+            n
+        };
+        // The 14 panels in a 4 × 4 grid under the title; the legend is the 15th.
+        let top = 40;
+        let (pw, ph) = (w / 4, (h - top) / 4);
+        for k in 0..GEOMETRY_COUNT as u32 {
+            let (x0, y0) = ((k % 4) * pw, top + (k / 4) * ph);
+            for c in CostFunction::ALL {
+                let n = colour(cost_colour(c), x0, y0, x0 + pw, y0 + ph);
+                assert!(n > 150, "panel {k}: {n} pixels of the {c} line");
+            }
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let [_, svg] = render(&fig, &study, &analysis, dir.path()).unwrap();
+        let texts: String = svg_elements(&svg)
+            .iter()
+            .filter(|e| e.tag == "text")
+            .map(|e| e.text.clone() + " ")
+            .collect();
+        assert!(
+            texts.contains(
+                "cf1 and m2 coincide (within 0.0000 in R): the cf1 line is the wider one beneath"
+            ),
+            "{texts}"
+        );
+    }
+
+    /// Fig. 11's sample names stay readable with 30+ samples: no two labels overlap (their
+    /// extents measured with the report's font, turned as drawn), each lies inside the figure,
+    /// and none is smaller than 12 px. They were written side by side however many there were.
+    #[test]
+    fn sample_labels_do_not_overlap_with_many_samples() {
+        use ab_glyph::{Font, FontRef, ScaleFont};
+        let base = study_from_truth(8, None);
+        let mut study = Study::default();
+        for k in 0..4 {
+            for s in &base.samples {
+                let mut s = s.clone();
+                s.name = format!("{} (scan {})", s.name, 100 + k * 8 + study.samples.len());
+                study.samples.push(s);
+            }
+        }
+        let n = study.samples.len();
+        assert!(n >= 30);
+        let analysis = Analysis::of(&study);
+        let dir = tempfile::tempdir().unwrap();
+        let face = FontRef::try_from_slice(FONT).unwrap();
+        for fig in figures(&study)
+            .into_iter()
+            .filter(|f| matches!(f.kind, Kind::BoxPlots | Kind::SpecularDeltaL))
+        {
+            let [_, svg] = render(&fig, &study, &analysis, dir.path()).unwrap();
+            let (w, h) = (f64::from(fig.size.0), f64::from(fig.size.1));
+            let names: Vec<&str> = study.samples.iter().map(|s| s.name.as_str()).collect();
+            let labels: Vec<El> = svg_elements(&svg)
+                .into_iter()
+                .filter(|e| e.tag == "text" && names.contains(&e.text.as_str()))
+                .collect();
+            assert_eq!(labels.len(), n, "{}", fig.stem);
+            // Each label's box: (x0, y0, x1, y1) in pixels.
+            let boxes: Vec<[f64; 4]> = labels
+                .iter()
+                .map(|e| {
+                    let px = e.num("font-size") * 1.24;
+                    assert!(px >= 12.0 - 1e-6, "{}: {px} px", e.text);
+                    let scaled = face.as_scaled(px as f32);
+                    let mut len = 0.0f64;
+                    let mut prev = None;
+                    for c in e.text.chars() {
+                        let id = face.glyph_id(c);
+                        if let Some(p) = prev {
+                            len += f64::from(scaled.kern(p, id));
+                        }
+                        len += f64::from(scaled.h_advance(id));
+                        prev = Some(id);
+                    }
+                    let (x, y) = (e.num("x"), e.num("y"));
+                    let along = match e.get("text-anchor") {
+                        "end" => [-len, 0.0],
+                        "middle" => [-len / 2.0, len / 2.0],
+                        _ => [0.0, len],
+                    };
+                    if e.get("transform").starts_with("rotate(270") {
+                        // Turned upright, reading upwards: along the text is up the page.
+                        [x - px / 2.0, y - along[1], x + px / 2.0, y - along[0]]
+                    } else {
+                        assert_eq!(e.get("transform"), "", "{}", e.text);
+                        [x + along[0], y - px / 2.0, x + along[1], y + px]
+                    }
+                })
+                .collect();
+            for (i, a) in boxes.iter().enumerate() {
+                assert!(
+                    a[0] >= 0.0 && a[1] >= 0.0 && a[2] <= w && a[3] <= h,
+                    "{}: {} outside the figure: {a:?}",
+                    fig.stem,
+                    labels[i].text
+                );
+                for (j, b) in boxes.iter().enumerate().skip(i + 1) {
+                    let overlap = a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
+                    assert!(
+                        !overlap,
+                        "{}: {} {a:?} overlaps {} {b:?}",
+                        fig.stem, labels[i].text, labels[j].text
+                    );
+                }
+            }
         }
     }
 

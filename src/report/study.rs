@@ -237,7 +237,10 @@ pub fn simulated_statement<'a>(
             Some(r) if !named.contains(&r) => named.push(r),
             Some(_) => {}
             None => {
-                let rest = note.strip_prefix("simulated — ").unwrap_or(&note).to_string();
+                let rest = note
+                    .strip_prefix("simulated — ")
+                    .unwrap_or(&note)
+                    .to_string();
                 if !other.contains(&rest) {
                     other.push(rest);
                 }
@@ -418,6 +421,52 @@ pub(crate) mod tests {
                 }
             })
             .collect();
+        Study { samples }
+    }
+
+    /// `study` as if loaded from a store whose scans were measured on simulated instruments:
+    /// sample `i` replayed from the recording `recordings[i]`, named as the store names it.
+    pub(crate) fn simulated(mut study: Study, recordings: &[&str]) -> Study {
+        use crate::store::{InstrumentProvenance, Provenance, Source};
+        let sim = InstrumentProvenance {
+            simulated: Some(true),
+            ..InstrumentProvenance::unknown()
+        };
+        for (s, r) in study.samples.iter_mut().zip(recordings) {
+            s.origin = Some(Origin {
+                station: None,
+                measured_at_ms: 0,
+                provenance: Provenance {
+                    ma_t12: sim.clone(),
+                    sra: sim.clone(),
+                    source: Source::Measured,
+                    source_detail: Some(format!("simulated — replayed from {r}")),
+                },
+            });
+        }
+        study
+    }
+
+    /// The demo run twice into one store: every sample's recording replayed again, the second
+    /// run's scans after the first's, both named by scan id as the loader names them.
+    pub(crate) fn replayed_twice(n: usize) -> Study {
+        let once = study_from_truth(n, None);
+        let recordings: Vec<String> = once
+            .samples
+            .iter()
+            .map(|s| format!("synthetic-{} ({})", crate::synth::slug(&s.name), s.name))
+            .collect();
+        let refs: Vec<&str> = recordings.iter().map(String::as_str).collect();
+        let mut samples = Vec::new();
+        for run in 0..2 {
+            let mut copy = simulated(once.clone(), &refs);
+            for (i, s) in copy.samples.iter_mut().enumerate() {
+                let id = (run * n + i + 1) as i64;
+                s.scan_id = Some(id);
+                s.name = format!("{} (scan {id})", s.name);
+            }
+            samples.extend(copy.samples);
+        }
         Study { samples }
     }
 

@@ -250,7 +250,10 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
                 .filter_map(move |f| f.done().map(|d| (s.name.as_str(), f, d)))
         })
         .collect();
-    let with = done.iter().filter(|(_, _, d)| d.uncertainty.is_some()).count();
+    let with = done
+        .iter()
+        .filter(|(_, _, d)| d.uncertainty.is_some())
+        .count();
     if !done.is_empty() {
         b.push(Block::Heading(
             "Fitted lobe parameters with bootstrap intervals".into(),
