@@ -285,7 +285,7 @@ fn check_figure_text(dir: &Path, scans: &[Scan], a: &Analysis) {
         "{f12:?}"
     );
     has(&f12, "mean ΔE00 over samples", "fig12");
-    has(&f12, "cost function (method)", "fig12");
+    has(&f12, "geometries the mean is over", "fig12");
     for label in ["all 14 geometries", "diffuse (MA-T12)", "specular (SRA)"] {
         has(&f12, label, "fig12");
     }

@@ -8,6 +8,13 @@
 //! - The sign test pairs the ΔE00 of two cost functions per (sample, geometry): 14 pairs per
 //!   sample, ties dropped. `plus` counts pairs where the first cost function has the larger
 //!   ΔE00 (fits worse).
+//! - A recording replayed more than once (the demo run twice: the same sample's recording
+//!   through the simulated instruments again) is one sample, not several: its scans hold the
+//!   same readings, so counting each would count one measurement as many. Scans of one sample
+//!   that replay the same recording, or hold bit-identical readings (one file imported twice),
+//!   count once, as the last of them in report order whose fits all finished (else the last);
+//!   the others are listed ([`Repeat`]). Scans of one sample with different readings (measured
+//!   again) each count, and the report says so ([`Rescan`]).
 //! - The specular luminance metric (SCIENCE.md §7.2) gets its own mean per cost function and
 //!   its own sign tests, on the paired |ΔL*| per (sample, SRA geometry): 2 pairs per sample.
 
@@ -15,7 +22,7 @@ use crate::cost::CostFunction;
 use crate::evaluation::Evaluation;
 use crate::stats::{MeanCi, SignTest, mean_ci95, sign_test};
 
-use super::study::{DoneFit, Study};
+use super::study::{DoneFit, SampleStudy, Study};
 
 /// A sample left out of the comparison, and why.
 #[derive(Debug, Clone, PartialEq)]
@@ -23,6 +30,28 @@ pub struct Exclusion {
     pub sample: String,
     /// One entry per cost function whose fit is missing, failed or unfinished.
     pub reasons: Vec<String>,
+}
+
+/// A scan counted once with another: it replays the same recording (or holds the same
+/// readings) as the scan that counts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Repeat {
+    /// The scan left out, by its name in the study.
+    pub sample: String,
+    /// The scan that counts for both.
+    pub counted_as: String,
+    /// What they share: "the recording synthetic-t-sky-blue (T.Sky blue)" or "the same
+    /// readings".
+    pub shared: String,
+}
+
+/// A sample measured in more than one scan with different readings: each scan counts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rescan {
+    /// The sample's name as scanned.
+    pub sample: String,
+    /// The scans' names in the study.
+    pub scans: Vec<String>,
 }
 
 /// Mean ΔE00 over samples under one cost function.
@@ -56,6 +85,11 @@ pub struct Analysis {
     /// Indices into `study.samples` of the samples that take part.
     pub included: Vec<usize>,
     pub excluded: Vec<Exclusion>,
+    /// Scans counted once with another scan of the same recording: in neither `included` nor
+    /// `excluded`.
+    pub repeats: Vec<Repeat>,
+    /// Samples with several counted scans of different readings: each scan counts.
+    pub rescanned: Vec<Rescan>,
     pub per_cost: Vec<CostSummary>,
     pub sign_tests: Vec<SignRow>,
     /// Sign tests on the paired specular |ΔL*| per (sample, SRA geometry): 2 pairs a sample.
@@ -65,9 +99,13 @@ pub struct Analysis {
 impl Analysis {
     pub fn of(study: &Study) -> Analysis {
         let cost_functions = study.cost_functions();
+        let (repeats, rescanned, counted) = replays(study, &cost_functions);
         let mut included = Vec::new();
         let mut excluded = Vec::new();
         for (i, s) in study.samples.iter().enumerate() {
+            if !counted[i] {
+                continue;
+            }
             let reasons: Vec<String> = cost_functions
                 .iter()
                 .filter_map(|&c| match s.fit(c) {
@@ -150,11 +188,87 @@ impl Analysis {
             cost_functions,
             included,
             excluded,
+            repeats,
+            rescanned,
             per_cost,
             sign_tests,
             luminance_sign_tests,
         }
     }
+}
+
+/// Who a sample is: its scanned name and station.
+fn identity(s: &SampleStudy) -> (&str, Option<&str>) {
+    (
+        s.scan.sample.as_str(),
+        s.origin.as_ref().and_then(|o| o.station.as_deref()),
+    )
+}
+
+/// What two scans of one sample share that makes them one measurement: the same replayed
+/// recording, or bit-identical readings.
+fn shared(a: &SampleStudy, b: &SampleStudy) -> Option<String> {
+    match (a.recording(), b.recording()) {
+        (Some(x), Some(y)) if x == y => return Some(format!("the recording {x}")),
+        _ => {}
+    }
+    (a.scan.readings == b.scan.readings && a.scan.reference == b.scan.reference)
+        .then(|| "the same readings".to_string())
+}
+
+/// The scans counted once with another ([`Repeat`]), the samples counted per scan
+/// ([`Rescan`]), and per sample whether it counts.
+fn replays(study: &Study, costs: &[CostFunction]) -> (Vec<Repeat>, Vec<Rescan>, Vec<bool>) {
+    let n = study.samples.len();
+    let complete = |i: usize| costs.iter().all(|&c| study.samples[i].done(c).is_some());
+    // Groups of one measurement: scans of one sample that share a recording or readings.
+    let mut group: Vec<usize> = (0..n).collect();
+    for i in 0..n {
+        for j in 0..i {
+            if group[j] == j
+                && identity(&study.samples[i]) == identity(&study.samples[j])
+                && shared(&study.samples[i], &study.samples[j]).is_some()
+            {
+                group[i] = j;
+                break;
+            }
+        }
+    }
+    let mut counted = vec![false; n];
+    let mut repeats = Vec::new();
+    for head in (0..n).filter(|&i| group[i] == i) {
+        let members: Vec<usize> = (0..n).filter(|&i| group[i] == head).collect();
+        let keep = members
+            .iter()
+            .rev()
+            .copied()
+            .find(|&i| complete(i))
+            .unwrap_or(members[members.len() - 1]);
+        counted[keep] = true;
+        for &i in members.iter().filter(|&&i| i != keep) {
+            repeats.push(Repeat {
+                sample: study.samples[i].name.clone(),
+                counted_as: study.samples[keep].name.clone(),
+                shared: shared(&study.samples[i], &study.samples[keep])
+                    .unwrap_or_else(|| "the same readings".into()),
+            });
+        }
+    }
+    let mut rescanned: Vec<Rescan> = Vec::new();
+    for i in (0..n).filter(|&i| counted[i]) {
+        let (name, _) = identity(&study.samples[i]);
+        let same: Vec<String> = (0..n)
+            .filter(|&j| counted[j] && identity(&study.samples[j]) == identity(&study.samples[i]))
+            .map(|j| study.samples[j].name.clone())
+            .collect();
+        if same.len() > 1 && !rescanned.iter().any(|r| r.scans == same) {
+            rescanned.push(Rescan {
+                sample: name.to_string(),
+                scans: same,
+            });
+        }
+    }
+    (repeats, rescanned, counted)
 }
 
 /// A p-value readably: four decimals, or scientific notation below 0.0001.
@@ -192,6 +306,57 @@ mod tests {
         let t = a.luminance_sign_tests[0].test;
         assert_eq!(t.n + t.ties, 4 * 2);
         assert_eq!(a.per_cost[0].specular_delta_l.unwrap().n, 4);
+    }
+
+    /// The demo run twice: 8 recordings replayed twice each make 16 scans of 8 samples. Each
+    /// recording counts once (the later replay), so n is 8, not 16, and the sign tests pair 8
+    /// samples' geometries.
+    #[test]
+    fn a_recording_replayed_twice_counts_once() {
+        let study = super::super::study::tests::replayed_twice(8);
+        assert_eq!(study.samples.len(), 16);
+        let a = Analysis::of(&study);
+        assert_eq!(a.included, (8..16).collect::<Vec<_>>());
+        assert!(a.excluded.is_empty());
+        assert_eq!(a.repeats.len(), 8);
+        assert_eq!(a.repeats[0].sample, "T.Freesia pink (scan 1)");
+        assert_eq!(a.repeats[0].counted_as, "T.Freesia pink (scan 9)");
+        assert_eq!(
+            a.repeats[0].shared,
+            "the recording synthetic-t-freesia-pink (T.Freesia pink)"
+        );
+        assert_eq!(a.per_cost[0].all.unwrap().n, 8);
+        let t = a.sign_tests[0].test;
+        assert_eq!(t.n + t.ties, 8 * 14);
+        // The same as the study of one run.
+        let once = Analysis::of(&study_from_truth(8, None));
+        assert_eq!(a.per_cost, once.per_cost);
+        assert!(a.rescanned.is_empty());
+    }
+
+    /// A sample measured twice with different readings is two measurements: both count, and the
+    /// analysis names it so the report can say that n counts scans.
+    #[test]
+    fn a_sample_scanned_again_counts_per_scan_and_is_named() {
+        let mut study = study_from_truth(3, None);
+        let mut again = study.samples[0].clone();
+        again.scan.readings.ma_t12[0][0] *= 1.01;
+        study.samples[0].name = "T.Freesia pink (scan 1)".into();
+        again.name = "T.Freesia pink (scan 4)".into();
+        study.samples.push(again);
+        let a = Analysis::of(&study);
+        assert_eq!(a.included.len(), 4);
+        assert!(a.repeats.is_empty());
+        assert_eq!(
+            a.rescanned,
+            vec![Rescan {
+                sample: "T.Freesia pink".into(),
+                scans: vec![
+                    "T.Freesia pink (scan 1)".into(),
+                    "T.Freesia pink (scan 4)".into()
+                ],
+            }]
+        );
     }
 
     #[test]

@@ -108,6 +108,25 @@ pub fn write_report_with(
     if study.samples.is_empty() {
         return Err(ReportError::Empty);
     }
+    // A recording replayed more than once counts once (analysis::Repeat): the report covers
+    // the scans that count, and lists the others.
+    let full = Analysis::of(study);
+    let counted_study;
+    let study: &Study = if full.repeats.is_empty() {
+        study
+    } else {
+        let left_out: Vec<&str> = full.repeats.iter().map(|r| r.sample.as_str()).collect();
+        counted_study = Study {
+            samples: study
+                .samples
+                .iter()
+                .filter(|s| !left_out.contains(&s.name.as_str()))
+                .cloned()
+                .collect(),
+        };
+        &counted_study
+    };
+    let repeats = full.repeats;
     // The samples the per-sample figures show.
     let shown = opts.max_sample_figures.max(1).min(study.samples.len());
     let subset;
@@ -125,7 +144,7 @@ pub fn write_report_with(
     let out = crate::safe_fs::Dir::create(dir)?;
     let staging = out.staging(".brdfd-report-")?;
     let staged = staging.path().to_path_buf();
-    let result = draw_report(study, drawn, shown, &staging.held_path(), progress);
+    let result = draw_report(study, drawn, shown, repeats, &staging.held_path(), progress);
     let published = result.and_then(|files| publish(&out, &staging, files, opts.replace));
     let staging_name = staged
         .file_name()
@@ -200,11 +219,13 @@ fn draw_report(
     study: &Study,
     drawn: &Study,
     shown: usize,
+    repeats: Vec<analysis::Repeat>,
     dir: &Path,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<ReportFiles, ReportError> {
-    let analysis = Analysis::of(study);
-    let figs = figures::figures(drawn);
+    let mut analysis = Analysis::of(study);
+    analysis.repeats = repeats;
+    let figs = figures::figures_for(drawn, study);
     let total = figs.len() + 1;
     let mut written = Vec::new();
     for (i, f) in figs.iter().enumerate() {
@@ -228,11 +249,14 @@ fn draw_report(
                 message: e.to_string(),
             }
         })?;
-        let caption = format!(
+        let mut caption = format!(
             "{}: the fitted material per cost function on a sphere, 31 bands under a directional D65 light with a weak ambient (brdfd render); {}.",
             s.name,
             s.scale().describe()
         );
+        if let Some(note) = s.simulated_note() {
+            caption.push_str(&format!(" The scan is {note}, not a measurement."));
+        }
         md_previews.push_str(&format!("![{name}]({name})\n\n{caption}\n\n"));
         html_previews.push_str(&format!(
             "<figure>\n<img src=\"{name}\" alt=\"preview of {0}\">\n<figcaption>{1}</figcaption>\n</figure>\n",
@@ -380,6 +404,112 @@ mod tests {
                 ))
                 .exists()
         );
+    }
+
+    /// The demo run twice into one store: the report counts each replayed recording once, says
+    /// so, says in its header, every caption and every figure that the scans are simulated and
+    /// replayed from which recordings, and says that the fits have no bootstrap intervals and
+    /// why.
+    #[test]
+    fn a_report_of_replayed_scans_says_so_and_counts_each_recording_once() {
+        let study = study::tests::replayed_twice(3);
+        let dir = tempfile::tempdir().unwrap();
+        let files = write_report(&study, dir.path(), &mut |_, _, _| {}).unwrap();
+        let md = std::fs::read_to_string(&files.markdown).unwrap();
+        assert!(
+            md.contains(
+                "3 samples (6 scans, 3 of them a recording replayed again and counted once)"
+            ),
+            "{md}"
+        );
+        assert!(md.contains(
+            "- T.Freesia pink (scan 1): the recording synthetic-t-freesia-pink (T.Freesia pink), counted as T.Freesia pink (scan 4)"
+        ), "{md}");
+        assert!(md.contains(
+            "Every scan of this study is simulated — replayed from synthetic-t-freesia-pink (T.Freesia pink), synthetic-t-prairie-green (T.Prairie green), synthetic-t-manzana-green (T.Manzana green):"
+        ), "{md}");
+        // Only the scans that count are drawn: three spectra figures, three previews.
+        let spectra = files
+            .figures
+            .iter()
+            .filter(|[png, _]| png.to_string_lossy().contains("fig08-"))
+            .count();
+        assert_eq!(spectra, 3);
+        assert_eq!(files.previews.len(), 3);
+        assert!(md.contains("| T.Freesia pink (scan 4) |"), "{md}");
+        assert!(!md.contains("| T.Freesia pink (scan 1) |"), "{md}");
+        // Every figure's caption, and every preview's, says the scans are simulated.
+        let captions: Vec<&str> = md
+            .split("![")
+            .skip(1)
+            .map(|c| c.lines().nth(2).unwrap_or_default())
+            .collect();
+        assert_eq!(captions.len(), files.figures.len() + files.previews.len());
+        for c in &captions {
+            assert!(c.contains("simulated — replayed from"), "{c}");
+        }
+        assert!(md.contains(
+            "for sample \"T.Freesia pink (scan 4)\"; estimates per cost function (cf1, cf2, m2), method separable, drawn widest first so that estimates which coincide show as nested lines. No error bars: none of this sample's fits has bootstrap intervals (the summary says why). This scan is simulated — replayed from synthetic-t-freesia-pink (T.Freesia pink), not a measurement."
+        ), "{md}");
+        // The figures themselves say it too.
+        for [_, svg] in &files.figures {
+            let text = std::fs::read_to_string(svg).unwrap();
+            assert!(
+                text.contains("simulated — replayed from"),
+                "{}",
+                svg.display()
+            );
+        }
+        let fig8 =
+            std::fs::read_to_string(dir.path().join("fig08-spectra-t-freesia-pink-scan-4.svg"))
+                .unwrap();
+        assert!(
+            fig8.contains("simulated — replayed from synthetic-t-freesia-pink (T.Freesia pink)")
+        );
+        let fig12 = std::fs::read_to_string(dir.path().join("fig12-mean-delta-e.svg")).unwrap();
+        assert!(fig12.contains("(n = 3 samples)"), "{fig12}");
+        // No fit has intervals: the report says so and why, instead of leaving them out.
+        assert!(md.contains(
+            "No bootstrap intervals: none of the 9 finished fits has them, so there is no table of parameter intervals and Fig. 8 draws no error bars. The store keeps no intervals for them."
+        ), "{md}");
+        assert!(md.contains("[fit] bootstrap is above 0"), "{md}");
+    }
+
+    /// Fits without bootstrap intervals beside fits with them are marked, counted and
+    /// explained.
+    #[test]
+    fn fits_without_intervals_are_marked_and_explained() {
+        let mut study = study_from_truth(2, None);
+        let FitState::Done(d) = &mut study.samples[0].fits[0].state else {
+            panic!("the first fit is done");
+        };
+        let p = d.params;
+        d.uncertainty = Some(crate::uncertainty::Uncertainty {
+            method: crate::uncertainty::METHOD.into(),
+            resamples: 200,
+            noise: 0.014,
+            seed: 1,
+            ks: [p.ks * 0.8, p.ks * 1.2],
+            alpha: [p.alpha * 0.8, p.alpha * 1.2],
+            ior: [p.ior * 0.9, p.ior * 1.1],
+            kd: p.kd.iter().map(|k| [k * 0.9, k * 1.1]).collect(),
+            delta_e00_mean: [0.1, 0.2],
+            delta_e00_diffuse_mean: [0.1, 0.2],
+            delta_e00_specular_mean: Some([1.0, 2.0]),
+            calibrated: false,
+            note: None,
+        });
+        let a = Analysis::of(&study);
+        let md = summary::markdown(&study, &a, &figures::figures(&study));
+        assert!(md.contains("| T.Freesia pink | cf1 | "), "{md}");
+        assert!(md.contains("| T.Freesia pink | cf2 | "), "{md}");
+        assert!(md.contains("(no interval)"), "{md}");
+        assert!(md.contains(
+            "5 of the 6 finished fits have no bootstrap intervals (\"no interval\" above; Fig. 8 draws no error bars for them). These fits were made in this process without a bootstrap: intervals are computed only when asked for (brdfd fit --bootstrap N)."
+        ), "{md}");
+        assert!(md.contains("Error bars: the 95 % bootstrap intervals of the estimates, for the 1 of its 3 fits that have them."), "{md}");
+        // Not simulated as far as the study knows: nothing said of it.
+        assert!(!md.contains("simulated —"), "{md}");
     }
 
     #[test]

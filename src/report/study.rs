@@ -208,6 +208,77 @@ impl SampleStudy {
     }
 }
 
+impl SampleStudy {
+    /// "simulated — replayed from …" when the scan was measured on a simulated instrument
+    /// (its stored provenance says so), as `brdfd show` says it; `None` for a scan from real
+    /// instruments, or one whose provenance is unknown (a study made in memory).
+    pub fn simulated_note(&self) -> Option<String> {
+        let p = &self.origin.as_ref()?.provenance;
+        if !p.simulated() {
+            return None;
+        }
+        Some(match p.source_detail.as_deref() {
+            Some(d) if d.starts_with("simulated") => d.to_string(),
+            Some(d) => format!("simulated — {d}"),
+            None => "simulated — which recording answered was not recorded".into(),
+        })
+    }
+
+    /// The recording a simulated scan replayed, as its provenance names it
+    /// ("synthetic-t-sky-blue (T.Sky blue)"); `None` for a scan that is not simulated or whose
+    /// recording was not recorded.
+    pub fn recording(&self) -> Option<String> {
+        let note = self.simulated_note()?;
+        note.strip_prefix("simulated — replayed from ")
+            .map(str::to_string)
+    }
+}
+
+/// What a figure or the summary says of the simulated scans among `samples`: "simulated —
+/// replayed from A, B", and whether every one of them is simulated. `None` when none is.
+pub fn simulated_statement<'a>(
+    samples: impl IntoIterator<Item = &'a SampleStudy>,
+) -> Option<(String, bool)> {
+    let mut named: Vec<String> = Vec::new();
+    let mut other: Vec<String> = Vec::new();
+    let (mut simulated, mut total) = (0usize, 0usize);
+    for s in samples {
+        total += 1;
+        let Some(note) = s.simulated_note() else {
+            continue;
+        };
+        simulated += 1;
+        match s.recording() {
+            Some(r) if !named.contains(&r) => named.push(r),
+            Some(_) => {}
+            None => {
+                let rest = note
+                    .strip_prefix("simulated — ")
+                    .unwrap_or(&note)
+                    .to_string();
+                if !other.contains(&rest) {
+                    other.push(rest);
+                }
+            }
+        }
+    }
+    if simulated == 0 {
+        return None;
+    }
+    let mut text = String::from("simulated");
+    if !named.is_empty() {
+        text.push_str(&format!(" — replayed from {}", named.join(", ")));
+    }
+    if !other.is_empty() {
+        text.push_str(&format!(
+            "{}{}",
+            if named.is_empty() { " — " } else { "; " },
+            other.join("; ")
+        ));
+    }
+    Some((text, simulated == total))
+}
+
 impl Study {
     /// Every finished fit of every sample, in sample order.
     pub fn done_fits(&self) -> impl Iterator<Item = &DoneFit> {
@@ -365,6 +436,52 @@ pub(crate) mod tests {
                 }
             })
             .collect();
+        Study { samples }
+    }
+
+    /// `study` as if loaded from a store whose scans were measured on simulated instruments:
+    /// sample `i` replayed from the recording `recordings[i]`, named as the store names it.
+    pub(crate) fn simulated(mut study: Study, recordings: &[&str]) -> Study {
+        use crate::store::{InstrumentProvenance, Provenance, Source};
+        let sim = InstrumentProvenance {
+            simulated: Some(true),
+            ..InstrumentProvenance::unknown()
+        };
+        for (s, r) in study.samples.iter_mut().zip(recordings) {
+            s.origin = Some(Origin {
+                station: None,
+                measured_at_ms: 0,
+                provenance: Provenance {
+                    ma_t12: sim.clone(),
+                    sra: sim.clone(),
+                    source: Source::Measured,
+                    source_detail: Some(format!("simulated — replayed from {r}")),
+                },
+            });
+        }
+        study
+    }
+
+    /// The demo run twice into one store: every sample's recording replayed again, the second
+    /// run's scans after the first's, both named by scan id as the loader names them.
+    pub(crate) fn replayed_twice(n: usize) -> Study {
+        let once = study_from_truth(n, None);
+        let recordings: Vec<String> = once
+            .samples
+            .iter()
+            .map(|s| format!("synthetic-{} ({})", crate::synth::slug(&s.name), s.name))
+            .collect();
+        let refs: Vec<&str> = recordings.iter().map(String::as_str).collect();
+        let mut samples = Vec::new();
+        for run in 0..2 {
+            let mut copy = simulated(once.clone(), &refs);
+            for (i, s) in copy.samples.iter_mut().enumerate() {
+                let id = (run * n + i + 1) as i64;
+                s.scan_id = Some(id);
+                s.name = format!("{} (scan {id})", s.name);
+            }
+            samples.extend(copy.samples);
+        }
         Study { samples }
     }
 

@@ -8,7 +8,7 @@ use crate::stats::MeanCi;
 
 use super::analysis::{Analysis, SignRow, format_p};
 use super::figures::Figure;
-use super::study::{FitState, Study};
+use super::study::{DoneFit, FitState, FitStudy, Study, simulated_statement};
 
 /// The columns of the sign-test tables (Table 3 on ΔE00, Table 8 on |ΔL*|).
 const SIGN_TEST_HEAD: [&str; 7] = ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"];
@@ -96,16 +96,72 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             .collect::<Vec<_>>()
             .join(" / "),
     };
+    let samples = if analysis.repeats.is_empty() {
+        format!("{} samples", study.samples.len())
+    } else {
+        format!(
+            "{} samples ({} scans, {} of them a recording replayed again and counted once)",
+            study.samples.len(),
+            study.samples.len() + analysis.repeats.len(),
+            analysis.repeats.len()
+        )
+    };
     let mut b = vec![
         Block::Heading("brdfd study report".into()),
         Block::Para(format!(
-            "{} samples; cost functions {cost_list}; fit method {methods}; SRA readings processed with the {strategies} strategy. Colour: {colour}, CIELAB, ΔE00 = CIEDE2000 between measured and estimated colour, per geometry (12 MA-T12 + 2 SRA). {} samples take part in the comparison, {} left out.",
-            study.samples.len(),
+            "{samples}; cost functions {cost_list}; fit method {methods}; SRA readings processed with the {strategies} strategy. Colour: {colour}, CIELAB, ΔE00 = CIEDE2000 between measured and estimated colour, per geometry (12 MA-T12 + 2 SRA). {} samples take part in the comparison, {} left out.",
             analysis.included.len(),
             analysis.excluded.len()
         )),
-        Block::Heading("Mean ΔE00 per sample and cost function".into()),
     ];
+    if let Some((said, all)) = simulated_statement(&study.samples) {
+        b.push(Block::Para(if all {
+            format!(
+                "Every scan of this study is {said}: readings recorded earlier, played back through simulated instruments, not measurements made for this report."
+            )
+        } else {
+            let names: Vec<&str> = study
+                .samples
+                .iter()
+                .filter(|s| s.simulated_note().is_some())
+                .map(|s| s.name.as_str())
+                .collect();
+            format!(
+                "{} of the {} scans are {said}: readings recorded earlier, played back through simulated instruments, not measurements ({}). The others were not measured on simulated instruments.",
+                names.len(),
+                study.samples.len(),
+                names.join(", ")
+            )
+        }));
+    }
+    if !analysis.repeats.is_empty() {
+        b.push(Block::Para(format!(
+            "Counted once: {} scans repeat a measurement another scan of the study already holds (the same recording replayed again, or the same readings). One measurement is one sample: each counts once, as the last of its scans whose fits all finished, in every table, figure and statistic below; the repeats are left out:",
+            analysis.repeats.len()
+        )));
+        b.push(Block::List(
+            analysis
+                .repeats
+                .iter()
+                .map(|r| format!("{}: {}, counted as {}", r.sample, r.shared, r.counted_as))
+                .collect(),
+        ));
+    }
+    if !analysis.rescanned.is_empty() {
+        b.push(Block::Para(
+            "Counted per scan: these samples were scanned more than once with different readings; every scan counts as one sample in the means, intervals and sign tests, so n counts scans, not distinct physical samples:".into(),
+        ));
+        b.push(Block::List(
+            analysis
+                .rescanned
+                .iter()
+                .map(|r| format!("{}: {}", r.sample, r.scans.join(", ")))
+                .collect(),
+        ));
+    }
+    b.push(Block::Heading(
+        "Mean ΔE00 per sample and cost function".into(),
+    ));
     let mut head = vec!["sample".to_string()];
     for c in costs {
         for part in ["all", "diffuse", "specular", "max"] {
@@ -184,40 +240,80 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
         head: SIGN_TEST_HEAD.map(String::from).to_vec(),
         rows: sign_test_rows(study, &analysis.sign_tests),
     });
-    // Parameters with their bootstrap intervals, when any fit has them (SCIENCE.md §10).
-    let with_intervals: Vec<Vec<String>> = study
+    // Parameters with their bootstrap intervals (SCIENCE.md §10); a fit without them says so.
+    let done: Vec<(&str, &FitStudy, &DoneFit)> = study
         .samples
         .iter()
         .flat_map(|s| {
-            s.fits.iter().filter_map(move |f| {
-                let d = f.done()?;
-                let u = d.uncertainty.as_ref()?;
-                let p = &d.params;
-                let cell = |v: f64, iv: [f64; 2]| format!("{v:.4} [{:.4}, {:.4}]", iv[0], iv[1]);
-                Some(vec![
-                    s.name.clone(),
-                    f.cost.to_string(),
-                    cell(p.ks, u.ks),
-                    cell(p.alpha, u.alpha),
-                    cell(p.ior, u.ior),
-                    cell(d.evaluation.all.mean, u.delta_e00_mean),
-                    u.resamples.to_string(),
-                    if u.calibrated { "yes" } else { "no" }.to_string(),
-                ])
-            })
+            s.fits
+                .iter()
+                .filter_map(move |f| f.done().map(|d| (s.name.as_str(), f, d)))
         })
         .collect();
-    if !with_intervals.is_empty() {
+    let with = done
+        .iter()
+        .filter(|(_, _, d)| d.uncertainty.is_some())
+        .count();
+    if !done.is_empty() {
         b.push(Block::Heading(
             "Fitted lobe parameters with bootstrap intervals".into(),
         ));
-        b.push(Block::Table {
-            caption: "Table 4. Fitted ks, α, μ (ior) and mean ΔE00, each with its 95 % bootstrap interval [low, high]: the measured BRDF perturbed with the noise the scan shows, refitted per resample (parametric bootstrap, SCIENCE.md §10). The ΔE00 interval is the spread of each resample's fit against its resample. Fig. 8 draws the kd intervals as error bars. Calibrated: whether intervals of that cost function and SRA model were measured to hold the truth in ≥ 90 % of synthetic trials (SCIENCE.md §10); where \"no\", they are bootstrap intervals, not calibrated 95 % intervals.".into(),
-            head: ["sample", "cost", "ks", "α", "μ", "mean ΔE00", "resamples", "calibrated"]
-                .map(String::from)
-                .to_vec(),
-            rows: with_intervals,
-        });
+        let why = missing_intervals_reason(study);
+        if with == 0 {
+            b.push(Block::Para(format!(
+                "No bootstrap intervals: none of the {} finished fits has them, so there is no table of parameter intervals and Fig. 8 draws no error bars. {why}",
+                done.len()
+            )));
+        } else {
+            let rows = done
+                .iter()
+                .map(|(name, f, d)| {
+                    let p = &d.params;
+                    let mut row = vec![name.to_string(), f.cost.to_string()];
+                    match &d.uncertainty {
+                        Some(u) => {
+                            let cell = |v: f64, iv: [f64; 2]| {
+                                format!("{v:.4} [{:.4}, {:.4}]", iv[0], iv[1])
+                            };
+                            row.extend([
+                                cell(p.ks, u.ks),
+                                cell(p.alpha, u.alpha),
+                                cell(p.ior, u.ior),
+                                cell(d.evaluation.all.mean, u.delta_e00_mean),
+                                u.resamples.to_string(),
+                                if u.calibrated { "yes" } else { "no" }.to_string(),
+                            ]);
+                        }
+                        None => {
+                            let cell = |v: f64| format!("{v:.4} (no interval)");
+                            row.extend([
+                                cell(p.ks),
+                                cell(p.alpha),
+                                cell(p.ior),
+                                cell(d.evaluation.all.mean),
+                                "none".into(),
+                                "—".into(),
+                            ]);
+                        }
+                    }
+                    row
+                })
+                .collect();
+            b.push(Block::Table {
+                caption: "Table 4. Fitted ks, α, μ (ior) and mean ΔE00, each with its 95 % bootstrap interval [low, high]: the measured BRDF perturbed with the noise the scan shows, refitted per resample (parametric bootstrap, SCIENCE.md §10). The ΔE00 interval is the spread of each resample's fit against its resample. Fig. 8 draws the kd intervals as error bars. Calibrated: whether intervals of that cost function and SRA model were measured to hold the truth in ≥ 90 % of synthetic trials (SCIENCE.md §10); where \"no\", they are bootstrap intervals, not calibrated 95 % intervals. A fit without intervals is marked \"no interval\".".into(),
+                head: ["sample", "cost", "ks", "α", "μ", "mean ΔE00", "resamples", "calibrated"]
+                    .map(String::from)
+                    .to_vec(),
+                rows,
+            });
+            if with < done.len() {
+                b.push(Block::Para(format!(
+                    "{} of the {} finished fits have no bootstrap intervals (\"no interval\" above; Fig. 8 draws no error bars for them). {why}",
+                    done.len() - with,
+                    done.len()
+                )));
+            }
+        }
     }
     // Where, when and by which instruments each stored scan was measured.
     if study.samples.iter().any(|s| s.origin.is_some()) {
@@ -372,6 +468,15 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
         });
     }
     b
+}
+
+/// Why fits have no bootstrap intervals, as far as the study can tell.
+fn missing_intervals_reason(study: &Study) -> String {
+    if study.samples.iter().any(|s| s.origin.is_some()) {
+        "The store keeps no intervals for them. The daemon bootstraps each fit after storing it, one fit at a time, when [fit] bootstrap is above 0 (200 resamples by default; 0 turns them off). A stored fit has none when that setting was 0, when its bootstrap had not finished when the report read the store, or when the daemon stopped first — as brdfd demo and brdfd replay do once the fits are done. Report again once the bootstraps have run.".into()
+    } else {
+        "These fits were made in this process without a bootstrap: intervals are computed only when asked for (brdfd fit --bootstrap N).".into()
+    }
 }
 
 fn md_cell(s: &str) -> String {
