@@ -17,7 +17,7 @@
 //! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
 //! - [`synth`]: synthetic scans from a known ground truth (ColorChecker spectra, matt lobes).
 //! - [`fit`]: one scan → processing → optimiser → ΔE00 evaluation, and the fit report (JSON).
-//! - [`report`]: study reports: the paper's figures 4–12 (PNG, SVG), statistics, HTML/Markdown.
+//! - [`report`]: study reports: the paper's figures 4–12 and Fig. 13 (PNG, SVG), statistics, HTML/Markdown.
 //! - [`formats`]: exchange formats: CGATS.17, CxF3, CSV, JSON exports; instrument-software imports.
 //! - [`render`]: spectral sphere previews of fitted materials (PNG).
 //! - [`safe_fs`]: every file written outside the store: no links followed, never onto the store.

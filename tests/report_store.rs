@@ -352,7 +352,7 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
     ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("3 samples, 16 figures (PNG and SVG)"),
+        stdout.contains("3 samples, 17 figures (PNG and SVG)"),
         "{stdout}"
     );
     for stem in [
@@ -370,6 +370,7 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
         "fig11b-specular-delta-l",
         "fig12-mean-delta-e",
         "fig12b-mean-specular-delta-l",
+        "fig13-residual-lightness",
     ] {
         for ext in ["png", "svg"] {
             let p = out_dir.join(format!("{stem}.{ext}"));
@@ -514,5 +515,5 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
         std::path::Path::new(v["html"].as_str().unwrap()).exists(),
         "{v}"
     );
-    assert_eq!(v["figures"].as_array().unwrap().len(), 4 + 3 + 3 + 6, "{v}");
+    assert_eq!(v["figures"].as_array().unwrap().len(), 4 + 3 + 3 + 7, "{v}");
 }

@@ -51,7 +51,7 @@ pub enum Command {
     /// eight samples) through the whole daemon into a local SQLite file, fit all three cost
     /// functions, and compare them.
     Demo(demo::DemoArgs),
-    /// Write the study report of stored scans: the paper's figures 4–12 (PNG and SVG) and a
+    /// Write the study report of stored scans: the paper's figures 4–12 and where the model misses (Fig. 13; PNG and SVG) and a
     /// summary (HTML, Markdown) with ΔE00 per sample and cost function, means with 95 % CI and
     /// sign tests.
     Report(report::ReportArgs),

@@ -1,4 +1,4 @@
-//! `brdfd report`: the study report (SCIENCE.md §9) of stored scans — figures 4–12 as PNG and
+//! `brdfd report`: the study report (SCIENCE.md §9) of stored scans — figures 4–13 as PNG and
 //! SVG, and the summary in HTML and Markdown — written into one directory, with progress on
 //! stderr. Reads the store directly (no daemon needed): a station's SQLite file, or the lab's
 //! central PostgreSQL database (`--db postgres://…`, `--station`).

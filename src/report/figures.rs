@@ -1,4 +1,4 @@
-//! The paper's figures 4–12 (SCIENCE.md §9), drawn with plotters into PNG (bitmap backend)
+//! The paper's figures 4–12 and Fig. 13, where the model misses (SCIENCE.md §9), drawn with plotters into PNG (bitmap backend)
 //! and SVG from one drawing routine per figure.
 //!
 //! Text is rendered with the embedded DejaVu Sans (`fonts/`), registered with plotters'
@@ -254,6 +254,7 @@ enum Kind {
     LuminanceSpecular,
     SpecularDeltaL,
     MeanDeltaL,
+    ResidualLightness,
 }
 
 fn methods(study: &Study) -> String {
@@ -488,6 +489,15 @@ fn figure_list(study: &Study) -> Vec<Figure> {
         size: (1000, 700),
         note: None,
     });
+    out.push(Figure {
+        stem: "fig13-residual-lightness".into(),
+        caption: format!(
+            "Fig. 13. Where the model misses: measured minus estimated CIELAB lightness ΔL* (D65, 2°) at each of the 12 diffuse (MA-T12) geometries, per cost function ({cost_list}), method {method}; each dot one sample (in its colour, as in Fig. 5), the box from first to third quartile over the samples with a line at the median. Above zero the fit is too dark at that geometry, below zero too bright; a pattern shared by the samples is a shape the model cannot take, not noise."
+        ),
+        kind: Kind::ResidualLightness,
+        size: (1440, 720),
+        note: None,
+    });
     // A study whose scans have no specular readings (MA-T12-only instrument exports) has
     // nothing to draw in the SRA figures: they are left out, not drawn empty.
     if !study
@@ -580,6 +590,7 @@ fn draw<DB: DrawingBackend>(
         Kind::MeanCi => mean_ci(root, study, analysis),
         Kind::LuminanceSpecular => luminance_specular(root, study),
         Kind::SpecularDeltaL => specular_delta_l_points(root, study),
+        Kind::ResidualLightness => residual_lightness(root, study),
         Kind::MeanDeltaL => mean_ci_groups(
             root,
             study,
@@ -853,6 +864,130 @@ fn lightness_lines<DB: DrawingBackend>(
             legend_font.pos(Pos::new(HPos::Left, VPos::Center)),
         ))?;
     }
+    Ok(())
+}
+
+/// Fig. 13: measured minus estimated L* per diffuse geometry, a box over the samples per cost
+/// function and a dot per sample.
+fn residual_lightness<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    study: &Study,
+) -> DrawResult<DB> {
+    let geos: Vec<_> = GEOMETRIES
+        .iter()
+        .filter(|g| g.device == Device::MaT12)
+        .collect();
+    let costs = study.cost_functions();
+    let styles = sample_styles(study);
+    // ΔL* per cost function, sample and geometry (None where the fit is not done).
+    let residuals: Vec<Vec<Option<Vec<f64>>>> = costs
+        .iter()
+        .map(|&c| {
+            study
+                .samples
+                .iter()
+                .map(|s| {
+                    let d = s.done(c)?;
+                    let (m, e) = (lab_of(&s.measured.values), lab_of(&d.estimated));
+                    Some(geos.iter().map(|g| m[g.index].l - e[g.index].l).collect())
+                })
+                .collect()
+        })
+        .collect();
+    let (lo, hi) = padded(
+        residuals
+            .iter()
+            .flatten()
+            .flatten()
+            .flatten()
+            .copied()
+            .chain([0.0]),
+    );
+    let names: Vec<&str> = geos.iter().map(|g| g.name).collect();
+    let n = geos.len();
+    let mut chart = ChartBuilder::on(root)
+        .caption(
+            format!(
+                "Fig. 13  Where the model misses: measured − estimated L* per geometry (method {})",
+                methods(study)
+            ),
+            font(24),
+        )
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(70)
+        .build_cartesian_2d(-0.5f64..n as f64 - 0.5, lo..hi)?;
+    chart
+        .configure_mesh()
+        .x_desc("geometry (device name; detector° as aspecular°)")
+        .y_desc("ΔL* measured − estimated")
+        .x_labels(n)
+        .x_label_formatter(&|x| {
+            let i = x.round();
+            if (x - i).abs() < 1e-6 && i >= 0.0 {
+                names.get(i as usize).copied().unwrap_or("").to_string()
+            } else {
+                String::new()
+            }
+        })
+        .label_style(font(15))
+        .axis_desc_style(font(17))
+        .draw()?;
+    chart.draw_series(std::iter::once(PathElement::new(
+        vec![(-0.5, 0.0), (n as f64 - 0.5, 0.0)],
+        BLACK.stroke_width(1),
+    )))?;
+    let m = costs.len().max(1) as f64;
+    let width = 0.8 / m;
+    for (k, (&c, per_sample)) in costs.iter().zip(&residuals).enumerate() {
+        let col = cost_colour(c);
+        let offset = (k as f64 - (m - 1.0) / 2.0) * width;
+        let mut first = true;
+        for gi in 0..n {
+            let values: Vec<f64> = per_sample.iter().flatten().map(|r| r[gi]).collect();
+            let Some([_, q1, med, q3, _]) = quartiles(&values) else {
+                continue;
+            };
+            let x = gi as f64 + offset;
+            let (x0, x1) = (x - width * 0.4, x + width * 0.4);
+            let series = chart.draw_series(std::iter::once(Rectangle::new(
+                [(x0, q1), (x1, q3)],
+                col.mix(0.25).filled(),
+            )))?;
+            if first {
+                series
+                    .label(format!("{c} ({})", study.method_of(c)))
+                    .legend(move |(x, y)| {
+                        Rectangle::new([(x, y - 6), (x + 16, y + 6)], col.mix(0.6).filled())
+                    });
+                first = false;
+            }
+            chart.draw_series(std::iter::once(Rectangle::new(
+                [(x0, q1), (x1, q3)],
+                col.stroke_width(2),
+            )))?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(x0, med), (x1, med)],
+                col.stroke_width(3),
+            )))?;
+            for (r, (_, style)) in per_sample.iter().zip(&styles) {
+                if let Some(r) = r {
+                    chart.draw_series(std::iter::once(Circle::new(
+                        (x, r[gi]),
+                        3,
+                        style.colour.filled(),
+                    )))?;
+                }
+            }
+        }
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .label_font(font(15))
+        .draw()?;
     Ok(())
 }
 

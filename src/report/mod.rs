@@ -1,9 +1,9 @@
-//! Study reports: the paper's figures 4–12 and its statistics (SCIENCE.md §8–9), built from an
+//! Study reports: the paper's figures 4–12, Fig. 13 (where the model misses) and the statistics (SCIENCE.md §8–9), built from an
 //! in-memory [`Study`] so that everything is testable without a database.
 //!
 //! - [`study`]: the study model (samples, measured BRDF, fits per cost function).
 //! - [`analysis`]: which samples take part, mean ΔE00 with 95 % CI, sign tests.
-//! - [`figures`]: figures 4–12 as PNG and SVG (plotters, embedded DejaVu Sans).
+//! - [`figures`]: figures 4–13 as PNG and SVG (plotters, embedded DejaVu Sans).
 //! - [`summary`]: the summary page in Markdown and HTML.
 //! - [`load`]: builds a study from the store.
 //!
@@ -323,8 +323,8 @@ mod tests {
         let mut steps = Vec::new();
         let files =
             write_report(&study, dir.path(), &mut |s, _, _| steps.push(s.to_string())).unwrap();
-        // 4, 5, 6, 6b, 7×3, 8×3, 9, 10, 11, 11b, 12, 12b.
-        assert_eq!(files.figures.len(), 4 + 3 + 3 + 6);
+        // 4, 5, 6, 6b, 7×3, 8×3, 9, 10, 11, 11b, 12, 12b, 13.
+        assert_eq!(files.figures.len(), 4 + 3 + 3 + 7);
         for [png, svg] in &files.figures {
             let bytes = std::fs::read(png).unwrap();
             assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", png.display());
@@ -381,8 +381,8 @@ mod tests {
             ..ReportOptions::default()
         };
         let files = write_report_with(&study, dir.path(), &opts, &mut |_, _, _| {}).unwrap();
-        // 4, 5, 6, 6b, 7×3, 8×2 (not 3), 9, 10, 11, 11b, 12, 12b.
-        assert_eq!(files.figures.len(), 4 + 3 + 2 + 6);
+        // 4, 5, 6, 6b, 7×3, 8×2 (not 3), 9, 10, 11, 11b, 12, 12b, 13.
+        assert_eq!(files.figures.len(), 4 + 3 + 2 + 7);
         assert_eq!(files.previews.len(), 2);
         let md = std::fs::read_to_string(&files.markdown).unwrap();
         assert!(md.contains("show the first 2 of the 3 samples"), "{md}");
