@@ -277,7 +277,8 @@ fn files_written_slowly_in_pieces_are_imported_whole_and_fitted() {
     assert_eq!(shown["scan"]["provenance"]["source"], "imported");
     assert_eq!(
         shown["scan"]["provenance"]["source_detail"],
-        "imported from session 1.cgats and session 1.sra.csv, instrument software export"
+        "imported from session 1.cgats and session 1.sra.csv, instrument software export; \
+         CGATS export session 1.cgats; originator MA-T12 software"
     );
     let exported = Scan::from_json(
         daemon

@@ -394,7 +394,17 @@ mod tests {
             &ImportOptions::default(),
         )
         .unwrap();
+        // The readings as written, and what the header says of them (no CREATED or
+        // INSTRUMENTATION here: the originator only).
+        let mut got = got;
+        let origin = got[0].origin.take().expect("an instrument export's origin");
         assert_eq!(got, vec![s.scan.clone()]);
+        assert_eq!(origin.measured_at, None);
+        assert_eq!(origin.ma_t12, None);
+        assert_eq!(
+            origin.notes.get("originator").map(String::as_str),
+            Some("MA-T12 software")
+        );
     }
 
     #[test]

@@ -423,21 +423,7 @@ pub(crate) fn origins(file: &str, text: &str) -> BTreeMap<String, crate::scan::O
             ..Default::default()
         };
         if let Some(created) = child(object, "CreationDate").and_then(|c| c.text()) {
-            match super::export_time(created) {
-                Some((at, offset)) => {
-                    origin.measured_at = Some(at);
-                    if !offset {
-                        origin
-                            .notes
-                            .insert("time zone".into(), "none stated; taken as UTC".into());
-                    }
-                }
-                None => {
-                    origin
-                        .notes
-                        .insert("created".into(), created.trim().to_string());
-                }
-            }
+            origin.note_created(created);
         }
         if let Some(c) = &creator {
             origin.notes.insert("originator".into(), c.clone());
@@ -878,7 +864,13 @@ pub(crate) mod tests {
             &ImportOptions::default(),
         )
         .unwrap();
+        // The readings as written, and what the export says of them: the object's creation
+        // time as the measurement time.
+        let mut got = got;
+        let origin = got[0].origin.take().expect("an instrument export's origin");
         assert_eq!(got, vec![s.scan]);
+        assert_eq!(origin.measured_at.as_deref(), Some("2024-05-01T12:00:00Z"));
+        assert_eq!(origin.source.as_deref(), Some("CxF3 export m.cxf"));
     }
 
     #[test]

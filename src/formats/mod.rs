@@ -272,6 +272,27 @@ pub(crate) fn export_time(text: &str) -> Option<(String, bool)> {
     Some((t.to_string(), false))
 }
 
+impl Origin {
+    /// Keeps an export's creation time as the measurement time (RFC 3339 UTC; a time without
+    /// an offset is taken as UTC and the notes say so), or, when it is no time brdfd reads, as
+    /// a note.
+    pub(crate) fn note_created(&mut self, created: &str) {
+        match export_time(created) {
+            Some((at, offset)) => {
+                self.measured_at = Some(at);
+                if !offset {
+                    self.notes
+                        .insert("time zone".into(), "none stated; taken as UTC".into());
+                }
+            }
+            None => {
+                self.notes
+                    .insert("created".into(), created.trim().to_string());
+            }
+        }
+    }
+}
+
 /// What an instrument's CGATS export says in its header of where its readings came from:
 /// `CREATED` (when it was written, as the measurement time), `INSTRUMENTATION` (the
 /// instrument: a real one) and `ORIGINATOR` (the software). brdfd's own exports (with a
@@ -285,19 +306,7 @@ fn cgats_origin(file: &str, t: &table::Table) -> Option<Origin> {
         ..Origin::default()
     };
     if let Some(created) = t.keyword("CREATED") {
-        match export_time(created) {
-            Some((at, offset)) => {
-                origin.measured_at = Some(at);
-                if !offset {
-                    origin
-                        .notes
-                        .insert("time zone".into(), "none stated; taken as UTC".into());
-                }
-            }
-            None => {
-                origin.notes.insert("created".into(), created.to_string());
-            }
-        }
+        origin.note_created(created);
     }
     if let Some(instrument) = t
         .keyword("INSTRUMENTATION")

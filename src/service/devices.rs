@@ -103,12 +103,7 @@ impl Devices {
         ma_t12: Script,
         options: &ReplayOptions,
     ) -> Result<Devices, DeviceSetupError> {
-        let sim_m = SimMat12::new(ma_t12, options.clone()).map_err(|source| {
-            DeviceSetupError::Simulation {
-                instrument: Instrument::MaT12,
-                source,
-            }
-        })?;
+        let sim_m = sim_mat12(ma_t12, options)?;
         Ok(Devices {
             ma_t12: spawn_mat12_with(sim_m.factory(), DriverConfig::default(), None),
             sra: None,
@@ -137,12 +132,7 @@ impl Devices {
         options: &ReplayOptions,
         record: [Option<&Path>; 2],
     ) -> Result<Devices, DeviceSetupError> {
-        let sim_m = SimMat12::new(ma_t12, options.clone()).map_err(|source| {
-            DeviceSetupError::Simulation {
-                instrument: Instrument::MaT12,
-                source,
-            }
-        })?;
+        let sim_m = sim_mat12(ma_t12, options)?;
         let sim_s =
             SimSra::new(sra, options.clone()).map_err(|source| DeviceSetupError::Simulation {
                 instrument: Instrument::Sra,
@@ -192,12 +182,7 @@ impl Devices {
         let ma_t12 = match &m.transport {
             MaT12Transport::Simulated { session } => {
                 let script = script(Instrument::MaT12, session.as_deref())?;
-                let sim = SimMat12::new(script, options.clone()).map_err(|source| {
-                    DeviceSetupError::Simulation {
-                        instrument: Instrument::MaT12,
-                        source,
-                    }
-                })?;
+                let sim = sim_mat12(script, options)?;
                 let handle = spawn_mat12_with(sim.factory(), m_cfg, m_rec);
                 simulators.ma_t12 = Some(sim);
                 handle
@@ -363,6 +348,14 @@ fn script(instrument: Instrument, session: Option<&Path>) -> Result<Script, Devi
             Script::parse(&text).map_err(sim_err)
         }
     }
+}
+
+/// The simulated MA-T12 replaying `script`.
+fn sim_mat12(script: Script, options: &ReplayOptions) -> Result<SimMat12, DeviceSetupError> {
+    SimMat12::new(script, options.clone()).map_err(|source| DeviceSetupError::Simulation {
+        instrument: Instrument::MaT12,
+        source,
+    })
 }
 
 /// The next event of a driver's channel, or never when there is no driver (the SRA turned
