@@ -4,6 +4,7 @@
 
 use super::*;
 use crate::cost::cost;
+use crate::model::evaluate;
 use crate::geometry::by_name;
 use crate::optimise::synthetic::{self, SyntheticCase};
 

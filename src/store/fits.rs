@@ -535,7 +535,12 @@ impl Store {
         if !measured.geometries.has_sra() {
             return Ok((sra, None));
         }
-        let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
+        let kind: model::ModelKind = run
+            .settings
+            .get("model")
+            .and_then(|v| serde_json::from_value(v.clone()).ok())
+            .unwrap_or_default();
+        let estimated = model::evaluate_model(&params, kind, fresnel, &SpecularGeometry::all());
         Ok((
             sra,
             Some(specular_delta_l(&measured.values, &estimated, sra)),
