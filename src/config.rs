@@ -1897,7 +1897,9 @@ mod tests {
                 .model,
             ModelKind::OrenNayar
         );
-        let e = parse("[fit]\nmodel = \"lambert\"\n").unwrap_err().to_string();
+        let e = parse("[fit]\nmodel = \"lambert\"\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("fit.model") && e.contains("two-lobe"), "{e}");
         let e = parse("[fit]\nmethod = \"paper\"\nmodel = \"two-lobe\"\n")
             .unwrap_err()
