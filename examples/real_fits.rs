@@ -97,13 +97,16 @@ fn main() {
             let mut de_out = vec![Vec::new(); MA_T12_COUNT];
             let mut dl_out = vec![Vec::new(); MA_T12_COUNT];
             let mut means = Vec::new();
+            let mut fitted_params = Vec::new();
             for (_, m) in &scans {
                 let settings = Settings {
                     cost,
                     model,
+                    fresnel,
                     ..Settings::default()
                 };
                 let out = fit(m, &settings).expect("a real scan fits");
+                fitted_params.push(out.params);
                 let est = model::evaluate_model(
                     &out.params,
                     model,
@@ -155,6 +158,21 @@ fn main() {
                 mean(&means),
                 mean(&de_out.concat())
             );
+            for p in &fitted_params {
+                let extra: Vec<String> = model
+                    .extra_names()
+                    .iter()
+                    .zip(p.extra.iter())
+                    .map(|(n, v)| format!("  {n} {v:.4}"))
+                    .collect();
+                println!(
+                    "  fitted: ks {:.4}  alpha {:.4}  ior {:.4}{}",
+                    p.ks,
+                    p.alpha,
+                    p.ior,
+                    extra.concat()
+                );
+            }
             println!(
                 "  {:<8} {:>9} {:>9} {:>11}   {:>9} {:>9} {:>11}",
                 "geometry",
