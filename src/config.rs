@@ -270,6 +270,8 @@ pub struct FitConfig {
     /// How an SRA reading enters the cost: the paper's flat grey spectrum or the luminance
     /// (SCIENCE.md §5.1).
     pub sra: crate::sra_reading::SraModel,
+    /// The model's form (SCIENCE.md §4.1): the paper's by default.
+    pub model: crate::model::ModelKind,
     /// Bootstrap resamples per fit for the parameter intervals (SCIENCE.md §10); 0 turns the
     /// intervals off.
     pub bootstrap: u32,
@@ -416,6 +418,7 @@ impl Default for Config {
                 max_concurrent_fits: NonZeroUsize::MIN,
                 specular: SpecularStrategy::default(),
                 sra: defaults::SRA,
+                model: crate::model::ModelKind::Paper,
                 bootstrap: defaults::BOOTSTRAP,
             },
             colour: crate::colour::Colorimetry::default(),
@@ -557,6 +560,7 @@ struct RawFit {
     max_concurrent_fits: S<u64>,
     specular: S<String>,
     sra: S<String>,
+    model: S<String>,
     bootstrap: S<u32>,
 }
 
@@ -1068,6 +1072,12 @@ impl Checker<'_> {
 
     /// `[fit]`
     fn fit(&self, raw: &RawFit) -> Result<FitConfig, ConfigError> {
+        let method = self.value(
+            "fit.method",
+            &raw.method,
+            Method::default().name().into(),
+            |m| m.parse::<Method>().map_err(|e| e.to_string()),
+        )?;
         Ok(FitConfig {
             cost_functions: self.value(
                 "fit.cost_functions",
@@ -1091,12 +1101,7 @@ impl Checker<'_> {
                     Ok(out)
                 },
             )?,
-            method: self.value(
-                "fit.method",
-                &raw.method,
-                Method::default().name().into(),
-                |m| m.parse::<Method>().map_err(|e| e.to_string()),
-            )?,
+            method,
             seed: self.value("fit.seed", &raw.seed, defaults::SEED, Ok)?,
             max_concurrent_fits: self.value(
                 "fit.max_concurrent_fits",
@@ -1117,6 +1122,20 @@ impl Checker<'_> {
                 s.parse::<crate::sra_reading::SraModel>()
                     .map_err(|e| e.to_string())
             })?,
+            model: self.value(
+                "fit.model",
+                &raw.model,
+                crate::model::ModelKind::default().name().into(),
+                |s| {
+                    let m = s.parse::<crate::model::ModelKind>()?;
+                    if m != crate::model::ModelKind::Paper && method == Method::Paper {
+                        return Err(format!(
+                            "model {m} needs the separable method (fit.method = \"separable\")"
+                        ));
+                    }
+                    Ok(m)
+                },
+            )?,
             bootstrap: self.value("fit.bootstrap", &raw.bootstrap, defaults::BOOTSTRAP, |n| {
                 if n <= 10_000 {
                     Ok(n)
@@ -1882,6 +1901,28 @@ mod tests {
         assert_eq!(c.fit.sra, SraModel::Flat);
         let e = parse("[fit]\nsra = \"grey\"\n").unwrap_err().to_string();
         assert!(e.contains("fit.sra") && e.contains("luminance"), "{e}");
+    }
+
+    #[test]
+    fn model_setting() {
+        use crate::model::ModelKind;
+        assert_eq!(parse("").unwrap().fit.model, ModelKind::Paper);
+        let c = parse("[fit]\nmodel = \"oren-nayar\"\n").unwrap();
+        assert_eq!(c.fit.model, ModelKind::OrenNayar);
+        assert_eq!(
+            crate::service::ServiceSettings::from_config(&c)
+                .fit_settings(CostFunction::Cf2, Method::Separable, 1)
+                .model,
+            ModelKind::OrenNayar
+        );
+        let e = parse("[fit]\nmodel = \"lambert\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("fit.model") && e.contains("two-lobe"), "{e}");
+        let e = parse("[fit]\nmethod = \"paper\"\nmodel = \"two-lobe\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("fit.model") && e.contains("separable"), "{e}");
     }
 
     #[test]

@@ -16,7 +16,7 @@ use crate::colour::{Colorimetry, Lab};
 use crate::cost::CostFunction;
 use crate::evaluation::{Evaluation, evaluate_with, lab_per_geometry_with};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
-use crate::model::{self, FresnelCosine, SpecularGeometry};
+use crate::model::{self, FresnelCosine, ModelKind, SpecularGeometry};
 use crate::optimise::{self, FitError, FitOutcome, Progress, Settings};
 use crate::processing::{self, MeasuredBrdf, ProcessingError, ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
@@ -115,8 +115,9 @@ pub fn fit_measured(
                 source,
             }
         })?;
-    let estimated = model::evaluate(
+    let estimated = model::evaluate_model(
         &outcome.params,
+        request.settings.model,
         request.settings.fresnel,
         &SpecularGeometry::all(),
     );
@@ -183,12 +184,7 @@ impl FitReport {
             cost_function: self.request.settings.cost,
             method: self.outcome.method.to_string(),
             seed: self.outcome.seed,
-            params: ParamsDocument {
-                kd: p.kd.to_vec(),
-                ks: p.ks,
-                alpha: p.alpha,
-                ior: p.ior,
-            },
+            params: ParamsDocument::new(p, self.request.settings.model),
             cost: self.outcome.cost,
             evaluations: self.outcome.evaluations,
             generations: self.outcome.generations,
@@ -200,6 +196,7 @@ impl FitReport {
             lab: self.lab(),
             specular_strategy: self.request.processing.specular,
             fresnel: self.request.settings.fresnel,
+            model: self.request.settings.model,
             colorimetry: self.request.colorimetry,
             sra: self.request.settings.sra,
             specular_delta_l: self.specular_delta_l.map(SpecularDeltaLDocument::from),
@@ -256,6 +253,9 @@ pub struct FitDocument {
     pub specular_strategy: SpecularStrategy,
     /// Which cosine the model's Fresnel term used.
     pub fresnel: FresnelCosine,
+    /// The model's form (SCIENCE.md §4.1): `"paper"` unless `--model` chose an option.
+    #[serde(default)]
+    pub model: ModelKind,
     /// The colorimetry the ΔE00 values were computed with (`{"observer": "2", "weighting":
     /// "summation"}` unless configured otherwise).
     #[serde(default)]
@@ -434,6 +434,34 @@ pub struct ParamsDocument {
     pub ks: f64,
     pub alpha: f64,
     pub ior: f64,
+    /// Oren–Nayar roughness σ, radians (`--model oren-nayar`); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<f64>,
+    /// The second lobe's scale and width (`--model two-lobe`); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ks2: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha2: Option<f64>,
+}
+
+impl ParamsDocument {
+    /// The document form of the parameters of a fit with model `kind`.
+    pub fn new(p: &model::Params, kind: ModelKind) -> Self {
+        let (sigma, ks2, alpha2) = match kind {
+            ModelKind::Paper => (None, None, None),
+            ModelKind::OrenNayar => (Some(p.extra[0]), None, None),
+            ModelKind::TwoLobe => (None, Some(p.extra[0]), Some(p.extra[1])),
+        };
+        ParamsDocument {
+            kd: p.kd.to_vec(),
+            ks: p.ks,
+            alpha: p.alpha,
+            ior: p.ior,
+            sigma,
+            ks2,
+            alpha2,
+        }
+    }
 }
 
 /// One number per geometry measured, written as an object keyed by geometry name in table
@@ -527,6 +555,7 @@ mod tests {
             "delta_e00_specular_mean",
             "specular_strategy",
             "fresnel",
+            "model",
             "colorimetry",
             "sra",
             "specular_delta_l",

@@ -51,7 +51,138 @@ impl FresnelCosine {
     }
 }
 
-/// The 34 model parameters.
+/// The model's form (`[fit] model`, `brdfd fit --model`, SCIENCE.md §4.1): the paper's
+/// (the default), or the paper's with one change that the real scans' residuals point to.
+/// Every option keeps the paper's specular lobe and the 31-band kd; the extra parameters
+/// are [`Params::extra`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelKind {
+    /// `kd(λ) + lobe`, paper Eq. 1: a Lambertian diffuse term.
+    #[default]
+    Paper,
+    /// The diffuse term of Oren & Nayar's qualitative model, `kd(λ) · (A + B · max(0,
+    /// cos(φr − φi)) · sin a · tan b)` with a = max(θi, θr), b = min(θi, θr),
+    /// `A = 1 − 0.5 σ²/(σ² + 0.33)`, `B = 0.45 σ²/(σ² + 0.09)` (M. Oren & S. K. Nayar,
+    /// "Generalization of Lambert's reflectance model", SIGGRAPH 1994, Eq. 30), σ the facet
+    /// slope roughness in radians (`extra[0]`). σ = 0 is Lambert: the paper's model.
+    OrenNayar,
+    /// A second GGX lobe beside the paper's, `ks2 · F · D(α2) · G(α2) / (π cosθi cosθr)`, with
+    /// the same Fresnel and μ (`extra = [ks2, α2]`): a haze or sheen wider (or narrower) than
+    /// the main lobe. ks2 = 0 is the paper's model.
+    TwoLobe,
+}
+
+impl ModelKind {
+    /// Every choice, the default first.
+    pub const ALL: [ModelKind; 3] = [ModelKind::Paper, ModelKind::OrenNayar, ModelKind::TwoLobe];
+
+    /// The name on the command line, in the settings and in reports (the serde form).
+    pub const fn name(self) -> &'static str {
+        match self {
+            ModelKind::Paper => "paper",
+            ModelKind::OrenNayar => "oren-nayar",
+            ModelKind::TwoLobe => "two-lobe",
+        }
+    }
+
+    /// How many of [`Params::extra`] the option uses.
+    pub const fn extra_count(self) -> usize {
+        match self {
+            ModelKind::Paper => 0,
+            ModelKind::OrenNayar => 1,
+            ModelKind::TwoLobe => 2,
+        }
+    }
+
+    /// The bounds of the extra parameters (unused ones (0, 0)): Oren–Nayar σ ∈ [0, 1] rad;
+    /// second lobe ks2 within the lobe's ks bounds, α2 within its α bounds.
+    pub fn extra_bounds(self, bounds: &Bounds) -> [(f64, f64); EXTRA] {
+        match self {
+            ModelKind::Paper => [(0.0, 0.0); EXTRA],
+            ModelKind::OrenNayar => [OREN_NAYAR_SIGMA, (0.0, 0.0)],
+            ModelKind::TwoLobe => [bounds.ks, bounds.alpha],
+        }
+    }
+
+    /// The names of the extra parameters, as the fit document writes them.
+    pub const fn extra_names(self) -> &'static [&'static str] {
+        match self {
+            ModelKind::Paper => &[],
+            ModelKind::OrenNayar => &["sigma"],
+            ModelKind::TwoLobe => &["ks2", "alpha2"],
+        }
+    }
+
+    /// At one geometry, for the extra parameters `extra` and the lobe's μ: the factor the
+    /// diffuse kd is multiplied by and the λ-independent term added besides the paper's lobe.
+    /// The paper's model: (1, 0).
+    pub fn shape(
+        self,
+        extra: &[f64; EXTRA],
+        ior: f64,
+        fresnel: FresnelCosine,
+        g: &SpecularGeometry,
+    ) -> (f64, f64) {
+        match self {
+            ModelKind::Paper => (1.0, 0.0),
+            ModelKind::OrenNayar => (oren_nayar_factor(extra[0], g), 0.0),
+            // ks2 = 0 is no second lobe, whatever α2 (even 0, where D is 0/0 at the mirror).
+            ModelKind::TwoLobe if extra[0] == 0.0 => (1.0, 0.0),
+            ModelKind::TwoLobe => (1.0, specular_term(extra[0], extra[1], ior, fresnel, g)),
+        }
+    }
+}
+
+impl std::fmt::Display for ModelKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for ModelKind {
+    type Err = String;
+
+    /// Parses `paper`, `oren-nayar` or `two-lobe`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        ModelKind::ALL
+            .into_iter()
+            .find(|m| m.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| {
+                format!("unknown model \"{s}\": expected one of paper, oren-nayar, two-lobe")
+            })
+    }
+}
+
+/// Oren–Nayar roughness bounds, radians: 0 (Lambert) to 1 (57°, where A and B are within
+/// 25 % and 8 % of their limits).
+pub const OREN_NAYAR_SIGMA: (f64, f64) = (0.0, 1.0);
+
+/// The number of extra parameters a model option may have ([`ModelKind::extra_count`]).
+pub const EXTRA: usize = 2;
+
+/// Oren & Nayar's qualitative diffuse factor (SIGGRAPH 1994, Eq. 30) at one geometry for
+/// roughness σ (radians): `A + B · max(0, cos(φr − φi)) · sin a · tan b`. The BRDF is
+/// `ρ/π` times it; here kd stands for ρ/π. All 14 geometries are in the plane of incidence,
+/// so cos(φr − φi) is +1 on the light's side (back-scatter) and −1 on the far side, where the
+/// factor is A.
+pub fn oren_nayar_factor(sigma: f64, g: &SpecularGeometry) -> f64 {
+    let s2 = sigma * sigma;
+    let a = 1.0 - 0.5 * s2 / (s2 + 0.33);
+    let b = 0.45 * s2 / (s2 + 0.09);
+    if g.same_side {
+        let (ti, tr) = (
+            g.cos_i.clamp(-1.0, 1.0).acos(),
+            g.cos_r.clamp(-1.0, 1.0).acos(),
+        );
+        let (alpha, beta) = (ti.max(tr), ti.min(tr));
+        a + b * alpha.sin() * beta.tan()
+    } else {
+        a
+    }
+}
+
+/// The model parameters: the paper's 34, and the extra ones of a [`ModelKind`] option.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Params {
     /// Diffuse term per band, sr⁻¹.
@@ -62,6 +193,14 @@ pub struct Params {
     pub alpha: f64,
     /// Index of refraction μ.
     pub ior: f64,
+    /// The extra parameters of the fit's [`ModelKind`] (Oren–Nayar `[σ, 0]`, second lobe
+    /// `[ks2, α2]`); zero, and left out of the serialised form, for the paper's model.
+    #[serde(default, skip_serializing_if = "no_extra")]
+    pub extra: [f64; EXTRA],
+}
+
+fn no_extra(x: &[f64; EXTRA]) -> bool {
+    x.iter().all(|&v| v == 0.0)
 }
 
 /// Parameter bounds; settings, recorded with every fit.
@@ -181,6 +320,8 @@ pub struct SpecularGeometry {
     /// l·h (= v·h)
     pub l_dot_h: f64,
     pub v_dot_h: f64,
+    /// Whether the viewer is on the light's side of the normal (φr = φi, back-scatter).
+    pub same_side: bool,
 }
 
 impl SpecularGeometry {
@@ -192,6 +333,7 @@ impl SpecularGeometry {
             cos_h: h[2],
             l_dot_h: dot(l, h),
             v_dot_h: dot(v, h),
+            same_side: l[0] * v[0] + l[1] * v[1] > 0.0,
         }
     }
 
@@ -213,6 +355,30 @@ pub fn specular_term(
     let d = ggx_d(alpha, g.cos_h);
     let gg = smith_g1(alpha, g.cos_i, g.l_dot_h) * smith_g1(alpha, g.cos_r, g.v_dot_h);
     ks * f * d * gg / (std::f64::consts::PI * g.cos_i * g.cos_r)
+}
+
+/// The model of form `kind` for every geometry and band:
+/// `A[g][λ] = kd(λ) · a_g + specular_g + extra_g` ([`ModelKind::shape`]), sr⁻¹. For the
+/// paper's model this is [`evaluate`], bit for bit.
+pub fn evaluate_model(
+    params: &Params,
+    kind: ModelKind,
+    fresnel: FresnelCosine,
+    geometries: &[SpecularGeometry; GEOMETRY_COUNT],
+) -> [Spectrum; GEOMETRY_COUNT] {
+    if kind == ModelKind::Paper {
+        return evaluate(params, fresnel, geometries);
+    }
+    std::array::from_fn(|gi| {
+        let g = &geometries[gi];
+        let s = specular_term(params.ks, params.alpha, params.ior, fresnel, g);
+        let (a, t) = kind.shape(&params.extra, params.ior, fresnel, g);
+        let mut out = [0.0; BANDS];
+        for (o, kd) in out.iter_mut().zip(params.kd.iter()) {
+            *o = kd * a + (s + t);
+        }
+        out
+    })
 }
 
 /// The full model for every geometry and band: `A[g][λ] = kd(λ) + specular_g`, sr⁻¹.
@@ -359,11 +525,139 @@ mod tests {
             ks: 1.0,
             alpha: 0.3,
             ior: 1.5,
+            extra: [0.0; EXTRA],
         };
         let geos = SpecularGeometry::all();
         let a = evaluate(&params, FresnelCosine::Incidence, &geos);
         close(a[12][0], 0.1 + 0.0506963787, 1e-9);
         assert!(a[13].iter().all(|&x| x == a[13][0]));
+    }
+
+    /// Oren & Nayar (SIGGRAPH 1994) Eq. 30 written out by hand at σ = 0.3 rad (σ² = 0.09:
+    /// A = 1 − 0.045/0.42, B = 0.45 · 0.09/0.18 = 0.225) and σ = 1 rad (A = 1 − 0.5/1.33,
+    /// B = 0.45/1.09), at the four MA-T12 geometries on the light's side, where
+    /// `A + B sin(max θ) tan(min θ)`, and on the far side, where A.
+    #[test]
+    fn oren_nayar_factor_matches_the_published_formula() {
+        let cases = [
+            (
+                0.3,
+                0.8928571428571429,
+                [
+                    ("45as110", 1.096776394940389),
+                    ("15as45", 0.9230014270056442),
+                    ("15as80", 0.9474971417740072),
+                    ("45as75", 0.9847130082115121),
+                ],
+            ),
+            (
+                1.0,
+                0.6240601503759399,
+                [
+                    ("45as110", 0.9982239156662999),
+                    ("15as45", 0.679370763492456),
+                    ("15as80", 0.72431702912248),
+                    ("45as75", 0.7926030225857915),
+                ],
+            ),
+        ];
+        for (sigma, a, same_side) in cases {
+            for (name, want) in same_side {
+                let g = SpecularGeometry::new(by_name(name).unwrap());
+                assert!(g.same_side, "{name}");
+                close(oren_nayar_factor(sigma, &g), want, 1e-12);
+            }
+            for name in [
+                "15as-45", "15as-15", "45as-15", "45as45", "sra-20", "sra-60",
+            ] {
+                let g = SpecularGeometry::new(by_name(name).unwrap());
+                assert!(!g.same_side, "{name}");
+                close(oren_nayar_factor(sigma, &g), a, 1e-12);
+            }
+            // Normal incidence: min θ = 0, tan 0 = 0: A on either side.
+            let g = SpecularGeometry::new(by_name("15as15").unwrap());
+            close(oren_nayar_factor(sigma, &g), a, 1e-12);
+        }
+    }
+
+    /// At their neutral parameters (σ = 0; ks2 = 0) the options are the paper's model, bit for
+    /// bit, and so is `evaluate_model` for the paper's.
+    #[test]
+    fn model_options_reduce_to_the_paper_at_their_neutral_parameters() {
+        let geos = SpecularGeometry::all();
+        for g in &geos {
+            assert_eq!(oren_nayar_factor(0.0, g), 1.0);
+        }
+        let kd: Spectrum = std::array::from_fn(|b| 0.02 + 0.004 * b as f64);
+        let p = Params {
+            kd,
+            ks: 0.7,
+            alpha: 0.25,
+            ior: 1.6,
+            extra: [0.0; EXTRA],
+        };
+        for fresnel in FresnelCosine::ALL {
+            let paper = evaluate(&p, fresnel, &geos);
+            for kind in ModelKind::ALL {
+                let got = evaluate_model(&p, kind, fresnel, &geos);
+                for g in 0..GEOMETRY_COUNT {
+                    assert_eq!(
+                        got[g].map(f64::to_bits),
+                        paper[g].map(f64::to_bits),
+                        "{kind} {fresnel:?} {g}"
+                    );
+                }
+            }
+            // A second lobe of zero width parameters aside, ks2 = 0 with any α2 adds nothing.
+            let q = Params {
+                extra: [0.0, 0.6],
+                ..p
+            };
+            assert_eq!(
+                evaluate_model(&q, ModelKind::TwoLobe, fresnel, &geos),
+                paper
+            );
+        }
+        // The options away from neutral: the second lobe adds its own term, Oren–Nayar
+        // scales kd.
+        let q = Params {
+            extra: [0.3, 0.0],
+            ..p
+        };
+        let on = evaluate_model(&q, ModelKind::OrenNayar, FresnelCosine::Incidence, &geos);
+        for g in 0..GEOMETRY_COUNT {
+            let s = specular_term(p.ks, p.alpha, p.ior, FresnelCosine::Incidence, &geos[g]);
+            close(
+                on[g][7],
+                kd[7] * oren_nayar_factor(0.3, &geos[g]) + s,
+                1e-14,
+            );
+        }
+        let q = Params {
+            extra: [0.2, 0.5],
+            ..p
+        };
+        let two = evaluate_model(&q, ModelKind::TwoLobe, FresnelCosine::Incidence, &geos);
+        for g in 0..GEOMETRY_COUNT {
+            let s = specular_term(p.ks, p.alpha, p.ior, FresnelCosine::Incidence, &geos[g])
+                + specular_term(0.2, 0.5, p.ior, FresnelCosine::Incidence, &geos[g]);
+            close(two[g][3], kd[3] + s, 1e-14);
+        }
+        // The paper's parameters serialise as before the options existed.
+        let v = serde_json::to_value(p).unwrap();
+        assert!(v.get("extra").is_none());
+        let back: Params = serde_json::from_value(v).unwrap();
+        assert_eq!(back, p);
+        for kind in ModelKind::ALL {
+            assert_eq!(kind.name().parse::<ModelKind>().unwrap(), kind);
+            assert_eq!(serde_json::to_string(&kind).unwrap(), format!("\"{kind}\""));
+        }
+        assert!(
+            "lambert"
+                .parse::<ModelKind>()
+                .unwrap_err()
+                .contains("oren-nayar")
+        );
     }
 
     #[test]

@@ -178,6 +178,8 @@ fn shade(
                 cos_h: dot(h, n),
                 l_dot_h: dot(l, h),
                 v_dot_h: dot(v, h),
+                // l and v on the same side of the normal: their tangential parts agree.
+                same_side: dot(l, v) - cos_i * cos_r > 0.0,
             };
             let spec = specular_term(params.ks, params.alpha, params.ior, fresnel, &g);
             // Reflectance factor of the lobe (π·f) times the irradiance cosθi.
@@ -435,6 +437,7 @@ pub(crate) mod tests {
             ks: 0.6,
             alpha: 0.15,
             ior: 1.5,
+            extra: [0.0; crate::model::EXTRA],
         }
     }
 

@@ -124,6 +124,7 @@ impl GroundTruth {
                 ks,
                 alpha,
                 ior,
+                extra: [0.0; crate::model::EXTRA],
             },
         }
     }

@@ -197,6 +197,14 @@ pub const CALIBRATION: [Coverage; 6] = [
 /// Whether the bootstrap intervals of a fit with these settings are calibrated 95 % intervals,
 /// and if not, why: `Ok(())` or `Err(note)`.
 pub fn calibration(settings: &Settings) -> Result<(), String> {
+    if settings.model != crate::model::ModelKind::Paper {
+        return Err(format!(
+            "coverage was measured with the paper's model, not {} (its extra parameters are \
+             held at the point fit's): these are bootstrap intervals, not calibrated 95 % \
+             intervals",
+            settings.model.name()
+        ));
+    }
     if settings.fresnel != FresnelCosine::Incidence {
         return Err(format!(
             "coverage was measured with the paper's Fresnel (incidence), not {}: these are \
@@ -383,7 +391,12 @@ pub fn bootstrap(
         let m = resample(measured, sigma, &mut rng);
         let out = refit_local(&m, settings, point)
             .map_err(|source| UncertaintyError::Refit { index: i, source })?;
-        let est = model::evaluate(&out.params, settings.fresnel, &SpecularGeometry::all());
+        let est = model::evaluate_model(
+            &out.params,
+            settings.model,
+            settings.fresnel,
+            &SpecularGeometry::all(),
+        );
         let e = evaluate_with(&m.values, &est, colorimetry, m.geometries);
         Ok(Draw {
             params: out.params,

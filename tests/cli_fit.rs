@@ -86,6 +86,37 @@ fn fit_json_has_every_contract_key() {
 }
 
 #[test]
+fn fit_model_option_is_recorded_with_its_parameters() {
+    let scan = example("t-freesia-pink.scan.json");
+    let fit = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec!["fit", "--input", &scan, "--cost", "cf1", "--json"];
+        args.extend_from_slice(extra);
+        let out = brdfd(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let paper = fit(&[]);
+    assert_eq!(paper["model"], "paper");
+    assert!(paper["params"].get("sigma").is_none());
+    let on = fit(&["--model", "oren-nayar"]);
+    assert_eq!(on["model"], "oren-nayar");
+    let sigma = on["params"]["sigma"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&sigma), "sigma {sigma}");
+    // One more free parameter, nested: never a worse fit of the same readings.
+    assert!(on["cost"].as_f64().unwrap() <= paper["cost"].as_f64().unwrap() * (1.0 + 1e-9));
+    let out = brdfd(&[
+        "fit", "--input", &scan, "--cost", "cf1", "--method", "paper", "--model", "two-lobe",
+    ]);
+    assert!(!out.status.success());
+    let err = stderr_one_line(&out);
+    assert!(err.contains("separable"), "{err}");
+}
+
+#[test]
 fn fit_table_is_readable() {
     let scan = example("t-pebble-grey.noisy.scan.json");
     let out = brdfd(&[
@@ -228,6 +259,7 @@ fn help_lists_subcommands_and_explains_fit_options() {
         "--seed",
         "--specular",
         "--fresnel",
+        "--model",
         "--json",
     ] {
         assert!(text.contains(opt), "fit --help must explain {opt}");

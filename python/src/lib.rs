@@ -182,6 +182,7 @@ fn fit(
             .map(|s| parse("SRA observer", s))
             .transpose()?
             .unwrap_or_default(),
+        model: brdfd::model::ModelKind::default(),
         bootstrap,
         json: true,
     };

@@ -9,7 +9,7 @@ use crate::colour::{Colorimetry, Observer, Weighting};
 use crate::cost::CostFunction;
 use crate::fit::{FitReport, FitRequest, fit_scan};
 use crate::geometry::GEOMETRIES;
-use crate::model::FresnelCosine;
+use crate::model::{FresnelCosine, ModelKind};
 use crate::optimise::{Method, Settings};
 use crate::processing::{ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
@@ -51,6 +51,12 @@ pub struct FitArgs {
     /// what renderers evaluate; a fit with it exports to Mitsuba without approximation).
     #[arg(long, value_name = "incidence|light-half|exact", default_value = "incidence", value_parser = parse_fresnel)]
     pub fresnel: FresnelCosine,
+
+    /// The model's form (SCIENCE.md §4.1): `paper` (the paper's Eq. 1, Lambertian diffuse),
+    /// `oren-nayar` (Oren–Nayar's rough diffuse term, one more parameter σ) or `two-lobe` (a
+    /// second GGX lobe, two more parameters). Needs the default method for the options.
+    #[arg(long, value_name = "paper|oren-nayar|two-lobe", default_value_t = ModelKind::Paper)]
+    pub model: ModelKind,
 
     /// Standard observer for L*a*b* and ΔE00: `2` (CIE 1931, the paper's) or `10` (CIE 1964,
     /// what instrument software often uses). Illuminant is always D65.
@@ -117,6 +123,7 @@ impl FitArgs {
                 cost: self.cost,
                 seed: self.seed,
                 fresnel: self.fresnel,
+                model: self.model,
                 sra: SraReading {
                     model: self.sra,
                     illuminant: self.sra_illuminant,
@@ -190,6 +197,15 @@ pub fn table(r: &FitReport) -> String {
         parse_name(s.fresnel),
         s.sra
     );
+    if s.model != ModelKind::Paper {
+        let names = s.model.extra_names();
+        let values: Vec<String> = names
+            .iter()
+            .zip(o.params.extra.iter())
+            .map(|(n, v)| format!("{n} {v:.5}"))
+            .collect();
+        let _ = writeln!(t, "model            {}: {}", s.model, values.join("  "));
+    }
     let _ = writeln!(
         t,
         "cost             {:.6e}  ({} evaluations, {} generations, {:.1} ms)",

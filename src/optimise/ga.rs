@@ -42,6 +42,7 @@ fn to_params(g: &Genome) -> Params {
         ks: g[BANDS],
         alpha: g[BANDS + 1],
         ior: g[BANDS + 2],
+        extra: [0.0; crate::model::EXTRA],
     }
 }
 

@@ -24,6 +24,7 @@
 
 mod ga;
 mod nelder_mead;
+mod options;
 mod problem;
 mod separable;
 pub mod synthetic;
@@ -37,7 +38,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cost::{CostFunction, cost_with};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
-use crate::model::{Bounds, FresnelCosine, Params, SpecularGeometry, evaluate};
+use crate::model::{Bounds, FresnelCosine, ModelKind, Params, SpecularGeometry, evaluate_model};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, wavelengths_nm};
 use crate::sra_reading::SraReading;
@@ -231,6 +232,14 @@ pub struct Settings {
     /// left out of the serialised settings so that they read as before the option existed.
     #[serde(skip_serializing_if = "SraReading::is_default")]
     pub sra: SraReading,
+    /// The model's form (SCIENCE.md §4.1). Default: the paper's, left out of the serialised
+    /// settings so that they read as before the option existed.
+    #[serde(skip_serializing_if = "is_paper_model")]
+    pub model: ModelKind,
+}
+
+fn is_paper_model(m: &ModelKind) -> bool {
+    *m == ModelKind::Paper
 }
 
 impl Default for Settings {
@@ -244,6 +253,7 @@ impl Default for Settings {
             paper: GaSettings::default(),
             separable: SeparableSettings::default(),
             sra: SraReading::default(),
+            model: ModelKind::default(),
         }
     }
 }
@@ -282,6 +292,17 @@ impl Settings {
                 b.ks.0
             )
         })?;
+
+        check(
+            self.model == ModelKind::Paper || self.method == Method::Separable,
+            || {
+                format!(
+                    "model {} needs the separable method: the paper's GA fits the paper's \
+                     model only",
+                    self.model.name()
+                )
+            },
+        )?;
 
         let p = &self.paper;
         check(p.population >= 4, || {
@@ -470,15 +491,24 @@ pub fn fit_with_observer(
     let started = Instant::now();
     settings.validate()?;
     check_input(measured, settings.cost)?;
-    let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds)
-        .with_sra(measured, settings.sra);
-    let run = match settings.method {
-        Method::Paper => ga::run(&problem, &settings.paper, settings.seed, observer)?,
-        Method::Separable => {
-            separable::run(&problem, &settings.separable, settings.seed, observer)?
+    let run = if settings.model == ModelKind::Paper {
+        let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds)
+            .with_sra(measured, settings.sra);
+        match settings.method {
+            Method::Paper => ga::run(&problem, &settings.paper, settings.seed, observer)?,
+            Method::Separable => {
+                separable::run(&problem, &settings.separable, settings.seed, observer)?
+            }
         }
+    } else {
+        options::run(measured, settings, observer)?
     };
-    let model = evaluate(&run.params, settings.fresnel, &SpecularGeometry::all());
+    let model = evaluate_model(
+        &run.params,
+        settings.model,
+        settings.fresnel,
+        &SpecularGeometry::all(),
+    );
     Ok(FitOutcome {
         params: run.params,
         cost: cost_with(settings.cost, settings.sra, measured, &model),
@@ -502,10 +532,15 @@ pub fn refit_local(
     let started = Instant::now();
     settings.validate()?;
     check_input(measured, settings.cost)?;
-    let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds)
-        .with_sra(measured, settings.sra);
-    let run = separable::run_local(&problem, &settings.separable, start);
-    let model = evaluate(&run.params, settings.fresnel, &SpecularGeometry::all());
+    let problem = options::problem(measured, settings, &start.extra);
+    let mut run = separable::run_local(&problem, &settings.separable, start);
+    run.params.extra = start.extra;
+    let model = evaluate_model(
+        &run.params,
+        settings.model,
+        settings.fresnel,
+        &SpecularGeometry::all(),
+    );
     Ok(FitOutcome {
         params: run.params,
         cost: cost_with(settings.cost, settings.sra, measured, &model),

@@ -181,6 +181,38 @@ pub(crate) struct Problem {
     /// The SRA luminance residuals of the `luminance` reading model; `None` for the paper's
     /// flat model.
     lum: Option<Lum>,
+    /// A model option's change to the paper's model at fixed extra parameters
+    /// ([`Problem::with_shape`]); `None` for the paper's model.
+    shape: Option<Shape>,
+}
+
+/// A model option (`crate::model::ModelKind`) at fixed extra parameters, as the per-band
+/// solves see it: the diffuse term `kd · a_g` and, beside the paper's lobe, a second lobe.
+///
+/// Every cost function depends on the model only through `w_g · A_g(λ)` and on the
+/// measurement only through `w_g · M_g(λ)`. With `A = a·kd + s`,
+/// `w·(M − a·kd − s) = (w·a)·(M/a − kd − s/a)`: the problem is the paper's one for the weights
+/// `w·a`, the measurement `M/a` and the specular terms `s/a`, and every exact per-band kd
+/// solve applies unchanged (m2 too: `w·a·(M/a) = w·M`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Shape {
+    /// The diffuse factor per geometry (Oren–Nayar), 1 for Lambert.
+    pub a: [f64; G],
+    /// The second lobe's (ks2, α2), sharing the fit's μ and Fresnel.
+    pub lobe2: Option<(f64, f64)>,
+}
+
+impl Shape {
+    /// The measured BRDF divided by the diffuse factor, geometry by geometry.
+    fn transform(&self, measured: &MeasuredBrdf) -> MeasuredBrdf {
+        let mut m = *measured;
+        for g in 0..G {
+            for v in m.values[g].iter_mut() {
+                *v /= self.a[g];
+            }
+        }
+        m
+    }
 }
 
 /// The luminance model's SRA terms (SCIENCE.md §5.1): at SRA geometry k the residual
@@ -251,6 +283,22 @@ impl Problem {
         )
     }
 
+    /// The problem of a model option at fixed extra parameters ([`Shape`]). Apply
+    /// [`Problem::with_sra`] after this, as after [`Problem::new`].
+    pub fn with_shape(
+        measured: &MeasuredBrdf,
+        cf: CostFunction,
+        fresnel: FresnelCosine,
+        bounds: Bounds,
+        shape: Shape,
+    ) -> Self {
+        let w = masked_weights(measured);
+        let w = std::array::from_fn(|g| w[g] * shape.a[g]);
+        let mut p = Self::build(&shape.transform(measured), cf, fresnel, bounds, w, None);
+        p.shape = Some(shape);
+        p
+    }
+
     /// The same problem under the SRA reading model `sra` (SCIENCE.md §5.1). The paper's flat
     /// model leaves it as it is. The luminance model takes the SRA geometries out of the
     /// per-band arrays (their weight there becomes 0, so every per-band solve runs over the 12
@@ -261,7 +309,16 @@ impl Problem {
         if sra.model == SraModel::Flat || !measured.geometries.has_sra() {
             return self;
         }
-        let w = masked_weights(measured);
+        let shape = self.shape;
+        let transformed;
+        let (measured, w) = match &shape {
+            None => (measured, masked_weights(measured)),
+            Some(sh) => {
+                transformed = sh.transform(measured);
+                let w = masked_weights(measured);
+                (&transformed, std::array::from_fn(|g| w[g] * sh.a[g]))
+            }
+        };
         let spectral: [f64; G] = std::array::from_fn(|g| if g < MA_T12_COUNT { w[g] } else { 0.0 });
         let c = sra.weights();
         let ws: [f64; SRA_COUNT] = std::array::from_fn(|k| w[MA_T12_COUNT + k]);
@@ -273,14 +330,16 @@ impl Problem {
             wy,
             ly: wy.map(|x| ln_1p_recip(x).0),
         };
-        Self::build(
+        let mut p = Self::build(
             measured,
             self.cf,
             self.fresnel,
             self.bounds,
             spectral,
             Some(lum),
-        )
+        );
+        p.shape = shape;
+        p
     }
 
     /// [`Problem::new`] with the weights `w` of the per-band (spectral) terms.
@@ -312,6 +371,7 @@ impl Problem {
             sum_c: [0.0; BP],
             sum_cm: [0.0; BP],
             lum,
+            shape: None,
         };
         // The padded bands repeat the last one.
         for b in 0..BP {
@@ -339,7 +399,20 @@ impl Problem {
     /// The 14 specular terms `s_g` (sr⁻¹) for (ks, α, μ).
     #[inline]
     pub fn specular(&self, ks: f64, alpha: f64, ior: f64) -> [f64; G] {
-        std::array::from_fn(|g| specular_term(ks, alpha, ior, self.fresnel, &self.geos[g]))
+        match &self.shape {
+            None => {
+                std::array::from_fn(|g| specular_term(ks, alpha, ior, self.fresnel, &self.geos[g]))
+            }
+            // A model option: both lobes, over the diffuse factor ([`Shape`]).
+            Some(sh) => std::array::from_fn(|g| {
+                let geo = &self.geos[g];
+                let mut s = specular_term(ks, alpha, ior, self.fresnel, geo);
+                if let Some((ks2, alpha2)) = sh.lobe2.filter(|l| l.0 != 0.0) {
+                    s += specular_term(ks2, alpha2, ior, self.fresnel, geo);
+                }
+                s / sh.a[g]
+            }),
+        }
     }
 
     /// The cost of a full parameter set (34 parameters), as [`crate::cost::cost`] defines it.
@@ -928,7 +1001,13 @@ mod tests {
         let (ks, alpha, ior) = (truth.ks * 1.2, truth.alpha * 0.9, truth.ior);
         let mut kd = [0.0; BANDS];
         let f = prob.profile(Criterion::L1, ks, alpha, ior, &mut kd);
-        let fitted = Params { kd, ks, alpha, ior };
+        let fitted = Params {
+            kd,
+            ks,
+            alpha,
+            ior,
+            extra: [0.0; crate::model::EXTRA],
+        };
         let want = l1_reference(&m, &fitted);
         assert!(((f - want) / want).abs() < 1e-13, "{f} vs {want}");
         let s = prob.specular(ks, alpha, ior);

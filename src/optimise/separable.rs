@@ -137,7 +137,13 @@ pub(super) fn run_local(problem: &Problem, s: &SeparableSettings, start: &Params
     tracker.evaluations = count.get();
     let (ks, alpha, ior) = map.params(&best_t);
     Run {
-        params: Params { kd, ks, alpha, ior },
+        params: Params {
+            kd,
+            ks,
+            alpha,
+            ior,
+            extra: [0.0; crate::model::EXTRA],
+        },
         tracker,
     }
 }
@@ -271,7 +277,13 @@ pub(super) fn run(
     tracker.evaluations = count.get();
     let (ks, alpha, ior) = map.params(&best_t);
     Ok(Run {
-        params: Params { kd, ks, alpha, ior },
+        params: Params {
+            kd,
+            ks,
+            alpha,
+            ior,
+            extra: [0.0; crate::model::EXTRA],
+        },
         tracker,
     })
 }

@@ -71,6 +71,7 @@ pub fn cases() -> [SyntheticCase; 6] {
                 ks,
                 alpha,
                 ior,
+                extra: [0.0; crate::model::EXTRA],
             },
         }
     })

@@ -5,6 +5,7 @@
 use super::*;
 use crate::cost::cost;
 use crate::geometry::by_name;
+use crate::model::evaluate;
 use crate::optimise::synthetic::{self, SyntheticCase};
 
 fn settings(cf: CostFunction, method: Method, seed: u64) -> Settings {

@@ -103,6 +103,13 @@ fn fit_state_with(
                     extras.colorimetry.unwrap_or_default(),
                     extras.uncertainty.clone(),
                 )
+                .with_model(
+                    measured,
+                    run.settings
+                        .get("model")
+                        .and_then(|v| serde_json::from_value(v.clone()).ok())
+                        .unwrap_or_default(),
+                )
                 .with_sra(measured, sra),
             ))
         }

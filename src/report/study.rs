@@ -160,6 +160,25 @@ impl DoneFit {
     }
 
     /// The same fit made with the SRA reading model `sra` (its |ΔL*| under that instrument).
+    /// The same fit made with model option `kind` (SCIENCE.md §4.1): the estimated BRDF and the
+    /// evaluation recomputed with it. The paper's model leaves the fit as it is. Apply before
+    /// [`DoneFit::with_sra`].
+    pub fn with_model(mut self, measured: &MeasuredBrdf, kind: model::ModelKind) -> DoneFit {
+        if kind == model::ModelKind::Paper {
+            return self;
+        }
+        self.estimated =
+            model::evaluate_model(&self.params, kind, self.fresnel, &SpecularGeometry::all());
+        self.evaluation = evaluate_with(
+            &measured.values,
+            &self.estimated,
+            self.colorimetry,
+            measured.geometries,
+        );
+        let sra = self.sra;
+        self.with_sra(measured, sra)
+    }
+
     pub fn with_sra(mut self, measured: &MeasuredBrdf, sra: SraReading) -> DoneFit {
         self.sra = sra;
         self.specular_delta_l = measured
@@ -359,6 +378,7 @@ impl Study {
                                 r.request.colorimetry,
                                 r.uncertainty.clone(),
                             )
+                            .with_model(&r.measured, r.request.settings.model)
                             .with_sra(&r.measured, r.request.settings.sra),
                         )),
                     })

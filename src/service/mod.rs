@@ -85,6 +85,8 @@ pub struct ServiceSettings {
     pub specular: SpecularStrategy,
     /// How an SRA reading enters the cost (`[fit] sra`; a refit may ask for another).
     pub sra: crate::sra_reading::SraModel,
+    /// The model's form (`[fit] model`); fits with the paper's GA always use the paper's.
+    pub model: crate::model::ModelKind,
     /// The reference tile's calibrated reflectance (`[reference] reflectance`), recorded with
     /// every reference set measured; `None`: results relative to the tile.
     pub reference_reflectance: Option<crate::spectral::Spectrum>,
@@ -110,6 +112,7 @@ impl ServiceSettings {
             max_concurrent_fits: config.fit.max_concurrent_fits.get(),
             specular: config.fit.specular,
             sra: config.fit.sra,
+            model: config.fit.model,
             reference_reflectance: config.reference.reflectance,
             shutdown_grace: Duration::from_secs(10),
             sync: config.sync.url.as_ref().map(|url| {
@@ -130,6 +133,12 @@ impl ServiceSettings {
             cost,
             seed,
             sra: crate::sra_reading::SraReading::default().with_model(self.sra),
+            // The settings record the model each fit used: the paper GA fits only the paper's.
+            model: if method == Method::Separable {
+                self.model
+            } else {
+                crate::model::ModelKind::Paper
+            },
             ..Settings::default()
         }
     }

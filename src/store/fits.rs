@@ -557,7 +557,12 @@ impl Store {
             .and_then(|v| serde_json::from_value(v.clone()).ok())
             .unwrap_or_default();
         let measured = self.processed(run.processed).await?.brdf;
-        let estimated = model::evaluate(&params, fresnel, &SpecularGeometry::all());
+        let kind: model::ModelKind = run
+            .settings
+            .get("model")
+            .and_then(|v| serde_json::from_value(v.clone()).ok())
+            .unwrap_or_default();
+        let estimated = model::evaluate_model(&params, kind, fresnel, &SpecularGeometry::all());
         Ok((sra, Some((measured, estimated))))
     }
 }
