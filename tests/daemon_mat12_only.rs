@@ -265,8 +265,10 @@ fn serve_with_the_sra_off_says_so_and_status_shows_it() {
         .expect("the SRA is listed")
         .clone();
     assert_eq!(sra["state"], "off", "{sra}");
+    // The banners follow the listening line; the API may answer before they are written.
+    wait_until("the SRA-off banner on stderr", || {
+        std::fs::read_to_string(&log).is_ok_and(|e| e.contains("SRA TURNED OFF"))
+    });
     let _ = child.kill();
     let _ = child.wait();
-    let stderr = std::fs::read_to_string(&log).unwrap();
-    assert!(stderr.contains("SRA TURNED OFF"), "{stderr}");
 }
