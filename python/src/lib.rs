@@ -63,7 +63,11 @@ impl PyScan {
     }
 
     fn __repr__(&self) -> String {
-        format!("Scan(sample={:?}, reference={:?})", self.scan.sample, self.reference())
+        format!(
+            "Scan(sample={:?}, reference={:?})",
+            self.scan.sample,
+            self.reference()
+        )
     }
 }
 
@@ -131,7 +135,11 @@ impl PyFitReport {
         let m = &self.report.measured;
         GEOMETRIES
             .iter()
-            .map(|g| m.geometries.contains(g.index).then(|| m.values[g.index].to_vec()))
+            .map(|g| {
+                m.geometries
+                    .contains(g.index)
+                    .then(|| m.values[g.index].to_vec())
+            })
             .collect()
     }
 
@@ -144,7 +152,8 @@ impl PyFitReport {
 /// Fits a scan exactly as `brdfd fit` does with the same options.
 #[pyfunction]
 #[pyo3(signature = (scan, cost, method=None, seed=None, bootstrap=0, sra=None, specular=None,
-    fresnel=None, observer=None, weighting=None, sra_illuminant=None, sra_observer=None))]
+    fresnel=None, observer=None, weighting=None, sra_illuminant=None, sra_observer=None,
+    model=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -160,20 +169,36 @@ fn fit(
     weighting: Option<&str>,
     sra_illuminant: Option<&str>,
     sra_observer: Option<&str>,
+    model: Option<&str>,
 ) -> PyResult<PyFitReport> {
     let args = FitArgs {
         input: scan.source.clone(),
         cost: parse("cost function", cost)?,
-        method: method.map(|m| parse("method", m)).transpose()?.unwrap_or_default(),
+        method: method
+            .map(|m| parse("method", m))
+            .transpose()?
+            .unwrap_or_default(),
         seed: seed.unwrap_or(brdfd::optimise::Settings::default().seed),
-        specular: specular.map(|s| parse("specular strategy", s)).transpose()?.unwrap_or_default(),
+        specular: specular
+            .map(|s| parse("specular strategy", s))
+            .transpose()?
+            .unwrap_or_default(),
         fresnel: match fresnel {
             Some(f) => parse_fresnel(f).map_err(PyValueError::new_err)?,
             None => parse_fresnel("incidence").expect("the default Fresnel cosine"),
         },
-        observer: observer.map(|o| parse("observer", o)).transpose()?.unwrap_or_default(),
-        weighting: weighting.map(|w| parse("weighting", w)).transpose()?.unwrap_or_default(),
-        sra: sra.map(|s| parse("SRA model", s)).transpose()?.unwrap_or_default(),
+        observer: observer
+            .map(|o| parse("observer", o))
+            .transpose()?
+            .unwrap_or_default(),
+        weighting: weighting
+            .map(|w| parse("weighting", w))
+            .transpose()?
+            .unwrap_or_default(),
+        sra: sra
+            .map(|s| parse("SRA model", s))
+            .transpose()?
+            .unwrap_or_default(),
         sra_illuminant: sra_illuminant
             .map(|s| parse("SRA illuminant", s))
             .transpose()?
@@ -182,7 +207,10 @@ fn fit(
             .map(|s| parse("SRA observer", s))
             .transpose()?
             .unwrap_or_default(),
-        model: brdfd::model::ModelKind::default(),
+        model: model
+            .map(|m| parse("model", m))
+            .transpose()?
+            .unwrap_or_default(),
         bootstrap,
         json: true,
     };
@@ -235,10 +263,19 @@ fn evaluate(
     fresnel: Option<&str>,
 ) -> PyResult<Vec<Vec<f64>>> {
     let kd: [f64; BANDS] = kd.try_into().map_err(|v: Vec<f64>| {
-        PyValueError::new_err(format!("kd has {} values; the model has {BANDS} bands (400–700 nm every 10 nm)", v.len()))
+        PyValueError::new_err(format!(
+            "kd has {} values; the model has {BANDS} bands (400–700 nm every 10 nm)",
+            v.len()
+        ))
     })?;
     let fresnel = parse_fresnel(fresnel.unwrap_or("incidence")).map_err(PyValueError::new_err)?;
-    let params = Params { kd, ks, alpha, ior };
+    let params = Params {
+        kd,
+        ks,
+        alpha,
+        ior,
+        extra: Default::default(),
+    };
     let nm = wavelengths_nm();
     let bands: Vec<usize> = wavelengths
         .iter()
@@ -282,7 +319,11 @@ fn evaluate(
 /// The tidy export of a store, read-only: (spectra.csv, fits.csv) text.
 #[pyfunction]
 #[pyo3(signature = (path, include_simulated=true))]
-fn store_tidy(py: Python<'_>, path: PathBuf, include_simulated: bool) -> PyResult<(String, String)> {
+fn store_tidy(
+    py: Python<'_>,
+    path: PathBuf,
+    include_simulated: bool,
+) -> PyResult<(String, String)> {
     py.detach(|| -> anyhow::Result<(String, String)> {
         let study = brdfd::cli::report::load_study_checked(
             Path::new(&path),

@@ -85,6 +85,17 @@ def test_fit_with_options_and_bootstrap_equals_the_cli():
     assert (iv["kd"][:, 0] <= iv["kd"][:, 1]).all()
 
 
+def test_a_model_option_equals_the_cli_bit_for_bit():
+    scan = brdfd.read_scan(SCAN)
+    got = brdfd.fit(scan, cost="cf1", seed=2, model="oren-nayar", fresnel="exact")
+    cli = json.loads(run("fit", "--input", str(SCAN), "--cost", "cf1", "--seed", "2",
+                         "--model", "oren-nayar", "--fresnel", "exact", "--json"))
+    same_bits(without_timing(got.document), without_timing(cli))
+    assert got.document["model"] == "oren-nayar"
+    with pytest.raises(ValueError, match="model"):
+        brdfd.fit(scan, cost="cf1", model="lambert")
+
+
 def test_bootstrap_intervals_hold_the_default_fit():
     # The default method ends in a local optimum, so the warm-started refits of the resamples
     # stay around it. (The paper GA's point need not be one: its refits may descend elsewhere.)
