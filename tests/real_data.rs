@@ -166,9 +166,17 @@ fn the_daemon_imports_real_exports_by_watch_folder_and_http_and_fits_them() {
         })
         .collect();
     let mut any_texture = false;
+    // Every fit of every scan ended, as the store says (the status counters may run ahead of
+    // the fit's last commit).
     wait_for("every fit done", || {
-        let status = daemon.client.get("/status").unwrap();
-        status["fits_queued"] == 0 && status["fits_running"] == 0
+        scans.iter().all(|s| {
+            let d = daemon.client.get(&format!("/scans/{}", s["id"])).unwrap();
+            let fits = d["fits"].as_array().cloned().unwrap_or_default();
+            fits.len() == 3
+                && fits
+                    .iter()
+                    .all(|f| f["run"]["status"] != "queued" && f["run"]["status"] != "running")
+        })
     });
     for s in scans {
         let id = s["id"].as_i64().unwrap();

@@ -166,6 +166,15 @@ enum Ended {
     Stopped,
 }
 
+/// Takes one off a `status` counter when dropped: the end of what it counts, on every path.
+struct CountedUntilDrop<'a>(&'a AtomicUsize);
+
+impl Drop for CountedUntilDrop<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
 impl Service {
     /// Starts the dispatcher.
     pub(crate) async fn start_fit_worker(&self, mut rx: mpsc::UnboundedReceiver<FitRunId>) {
@@ -226,7 +235,12 @@ impl Service {
 
     async fn run_fit(&self, fit: FitRunId, permit: tokio::sync::OwnedSemaphorePermit) {
         let worker = &self.inner.fits;
+        // Running from the moment it leaves the queue until its end is recorded (every return
+        // below), so that `status` never shows an idle worker while a fit's row still says
+        // queued or running.
+        worker.running.fetch_add(1, Ordering::Relaxed);
         worker.queued.fetch_sub(1, Ordering::Relaxed);
+        let running = CountedUntilDrop(&worker.running);
         let cancel = worker.flag(fit).unwrap_or_default();
         let prepared = self.prepare_fit(fit).await;
         let (job, cost) = match prepared {
@@ -262,7 +276,6 @@ impl Service {
             worker.forget(fit);
             return;
         }
-        worker.running.fetch_add(1, Ordering::Relaxed);
         self.inner.events.send(Event::FitStarted {
             fit,
             scan,
@@ -296,7 +309,6 @@ impl Service {
         })
         .await;
         Timings::add(&self.inner.timings.fit_ns, started.elapsed());
-        worker.running.fetch_sub(1, Ordering::Relaxed);
 
         let ended = match joined {
             Ok(Ok(Ok(report))) => Ended::Done(Box::new(report)),
@@ -320,6 +332,8 @@ impl Service {
         };
         let stored = self.record_fit_end(fit, scan, cost, ended).await;
         worker.forget(fit);
+        // The fit's end is recorded; its bootstrap is counted on its own.
+        drop(running);
         if let Some(report) = stored {
             self.bootstrap_fit(fit, *report).await;
         }
@@ -335,15 +349,9 @@ impl Service {
             return;
         }
         // Counted from now until stored (or given up), for `status`.
-        struct Pending<'a>(&'a AtomicUsize);
-        impl Drop for Pending<'_> {
-            fn drop(&mut self) {
-                self.0.fetch_sub(1, Ordering::Relaxed);
-            }
-        }
         let worker = &self.inner.fits;
         worker.bootstraps_pending.fetch_add(1, Ordering::Relaxed);
-        let _pending = Pending(&worker.bootstraps_pending);
+        let _pending = CountedUntilDrop(&worker.bootstraps_pending);
         let Ok(permit) = worker.bootstrap_slot.clone().acquire_owned().await else {
             return;
         };
