@@ -11,7 +11,7 @@
 //!   For cf2 and m2 the same search first runs on smoother criteria (cf1, then for cf2 the
 //!   weighted L1 error), whose optima are extra starting points: cf2's landscape has many
 //!   local minima, and this continuation is what makes its fits agree across seeds.
-//!   The reliability harness (`examples/reliability.rs`) checks that it ends within 1 % of the
+//!   The reliability harness (`tools/src/bin/reliability.rs`) checks that it ends within 1 % of the
 //!   best cost either method ever finds, on every scan, cost function and seed.
 //!
 //! Both are deterministic: the same measured BRDF, settings and seed give the same parameters

@@ -27,7 +27,7 @@
 //! rarely land near; on "T.Freesia pink" with 1 % noise there are two long, curved valleys
 //! 1.7 % apart, and a Nelder–Mead search and polish from a uniformly random start reaches the
 //! better one in only about a quarter of the starts. The reliability harness
-//! (`examples/reliability.rs`) found fits ending up to 8.7 % above the best. cf1's optimum as
+//! (`tools/src/bin/reliability.rs`) found fits ending up to 8.7 % above the best. cf1's optimum as
 //! one extra start cured the noise-free scans but not T.Freesia pink 1 % (13 of 50 seeds
 //! missed), and neither 8 design starts on top (still 7 misses in 1 400 cf2 fits, at 17 ms a
 //! fit) nor big-simplex restarts from the best point (no change) closed the gap.

@@ -1,5 +1,5 @@
 //! Synthetic measured BRDFs with known parameters, for the optimiser's tests, its benchmark and
-//! its reliability harness (`examples/reliability.rs`).
+//! its reliability harness (`tools/src/bin/reliability.rs`).
 //!
 //! A case is a diffuse spectrum from a real ColorChecker patch (kd = reflectance factor / π,
 //! sr⁻¹) plus matt specular parameters of the kind the paper's samples have. The measured BRDF

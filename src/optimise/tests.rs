@@ -1,5 +1,5 @@
 //! Tests of the public fitting API on synthetic scans built from known parameters.
-//! The full reliability study is `examples/reliability.rs`; `small_reliability_study` below
+//! The full reliability study is `tools/src/bin/reliability.rs`; `small_reliability_study` below
 //! is its always-run miniature.
 
 use super::*;
@@ -435,7 +435,7 @@ fn names_and_settings_serialise() {
     assert!(serde_json::from_str::<Settings>(r#"{"sead": 1}"#).is_err());
 }
 
-/// The always-run miniature of `examples/reliability.rs`: over two noisy scans × 3 cost
+/// The always-run miniature of `tools/src/bin/reliability.rs`: over two noisy scans × 3 cost
 /// functions × 3 seeds, every separable fit ends within 1 % of the best cost any run found.
 #[test]
 fn small_reliability_study() {

@@ -9,7 +9,7 @@
 //! as the reference. Checks that the default (separable) method ends within 1 % of it every
 //! time, and counts how often the paper GA does not. Exits non-zero on any separable miss.
 //!
-//! Run: `cargo run --release --example reliability [-- OPTIONS]`. The default is the full
+//! Run: `cargo run --release -p brdfd-tools --bin reliability [-- OPTIONS]`. The default is the full
 //! comparison. Options, for quicker looks while working on the optimiser:
 //! - `--seeds N`: seeds per scan and cost function (default 10).
 //! - `--scans all|examples|cases|real`: the example scans of `tests/data/`, the optimiser's
@@ -46,7 +46,7 @@ fn scans(which: Which) -> Vec<(String, f64, MeasuredBrdf)> {
     if which == Which::Real {
         return real(out);
     }
-    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data");
     let mut files: Vec<_> = std::fs::read_dir(&data)
         .expect("tests/data holds the example scans")
         .map(|e| e.expect("readable tests/data entry").path())
@@ -71,7 +71,7 @@ fn scans(which: Which) -> Vec<(String, f64, MeasuredBrdf)> {
 
 /// Appends the real MA-T12 measurements (X-Rite's `.xlsx` exports), labelled `real:NAME`.
 fn real(mut out: Vec<(String, f64, MeasuredBrdf)>) -> Vec<(String, f64, MeasuredBrdf)> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-mat12");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/real-mat12");
     let mut files: Vec<_> = std::fs::read_dir(&dir)
         .expect("tests/data/real-mat12 holds the real exports")
         .map(|e| e.expect("readable entry").path())
