@@ -181,21 +181,25 @@ def fit(
     weighting: Optional[str] = None,
     sra_illuminant: Optional[str] = None,
     sra_observer: Optional[str] = None,
+    model: Optional[str] = None,
 ) -> FitResult:
     """Fits a scan as ``brdfd fit`` does with the same options (``cost``: cf1, cf2, m2;
     ``method``: the default or "paper"; ``sra``: "flat" or "luminance"; ``bootstrap``:
-    resamples for 95 % intervals, 0 skips them).  Runs without holding the GIL."""
+    resamples for 95 % intervals, 0 skips them; ``model``: "paper" (the default), "oren-nayar"
+    or "two-lobe"; ``fresnel``: "incidence" (the default), "light-half" or "exact").  Runs
+    without holding the GIL."""
     report = _native.fit(
         scan, cost, method, seed, bootstrap, sra, specular, fresnel, observer, weighting,
-        sra_illuminant, sra_observer,
+        sra_illuminant, sra_observer, model,
     )
     text = report.to_json()
     doc = json.loads(text)
     p = doc["params"]
-    params = {"kd": np.array(p["kd"], dtype=float), "ks": p["ks"], "alpha": p["alpha"],
-              "ior": p["ior"]}
+    # The paper's parameters, and a model option's own (sigma, ks2, alpha2) when it has them.
+    params = {k: (np.array(v, dtype=float) if k == "kd" else v) for k, v in p.items()}
     lab = {g: {"measured": np.array(v["measured"], dtype=float),
-               "fitted": np.array(v["fitted"], dtype=float)} for g, v in doc["lab"].items()}
+               "fitted": np.array(v["fitted"], dtype=float),
+               "residual": v.get("residual")} for g, v in doc["lab"].items()}
     unc = doc.get("uncertainty")
     intervals = None
     if unc is not None:
