@@ -949,27 +949,9 @@ fn residual_lightness<DB: DrawingBackend>(
                 continue;
             };
             let x = gi as f64 + offset;
-            let (x0, x1) = (x - width * 0.4, x + width * 0.4);
-            let series = chart.draw_series(std::iter::once(Rectangle::new(
-                [(x0, q1), (x1, q3)],
-                col.mix(0.25).filled(),
-            )))?;
-            if first {
-                series
-                    .label(format!("{c} ({})", study.method_of(c)))
-                    .legend(move |(x, y)| {
-                        Rectangle::new([(x, y - 6), (x + 16, y + 6)], col.mix(0.6).filled())
-                    });
-                first = false;
-            }
-            chart.draw_series(std::iter::once(Rectangle::new(
-                [(x0, q1), (x1, q3)],
-                col.stroke_width(2),
-            )))?;
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(x0, med), (x1, med)],
-                col.stroke_width(3),
-            )))?;
+            let label = first.then(|| format!("{c} ({})", study.method_of(c)));
+            first = false;
+            draw_box(&mut chart, x, width, [q1, med, q3], col, 0.25, label)?;
             for (r, (_, style)) in per_sample.iter().zip(&styles) {
                 if let Some(r) = r {
                     chart.draw_series(std::iter::once(Circle::new(
@@ -1320,6 +1302,43 @@ fn per_sample_size(names: &[&str]) -> (u32, u32) {
     (width, height)
 }
 
+/// One box of a box plot at `x` (`width` the group's slot): the quartile box filled at
+/// `fill` opacity and outlined, the median line, and, for the first box of a series, its legend
+/// entry `label`. Whiskers and points are the caller's.
+fn draw_box<DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    x: f64,
+    width: f64,
+    [q1, med, q3]: [f64; 3],
+    col: RGBColor,
+    fill: f64,
+    label: Option<String>,
+) -> DrawResult<DB> {
+    let (x0, x1) = (x - width * 0.4, x + width * 0.4);
+    let series = chart.draw_series(std::iter::once(Rectangle::new(
+        [(x0, q1), (x1, q3)],
+        col.mix(fill).filled(),
+    )))?;
+    if let Some(label) = label {
+        series.label(label).legend(move |(x, y)| {
+            Rectangle::new([(x, y - 6), (x + 16, y + 6)], col.mix(0.6).filled())
+        });
+    }
+    chart.draw_series(std::iter::once(Rectangle::new(
+        [(x0, q1), (x1, q3)],
+        col.stroke_width(2),
+    )))?;
+    chart.draw_series(std::iter::once(PathElement::new(
+        vec![(x0, med), (x1, med)],
+        col.stroke_width(3),
+    )))?;
+    Ok(())
+}
+
 /// The axes of Fig. 11 and 11b: one column per sample (named on the x axis), y from 0 to 1.3 ×
 /// the largest of `values` (1 when none is above 0), caption and y label as given. The names
 /// are written under their columns, turned upright when they do not fit side by side.
@@ -1416,27 +1435,9 @@ fn box_plots<DB: DrawingBackend>(
                 continue;
             };
             let x = i as f64 + offset;
-            let (x0, x1) = (x - width * 0.4, x + width * 0.4);
-            let series = chart.draw_series(std::iter::once(Rectangle::new(
-                [(x0, q1), (x1, q3)],
-                col.mix(0.35).filled(),
-            )))?;
-            if first {
-                series
-                    .label(format!("{c} ({})", study.method_of(c)))
-                    .legend(move |(x, y)| {
-                        Rectangle::new([(x, y - 6), (x + 16, y + 6)], col.mix(0.6).filled())
-                    });
-                first = false;
-            }
-            chart.draw_series(std::iter::once(Rectangle::new(
-                [(x0, q1), (x1, q3)],
-                col.stroke_width(2),
-            )))?;
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(x0, med), (x1, med)],
-                col.stroke_width(3),
-            )))?;
+            let label = first.then(|| format!("{c} ({})", study.method_of(c)));
+            first = false;
+            draw_box(&mut chart, x, width, [q1, med, q3], col, 0.35, label)?;
             for (a, b) in [(min, q1), (q3, max)] {
                 chart.draw_series(std::iter::once(PathElement::new(
                     vec![(x, a), (x, b)],
