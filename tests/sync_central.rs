@@ -800,6 +800,150 @@ async fn a_copied_store_is_refused_and_nothing_of_it_is_mixed_in() {
     .await;
 }
 
+/// Central rows of `station`, over every forwarded table.
+async fn central_rows(url: &str, station: &str) -> usize {
+    central_tables(url, station)
+        .await
+        .values()
+        .map(Vec::len)
+        .sum()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bench_moved_to_a_new_pc_takes_its_station_id_over_by_retiring_the_old_store() {
+    let _serial = serial();
+    let db = TestDb::create("retire");
+    bounded(async {
+        let dir = tempfile::tempdir().unwrap();
+        let old = dir.path().join("old-pc.db");
+        let (store, service) = station_on(&old, "bench-r", &db.url, 20).await;
+        measure_reference(&service).await;
+        scan_and_settle(&service, samples(1)[0]).await;
+        drained_service(&service, &old).await;
+        // The store is copied to the bench's new PC, but the old PC goes on for a while.
+        let new = dir.path().join("new-pc.db");
+        vacuum_into(&old, &new).await;
+        scan_and_settle(&service, samples(2)[1]).await;
+        drained_service(&service, &old).await;
+        // The new PC measures under the station id: refused, and told both ways out.
+        let (ns, nsvc) = station_on(&new, "bench-r", &db.url, 20).await;
+        measure_reference(&nsvc).await;
+        scan_and_settle(&nsvc, samples(3)[2]).await;
+        let e = refused(&nsvc).await;
+        assert!(e.contains("--adopt NEW_ID"), "{e}");
+        assert!(e.contains("--retire-old ARCHIVE_ID"), "{e}");
+        nsvc.stop_keeping_store().await;
+        ns.close().await;
+
+        let new_path = new.to_str().unwrap();
+        let retire = |archive: &str| {
+            run_brdfd(
+                &[
+                    "sync",
+                    "--db",
+                    new_path,
+                    "--to",
+                    &db.url,
+                    "--station",
+                    "bench-r",
+                    "--retire-old",
+                    archive,
+                ],
+                None,
+            )
+        };
+        // Retiring while the old store still forwards is refused, and changes nothing.
+        let out = retire("bench-r-old-pc");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(6), "{err}");
+        assert!(err.contains("stop that daemon first"), "{err}");
+        assert_same(&old, &db.url, "bench-r").await;
+        assert_eq!(central_rows(&db.url, "bench-r-old-pc").await, 0);
+
+        // The old PC is stopped; once it has fallen silent, retiring keeps its rows as the
+        // archive and gives the station id to the new PC's store, which sends all it holds.
+        service.stop_keeping_store().await;
+        store.close().await;
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        let out = loop {
+            let out = retire("bench-r-old-pc");
+            let err = String::from_utf8_lossy(&out.stderr).to_string();
+            if out.status.success() || !err.contains("stop that daemon first") {
+                break out;
+            }
+            assert!(std::time::Instant::now() < deadline, "{err}");
+            tokio::time::sleep(Duration::from_millis(500)).await;
+        };
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            stdout.contains("are now station bench-r-old-pc"),
+            "{stdout}"
+        );
+        assert_same(&new, &db.url, "bench-r").await;
+        assert_same(&old, &db.url, "bench-r-old-pc").await;
+        let pool = sqlx::PgPool::connect(&db.url).await.unwrap();
+        let from: Option<String> = sqlx::query_scalar(
+            "SELECT retired_from FROM stations WHERE station = 'bench-r-old-pc'",
+        )
+        .fetch_one(&pool)
+        .await
+        .unwrap();
+        assert_eq!(from.as_deref(), Some("bench-r"));
+        pool.close().await;
+        // Retiring again to the same archive id is refused: it is taken.
+        let out = retire("bench-r-old-pc");
+        assert_eq!(out.status.code(), Some(6));
+        assert!(String::from_utf8_lossy(&out.stderr).contains("already in use"));
+        assert_same(&new, &db.url, "bench-r").await;
+
+        // The new PC's daemon goes on as the station.
+        let (ns, nsvc) = station_on(&new, "bench-r", &db.url, 20).await;
+        measure_reference(&nsvc).await;
+        scan_and_settle(&nsvc, samples(4)[3]).await;
+        drained_service(&nsvc, &new).await;
+        assert_same(&new, &db.url, "bench-r").await;
+
+        // The old PC, started again, is refused, and nothing of it is mixed in anywhere.
+        let archived = central_rows(&db.url, "bench-r-old-pc").await;
+        let (os, osvc) = station_on(&old, "bench-r", &db.url, 20).await;
+        measure_reference(&osvc).await;
+        scan_and_settle(&osvc, samples(1)[0]).await;
+        refused(&osvc).await;
+        osvc.stop_keeping_store().await;
+        os.close().await;
+        nsvc.stop_keeping_store().await;
+        ns.close().await;
+        assert_same(&new, &db.url, "bench-r").await;
+        assert_eq!(central_rows(&db.url, "bench-r-old-pc").await, archived);
+        // Nothing forwards under the archive id.
+        let out = run_brdfd(
+            &[
+                "sync",
+                "--db",
+                old.to_str().unwrap(),
+                "--to",
+                &db.url,
+                "--station",
+                "bench-r-old-pc",
+                "--once",
+            ],
+            None,
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(6), "{err}");
+        assert!(
+            err.contains("is the archive of station \"bench-r\""),
+            "{err}"
+        );
+    })
+    .await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_central_database_restored_from_a_backup_is_caught_up() {
     let _serial = serial();

@@ -505,10 +505,16 @@ fn central_check(config: &Config) -> Check {
             let fix = match &e {
                 SyncError::Forked { .. } | SyncError::StoreBehind { .. } => format!(
                     "this store is a copy of station \"{}\"'s store: stop its daemon, run \
-                     `brdfd sync --db {} --adopt NEW_ID` and set [station] id = \"NEW_ID\"",
+                     `brdfd sync --db {} --adopt NEW_ID` and set [station] id = \"NEW_ID\"; or, \
+                     to make it the station (a bench moved to a new PC), stop the old store's \
+                     daemon and run `brdfd sync --db {} --retire-old ARCHIVE_ID`",
                     config.station.id,
+                    config.store.path.display(),
                     config.store.path.display()
                 ),
+                SyncError::Archived { .. } => {
+                    "give this station its own [station] id in brdfd.toml".to_string()
+                }
                 SyncError::StationTaken { .. } | SyncError::StoreHasOtherId { .. } => {
                     "give this station its own [station] id in brdfd.toml".to_string()
                 }

@@ -144,7 +144,9 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
             SyncError::Forked { .. }
             | SyncError::StoreBehind { .. }
             | SyncError::StationTaken { .. }
-            | SyncError::StoreHasOtherId { .. },
+            | SyncError::StoreHasOtherId { .. }
+            | SyncError::Retire { .. }
+            | SyncError::Archived { .. },
         ) = cause.downcast_ref::<SyncError>()
         {
             return exit::REFUSED;

@@ -1,9 +1,13 @@
-//! `brdfd sync --db FILE --to URL [--once] [--verify] [--adopt NEW_ID]`: forwards a station's
+//! `brdfd sync --db FILE --to URL [--once] [--verify] [--adopt NEW_ID | --retire-old ARCHIVE_ID]`:
+//! forwards a station's
 //! store to the lab's central PostgreSQL database — the same forwarder the daemon runs with
 //! `[sync] url`, for a station that is stopped (or has no network while it runs). The store is
 //! only read: the cursor of what was sent lives in the central database, so running it twice
-//! sends nothing twice. `--adopt` is the one exception: it makes a copy of a station's store a
-//! station of its own (src/sync/lineage.rs) and writes that into the store.
+//! sends nothing twice. `--adopt` and `--retire-old` are the exceptions, the two ways out for a
+//! copy of a station's store that the station refuses: `--adopt` makes the copy a station of
+//! its own (src/sync/lineage.rs); `--retire-old` moves what the central database holds of the
+//! station to an archive id and gives the station id to the copy (src/sync/retire.rs). Both
+//! open the store as its owner, so its daemon must be stopped.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -26,11 +30,15 @@ Examples:
       compare every row with the central database, re-send what it lacks, exit
   brdfd sync --db copy.db --adopt bench-7
       make a copy of a station's store a station of its own (then set [station] id)
+  brdfd sync --db brdfd.db --to postgres://lab@db.lab/brdfd --retire-old bench-3-old-pc
+      a bench moved to a new PC whose copy of the store is refused: keep the old PC's rows
+      centrally as station bench-3-old-pc, make this store station bench-3 (its [station] id)
+      and send everything it holds; stop the old PC's daemon first
 
 The central schema is created or brought up to date on first contact. A central database
 migrated by a newer brdfd is refused, and so is a station id another store already forwards
 under, and a copy of a station's store that went its own way after it was copied (exit
-status 6, the message names `--adopt`). Every row is keyed by (station, local id): a resend
+status 6, the message names `--adopt` and `--retire-old`). Every row is keyed by (station, local id): a resend
 changes nothing, a row that changed (a fit that finished, a scan that failed) is updated.")]
 pub struct SyncArgs {
     /// The station's SQLite store; default: the configuration's `[store] path`.
@@ -65,6 +73,18 @@ pub struct SyncArgs {
     /// daemon must be stopped. Set [station] id = "NEW_ID" afterwards (or pass --station).
     #[arg(long, value_name = "NEW_ID", conflicts_with_all = ["once", "verify"])]
     pub adopt: Option<String>,
+
+    /// Make this store (a copy of a station's store, refused for that station: a bench moved
+    /// to a new PC while the old one went on) the station: what the central database holds
+    /// of the station is kept under ARCHIVE_ID, a station of its own marked retired; then this
+    /// store sends everything it holds under the station id, and exits. Refused while the old
+    /// store still forwards. This store's daemon must be stopped too.
+    #[arg(
+        long,
+        value_name = "ARCHIVE_ID",
+        conflicts_with_all = ["once", "verify", "adopt"]
+    )]
+    pub retire_old: Option<String>,
 
     /// Configuration file for the defaults above.
     #[arg(long, value_name = "brdfd.toml")]
@@ -102,6 +122,11 @@ pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| config.station.id.clone());
     let mut options = ForwarderOptions::new(station.clone(), url);
     options.batch = config.sync.batch;
+    if let Some(archive) = &args.retire_old {
+        return rt
+            .block_on(retire_old(&db, options, archive, args.json))
+            .with_context(|| format!("retiring station \"{station}\"'s old store"));
+    }
     rt.block_on(async {
         let mut forwarder = Forwarder::for_file(&db, options).await?;
         let central = forwarder
@@ -218,4 +243,82 @@ async fn adopt(db: &std::path::Path, new_id: &str) -> anyhow::Result<()> {
         db.display()
     );
     Ok(())
+}
+
+/// `--retire-old ARCHIVE_ID`: the station's central rows to the archive, the station to this
+/// store (a new incarnation of it, so the old store is refused if it comes back), then
+/// everything this store holds sent.
+async fn retire_old(
+    db: &std::path::Path,
+    options: ForwarderOptions,
+    archive: &str,
+    json: bool,
+) -> anyhow::Result<()> {
+    if !db.exists() {
+        anyhow::bail!("no store at {}", db.display());
+    }
+    let station = options.station.clone();
+    let store = Store::open(db).await?;
+    let result = async {
+        let (writer, _) = store.sync_pools();
+        let uid: String = sqlx::query_scalar("SELECT uid FROM sync_identity")
+            .fetch_one(writer)
+            .await
+            .context("reading the store's id")?;
+        let incarnation = crate::sync::lineage::read(writer)
+            .await?
+            .last()
+            .map(|i| i.id.clone())
+            .context("the store has no incarnation")?;
+        let central = crate::sync::Central::connect_and_migrate(&options.url).await?;
+        let retired =
+            crate::sync::retire::retire(&central, &station, archive, &uid, &incarnation).await;
+        central.close().await;
+        let retired = retired?;
+        if json {
+            let rows: serde_json::Map<String, serde_json::Value> = retired
+                .rows
+                .iter()
+                .map(|(t, n)| (t.to_string(), serde_json::Value::from(*n)))
+                .collect();
+            println!(
+                "{}",
+                serde_json::json!({
+                    "type": "retired", "station": station, "archive": archive,
+                    "host": retired.host, "rows": rows,
+                })
+            );
+        } else {
+            println!(
+                "station {station}: the old store's {} central rows (host {}) are now station \
+                 {archive}; this store is station {station}",
+                retired.total_rows(),
+                retired.host
+            );
+        }
+        let started = Instant::now();
+        let mut forwarder = Forwarder::for_store(&store, options).await?;
+        let report = forwarder.verify().await?;
+        let sent = forwarder.drain(&mut |_| {}).await?;
+        if json {
+            println!(
+                "{}",
+                serde_json::json!({
+                    "type": "drained", "resent": report.resent(), "rows": sent,
+                    "seconds": started.elapsed().as_secs_f64(),
+                })
+            );
+        } else {
+            println!(
+                "{} rows sent in {:.2} s; nothing pending. Start this station's daemon as \
+                 station {station}",
+                report.resent() + sent as usize,
+                started.elapsed().as_secs_f64()
+            );
+        }
+        Ok::<_, anyhow::Error>(())
+    }
+    .await;
+    store.close().await;
+    result
 }

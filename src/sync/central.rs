@@ -128,6 +128,20 @@ impl Central {
     /// Registers `station` for the store `uid` (first come, first served) and returns its
     /// cursor; refuses a station id another store holds.
     pub async fn register(&self, station: &str, uid: &str) -> Result<StationRow, SyncError> {
+        // An archive of a retired station's old store takes no rows (src/sync/retire.rs).
+        let archived: Option<String> = sqlx::query_scalar(
+            "SELECT retired_from FROM stations WHERE station = $1 AND retired_from IS NOT NULL",
+        )
+        .bind(station)
+        .fetch_optional(&self.pool)
+        .await
+        .map_err(|e| self.error(e))?;
+        if let Some(from) = archived {
+            return Err(SyncError::Archived {
+                station: station.to_string(),
+                from,
+            });
+        }
         // One store, one id: the same store under a second id would count its scans twice.
         let other: Option<String> = sqlx::query_scalar(
             "SELECT station FROM stations WHERE store_uid = $1 AND station <> $2 LIMIT 1",

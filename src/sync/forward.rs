@@ -682,7 +682,7 @@ impl Forwarder {
 
 /// How long after the last sign of life of the station's incarnation another one is refused
 /// as a second live copy.
-const LIVE: Duration = Duration::from_secs(5);
+pub(super) const LIVE: Duration = Duration::from_secs(5);
 
 /// How often an idle forwarder looks at the central cursor.
 const LOOK: Duration = Duration::from_secs(1);

@@ -22,6 +22,8 @@
 //!   that went its own way (fork detection), before any of its rows is written.
 //! - [`verify`]: per-row digests of the store against the central database; what is missing
 //!   or different is sent again (`brdfd sync --verify`, and by itself after a central restore).
+//! - [`retire`]: retiring a station's old store to an archive id, so that a copy of it (a bench
+//!   moved to a new PC) takes the station id over.
 //! - [`forward`]: the forwarder: batches, the loop with back-off, status (backlog, last error).
 //!
 //! Everything PostgreSQL-specific lives here and in `src/store/central.rs` (reading the
@@ -30,6 +32,7 @@
 pub mod central;
 pub mod forward;
 pub mod lineage;
+pub mod retire;
 pub mod tables;
 pub mod verify;
 
@@ -104,7 +107,9 @@ pub enum SyncError {
     #[error(
         "station \"{station}\" refuses this store: {detail}; nothing of this store was sent. \
          To keep this copy as a bench of its own, stop its daemon, run `brdfd sync --db FILE \
-         --adopt NEW_ID` and set [station] id = \"NEW_ID\""
+         --adopt NEW_ID` and set [station] id = \"NEW_ID\"; to make it the station (a bench \
+         moved to a new PC), stop the old one and run `brdfd sync --db FILE --retire-old \
+         ARCHIVE_ID`"
     )]
     Forked { station: String, detail: String },
 
@@ -138,6 +143,18 @@ pub enum SyncError {
     /// Reading the station's store failed.
     #[error("reading the station's store: {0}")]
     Local(#[source] sqlx::Error),
+
+    /// Retiring a station's old store (`brdfd sync --retire-old`) was refused.
+    #[error("cannot retire station \"{station}\": {why}")]
+    Retire { station: String, why: String },
+
+    /// The station id is the archive of a retired station's old store: nothing forwards
+    /// under it.
+    #[error(
+        "station id \"{station}\" is the archive of station \"{from}\"'s retired store; \
+         nothing forwards under it; give this station its own id with [station] id in brdfd.toml"
+    )]
+    Archived { station: String, from: String },
 
     /// A statement on the central database failed (connection lost, server stopped, …).
     #[error("the central database {url}: {message}")]
