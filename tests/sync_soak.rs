@@ -10,9 +10,14 @@
 //! for the stations to come to rest: a scan under way is aborted in most rounds, and let run,
 //! fits and all, in the others).
 //!
-//! `fault_soak_reduced` (run with the suite) injects each kind of fault once;
-//! `fault_soak` (ignored; `cargo test --release --test sync_soak -- --ignored`) injects
-//! `BRDFD_SOAK_FAULTS` (default 100) random ones, seeded by `BRDFD_SOAK_SEED` (default 1).
+//! Before the first fault the stations measure for a while with nothing going wrong, and the
+//! lag from local commit to central commit is read from each station's `status` (the
+//! forwarder's figure over the entries it sent) and printed.
+//!
+//! `fault_soak_reduced` (run with the suite) measures for 10 s and injects each kind of fault
+//! once; `fault_soak` (ignored; `cargo test --release --test sync_soak -- --ignored`) measures
+//! for `BRDFD_SOAK_LAG_SECONDS` (default 120) and injects `BRDFD_SOAK_FAULTS` (default 100)
+//! random ones, seeded by `BRDFD_SOAK_SEED` (default 1).
 
 // `common::serial()` is a process-wide std mutex held for a whole test on purpose: each
 // `#[tokio::test]` has its own runtime, so no task of the same runtime waits for it.
@@ -203,7 +208,54 @@ async fn copy_store(station: &Station, url: &str) {
     copy.child.wait().unwrap();
 }
 
-async fn soak(faults: &[Fault], seed: u64) {
+/// The stations measuring without faults for `seconds` (a reference, then scans back to back,
+/// at the recordings' pace); then each station's lag from local commit to central commit
+/// over the entries it forwarded (`status.sync.lag`), printed per station and for the worst.
+async fn lag_phase(stations: &[Station], url: &str, seconds: u64) {
+    let t0 = Instant::now();
+    let mut n = 0;
+    while t0.elapsed() < Duration::from_secs(seconds) {
+        for s in stations {
+            n += 1;
+            s.poke(n);
+        }
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    }
+    for s in stations {
+        let _ = s.client().post("/abort", None);
+    }
+    converged(stations, url, Duration::from_secs(180)).await;
+    let mut worst = (0.0_f64, 0.0_f64, 0.0_f64);
+    let mut entries = 0;
+    for s in stations {
+        let status = s.client().get("/status").unwrap();
+        let lag = &status["sync"]["lag"];
+        let (p50, p99, max) = (
+            lag["p50_ms"]
+                .as_f64()
+                .expect("a lag once entries were forwarded"),
+            lag["p99_ms"].as_f64().unwrap(),
+            lag["max_ms"].as_f64().unwrap(),
+        );
+        entries += lag["entries"].as_u64().unwrap();
+        eprintln!(
+            "lag {}: local commit → central commit over {} entries: p50 {p50:.0} ms, \
+             p99 {p99:.0} ms, max {max:.0} ms",
+            s.name, lag["entries"]
+        );
+        worst = (worst.0.max(p50), worst.1.max(p99), worst.2.max(max));
+    }
+    eprintln!(
+        "lag with {} stations measuring for {seconds} s ({entries} entries): worst station \
+         p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms",
+        stations.len(),
+        worst.0,
+        worst.1,
+        worst.2
+    );
+}
+
+async fn soak(faults: &[Fault], seed: u64, lag_seconds: u64) {
     let cluster = Cluster::start();
     let db = TestDb::create_on(&cluster.admin_url(), "soak");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
@@ -213,6 +265,7 @@ async fn soak(faults: &[Fault], seed: u64) {
     for s in &mut stations {
         s.start();
     }
+    lag_phase(&stations, &db.url, lag_seconds).await;
     let dump = tempfile::NamedTempFile::new().unwrap();
     let mut dumped = false;
     let mut recoveries = Vec::new();
@@ -306,6 +359,7 @@ async fn fault_soak_reduced() {
             Fault::RestoreDump,
         ],
         1,
+        10,
     )
     .await;
 }
@@ -332,5 +386,9 @@ async fn fault_soak() {
     let faults: Vec<Fault> = (0..n)
         .map(|_| kinds[rng.random_range(0..kinds.len())])
         .collect();
-    soak(&faults, seed).await;
+    let lag_seconds: u64 = std::env::var("BRDFD_SOAK_LAG_SECONDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(120);
+    soak(&faults, seed, lag_seconds).await;
 }

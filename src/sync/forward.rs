@@ -78,6 +78,40 @@ pub struct SyncStatus {
     /// The last `--verify` comparison with the central database, in one line.
     pub last_verify: Option<String>,
     pub last_verify_ms: Option<i64>,
+    /// How long the last [`LAG_WINDOW`] forwarded outbox entries took from their local commit
+    /// to the central commit (none forwarded yet: `None`).
+    pub lag: Option<Lag>,
+}
+
+/// Outbox entries the lag of [`SyncStatus::lag`] is taken over: the most recent ones.
+pub const LAG_WINDOW: usize = 1000;
+
+/// The lag from a row's local commit to its central commit (ms, the station's clock for both
+/// ends), over the most recent forwarded outbox entries. An entry queued during an outage
+/// counts the outage: this is what a scientist querying the central database waits for.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Lag {
+    pub entries: usize,
+    pub p50_ms: f64,
+    pub p99_ms: f64,
+    pub max_ms: f64,
+}
+
+impl Lag {
+    /// The summary of `lags` (ms), `None` when empty.
+    pub fn of(lags: impl IntoIterator<Item = i64>) -> Option<Lag> {
+        let mut xs: Vec<f64> = lags.into_iter().map(|l| l.max(0) as f64).collect();
+        if xs.is_empty() {
+            return None;
+        }
+        let max = xs.iter().copied().fold(0.0, f64::max);
+        Some(Lag {
+            entries: xs.len(),
+            p50_ms: crate::uncertainty::quantile(&mut xs, 0.50),
+            p99_ms: crate::uncertainty::quantile(&mut xs, 0.99),
+            max_ms: max,
+        })
+    }
 }
 
 /// What one batch did.
@@ -151,6 +185,8 @@ pub struct Forwarder {
     last_look: std::time::Instant,
     /// The last refusal recorded in the central database, so a retry does not repeat it.
     last_refusal: Option<String>,
+    /// The lags of the last [`LAG_WINDOW`] forwarded entries, oldest first.
+    recent_lags: std::collections::VecDeque<i64>,
     pub(super) status: Arc<Mutex<SyncStatus>>,
 }
 
@@ -201,6 +237,7 @@ impl Forwarder {
             refused: false,
             last_verify: None,
             last_verify_ms: None,
+            lag: None,
         };
         Forwarder {
             options,
@@ -213,6 +250,7 @@ impl Forwarder {
             needs_verify: false,
             last_look: std::time::Instant::now(),
             last_refusal: None,
+            recent_lags: std::collections::VecDeque::with_capacity(LAG_WINDOW),
             status: Arc::new(Mutex::new(status)),
         }
     }
@@ -359,7 +397,22 @@ impl Forwarder {
             Ok(report) => {
                 let rows = report.as_ref().map(|r| r.total_rows() as u64).unwrap_or(0);
                 let cursor = self.cursor;
+                let lag = match report {
+                    Some(r) if !r.lags_ms.is_empty() => {
+                        for &l in &r.lags_ms {
+                            if self.recent_lags.len() == LAG_WINDOW {
+                                self.recent_lags.pop_front();
+                            }
+                            self.recent_lags.push_back(l);
+                        }
+                        Lag::of(self.recent_lags.iter().copied())
+                    }
+                    _ => None,
+                };
                 self.set_status(|s| {
+                    if lag.is_some() {
+                        s.lag = lag;
+                    }
                     s.connected = true;
                     s.refused = false;
                     s.cursor = cursor;
@@ -1027,4 +1080,21 @@ pub(super) async fn upsert(
 /// One line for a failure, for the CLI.
 pub fn describe(e: &SyncError) -> String {
     one_line(e)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Lag;
+
+    #[test]
+    fn the_lag_summary_is_type_7_over_the_entries() {
+        assert_eq!(Lag::of(Vec::new()), None);
+        let lag = Lag::of((1..=100).rev()).unwrap();
+        assert_eq!(lag.entries, 100);
+        assert!((lag.p50_ms - 50.5).abs() < 1e-12, "{lag:?}");
+        assert!((lag.p99_ms - 99.01).abs() < 1e-9, "{lag:?}");
+        assert_eq!(lag.max_ms, 100.0);
+        // A clock step backwards never makes a negative lag.
+        assert_eq!(Lag::of([-5]).unwrap().max_ms, 0.0);
+    }
 }
