@@ -126,7 +126,8 @@ class FitResult:
     def evaluate(self, geometries: Optional[Sequence[Any]] = None,
                  wavelengths: Optional[Sequence[int]] = None) -> np.ndarray:
         """The fitted model's BRDF (sr⁻¹) with this fit's parameters and Fresnel cosine."""
-        return evaluate(self.params, geometries, wavelengths, fresnel=self.document["fresnel"])
+        return evaluate(self.params, geometries, wavelengths, fresnel=self.document["fresnel"],
+                        model=self.document.get("model", "paper"))
 
     def reflectance(self, geometry: str, which: str = "measured") -> np.ndarray:
         """The reflectance factor π·f at one geometry, 31 bands: ``which`` is ``"measured"`` or
@@ -224,21 +225,32 @@ def evaluate(
     geometries: Optional[Sequence[Any]] = None,
     wavelengths: Optional[Sequence[int]] = None,
     fresnel: str = "incidence",
+    model: str = "paper",
 ) -> np.ndarray:
     """The model's BRDF (sr⁻¹), shape (len(geometries), len(wavelengths)).
 
-    ``params``: ``{"kd": 31 values, "ks", "alpha", "ior"}`` or a :class:`FitResult` (then its
-    Fresnel cosine).  ``geometries``: names (default: all 14) or ``(θi, θr, φr)`` tuples in
-    degrees.  ``wavelengths``: band centres in nm (default: all 31; the model has no values
-    between bands).
+    ``params``: ``{"kd": 31 values, "ks", "alpha", "ior"}``, with a model option's own
+    parameters (``"sigma"`` for ``oren-nayar``, ``"ks2"`` and ``"alpha2"`` for ``two-lobe``),
+    or a :class:`FitResult` (then its Fresnel cosine and model option).  ``geometries``: names
+    (default: all 14) or ``(θi, θr, φr)`` tuples in degrees.  ``wavelengths``: band centres in
+    nm (default: all 31; the model has no values between bands).  ``model``: the model option
+    (SCIENCE.md §4.1), the paper's by default.
     """
     if isinstance(params, FitResult):
         return params.evaluate(geometries, wavelengths)
+    extra_names = {"paper": [], "oren-nayar": ["sigma"], "two-lobe": ["ks2", "alpha2"]}
+    if model not in extra_names:
+        raise ValueError(f"unknown model {model!r}; valid: {', '.join(extra_names)}")
+    missing = [n for n in extra_names[model] if n not in params]
+    if missing:
+        raise ValueError(f"model {model!r} needs the parameters {', '.join(missing)}")
+    extra = [float(params[n]) for n in extra_names[model]]
     geos = [g if isinstance(g, str) else tuple(float(a) for a in g)
             for g in (_geometry_names() if geometries is None else geometries)]
     wl = WAVELENGTHS.tolist() if wavelengths is None else [int(w) for w in wavelengths]
     rows = _native.evaluate([float(k) for k in params["kd"]], float(params["ks"]),
-                            float(params["alpha"]), float(params["ior"]), geos, wl, fresnel)
+                            float(params["alpha"]), float(params["ior"]), geos, wl, fresnel,
+                            model, extra)
     return np.array(rows, dtype=float).reshape(len(geos), len(wl))
 
 

@@ -44,5 +44,7 @@ def evaluate(
     geometries: Sequence[Union[str, Tuple[float, float, float]]],
     wavelengths: Sequence[int],
     fresnel: Optional[str] = None,
+    model: Optional[str] = None,
+    extra: Optional[Sequence[float]] = None,
 ) -> List[List[float]]: ...
 def store_tidy(path: str, include_simulated: bool = True) -> Tuple[str, str]: ...

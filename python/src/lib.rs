@@ -251,8 +251,11 @@ enum GeometryArg {
 }
 
 /// The model's BRDF (sr⁻¹): one row per geometry, one column per wavelength (band centres).
+/// `model` is a model option (`paper`, `oren-nayar`, `two-lobe`) and `extra` its own
+/// parameters in order (Oren–Nayar `[sigma]`, second lobe `[ks2, alpha2]`).
 #[pyfunction]
-#[pyo3(signature = (kd, ks, alpha, ior, geometries, wavelengths, fresnel=None))]
+#[pyo3(signature = (kd, ks, alpha, ior, geometries, wavelengths, fresnel=None, model=None, extra=None))]
+#[allow(clippy::too_many_arguments)]
 fn evaluate(
     kd: Vec<f64>,
     ks: f64,
@@ -261,6 +264,8 @@ fn evaluate(
     geometries: Vec<GeometryArg>,
     wavelengths: Vec<u32>,
     fresnel: Option<&str>,
+    model: Option<&str>,
+    extra: Option<Vec<f64>>,
 ) -> PyResult<Vec<Vec<f64>>> {
     let kd: [f64; BANDS] = kd.try_into().map_err(|v: Vec<f64>| {
         PyValueError::new_err(format!(
@@ -269,12 +274,28 @@ fn evaluate(
         ))
     })?;
     let fresnel = parse_fresnel(fresnel.unwrap_or("incidence")).map_err(PyValueError::new_err)?;
+    let kind: model::ModelKind = model
+        .unwrap_or("paper")
+        .parse()
+        .map_err(PyValueError::new_err)?;
+    let given = extra.unwrap_or_default();
+    let names = kind.extra_names();
+    if given.len() != names.len() {
+        return Err(PyValueError::new_err(format!(
+            "model \"{kind}\" has {} extra parameters ({}), {} given",
+            names.len(),
+            if names.is_empty() { "none".to_string() } else { names.join(", ") },
+            given.len()
+        )));
+    }
+    let mut extra = [0.0; model::EXTRA];
+    extra[..given.len()].copy_from_slice(&given);
     let params = Params {
         kd,
         ks,
         alpha,
         ior,
-        extra: Default::default(),
+        extra,
     };
     let nm = wavelengths_nm();
     let bands: Vec<usize> = wavelengths
@@ -309,9 +330,15 @@ fn evaluate(
                 })
             }
         };
-        // The same arithmetic as model::evaluate, at one geometry: kd(λ) + specular term.
+        // The same arithmetic as model::evaluate_model, at one geometry: kd(λ)·a + (lobe + t)
+        // (the paper's model: a = 1, t = 0, which is model::evaluate bit for bit).
         let s = model::specular_term(params.ks, params.alpha, params.ior, fresnel, &sg);
-        rows.push(bands.iter().map(|&b| params.kd[b] + s).collect());
+        if kind == model::ModelKind::Paper {
+            rows.push(bands.iter().map(|&b| params.kd[b] + s).collect());
+        } else {
+            let (a, t) = kind.shape(&params.extra, params.ior, fresnel, &sg);
+            rows.push(bands.iter().map(|&b| params.kd[b] * a + (s + t)).collect());
+        }
     }
     Ok(rows)
 }

@@ -92,6 +92,15 @@ def test_a_model_option_equals_the_cli_bit_for_bit():
                          "--model", "oren-nayar", "--fresnel", "exact", "--json"))
     same_bits(without_timing(got.document), without_timing(cli))
     assert got.document["model"] == "oren-nayar"
+    # The model at the fit's parameters is the fit's estimated BRDF, option and all.
+    assert np.array_equal(brdfd.evaluate(got), got.estimated)
+    two = brdfd.fit(scan, cost="cf1", seed=2, model="two-lobe")
+    assert np.array_equal(brdfd.evaluate(two), two.estimated)
+    assert np.array_equal(
+        brdfd.evaluate(two.params, model="two-lobe", fresnel=two.document["fresnel"]),
+        two.estimated)
+    with pytest.raises(ValueError, match="needs the parameters sigma"):
+        brdfd.evaluate(two.params, model="oren-nayar")
     with pytest.raises(ValueError, match="model"):
         brdfd.fit(scan, cost="cf1", model="lambert")
 
