@@ -371,14 +371,14 @@ pub(super) fn pending_fits(client: &Client, scan: ScanId) -> anyhow::Result<Vec<
 pub(super) fn print_scan_result(detail: &ScanView, json: bool) -> anyhow::Result<()> {
     if json {
         #[derive(serde::Serialize)]
-        struct Result<'a> {
+        struct Outcome<'a> {
             #[serde(rename = "type")]
             kind: &'static str,
             scan: &'a ScanView,
         }
         println!(
             "{}",
-            json_line(&Result {
+            json_line(&Outcome {
                 kind: "result",
                 scan: detail
             })?
