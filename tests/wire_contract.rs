@@ -45,7 +45,10 @@ impl Answer {
 
 impl Raw {
     fn new(addr: SocketAddr, token_file: &std::path::Path) -> Raw {
-        let token = std::fs::read_to_string(token_file).unwrap().trim().to_string();
+        let token = std::fs::read_to_string(token_file)
+            .unwrap()
+            .trim()
+            .to_string();
         let agent = ureq::Agent::config_builder()
             .http_status_as_error(false)
             .max_redirects(0)
@@ -252,7 +255,10 @@ async fn every_route_answers_with_its_wire_type() {
 
         let a = call(|r| r.get("/scans")).await;
         let list: Vec<wire::ScanSummary> = contract("GET /scans", &a, 200);
-        assert_eq!(list.iter().map(|s| s.id).collect::<Vec<_>>(), [second, scan]);
+        assert_eq!(
+            list.iter().map(|s| s.id).collect::<Vec<_>>(),
+            [second, scan]
+        );
         assert!(list[0].state.is(wire::ScanState::Aborted));
         let a = call(|r| r.get("/scans?sample_contains=CONTR&limit=5")).await;
         let found: Vec<wire::ScanSummary> = contract("GET /scans?sample_contains", &a, 200);
@@ -271,7 +277,11 @@ async fn every_route_answers_with_its_wire_type() {
         assert_eq!(view.scan.id, scan);
         assert_eq!(view.readings.len(), 14);
         assert!(!view.fits.is_empty());
-        assert!(view.fits.iter().all(|f| f.run.status.is(wire::FitStatus::Done)));
+        assert!(
+            view.fits
+                .iter()
+                .all(|f| f.run.status.is(wire::FitStatus::Done))
+        );
         let done = view.fits[0].run.id;
 
         let get = |path: String| {
@@ -339,7 +349,12 @@ async fn every_route_answers_with_its_wire_type() {
         let imported: wire::Imported = contract("POST /scans/import", &a, 201);
         let imported_scan = imported.scan.expect("the imported scan");
         assert!(imported.scans.is_none() && imported.colorimetry_checks.is_none());
-        assert!(d.service.wait_settled(imported_scan, STEP_TIMEOUT).await.unwrap());
+        assert!(
+            d.service
+                .wait_settled(imported_scan, STEP_TIMEOUT)
+                .await
+                .unwrap()
+        );
 
         let a = post(
             format!("/scans/{scan}/refit"),
@@ -355,7 +370,7 @@ async fn every_route_answers_with_its_wire_type() {
         assert_eq!(cancelling.cancelling, last);
         assert!(d.service.wait_settled(scan, STEP_TIMEOUT).await.unwrap());
         let a = post(format!("/fits/{last}/cancel"), None).await;
-        refusal("POST /fits/{id}/cancel (ended)", &a, 409);
+        refusal("POST /fits/{id}/cancel (ended)", &a, 400);
         let a = post("/abort".into(), None).await;
         assert_eq!(
             refusal("POST /abort (idle)", &a, 409).kind.as_deref(),
@@ -408,6 +423,7 @@ async fn every_route_answers_with_its_wire_type() {
                 agent
                     .post(format!("http://{addr}/session/logout"))
                     .header("cookie", &cookie)
+                    .header("content-type", "application/json")
                     .header("sec-fetch-site", "same-origin")
                     .header(&signed_in.csrf_header, &signed_in.csrf)
                     .send_empty(),
@@ -455,7 +471,10 @@ async fn every_route_answers_with_its_wire_type() {
         .await;
         assert!(health.ok);
         assert!(
-            matches!(&missing, brdfd::client::ClientError::Refused { status: 404, .. }),
+            matches!(
+                &missing,
+                brdfd::client::ClientError::Refused { status: 404, .. }
+            ),
             "{missing}"
         );
         assert!(preview.starts_with(b"\x89PNG"));
