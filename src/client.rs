@@ -5,14 +5,23 @@
 //! Every request carries the API token (`Authorization: Bearer …`) when the client has one;
 //! a 401 answer becomes [`ClientError::Unauthorized`], which says where the token is read from.
 //!
-//! Responses are handled as `serde_json::Value`: the CLI only formats them, and a client
-//! that does not insist on every field keeps working against a newer daemon.
+//! Every route has a typed call (`status()`, `scan(id)`, `refit(…)`, …) that reads the answer
+//! into its type of [`crate::wire`], the contract the daemon's handlers answer with: a field
+//! the daemon no longer sends, or sends renamed, is an error naming it
+//! ([`ClientError::Contract`]), not a default on the terminal. A newer daemon's extra fields
+//! are ignored, and its new states or kinds read as `Unknown` (see [`crate::wire::Open`]).
+//! The untyped calls (`get`, `post`, `get_text`, …) give the answer as it came, for tests and
+//! tools that look at the bytes themselves.
 
 use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::time::Duration;
 
+use serde::de::DeserializeOwned;
 use serde_json::Value;
+
+use crate::store::{FitRunId, ScanId};
+use crate::wire;
 
 /// The address `brdfd serve` listens on by default (`[api] listen`).
 pub const DEFAULT_ADDR: &str = "127.0.0.1:7878";
@@ -37,6 +46,17 @@ pub enum ClientError {
         status: u16,
         kind: String,
         message: String,
+    },
+    /// The daemon's answer is not the type this client reads for the route (a field missing
+    /// or renamed): daemon and client are of versions that do not agree.
+    #[error(
+        "the daemon on {addr} answered {route} with JSON this brdfd cannot read ({detail}); is \
+         the daemon a different version? (`brdfd status --json`, `brdfd --version`)"
+    )]
+    Contract {
+        addr: SocketAddr,
+        route: String,
+        detail: String,
     },
     /// The connection failed in another way.
     #[error("talking to the brdfd daemon on {addr}: {detail}")]
@@ -63,7 +83,7 @@ impl ClientError {
 
 /// The message and kind of a refusal's JSON body (or the body itself, when it is not one).
 fn refusal(status: u16, body: &str) -> ClientError {
-    let parsed: Option<crate::api::ErrorBody> = serde_json::from_str(body).ok();
+    let parsed: Option<wire::ErrorBody> = serde_json::from_str(body).ok();
     match parsed {
         Some(b) => ClientError::Refused {
             status,
@@ -241,13 +261,18 @@ impl Client {
 
     /// `POST path` with a JSON body (or none) → JSON.
     pub fn post(&self, path: &str, body: Option<&Value>) -> Result<Value, ClientError> {
+        let text = self.post_for_text(path, body.map(Value::to_string).as_deref())?;
+        self.json(text)
+    }
+
+    /// `POST path` with a JSON body as text (or none) → the answer's text, as it came.
+    pub fn post_for_text(&self, path: &str, body: Option<&str>) -> Result<String, ClientError> {
         let request = self.post_request(path);
         let response = match body {
-            Some(b) => request.send(b.to_string()),
+            Some(b) => request.send(b),
             None => request.send_empty(),
         };
-        let text = self.finish(response)?;
-        self.json(text)
+        self.finish(response)
     }
 
     /// `POST path` with a text body (a scan file) → JSON.
@@ -259,6 +284,12 @@ impl Client {
 
     /// `POST path` with a binary body (an instrument export such as an X-Rite `.xlsx`) → JSON.
     pub fn post_bytes(&self, path: &str, body: &[u8]) -> Result<Value, ClientError> {
+        let text = self.post_bytes_for_text(path, body)?;
+        self.json(text)
+    }
+
+    /// `POST path` with a binary body → the answer's text, as it came.
+    pub fn post_bytes_for_text(&self, path: &str, body: &[u8]) -> Result<String, ClientError> {
         let r = self
             .agent
             .post(&self.url(path))
@@ -268,8 +299,146 @@ impl Client {
             None => r,
         };
         let response = r.send(body);
-        let text = self.finish(response)?;
-        self.json(text)
+        self.finish(response)
+    }
+
+    /// The answer `text` to `route` read as its wire type.
+    fn typed<T: DeserializeOwned>(&self, route: &str, text: &str) -> Result<T, ClientError> {
+        serde_json::from_str(text).map_err(|e| ClientError::Contract {
+            addr: self.addr,
+            route: route.to_string(),
+            detail: e.to_string(),
+        })
+    }
+
+    fn get_typed<T: DeserializeOwned>(&self, path: &str) -> Result<T, ClientError> {
+        let text = self.get_text(path)?;
+        self.typed(&format!("GET {path}"), &text)
+    }
+
+    fn post_typed<T: DeserializeOwned, B: serde::Serialize>(
+        &self,
+        path: &str,
+        body: Option<&B>,
+    ) -> Result<T, ClientError> {
+        let body = body
+            .map(|b| serde_json::to_string(b))
+            .transpose()
+            .map_err(|e| ClientError::Transport {
+                addr: self.addr,
+                detail: format!("the request could not be written as JSON: {e}"),
+            })?;
+        let text = self.post_for_text(path, body.as_deref())?;
+        self.typed(&format!("POST {path}"), &text)
+    }
+
+    /// `GET /healthz`.
+    pub fn health(&self) -> Result<wire::Health, ClientError> {
+        self.get_typed("/healthz")
+    }
+
+    /// `GET /status`.
+    pub fn status(&self) -> Result<wire::Status, ClientError> {
+        self.get_typed("/status")
+    }
+
+    /// `POST /reference`: measure the white reference tile.
+    pub fn request_reference(&self) -> Result<wire::ReferenceAccepted, ClientError> {
+        self.post_typed::<_, ()>("/reference", None)
+    }
+
+    /// `POST /scans`: scan `sample`.
+    pub fn request_scan(&self, sample: &str) -> Result<wire::ScanAccepted, ClientError> {
+        let body = wire::ScanRequest {
+            sample: sample.to_string(),
+        };
+        self.post_typed("/scans", Some(&body))
+    }
+
+    /// `GET /scans` with the query's parameters, newest first.
+    pub fn scans(&self, query: &wire::ScanQuery) -> Result<Vec<wire::ScanSummary>, ClientError> {
+        self.get_typed(&scans_path(query))
+    }
+
+    /// `GET /scans/{id}`.
+    pub fn scan(&self, scan: ScanId) -> Result<wire::ScanView, ClientError> {
+        self.get_typed(&format!("/scans/{scan}"))
+    }
+
+    /// `GET /scans/{id}/export`: the scan as a `brdfd.scan/1` file, its text as sent.
+    pub fn export_scan(&self, scan: ScanId) -> Result<String, ClientError> {
+        self.get_text(&format!("/scans/{scan}/export"))
+    }
+
+    /// `POST /scans/import` of a `brdfd.scan/1` file's text.
+    pub fn import_scan(&self, file: &str) -> Result<wire::Imported, ClientError> {
+        let text = self.finish(self.post_request("/scans/import").send(file))?;
+        self.typed("POST /scans/import", &text)
+    }
+
+    /// `POST /scans/import` of an X-Rite QC `.xlsx` export.
+    pub fn import_xlsx(&self, bytes: &[u8]) -> Result<wire::Imported, ClientError> {
+        let text = self.post_bytes_for_text("/scans/import", bytes)?;
+        self.typed("POST /scans/import", &text)
+    }
+
+    /// `POST /scans/{id}/refit`.
+    pub fn refit(
+        &self,
+        scan: ScanId,
+        request: &wire::RefitRequest,
+    ) -> Result<wire::RefitAccepted, ClientError> {
+        self.post_typed(&format!("/scans/{scan}/refit"), Some(request))
+    }
+
+    /// `POST /abort`: stop the reference or scan in progress.
+    pub fn abort(&self) -> Result<wire::Aborted, ClientError> {
+        self.post_typed::<_, ()>("/abort", None)
+    }
+
+    /// `GET /fits/{id}`.
+    pub fn fit(&self, fit: FitRunId) -> Result<wire::FitDetail, ClientError> {
+        self.get_typed(&format!("/fits/{fit}"))
+    }
+
+    /// `POST /fits/{id}/cancel`.
+    pub fn cancel_fit(&self, fit: FitRunId) -> Result<wire::Cancelling, ClientError> {
+        self.post_typed::<_, ()>(&format!("/fits/{fit}/cancel"), None)
+    }
+
+    /// `GET /fits/{id}/preview.png`.
+    pub fn fit_preview(&self, fit: FitRunId) -> Result<Vec<u8>, ClientError> {
+        self.get_bytes(&format!("/fits/{fit}/preview.png"))
+    }
+
+    /// `GET /scans/{id}/textures/{position}.png`.
+    pub fn scan_texture(&self, scan: ScanId, position: u32) -> Result<Vec<u8>, ClientError> {
+        self.get_bytes(&format!("/scans/{scan}/textures/{position}.png"))
+    }
+
+    /// `GET /scans/{id}/swatches`.
+    pub fn swatches(&self, scan: ScanId) -> Result<wire::Swatches, ClientError> {
+        self.get_typed(&format!("/scans/{scan}/swatches"))
+    }
+
+    /// `GET /scans/{id}/readings`.
+    pub fn scan_readings(&self, scan: ScanId) -> Result<Vec<wire::BenchReading>, ClientError> {
+        self.get_typed(&format!("/scans/{scan}/readings"))
+    }
+
+    /// `GET /bench`.
+    pub fn bench(&self) -> Result<wire::Bench, ClientError> {
+        self.get_typed("/bench")
+    }
+
+    /// `POST /session/ticket`: a one-time login link for the web page.
+    pub fn ticket(&self) -> Result<wire::Ticket, ClientError> {
+        self.post_typed::<_, ()>(crate::api::access::TICKET_PATH, None)
+    }
+
+    /// `GET /session`.
+    pub fn session(&self) -> Result<wire::Session, ClientError> {
+        self.get_typed("/session")
     }
 
     /// Opens the event stream. Subscribe before making a request whose progress you want,
@@ -296,6 +465,43 @@ impl Client {
             lines: Box::new(BufReader::new(response.into_body().into_reader())),
         })
     }
+}
+
+/// The path of `GET /scans` with the query's parameters, percent-encoded.
+pub fn scans_path(query: &wire::ScanQuery) -> String {
+    let mut params = Vec::new();
+    if let Some(limit) = query.limit {
+        params.push(format!("limit={limit}"));
+    }
+    if let Some(before) = query.before {
+        params.push(format!("before={before}"));
+    }
+    for (key, value) in [
+        ("state", &query.state),
+        ("sample", &query.sample),
+        ("sample_contains", &query.sample_contains),
+    ] {
+        if let Some(v) = value {
+            params.push(format!("{key}={}", urlencode(v)));
+        }
+    }
+    if params.is_empty() {
+        "/scans".into()
+    } else {
+        format!("/scans?{}", params.join("&"))
+    }
+}
+
+/// A percent-encoding of a query value (sample names have spaces and dots).
+fn urlencode(text: &str) -> String {
+    text.bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'.' | b'_' | b'~' => {
+                (b as char).to_string()
+            }
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
 }
 
 /// The server-sent events of `GET /events`, one JSON object per event.
@@ -334,5 +540,32 @@ impl Iterator for EventStream {
                 data.push_str(d.strip_prefix(' ').unwrap_or(d));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn query_values_are_percent_encoded() {
+        assert_eq!(urlencode("T.Sky blue"), "T.Sky%20blue");
+        assert_eq!(urlencode("a&b=c"), "a%26b%3Dc");
+    }
+
+    #[test]
+    fn the_scans_path_carries_each_parameter_given() {
+        let q = wire::ScanQuery {
+            limit: Some(20),
+            before: Some(7),
+            state: Some("complete".into()),
+            sample: Some("T.Sky blue".into()),
+            sample_contains: None,
+        };
+        assert_eq!(
+            scans_path(&q),
+            "/scans?limit=20&before=7&state=complete&sample=T.Sky%20blue"
+        );
+        assert_eq!(scans_path(&wire::ScanQuery::default()), "/scans");
     }
 }

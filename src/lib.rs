@@ -31,6 +31,7 @@
 //! - [`service`]: the daemon: scan orchestrator (both instruments at once, every reading stored
 //!   as it arrives), fit worker (blocking threads behind a semaphore), events, shutdown.
 //! - [`api`]: the local HTTP API (axum) and its server-sent event stream.
+//! - [`wire`]: the API's request and answer types, the one contract of the daemon and its client.
 //! - [`client`]: the operator commands' side of the HTTP API (`brdfd scan`, `scans`, …).
 //! - [`sync`]: forwarding the store to the lab's central PostgreSQL database (several stations).
 pub mod api;
@@ -60,3 +61,4 @@ pub mod synth;
 #[cfg(test)]
 pub(crate) mod test_support;
 pub mod uncertainty;
+pub mod wire;

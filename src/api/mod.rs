@@ -1,9 +1,11 @@
 //! The local HTTP API (axum, HTTP/1.1, JSON), on loopback by default (`[api] listen`).
 //!
+//! Every JSON body below is a type of [`crate::wire`], the contract the client reads back.
+//!
 //! | method and path | does | answers |
 //! |---|---|---|
-//! | `GET /healthz` | liveness, for monitoring; needs no token | 200 `{"ok": true}` |
-//! | `GET /status` | the daemon's state | 200 [`crate::service::Status`] |
+//! | `GET /healthz` | liveness, for monitoring; needs no token | 200 [`wire::Health`] `{"ok": true}` |
+//! | `GET /status` | the daemon's state | 200 [`wire::Status`] |
 //! | `POST /reference` | measure the white reference tile | 202 `{"reference": id}` |
 //! | `POST /scans` `{"sample": "…"}` | scan a sample | 202 `{"scan": id}` |
 //! | `GET /scans?state=&sample=&sample_contains=&limit=&before=` | list scans, newest first (`sample`: that name; `sample_contains`: names holding that text, any case; `limit` ≤ 500; `before=ID` pages on) | 200 `[summary]` |
@@ -31,6 +33,7 @@
 //! not JSON) and 421 (a host name the daemon does not answer to).
 
 pub mod access;
+mod answer;
 pub mod metrics;
 pub mod server;
 pub mod web;
@@ -47,7 +50,6 @@ use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::{Json, Router};
-use serde::{Deserialize, Serialize};
 use tokio::sync::{Semaphore, watch};
 use tokio_stream::StreamExt;
 use tokio_stream::wrappers::BroadcastStream;
@@ -58,7 +60,9 @@ pub use server::ConnectionLimits;
 use crate::config::ApiConfig;
 use crate::scan::Scan;
 use crate::service::{RefitRequest, Service, ServiceError};
-use crate::store::{FitDetail, FitRunId, ScanDetail, ScanFilter, ScanId, ScanState, StoreError};
+use crate::store::{FitRunId, ScanFilter, ScanId, ScanState, StoreError};
+use crate::wire;
+pub use crate::wire::{ErrorBody, ScanQuery, ScanRequest as ScanRequestBody};
 
 /// An error as the API sends it.
 #[derive(Debug)]
@@ -73,26 +77,6 @@ impl From<ServiceError> for ApiError {
 impl From<StoreError> for ApiError {
     fn from(e: StoreError) -> Self {
         ApiError(ServiceError::Store(e))
-    }
-}
-
-/// The body of every refusal: the message for people, and for refusals of the service a
-/// machine-readable `kind` (see [`ApiError::kind`]) so that scripts can tell "busy, retry
-/// later" from "refused".
-#[derive(Debug, Serialize, Deserialize)]
-pub struct ErrorBody {
-    pub error: String,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub kind: Option<String>,
-}
-
-impl ErrorBody {
-    /// A refusal with a message and no kind.
-    pub fn message(error: impl Into<String>) -> ErrorBody {
-        ErrorBody {
-            error: error.into(),
-            kind: None,
-        }
     }
 }
 
@@ -213,26 +197,6 @@ fn without_parser_internals(detail: &str) -> String {
 const INTERNAL_ERROR: &str = "the daemon could not do this because its store failed; the daemon's log says why \
      (journalctl -u brdfd, or the terminal running brdfd serve)";
 
-/// `POST /scans` body.
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ScanRequestBody {
-    pub sample: String,
-}
-
-/// `GET /scans` query.
-#[derive(Debug, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ScanQuery {
-    pub state: Option<String>,
-    pub sample: Option<String>,
-    /// Only samples whose name holds this text, ignoring case.
-    pub sample_contains: Option<String>,
-    pub limit: Option<u32>,
-    /// Only scans with a smaller id: the last id of one page gives the next.
-    pub before: Option<i64>,
-}
-
 /// The most scans one `GET /scans` returns; page on with `before`.
 pub const MAX_LIST_LIMIT: u32 = 500;
 
@@ -242,22 +206,6 @@ pub const MAX_BODY_BYTES: usize = 1024 * 1024;
 /// The largest body `POST /scans/import` accepts: an X-Rite `.xlsx` export carries camera
 /// images (1–3 MiB each file); the reader's own cap.
 pub const MAX_IMPORT_BODY_BYTES: usize = crate::formats::xrite_xlsx::MAX_FILE_BYTES as usize;
-
-/// `GET /scans/{id}`.
-#[derive(Debug, Serialize)]
-pub struct ScanView {
-    #[serde(flatten)]
-    pub detail: ScanDetail,
-    /// Every fit run of the scan, oldest first, with its evaluation when done.
-    pub fits: Vec<FitDetail>,
-    /// Hours between the reference's completion and the scan's request.
-    pub reference_age_hours: f64,
-    /// Whether that is over `[scan] reference_max_age_hours` (the scan is not fitted then).
-    pub reference_stale: bool,
-    /// The instrument camera's images kept with an imported scan, in the export's order
-    /// (`GET /scans/{id}/textures/{position}.png`); empty for most scans.
-    pub textures: Vec<crate::store::TextureSummary>,
-}
 
 /// Everything [`ApiServer`] needs besides the service: who may call, and the bounds.
 #[derive(Debug, Clone)]
@@ -330,7 +278,7 @@ pub fn router(service: Service, options: &ApiOptions) -> Router {
 }
 
 async fn healthz() -> impl IntoResponse {
-    Json(serde_json::json!({ "ok": true }))
+    Json(wire::Health { ok: true })
 }
 
 /// A refusal that is not a [`ServiceError`]: a limit of the API itself.
@@ -352,14 +300,14 @@ async fn metrics(State(s): State<Service>) -> ApiResult<Response> {
 }
 
 async fn status(State(s): State<Service>) -> ApiResult<impl IntoResponse> {
-    Ok(Json(s.status().await?))
+    Ok(Json(wire::Status::from(s.status().await?)))
 }
 
 async fn reference(State(s): State<Service>) -> ApiResult<impl IntoResponse> {
     let id = s.request_reference().await?;
     Ok((
         StatusCode::ACCEPTED,
-        Json(serde_json::json!({ "reference": id })),
+        Json(wire::ReferenceAccepted { reference: id }),
     ))
 }
 
@@ -370,10 +318,7 @@ async fn request_scan(
     let Json(body) = body
         .map_err(|e| rejected_body("POST /scans", "send {\"sample\": \"NAME\"}", &e.body_text()))?;
     let id = s.request_scan(&body.sample).await?;
-    Ok((
-        StatusCode::ACCEPTED,
-        Json(serde_json::json!({ "scan": id })),
-    ))
+    Ok((StatusCode::ACCEPTED, Json(wire::ScanAccepted { scan: id })))
 }
 
 async fn list_scans(
@@ -415,7 +360,10 @@ async fn list_scans(
         .map(|t| t.trim().to_lowercase())
         .filter(|t| !t.is_empty())
     else {
-        return Ok(Json(s.store().list_scans(&filter).await?));
+        let page = s.store().list_scans(&filter).await?;
+        return Ok(Json(
+            page.iter().map(wire::ScanSummary::from).collect::<Vec<_>>(),
+        ));
     };
     // A name search pages through the scans, newest first, until `limit` match.
     filter.limit = MAX_LIST_LIMIT;
@@ -433,7 +381,12 @@ async fn list_scans(
         }
     }
     found.truncate(limit as usize);
-    Ok(Json(found))
+    Ok(Json(
+        found
+            .iter()
+            .map(wire::ScanSummary::from)
+            .collect::<Vec<_>>(),
+    ))
 }
 
 fn parse_id<T: std::str::FromStr>(what: &str, text: &str) -> Result<T, ApiError> {
@@ -452,18 +405,21 @@ async fn show_scan(
     let detail = s.store().scan_detail(scan).await?;
     let mut fits = Vec::new();
     for run in s.store().fits_for_scan(scan).await? {
-        fits.push(s.store().fit_detail(run.id).await?);
+        fits.push(wire::FitDetail::from(s.store().fit_detail(run.id).await?));
     }
     let r = &detail.reference.reference;
     let done = r.completed_at_ms.unwrap_or(r.taken_at_ms);
     let age_ms = (detail.scan.requested_at_ms - done).max(0);
     let reference_stale = age_ms as u128 > s.settings().reference_max_age.as_millis();
-    Ok(Json(ScanView {
-        detail,
+    let textures = s.store().scan_textures(scan).await?;
+    Ok(Json(wire::ScanView {
+        scan: (&detail.scan).into(),
+        readings: detail.readings.iter().map(Into::into).collect(),
+        reference: (&detail.reference).into(),
         fits,
         reference_age_hours: age_ms as f64 / 3.6e6,
         reference_stale,
-        textures: s.store().scan_textures(scan).await?,
+        textures: textures.iter().map(Into::into).collect(),
     }))
 }
 
@@ -548,7 +504,12 @@ async fn import_scan(
     let (scan, fits) = s.import_scan(&file).await?;
     Ok((
         StatusCode::CREATED,
-        Json(serde_json::json!({ "scan": scan, "fits": fits })),
+        Json(wire::Imported {
+            colorimetry_checks: None,
+            fits,
+            scan: Some(scan),
+            scans: None,
+        }),
     )
         .into_response())
 }
@@ -579,22 +540,22 @@ async fn import_xrite(s: &Service, body: &[u8]) -> Result<Response, ApiError> {
         }
         ids.push(scan);
         all_fits.extend(fits);
-        checks.push(serde_json::json!({
-            "scan": scan,
-            "sample": x.scan.sample,
-            "largest_delta_e00": x.check.largest,
-            "at": x.check.largest_at,
-            "warning": x.warning(),
-        }));
+        checks.push(wire::ColorimetryCheck {
+            at: x.check.largest_at.to_string(),
+            largest_delta_e00: x.check.largest,
+            sample: x.scan.sample.clone(),
+            scan,
+            warning: x.warning(),
+        });
     }
     Ok((
         StatusCode::CREATED,
-        Json(serde_json::json!({
-            "scan": ids.first(),
-            "scans": ids,
-            "fits": all_fits,
-            "colorimetry_checks": checks,
-        })),
+        Json(wire::Imported {
+            colorimetry_checks: Some(checks),
+            fits: all_fits,
+            scan: ids.first().copied(),
+            scans: Some(ids),
+        }),
     )
         .into_response())
 }
@@ -614,15 +575,12 @@ async fn refit(
         )
     })?;
     let fits = s.refit(scan, &request).await?;
-    Ok((
-        StatusCode::ACCEPTED,
-        Json(serde_json::json!({ "fits": fits })),
-    ))
+    Ok((StatusCode::ACCEPTED, Json(wire::RefitAccepted { fits })))
 }
 
 async fn abort(State(s): State<Service>) -> ApiResult<impl IntoResponse> {
     let op = s.abort()?;
-    Ok(Json(serde_json::json!({ "aborted": op })))
+    Ok(Json(wire::Aborted { aborted: op.into() }))
 }
 
 async fn show_fit(
@@ -630,7 +588,9 @@ async fn show_fit(
     Path(id): Path<String>,
 ) -> ApiResult<impl IntoResponse> {
     let fit: FitRunId = parse_id("fit", &id)?;
-    Ok(Json(s.store().fit_detail(fit).await?))
+    Ok(Json(wire::FitDetail::from(
+        s.store().fit_detail(fit).await?,
+    )))
 }
 
 /// The sphere preview of one fit, drawn on request on a blocking thread (`cargo bench --bench
@@ -700,7 +660,7 @@ async fn cancel_fit(
     s.cancel_fit(fit).await?;
     Ok((
         StatusCode::ACCEPTED,
-        Json(serde_json::json!({ "cancelling": fit })),
+        Json(wire::Cancelling { cancelling: fit }),
     ))
 }
 

@@ -12,9 +12,9 @@
 //! | `POST /session/logout` | ends the session | the cookie |
 //! | `GET /scans/{id}/export/{format}` | the scan (and its fits) as CGATS, CxF3, CSV or JSON | token or cookie |
 //! | `GET /report.html?scans=1,2` | the study report of those scans, figures inlined | token or cookie |
-//! | `GET /scans/{id}/swatches` | measured and fitted colour per geometry ([`Swatches`]) | token or cookie |
+//! | `GET /scans/{id}/swatches` | measured and fitted colour per geometry ([`wire::Swatches`]) | token or cookie |
 //! | `GET /scans/{id}/readings` | the scan's stored readings as the bench shows them (colour of a spectrum, an SRA value), also for a scan that was aborted or failed | token or cookie |
-//! | `GET /bench` | what the bench shows: the operation in progress, or the last scan measured, with its readings and fits so far ([`Bench`]) | token or cookie |
+//! | `GET /bench` | what the bench shows: the operation in progress, or the last scan measured, with its readings and fits so far ([`wire::Bench`]) | token or cookie |
 //!
 //! The page rebuilds its bench from `GET /bench` when it loads and whenever its event stream
 //! reconnects, then applies the events that follow: a reload or a second tab mid-scan shows
@@ -41,6 +41,10 @@ use crate::formats::{self, ExportOptions, Format};
 use crate::report::load::{LoadError, Selection};
 use crate::service::{Service, ServiceError};
 use crate::store::ScanId;
+use crate::wire::{
+    self, Bench, BenchFit, BenchKind, BenchOperation, BenchReading, FittedSwatches, Swatch,
+    Swatches,
+};
 
 /// The page, its style and its script, as served.
 pub const INDEX_HTML: &str = include_str!("web/index.html");
@@ -163,11 +167,11 @@ async fn ticket(Extension(access): Extension<Arc<Access>>) -> Response {
     let ticket = access.sessions().issue_ticket();
     (
         StatusCode::CREATED,
-        Json(serde_json::json!({
-            "ticket": ticket,
-            "path": format!("/login?ticket={ticket}"),
-            "expires_in_s": TICKET_LIFETIME.as_secs(),
-        })),
+        Json(wire::Ticket {
+            expires_in_s: TICKET_LIFETIME.as_secs(),
+            path: format!("/login?ticket={ticket}"),
+            ticket,
+        }),
     )
         .into_response()
 }
@@ -202,13 +206,17 @@ async fn session(Extension(access): Extension<Arc<Access>>, headers: HeaderMap) 
         } else {
             "this browser has no session"
         };
-        return Json(serde_json::json!({ "signed_in": false, "message": message })).into_response();
+        return Json(wire::Session::SignedOut(wire::SignedOut {
+            message: message.to_string(),
+            signed_in: false,
+        }))
+        .into_response();
     };
-    Json(serde_json::json!({
-        "signed_in": true,
-        "csrf": access.sessions().csrf(cookie),
-        "csrf_header": access::CSRF_HEADER,
-        "expires_at_ms": Sessions::expires_at_ms(cookie),
+    Json(wire::Session::SignedIn(wire::SignedIn {
+        csrf: access.sessions().csrf(cookie),
+        csrf_header: access::CSRF_HEADER.to_string(),
+        expires_at_ms: Sessions::expires_at_ms(cookie),
+        signed_in: true,
     }))
     .into_response()
 }
@@ -228,7 +236,7 @@ async fn logout(Extension(access): Extension<Arc<Access>>, headers: HeaderMap) -
                 access::SESSION_COOKIE
             ),
         )],
-        Json(serde_json::json!({ "logged_out": true })),
+        Json(wire::LoggedOut { logged_out: true }),
     )
         .into_response()
 }
@@ -294,17 +302,6 @@ async fn export_format(
     }
 }
 
-/// One colour as the page shows it.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct Swatch {
-    /// `#rrggbb`, clipped to the sRGB gamut.
-    pub srgb: String,
-    /// Whether the colour was outside the sRGB gamut (the swatch shows the nearest).
-    pub clipped: bool,
-    /// CIELAB (D65, 2°), two decimals.
-    pub lab: [f64; 3],
-}
-
 impl Swatch {
     /// The colour of a BRDF value (sr⁻¹) seen as a reflectance factor, as the report's swatch
     /// figures draw it.
@@ -319,40 +316,6 @@ impl Swatch {
             lab: [round(lab.l), round(lab.a), round(lab.b)],
         }
     }
-}
-
-/// The latest finished fit of one cost function, as the page's result view shows it.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct FittedSwatches {
-    pub cost_function: crate::cost::CostFunction,
-    pub method: String,
-    /// The fitted model's colour at each geometry.
-    pub estimated: Vec<Swatch>,
-    /// ΔE00 at each geometry, and means over the diffuse, specular and all geometries.
-    /// `null` at a geometry the scan did not measure.
-    pub delta_e00: Vec<Option<f64>>,
-    pub delta_e00_diffuse: f64,
-    /// `null` without specular readings.
-    pub delta_e00_specular: Option<f64>,
-    pub delta_e00_all: f64,
-}
-
-/// `GET /scans/{id}/swatches`: measured and fitted colour per geometry (as the report's
-/// Fig. 4 and 7).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct Swatches {
-    pub scan: ScanId,
-    pub sample: String,
-    /// The geometries the scan measured, MA-T12 then SRA (12 without specular readings);
-    /// every list below is in this order.
-    pub geometries: Vec<&'static str>,
-    /// What the readings are normalised by: the tile's name, or "instrument calibration".
-    pub reference: String,
-    /// Whether the scan has the SRA's specular readings.
-    pub specular_readings: bool,
-    pub measured: Vec<Swatch>,
-    /// One entry per cost function with a finished fit.
-    pub fits: Vec<FittedSwatches>,
 }
 
 async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response {
@@ -385,7 +348,7 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
             let fit = sample.fit(c)?;
             let done = fit.done()?;
             Some(FittedSwatches {
-                cost_function: c,
+                cost_function: c.into(),
                 method: fit.method.clone(),
                 estimated: only(done.estimated.iter().map(Swatch::of_brdf).collect()),
                 delta_e00: set.iter().map(|g| done.evaluation.at(g.index)).collect(),
@@ -398,7 +361,7 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
     Json(Swatches {
         scan,
         sample: sample.name.clone(),
-        geometries: set.iter().map(|g| g.name).collect(),
+        geometries: set.iter().map(|g| g.name.to_string()).collect(),
         reference: sample.scan.reference_label().to_string(),
         specular_readings: set.has_sra(),
         measured: only(sample.measured.values.iter().map(Swatch::of_brdf).collect()),
@@ -407,66 +370,12 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
     .into_response()
 }
 
-/// One stored reading as the bench shows it: the same fields as a `scan_reading` or
-/// `reference_reading` event.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct BenchReading {
-    pub geometry: &'static str,
-    pub device: &'static str,
-    #[serde(flatten)]
-    pub shown: crate::service::ReadingShown,
-}
-
-/// One fit of the scan on the bench, with what its `fit_done` event carries once done.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct BenchFit {
-    pub fit: crate::store::FitRunId,
-    pub cost_function: crate::cost::CostFunction,
-    pub status: crate::store::FitStatus,
-    pub error: Option<String>,
-    pub cost: Option<f64>,
-    pub wall_ms: Option<f64>,
-    pub delta_e00_diffuse_mean: Option<f64>,
-    pub delta_e00_specular_mean: Option<f64>,
-    pub delta_e00_mean: Option<f64>,
-}
-
-/// The reference or scan the bench shows.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct BenchOperation {
-    /// `reference` or `scan`.
-    pub kind: &'static str,
-    pub id: i64,
-    /// The sample's name (for a reference, the tile's).
-    pub sample: String,
-    /// `measuring`, `complete`, `failed` or `aborted`.
-    pub state: String,
-    /// Why it failed or was aborted.
-    pub reason: Option<String>,
-    /// Whether the instruments are measuring it now.
-    pub in_progress: bool,
-    /// How its readings came in, and which recording answered a simulated one.
-    pub provenance: crate::store::Provenance,
-    /// The readings stored so far, in geometry-table order.
-    pub readings: Vec<BenchReading>,
-    /// The scan's fits, oldest first (none for a reference).
-    pub fits: Vec<BenchFit>,
-}
-
-/// `GET /bench`.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct Bench {
-    /// The operation in progress; when idle, the last scan the instruments measured (`None`
-    /// before the first).
-    pub operation: Option<BenchOperation>,
-}
-
 fn bench_readings(readings: &[crate::store::Reading]) -> Vec<BenchReading> {
     readings
         .iter()
         .map(|r| BenchReading {
-            geometry: r.geometry.name,
-            device: r.device().key(),
+            geometry: r.geometry.name.to_string(),
+            device: r.device().into(),
             shown: crate::service::ReadingShown::of(&r.values, r.at_ms),
         })
         .collect()
@@ -487,8 +396,8 @@ async fn bench_of_scan(
         };
         fits.push(BenchFit {
             fit: run.id,
-            cost_function: run.cost_function,
-            status: run.status,
+            cost_function: run.cost_function.into(),
+            status: run.status.into(),
             error: run.error.clone(),
             cost: run.result.as_ref().map(|r| r.cost),
             wall_ms: run.result.as_ref().map(|r| r.wall_ms),
@@ -498,13 +407,13 @@ async fn bench_of_scan(
         });
     }
     Ok(BenchOperation {
-        kind: "scan",
+        kind: BenchKind::Scan.into(),
         id: scan.0,
         sample: detail.scan.sample.clone(),
-        state: detail.scan.state.as_str().to_string(),
+        state: super::answer::open(detail.scan.state.as_str()),
         reason: detail.scan.reason.clone(),
         in_progress,
-        provenance: detail.scan.provenance.clone(),
+        provenance: (&detail.scan.provenance).into(),
         readings: bench_readings(&detail.readings),
         fits,
     })
@@ -517,13 +426,13 @@ async fn bench_state(s: &Service) -> Result<Bench, ApiError> {
         Some(Operation::Reference { reference }) => {
             let detail = s.store().reference_detail(reference).await?;
             Some(BenchOperation {
-                kind: "reference",
+                kind: BenchKind::Reference.into(),
                 id: reference.0,
                 sample: detail.reference.name.clone(),
-                state: detail.reference.status.as_str().to_string(),
+                state: super::answer::open(detail.reference.status.as_str()),
                 reason: detail.reference.reason.clone(),
                 in_progress: true,
-                provenance: detail.reference.provenance.clone(),
+                provenance: (&detail.reference.provenance).into(),
                 readings: bench_readings(&detail.readings),
                 fits: Vec::new(),
             })

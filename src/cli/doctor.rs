@@ -441,12 +441,12 @@ fn daemon_check(config: &Config, args: &DoctorArgs) -> Check {
             }
         }
     };
-    match client.get("/status") {
+    match client.status() {
         Ok(v) => Check::ok(
             NAME,
             format!(
                 "brdfd {} answers on {addr} and accepts the token of {source}",
-                v["version"].as_str().unwrap_or("?")
+                super::operator::terminal_safe(&v.version)
             ),
         ),
         Err(crate::client::ClientError::NotRunning { .. }) => Check::fail(

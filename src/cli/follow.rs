@@ -6,15 +6,14 @@
 use std::collections::HashMap;
 use std::io::IsTerminal;
 
-use anyhow::bail;
-use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
-use serde::Deserialize;
-use serde_json::{Value, json};
-
-use super::operator::{id, terminal_safe};
+use super::operator::{json_line, terminal_safe};
 use crate::client::{Client, EventStream};
 use crate::service::Event;
 use crate::store::{FitRunId, ReferenceId, ScanId};
+use crate::wire::ScanView;
+use anyhow::bail;
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Deserialize;
 
 /// Progress display: bars on a terminal, plain lines otherwise.
 struct Progress {
@@ -124,8 +123,8 @@ impl Follower<'_> {
                 p.line(&format!("scan {scan} complete: {stored} readings stored"));
                 self.measuring = false;
                 // The fits are queued right after; their events follow.
-                if let Ok(pending) = pending_fits(self.client, scan.0) {
-                    self.fits_pending.extend(pending.into_iter().map(FitRunId));
+                if let Ok(pending) = pending_fits(self.client, *scan) {
+                    self.fits_pending.extend(pending);
                 }
             }
             Event::ReferenceComplete { reference } if mine => {
@@ -297,13 +296,13 @@ fn stale_reference_line(scan: ScanId, age_hours: f64, max_age_hours: f64) -> Str
 pub(super) fn follow_reference(
     client: &Client,
     events: EventStream,
-    reference: i64,
+    reference: ReferenceId,
     json: bool,
 ) -> anyhow::Result<()> {
     follow(
         client,
         events,
-        Followed::Reference(ReferenceId(reference)),
+        Followed::Reference(reference),
         Vec::new(),
         json,
     )
@@ -314,12 +313,11 @@ pub(super) fn follow_reference(
 pub(super) fn follow_scan(
     client: &Client,
     events: EventStream,
-    scan: i64,
-    fits: Vec<i64>,
+    scan: ScanId,
+    fits: Vec<FitRunId>,
     json: bool,
 ) -> anyhow::Result<()> {
-    let fits = fits.into_iter().map(FitRunId).collect();
-    follow(client, events, Followed::Scan(ScanId(scan)), fits, json)
+    follow(client, events, Followed::Scan(scan), fits, json)
 }
 
 /// Feeds every event to one [`Follower`] until it says the following is over. In NDJSON mode
@@ -365,22 +363,28 @@ fn follow(
 }
 
 /// The fits of scan `scan` still queued or running, from its detail.
-pub(super) fn pending_fits(client: &Client, scan: i64) -> anyhow::Result<Vec<i64>> {
-    let detail = client.get(&format!("/scans/{scan}"))?;
-    Ok(detail["fits"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|f| matches!(f["run"]["status"].as_str(), Some("queued" | "running")))
-        .map(|f| id(&f["run"], "id"))
-        .collect())
+pub(super) fn pending_fits(client: &Client, scan: ScanId) -> anyhow::Result<Vec<FitRunId>> {
+    Ok(client.scan(scan)?.pending_fits())
 }
 
 /// The end of a followed scan: its fits as a table, or `{"type":"result","scan":…}`.
-pub(super) fn print_scan_result(detail: &Value, json: bool) {
+pub(super) fn print_scan_result(detail: &ScanView, json: bool) -> anyhow::Result<()> {
     if json {
-        println!("{}", json!({ "type": "result", "scan": detail }));
+        #[derive(serde::Serialize)]
+        struct Outcome<'a> {
+            #[serde(rename = "type")]
+            kind: &'static str,
+            scan: &'a ScanView,
+        }
+        println!(
+            "{}",
+            json_line(&Outcome {
+                kind: "result",
+                scan: detail
+            })?
+        );
     } else {
         super::show::print_fits(detail);
     }
+    Ok(())
 }

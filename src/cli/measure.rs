@@ -1,10 +1,8 @@
 //! `brdfd reference` and `brdfd scan`: ask the daemon to measure the white reference tile or a
 //! sample, then follow the measurement (and a scan's fits) on the event stream.
 
-use serde_json::json;
-
 use super::follow::{follow_reference, follow_scan, print_scan_result};
-use super::operator::{DaemonArgs, id, tagged};
+use super::operator::{DaemonArgs, tagged};
 
 #[derive(Debug, clap::Args)]
 pub struct ReferenceArgs {
@@ -36,10 +34,10 @@ pub struct ScanArgs {
 pub fn reference(args: &ReferenceArgs) -> anyhow::Result<()> {
     let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
-    let v = client.post("/reference", None)?;
-    let reference = id(&v, "reference");
+    let v = client.request_reference()?;
+    let reference = v.reference;
     if args.json {
-        println!("{}", tagged("accepted", &v));
+        println!("{}", tagged("accepted", &v)?);
     } else {
         println!(
             "reference {reference} started: measuring the Munsell N9 tile on both instruments"
@@ -54,17 +52,17 @@ pub fn reference(args: &ReferenceArgs) -> anyhow::Result<()> {
 pub fn scan(args: &ScanArgs) -> anyhow::Result<()> {
     let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
-    let v = client.post("/scans", Some(&json!({ "sample": args.sample })))?;
-    let scan = id(&v, "scan");
+    let v = client.request_scan(&args.sample)?;
+    let scan = v.scan;
     if args.json {
-        println!("{}", tagged("accepted", &v));
+        println!("{}", tagged("accepted", &v)?);
     } else {
         println!("scan {scan} started: sample \"{}\"", args.sample);
     }
     match events {
         Some(events) => {
             follow_scan(&client, events, scan, Vec::new(), args.json)?;
-            print_scan_result(&client.get(&format!("/scans/{scan}"))?, args.json);
+            print_scan_result(&client.scan(scan)?, args.json)?;
             Ok(())
         }
         None => Ok(()),

@@ -157,6 +157,7 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
         if let Some(e) = cause.downcast_ref::<ClientError>() {
             return match e {
                 ClientError::NotRunning { .. } | ClientError::Transport { .. } => exit::NO_DAEMON,
+                ClientError::Contract { .. } => exit::FAILED,
                 ClientError::Unauthorized { .. } => exit::NOT_AUTHORISED,
                 e if e.is_busy() => exit::BUSY,
                 ClientError::Refused { status, .. } => match status {

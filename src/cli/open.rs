@@ -51,13 +51,10 @@ pub fn browser_addr(addr: SocketAddr) -> SocketAddr {
 pub fn run(args: &OpenArgs) -> anyhow::Result<()> {
     let client = args.daemon.client()?;
     let answer = client
-        .post(crate::api::access::TICKET_PATH, None)
+        .ticket()
         .context("asking the daemon for a login link")?;
-    let path = answer["path"]
-        .as_str()
-        .context("the daemon's answer has no login path (is it an older brdfd?)")?;
-    let expires = answer["expires_in_s"].as_u64().unwrap_or(120);
-    let url = format!("http://{}{path}", browser_addr(client.addr()));
+    let expires = answer.expires_in_s;
+    let url = format!("http://{}{}", browser_addr(client.addr()), answer.path);
     let desktop =
         std::env::var_os("DISPLAY").is_some() || std::env::var_os("WAYLAND_DISPLAY").is_some();
     let opened = !args.no_browser && desktop && open_in_browser(&url);

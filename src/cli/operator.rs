@@ -1,15 +1,16 @@
 //! What the operator subcommands (`reference`, `scan`, `scans`, `show`, `refit`, `abort`,
 //! `status`, `export`, `import`) share: where the daemon is and its token ([`DaemonArgs`]),
-//! times as the operator reads them, and fields of the daemon's JSON made safe for the terminal.
+//! times as the operator reads them, text made safe for the terminal, and `--json` output.
 //!
-//! Each subcommand talks to a running daemon over its HTTP API ([`crate::client`]). Refusals
+//! Each subcommand talks to a running daemon over its HTTP API ([`crate::client`]), whose typed
+//! calls give the answers as [`crate::wire`] types. Refusals
 //! print the daemon's message as it is ("the instruments are busy: scan 12 is in progress …");
 //! no daemon gives "no brdfd daemon is listening on … — start one with `brdfd serve`".
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-use serde_json::Value;
+use serde::Serialize;
 
 use crate::client::Client;
 
@@ -94,20 +95,8 @@ pub fn local_time_in(ms: i64, tz: &jiff::tz::TimeZone) -> String {
         Err(_) => utc(ms),
     }
 }
-pub(super) fn id(v: &Value, key: &str) -> i64 {
-    v.get(key).and_then(Value::as_i64).unwrap_or(-1)
-}
-
-pub(super) fn f(v: &Value, key: &str) -> f64 {
-    v.get(key).and_then(Value::as_f64).unwrap_or(f64::NAN)
-}
-
-/// A text field for the terminal: control characters (an escape sequence in a name stored
-/// before names were checked) are shown escaped, never sent to the terminal.
-pub(super) fn s(v: &Value, key: &str) -> String {
-    terminal_safe(v.get(key).and_then(Value::as_str).unwrap_or(""))
-}
-/// `text` with every control character escaped (`\u{1b}`), as it is printed.
+/// `text` with every control character escaped (`\u{1b}`), as it is printed: an escape
+/// sequence in a name stored before names were checked is shown, never sent to the terminal.
 pub fn terminal_safe(text: &str) -> String {
     if text.chars().any(char::is_control) {
         text.chars()
@@ -123,29 +112,47 @@ pub fn terminal_safe(text: &str) -> String {
         text.to_string()
     }
 }
-/// The fit ids of the daemon's answer to a refit or an import (its `"fits"` array).
-pub(super) fn queued_fits(answer: &Value) -> Vec<i64> {
-    answer["fits"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_i64)
-        .collect()
+/// An answer as `--json` prints it on one line: the daemon's fields, keys in alphabetical
+/// order at every level (a stable order for scripts that compare outputs).
+pub(super) fn json_line<T: Serialize>(value: &T) -> anyhow::Result<String> {
+    Ok(serde_json::to_value(value)?.to_string())
 }
 
-/// `value` (a JSON object) with `"type": kind` in front, as one NDJSON line.
-pub(super) fn tagged(kind: &str, value: &Value) -> Value {
-    let mut out = serde_json::Map::new();
-    out.insert("type".into(), Value::from(kind));
-    if let Some(fields) = value.as_object() {
-        out.extend(fields.clone());
+/// [`json_line`], indented.
+pub(super) fn json_pretty<T: Serialize>(value: &T) -> anyhow::Result<String> {
+    Ok(serde_json::to_string_pretty(&serde_json::to_value(value)?)?)
+}
+
+/// `value` (an answer that is a JSON object) with `"type": kind` among its fields, as one
+/// NDJSON line.
+pub(super) fn tagged<T: Serialize>(kind: &str, value: &T) -> anyhow::Result<String> {
+    #[derive(Serialize)]
+    struct Tagged<'a, T> {
+        #[serde(rename = "type")]
+        kind: &'a str,
+        #[serde(flatten)]
+        value: &'a T,
     }
-    Value::Object(out)
+    json_line(&Tagged { kind, value })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_tagged_answer_keeps_its_fields_in_alphabetical_order() {
+        let answer = crate::wire::Imported {
+            colorimetry_checks: None,
+            fits: vec![crate::store::FitRunId(4)],
+            scan: Some(crate::store::ScanId(2)),
+            scans: None,
+        };
+        assert_eq!(
+            tagged("accepted", &answer).unwrap(),
+            r#"{"fits":[4],"scan":2,"type":"accepted"}"#
+        );
+    }
 
     #[test]
     fn utc_formats_known_instants() {

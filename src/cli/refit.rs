@@ -1,11 +1,11 @@
 //! `brdfd refit`: fit a stored scan again, then follow the new fits.
 
-use serde_json::json;
-
 use super::follow::{follow_scan, print_scan_result};
-use super::operator::{DaemonArgs, queued_fits, tagged};
+use super::operator::{DaemonArgs, tagged};
 use crate::cost::CostFunction;
 use crate::optimise::Method;
+use crate::store::ScanId;
+use crate::wire::RefitRequest;
 
 #[derive(Debug, clap::Args)]
 pub struct RefitArgs {
@@ -40,23 +40,24 @@ pub struct RefitArgs {
 pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
     let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
-    let body = json!({
-        "cost_functions": args.cost,
-        "method": args.method,
-        "seed": args.seed,
-        "sra": args.sra,
-        "allow_stale_reference": args.allow_stale_reference,
-    });
-    let v = client.post(&format!("/scans/{}/refit", args.scan), Some(&body))?;
-    let fits = queued_fits(&v);
+    let request = RefitRequest {
+        cost_functions: args.cost.clone(),
+        method: args.method,
+        seed: args.seed,
+        sra: args.sra,
+        allow_stale_reference: args.allow_stale_reference,
+    };
+    let scan = ScanId(args.scan);
+    let v = client.refit(scan, &request)?;
     if args.json {
-        println!("{}", tagged("accepted", &v));
+        println!("{}", tagged("accepted", &v)?);
     } else {
-        println!("scan {}: fits {fits:?} queued", args.scan);
+        let ids: Vec<i64> = v.fits.iter().map(|f| f.0).collect();
+        println!("scan {scan}: fits {ids:?} queued");
     }
-    if let Some(events) = events.filter(|_| !fits.is_empty()) {
-        follow_scan(&client, events, args.scan, fits, args.json)?;
-        print_scan_result(&client.get(&format!("/scans/{}", args.scan))?, args.json);
+    if let Some(events) = events.filter(|_| !v.fits.is_empty()) {
+        follow_scan(&client, events, scan, v.fits.clone(), args.json)?;
+        print_scan_result(&client.scan(scan)?, args.json)?;
     }
     Ok(())
 }

@@ -7,7 +7,8 @@ use anyhow::Context;
 use serde_json::json;
 
 use super::follow::{follow_scan, pending_fits, print_scan_result};
-use super::operator::{DaemonArgs, id, queued_fits, tagged};
+use super::operator::{DaemonArgs, tagged};
+use crate::store::ScanId;
 
 #[derive(Debug, clap::Args)]
 pub struct ExportArgs {
@@ -44,10 +45,7 @@ pub struct ImportArgs {
     pub json: bool,
 }
 pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
-    let text = args
-        .daemon
-        .client()?
-        .get_text(&format!("/scans/{}/export", args.scan))?;
+    let text = args.daemon.client()?.export_scan(ScanId(args.scan))?;
     match &args.output {
         Some(path) => {
             super::write_new_file(path, text.as_bytes(), args.force)?;
@@ -74,14 +72,11 @@ fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
     let bytes = std::fs::read(&args.file)
         .with_context(|| format!("cannot read {}", args.file.display()))?;
     let client = args.daemon.client()?;
-    let v = client.post_bytes("/scans/import", &bytes)?;
+    let v = client.import_xlsx(&bytes)?;
     if args.json {
-        println!("{}", tagged("accepted", &v));
+        println!("{}", tagged("accepted", &v)?);
     }
-    let ids: Vec<i64> = v["scans"]
-        .as_array()
-        .map(|a| a.iter().filter_map(serde_json::Value::as_i64).collect())
-        .unwrap_or_default();
+    let ids = v.scans.clone().unwrap_or_default();
     for (scan, x) in ids.iter().zip(&scans) {
         if !args.json {
             println!(
@@ -98,7 +93,7 @@ fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
             if !pending.is_empty() {
                 follow_scan(&client, events, *scan, pending, args.json)?;
             }
-            print_scan_result(&client.get(&format!("/scans/{scan}"))?, args.json);
+            print_scan_result(&client.scan(*scan)?, args.json)?;
         }
     }
     Ok(())
@@ -132,14 +127,20 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     }
     let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
-    let v = client.post_text("/scans/import", &text)?;
-    let scan = id(&v, "scan");
-    let fits = queued_fits(&v);
+    let v = client.import_scan(&text)?;
+    let scan = v.scan.ok_or_else(|| {
+        anyhow::anyhow!(
+            "the daemon imported {} without naming its scan",
+            args.file.display()
+        )
+    })?;
+    let fits = &v.fits;
     if args.json {
-        println!("{}", tagged("accepted", &v));
+        println!("{}", tagged("accepted", &v)?);
     } else {
+        let ids: Vec<i64> = fits.iter().map(|f| f.0).collect();
         println!(
-            "{} imported as scan {scan}; fits {fits:?} queued",
+            "{} imported as scan {scan}; fits {ids:?} queued",
             args.file.display()
         );
     }
@@ -151,7 +152,7 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
                 follow_scan(&client, events, scan, pending, args.json)?;
             }
         }
-        print_scan_result(&client.get(&format!("/scans/{scan}"))?, args.json);
+        print_scan_result(&client.scan(scan)?, args.json)?;
     }
     Ok(())
 }

@@ -1,8 +1,7 @@
 //! `brdfd scans`: the scans in the daemon's store, newest first, a page at a time.
 
-use serde_json::Value;
-
-use super::operator::{DaemonArgs, id, local_time, s};
+use super::operator::{DaemonArgs, json_pretty, local_time, terminal_safe};
+use crate::wire::{Provenance, ScanQuery};
 
 #[derive(Debug, clap::Args)]
 pub struct ScansArgs {
@@ -26,22 +25,17 @@ pub struct ScansArgs {
 }
 pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
     let client = args.daemon.client()?;
-    let mut query = format!("/scans?limit={}", args.limit);
-    if let Some(before) = args.before {
-        query.push_str(&format!("&before={before}"));
-    }
-    if let Some(state) = &args.state {
-        query.push_str(&format!("&state={}", urlencode(state)));
-    }
-    if let Some(sample) = &args.sample {
-        query.push_str(&format!("&sample={}", urlencode(sample)));
-    }
-    let v = client.get(&query)?;
+    let rows = client.scans(&ScanQuery {
+        state: args.state.clone(),
+        sample: args.sample.clone(),
+        sample_contains: None,
+        limit: Some(args.limit),
+        before: args.before,
+    })?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        println!("{}", json_pretty(&rows)?);
         return Ok(());
     }
-    let rows = v.as_array().cloned().unwrap_or_default();
     if rows.is_empty() {
         println!("no scans");
         return Ok(());
@@ -54,22 +48,22 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
     for r in &rows {
         println!(
             "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<4} {}",
-            id(r, "id"),
-            s(r, "sample"),
-            s(r, "state"),
-            id(r, "reading_count"),
-            local_time(r["requested_at_ms"].as_i64().unwrap_or(0)),
-            simulated_mark(&r["provenance"]),
+            r.id,
+            terminal_safe(&r.sample),
+            terminal_safe(&r.state.to_string()),
+            r.reading_count,
+            local_time(r.requested_at_ms),
+            simulated_mark(&r.provenance),
             [
-                r["reason"].as_str().map(super::operator::terminal_safe),
-                super::show::simulated_note(&r["provenance"]),
+                r.reason.as_deref().map(terminal_safe),
+                super::show::simulated_note(&r.provenance),
             ]
             .into_iter()
             .flatten()
             .collect::<Vec<_>>()
             .join("; ")
         );
-        last = Some(id(r, "id"));
+        last = Some(r.id);
     }
     if let Some(last) = last
         && rows.len() as u32 == args.limit
@@ -78,39 +72,14 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
-/// A percent-encoding of a query value (sample names have spaces and dots).
-fn urlencode(text: &str) -> String {
-    text.bytes()
-        .map(|b| match b {
-            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'.' | b'_' | b'~' => {
-                (b as char).to_string()
-            }
-            _ => format!("%{b:02X}"),
-        })
-        .collect()
-}
 /// "sim" when either instrument was simulated, "?" when not recorded, "" for real ones.
-fn simulated_mark(provenance: &Value) -> &'static str {
-    let flags = [
-        provenance["ma_t12"]["simulated"].as_bool(),
-        provenance["sra"]["simulated"].as_bool(),
-    ];
+fn simulated_mark(provenance: &Provenance) -> &'static str {
+    let flags = [provenance.ma_t12.simulated, provenance.sra.simulated];
     if flags.contains(&Some(true)) {
         "sim"
     } else if flags.contains(&None) {
         "?"
     } else {
         ""
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn query_values_are_percent_encoded() {
-        assert_eq!(urlencode("T.Sky blue"), "T.Sky%20blue");
-        assert_eq!(urlencode("a&b=c"), "a%26b%3Dc");
     }
 }
