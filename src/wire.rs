@@ -290,6 +290,19 @@ pub struct SyncStatus {
     /// The last `--verify` comparison, in one line.
     pub last_verify: Option<String>,
     pub last_verify_ms: Option<i64>,
+    /// Local commit → central commit over the most recent forwarded entries (none yet:
+    /// `None`).
+    #[serde(default)]
+    pub lag: Option<Lag>,
+}
+
+/// The forwarding lag, ms, over the `entries` most recently forwarded.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Lag {
+    pub entries: usize,
+    pub p50_ms: f64,
+    pub p99_ms: f64,
+    pub max_ms: f64,
 }
 
 /// The watch folder.

@@ -98,6 +98,12 @@ impl From<crate::sync::SyncStatus> for wire::SyncStatus {
             refused: s.refused,
             last_verify: s.last_verify,
             last_verify_ms: s.last_verify_ms,
+            lag: s.lag.map(|l| wire::Lag {
+                entries: l.entries,
+                p50_ms: l.p50_ms,
+                p99_ms: l.p99_ms,
+                max_ms: l.max_ms,
+            }),
         }
     }
 }

@@ -60,6 +60,13 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
                 None => String::new(),
             }
         );
+        if let Some(lag) = &sync.lag {
+            println!(
+                "lag local commit → central commit over the last {} entries: p50 {:.0} ms, \
+                 p99 {:.0} ms, max {:.0} ms",
+                lag.entries, lag.p50_ms, lag.p99_ms, lag.max_ms
+            );
+        }
         if let Some(v) = &sync.last_verify {
             println!("last comparison with the central database: {v}");
         }
