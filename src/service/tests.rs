@@ -4,15 +4,14 @@ use super::*;
 use crate::store::ScanState;
 use drivers::Instrument;
 
-/// The busy claim as the service's parts see it (`acquisition.rs`).
-impl Service {
-    fn claim(&self, operation: Operation) -> Result<acquisition::BusyClaim, ServiceError> {
-        self.inner.acquisition.claim(operation)
-    }
+/// Claims the instruments as the orchestrator does (`acquisition.rs`).
+fn claim(s: &Service, operation: Operation) -> Result<acquisition::BusyClaim, ServiceError> {
+    s.inner.acquisition.claim(operation)
+}
 
-    fn check_idle(&self) -> Result<(), ServiceError> {
-        self.inner.acquisition.check_idle()
-    }
+/// Whether a request would find the instruments free.
+fn check_idle(s: &Service) -> Result<(), ServiceError> {
+    s.inner.acquisition.check_idle()
 }
 
 async fn service() -> Service {
@@ -36,26 +35,28 @@ async fn service() -> Service {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_instruments_are_claimed_by_one_operation_at_a_time() {
     let s = service().await;
-    let first = s.claim(Operation::Scan { scan: ScanId(3) }).unwrap();
-    let e = s
-        .claim(Operation::Reference {
+    let first = claim(&s, Operation::Scan { scan: ScanId(3) }).unwrap();
+    let e = claim(
+        &s,
+        Operation::Reference {
             reference: ReferenceId(1),
-        })
-        .unwrap_err();
+        },
+    )
+    .unwrap_err();
     let msg = e.to_string();
     assert!(
         msg.starts_with("the instruments are busy: scan 3 is in progress"),
         "{msg}"
     );
     assert!(msg.contains("brdfd abort"), "{msg}");
-    assert!(matches!(s.check_idle(), Err(ServiceError::Busy { .. })));
+    assert!(matches!(check_idle(&s), Err(ServiceError::Busy { .. })));
     // Abort reaches the claimant.
     assert_eq!(s.abort().unwrap(), Operation::Scan { scan: ScanId(3) });
     tokio::time::timeout(Duration::from_secs(1), first.notified())
         .await
         .expect("abort notified");
     drop(first);
-    assert!(s.check_idle().is_ok());
+    assert!(check_idle(&s).is_ok());
     assert!(matches!(s.abort(), Err(ServiceError::Idle)));
     s.shutdown().await;
 }
@@ -63,14 +64,14 @@ async fn the_instruments_are_claimed_by_one_operation_at_a_time() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_task_that_panics_frees_the_instruments() {
     let s = service().await;
-    let claim = s.claim(Operation::Scan { scan: ScanId(4) }).unwrap();
-    assert!(s.check_idle().is_err());
+    let held = claim(&s, Operation::Scan { scan: ScanId(4) }).unwrap();
+    assert!(check_idle(&s).is_err());
     let task = tokio::spawn(async move {
-        let _claim = claim;
+        let _claim = held;
         panic!("a bug in the scan task");
     });
     assert!(task.await.unwrap_err().is_panic());
-    assert!(s.check_idle().is_ok(), "the claim outlived its task");
+    assert!(check_idle(&s).is_ok(), "the claim outlived its task");
     assert!(matches!(s.abort(), Err(ServiceError::Idle)));
     s.shutdown().await;
 }
