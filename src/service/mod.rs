@@ -10,17 +10,27 @@
 //! a semaphore, cancellable, a panic failing only that fit) → fits and ΔE00 stored →
 //! [`events::Event`]s to every subscriber all along.
 //!
-//! Each part owns its state, private to its module; this file wires them and holds only what
-//! they share:
+//! Each part is a type of its own that holds the handles it uses and owns its state, private
+//! to its module; `impl Service` is here alone, and only wires the parts at start and hands
+//! each API call to the part that answers it:
+//! - `context.rs` ([`context::Context`]): what every part shares — the store, the event bus,
+//!   the settings, the timings, and the stop flag with the task tracking; each part holds a
+//!   clone;
 //! - `acquisition.rs` ([`acquisition::Acquisition`]): the instruments, the busy claim, the
 //!   reference in force, each instrument's identity and connection state, and the device
 //!   watcher;
-//! - `orchestrator.rs`: the measurement runs (references and scans, one path);
-//! - `pipeline.rs`: processing, refits, imports, and the store ↔ scan-file conversion;
+//! - `orchestrator.rs` ([`orchestrator::Orchestrator`]): the measurement runs (references and
+//!   scans, one path), with the acquisition and the pipeline;
+//! - `pipeline.rs` ([`pipeline::Pipeline`]): processing, refits, imports, exports, and the
+//!   store ↔ scan-file conversion; it queues fits with everything they need recorded;
 //! - `fit_worker.rs` ([`fit_worker::FitWorker`]): the fit queue, permits, cancel flags and
 //!   counters, and the bootstraps;
-//! - shared here: the store, the event bus, the settings, the stop signal and task tracking,
-//!   the timings, and the status of the forwarder and the watch folder.
+//! - `ingest.rs` ([`ingest::WatchFolder`]): the watch folder and its status;
+//! - `forwarder.rs` ([`forwarder::Forwarding`]): forwarding to the central database and its
+//!   status.
+//!
+//! Dependencies point one way: the orchestrator uses the acquisition and the pipeline, the
+//! watch folder the pipeline, the pipeline the fit worker; none of them holds the [`Service`].
 //!
 //! - [`Service`] is the handle (cheap to clone) the HTTP API and the in-process callers use.
 //! - [`devices`] builds the instruments (simulated or real, with the recording tap).
