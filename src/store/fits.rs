@@ -30,7 +30,7 @@ pub(super) struct FitRow {
     cost_function: String,
     settings_json: String,
     seed: String,
-    /// Migration 0020; absent from a central row read before its step 8, NULL before then.
+    /// Migration 0020; absent from a central row read before its step 9, NULL before then.
     #[sqlx(default)]
     fit_observer: Option<String>,
     #[sqlx(default)]
