@@ -361,15 +361,15 @@ impl Acquisition {
         let Ok((guard, mut stop)) = self.ctx.task_slot().await else {
             return;
         };
-        let service = self.clone();
+        let acquisition = self.clone();
         let devices = self.devices();
         let mut rx_m = devices.ma_t12.subscribe();
         let mut rx_s = devices.sra.as_ref().map(|h| h.subscribe());
         tokio::spawn(async move {
             // The drivers connected before anyone subscribed: ask who is there.
-            let devices = service.devices();
+            let devices = acquisition.devices();
             for h in devices.handles().cloned() {
-                let s = service.clone();
+                let s = acquisition.clone();
                 tokio::spawn(async move {
                     match h.identify().await {
                         Ok(identity) => {
@@ -388,7 +388,7 @@ impl Acquisition {
                     _ = stop.recv() => break,
                 };
                 match ev {
-                    Ok(ev) => service.on_device_event(ev).await,
+                    Ok(ev) => acquisition.on_device_event(ev).await,
                     Err(broadcast::error::RecvError::Lagged(_)) => {}
                     Err(broadcast::error::RecvError::Closed) => {
                         // Which one closed is not said; stop watching both (the drivers only

@@ -15,14 +15,14 @@
 //!
 //! A fit runs on what was recorded when it was queued, never on today's configuration: the
 //! processed scan it fits (`fit_runs.processed_id`), every optimiser setting
-//! (`settings_json`), and the colorimetry its ΔE00 are computed with (`observer`, `weighting`,
-//! `migrations/0020_fit_inputs.sql`); the processing options come from the processed row and
+//! (`settings_json`), and the colorimetry its ΔE00 are computed with (`fit_observer`,
+//! `fit_weighting`, `migrations/0020_fit_inputs.sql`); the processing options come from the processed row and
 //! the scan's reference set. Only a fit queued before the colorimetry was recorded falls back
 //! to the configured one.
 //!
 //! Cancellation goes through the optimiser's observer, called once per generation: it returns
-//! `Break` when the fit's flag is set ([`FitWorker::cancel_fit`]) or the daemon is stopping. A fit
-//! stopped by shutdown is left `running`; the next start queues it again (same seed, same
+//! `Break` when the fit's flag is set ([`FitWorker::cancel_fit`]) or the daemon is stopping. A
+//! fit stopped by shutdown is left `running`; the next start queues it again (same seed, same
 //! result).
 
 use std::collections::HashMap;
@@ -246,19 +246,18 @@ impl FitWorker {
     }
 
     async fn run_fit(&self, fit: FitRunId, permit: tokio::sync::OwnedSemaphorePermit) {
-        let worker = self;
         // Running from the moment it leaves the queue until its end is recorded (every return
         // below), so that `status` never shows an idle worker while a fit's row still says
         // queued or running.
-        worker.running.fetch_add(1, Ordering::Relaxed);
-        worker.queued.fetch_sub(1, Ordering::Relaxed);
-        let running = CountedUntilDrop(&worker.running);
-        let cancel = worker.flag(fit).unwrap_or_default();
+        self.running.fetch_add(1, Ordering::Relaxed);
+        self.queued.fetch_sub(1, Ordering::Relaxed);
+        let running = CountedUntilDrop(&self.running);
+        let cancel = self.flag(fit).unwrap_or_default();
         let prepared = self.prepare_fit(fit).await;
         let (job, cost) = match prepared {
             Ok(Some(p)) => p,
             Ok(None) => {
-                worker.forget(fit);
+                self.forget(fit);
                 return;
             }
             Err(PrepareError { scan, error: e }) => {
@@ -269,7 +268,7 @@ impl FitWorker {
                     // The fit could not even be read: there is no scan to name in an event.
                     None => tracing::warn!(%fit, %error, "fit failed before its scan was known"),
                 }
-                worker.forget(fit);
+                self.forget(fit);
                 return;
             }
         };
@@ -277,12 +276,12 @@ impl FitWorker {
         if cancel.load(Ordering::SeqCst) {
             self.mark_cancelled(fit).await;
             self.ctx.events.send(Event::FitCancelled { fit, scan });
-            worker.forget(fit);
+            self.forget(fit);
             return;
         }
         if let Err(e) = self.ctx.timed_store(self.ctx.store.start_fit(fit)).await {
             tracing::warn!(error = %e, %fit, "fit not started");
-            worker.forget(fit);
+            self.forget(fit);
             return;
         }
         self.ctx.events.send(Event::FitStarted {
@@ -293,7 +292,7 @@ impl FitWorker {
 
         let events = self.ctx.events.clone();
         let stopping = self.ctx.stop_flag();
-        let fit_fn = worker.fit_fn.clone();
+        let fit_fn = self.fit_fn.clone();
         let cancel_flag = cancel.clone();
         let started = Instant::now();
         let joined = tokio::task::spawn_blocking(move || {
@@ -340,7 +339,7 @@ impl FitWorker {
             Err(join) => Ended::Failed(format!("the fit's thread ended abnormally: {join}")),
         };
         let stored = self.record_fit_end(fit, scan, cost, ended).await;
-        worker.forget(fit);
+        self.forget(fit);
         // The fit's end is recorded; its bootstrap is counted on its own.
         drop(running);
         if let Some(report) = stored {
@@ -358,10 +357,9 @@ impl FitWorker {
             return;
         }
         // Counted from now until stored (or given up), for `status`.
-        let worker = self;
-        worker.bootstraps_pending.fetch_add(1, Ordering::Relaxed);
-        let _pending = CountedUntilDrop(&worker.bootstraps_pending);
-        let Ok(permit) = worker.bootstrap_slot.clone().acquire_owned().await else {
+        self.bootstraps_pending.fetch_add(1, Ordering::Relaxed);
+        let _pending = CountedUntilDrop(&self.bootstraps_pending);
+        let Ok(permit) = self.bootstrap_slot.clone().acquire_owned().await else {
             return;
         };
         let stopping = self.ctx.stop_flag();

@@ -491,15 +491,15 @@ impl WatchFolder {
         };
         let (guard, mut stop) = watch_folder.ctx.task_slot().await?;
         tracing::info!(dir = %dir.display(), "watching the folder for exports and scan files");
-        let service = watch_folder.clone();
+        let folder = watch_folder.clone();
         tokio::spawn(async move {
             let _guard = guard;
-            service.queue_pending_ingest_fits().await;
+            folder.queue_pending_ingest_fits().await;
             let mut watch = Watch::default();
             loop {
                 match folders.check(&settings.dir) {
-                    Ok(()) => service.ingest_pass(&settings, &folders, &mut watch).await,
-                    Err(e) => service.note_error(e),
+                    Ok(()) => folder.ingest_pass(&settings, &folders, &mut watch).await,
+                    Err(e) => folder.note_error(e),
                 }
                 tokio::select! {
                     _ = tokio::time::sleep(settings.poll) => {}
