@@ -106,6 +106,7 @@ async fn fill(path: &Path) -> Vec<Scan> {
                         cost_function: cost,
                         settings: serde_json::to_value(settings).unwrap(),
                         seed: settings.seed,
+                        colorimetry: Default::default(),
                     },
                 )
                 .await

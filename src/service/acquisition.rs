@@ -8,7 +8,7 @@
 //!   the provenance of every reference set and scan).
 //!
 //! The measurement runs (`orchestrator.rs`) claim the instruments through
-//! [`Acquisition::claim`]; the device watcher below ([`Service::watch_devices`]) keeps the
+//! [`Acquisition::claim`]; the device watcher below ([`Acquisition::watch_devices`]) keeps the
 //! identities and states up to date from the drivers' events. Nothing else in the service
 //! reaches into this state.
 
@@ -22,8 +22,9 @@ use tokio::sync::{Notify, broadcast};
 
 use crate::store::{InstrumentProvenance, Provenance, ReferenceId, ScanId, Source, now_ms};
 
+use super::context::Context;
 use super::events::Event;
-use super::{Devices, Service, ServiceError};
+use super::{Devices, ServiceError};
 
 /// A poisoned lock still holds consistent data here (every critical section is one
 /// assignment), so it is used as it is.
@@ -140,6 +141,8 @@ type ConnectionState = (&'static str, String, i64);
 
 /// The instruments and the service's knowledge of them (module docs).
 pub(crate) struct Acquisition {
+    /// The store (the instrument table) and the events the device watcher writes to.
+    ctx: Context,
     devices: Devices,
     busy: Arc<Mutex<Option<Busy>>>,
     /// The reference new scans use: the last one this daemon (or a previous run) measured.
@@ -156,8 +159,13 @@ pub(crate) struct Acquisition {
 
 impl Acquisition {
     /// The instruments, idle, with `reference` in force (the newest measured one in the store).
-    pub(crate) fn new(devices: Devices, reference: Option<ReferenceId>) -> Acquisition {
+    pub(super) fn new(
+        ctx: Context,
+        devices: Devices,
+        reference: Option<ReferenceId>,
+    ) -> Acquisition {
         Acquisition {
+            ctx,
             devices,
             busy: Arc::new(Mutex::new(None)),
             reference: Mutex::new(reference),
@@ -346,32 +354,26 @@ impl Acquisition {
             .entry((instrument.key(), state))
             .or_default() += 1;
     }
-}
 
-impl Service {
     /// Records the instruments' identities and reports their connection changes as events,
     /// until shutdown.
-    pub(crate) async fn watch_devices(&self) {
-        let Ok((guard, mut stop)) = self.task_slot().await else {
+    pub(super) async fn watch_devices(self: &Arc<Self>) {
+        let Ok((guard, mut stop)) = self.ctx.task_slot().await else {
             return;
         };
-        let service = self.clone();
-        let devices = self.inner.acquisition.devices();
+        let acquisition = self.clone();
+        let devices = self.devices();
         let mut rx_m = devices.ma_t12.subscribe();
         let mut rx_s = devices.sra.as_ref().map(|h| h.subscribe());
         tokio::spawn(async move {
             // The drivers connected before anyone subscribed: ask who is there.
-            let devices = service.inner.acquisition.devices();
+            let devices = acquisition.devices();
             for h in devices.handles().cloned() {
-                let s = service.clone();
+                let s = acquisition.clone();
                 tokio::spawn(async move {
                     match h.identify().await {
                         Ok(identity) => {
-                            s.inner.acquisition.count_transition(
-                                h.instrument(),
-                                "connected",
-                                identity.to_string(),
-                            );
+                            s.count_transition(h.instrument(), "connected", identity.to_string());
                             s.record_instrument(h.instrument(), &identity).await
                         }
                         Err(e) => tracing::warn!(error = %e, "instrument not available at start"),
@@ -386,7 +388,7 @@ impl Service {
                     _ = stop.recv() => break,
                 };
                 match ev {
-                    Ok(ev) => service.on_device_event(ev).await,
+                    Ok(ev) => acquisition.on_device_event(ev).await,
                     Err(broadcast::error::RecvError::Lagged(_)) => {}
                     Err(broadcast::error::RecvError::Closed) => {
                         // Which one closed is not said; stop watching both (the drivers only
@@ -431,14 +433,12 @@ impl Service {
             drivers::Event::Measuring { instrument, .. }
             | drivers::Event::Reading { instrument, .. } => {
                 // An instrument that answers again after a failed command is connected.
-                self.inner.acquisition.clear_error(instrument);
+                self.clear_error(instrument);
                 return;
             }
         };
-        self.inner
-            .acquisition
-            .count_transition(instrument, state, detail.clone());
-        self.inner.events.send(Event::Device {
+        self.count_transition(instrument, state, detail.clone());
+        self.ctx.events.send(Event::Device {
             device: instrument.key().to_string(),
             state: state.to_string(),
             detail,
@@ -447,10 +447,10 @@ impl Service {
 
     /// Keeps the instrument's identity and records it in the store's instrument table.
     async fn record_instrument(&self, instrument: Instrument, identity: &drivers::Identity) {
-        self.inner.acquisition.note_identity(instrument, identity);
+        self.note_identity(instrument, identity);
         let text = format!("{} firmware {}", identity.model, identity.firmware);
         if let Err(e) = self
-            .inner
+            .ctx
             .store
             .add_instrument(instrument.into(), &identity.serial, &text)
             .await

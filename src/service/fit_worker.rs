@@ -10,11 +10,19 @@
 //! [`FitWorker`] owns the worker's state — the queue's sending end, the fits' cancel flags,
 //! the queued/running/bootstrap counters, the bootstrap slot and the fit computation — and
 //! nothing outside this module changes it; the rest of the service hands it fit ids
-//! ([`FitWorker::submit`]) and reads its counters.
+//! ([`FitWorker::submit`]), asks it to cancel one ([`FitWorker::cancel_fit`]) and reads its
+//! counters.
+//!
+//! A fit runs on what was recorded when it was queued, never on today's configuration: the
+//! processed scan it fits (`fit_runs.processed_id`), every optimiser setting
+//! (`settings_json`), and the colorimetry its ΔE00 are computed with (`fit_observer`,
+//! `fit_weighting`, `migrations/0020_fit_inputs.sql`); the processing options come from the processed row and
+//! the scan's reference set. Only a fit queued before the colorimetry was recorded falls back
+//! to the configured one.
 //!
 //! Cancellation goes through the optimiser's observer, called once per generation: it returns
-//! `Break` when the fit's flag is set ([`Service::cancel_fit`]) or the daemon is stopping. A fit
-//! stopped by shutdown is left `running`; the next start queues it again (same seed, same
+//! `Break` when the fit's flag is set ([`FitWorker::cancel_fit`]) or the daemon is stopping. A
+//! fit stopped by shutdown is left `running`; the next start queues it again (same seed, same
 //! result).
 
 use std::collections::HashMap;
@@ -33,8 +41,9 @@ use crate::processing::{MeasuredBrdf, ProcessingOptions};
 use crate::store::{FitResult, FitRunId, FitStatus, ScanId, StoreError};
 use crate::uncertainty::{BootstrapOptions, UncertaintyError, bootstrap};
 
+use super::context::Context;
 use super::events::Event;
-use super::{Service, ServiceError, Timings};
+use super::{ServiceError, Timings};
 
 /// One fit, as the worker hands it to the fit computation.
 #[derive(Debug, Clone)]
@@ -80,6 +89,7 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 
 /// The fit worker's state (module docs).
 pub(crate) struct FitWorker {
+    ctx: Context,
     fit_fn: FitFn,
     /// Cancellation flags of queued and running fits.
     cancels: Mutex<HashMap<FitRunId, Arc<AtomicBool>>>,
@@ -94,10 +104,14 @@ pub(crate) struct FitWorker {
 }
 
 impl FitWorker {
-    /// The worker's state and the receiving end of its queue, for [`Service::start_fit_worker`].
-    pub(crate) fn new(fit_fn: FitFn) -> (FitWorker, mpsc::UnboundedReceiver<FitRunId>) {
+    /// The worker's state and the receiving end of its queue, for [`FitWorker::start`].
+    pub(super) fn new(
+        ctx: Context,
+        fit_fn: FitFn,
+    ) -> (Arc<FitWorker>, mpsc::UnboundedReceiver<FitRunId>) {
         let (tx, rx) = mpsc::unbounded_channel();
-        let worker = FitWorker {
+        let worker = Arc::new(FitWorker {
+            ctx,
             fit_fn,
             cancels: Mutex::new(HashMap::new()),
             tx,
@@ -105,7 +119,7 @@ impl FitWorker {
             running: AtomicUsize::new(0),
             bootstrap_slot: Arc::new(Semaphore::new(1)),
             bootstraps_pending: AtomicUsize::new(0),
-        };
+        });
         (worker, rx)
     }
 
@@ -175,16 +189,14 @@ impl Drop for CountedUntilDrop<'_> {
     }
 }
 
-impl Service {
+impl FitWorker {
     /// Starts the dispatcher.
-    pub(crate) async fn start_fit_worker(&self, mut rx: mpsc::UnboundedReceiver<FitRunId>) {
-        let Ok((guard, mut stop)) = self.task_slot().await else {
+    pub(super) async fn start(self: &Arc<Self>, mut rx: mpsc::UnboundedReceiver<FitRunId>) {
+        let Ok((guard, mut stop)) = self.ctx.task_slot().await else {
             return;
         };
-        let permits = Arc::new(Semaphore::new(
-            self.inner.settings.max_concurrent_fits.max(1),
-        ));
-        let service = self.clone();
+        let permits = Arc::new(Semaphore::new(self.ctx.settings.max_concurrent_fits.max(1)));
+        let worker = self.clone();
         tokio::spawn(async move {
             loop {
                 let fit = tokio::select! {
@@ -195,10 +207,10 @@ impl Service {
                     p = permits.clone().acquire_owned() => p.expect("the semaphore is never closed"),
                     _ = stop.recv() => break,
                 };
-                let Ok((fit_guard, _)) = service.task_slot().await else {
+                let Ok((fit_guard, _)) = worker.ctx.task_slot().await else {
                     break;
                 };
-                let s = service.clone();
+                let s = worker.clone();
                 tokio::spawn(async move {
                     s.run_fit(fit, permit).await;
                     drop(fit_guard);
@@ -209,8 +221,8 @@ impl Service {
     }
 
     /// Cancels a queued or running fit. A running fit stops at its next generation.
-    pub async fn cancel_fit(&self, fit: FitRunId) -> Result<(), ServiceError> {
-        let detail = self.inner.store.fit_detail(fit).await?;
+    pub(super) async fn cancel_fit(&self, fit: FitRunId) -> Result<(), ServiceError> {
+        let detail = self.ctx.store.fit_detail(fit).await?;
         match detail.run.status {
             FitStatus::Queued | FitStatus::Running => {}
             status => {
@@ -219,12 +231,12 @@ impl Service {
                 )));
             }
         }
-        match self.inner.fits.flag(fit) {
+        match self.flag(fit) {
             Some(flag) => flag.store(true, Ordering::SeqCst),
             // Queued in the store but not handed to this worker: cancel it there.
             None => {
-                self.inner.store.cancel_fit(fit).await?;
-                self.inner.events.send(Event::FitCancelled {
+                self.ctx.store.cancel_fit(fit).await?;
+                self.ctx.events.send(Event::FitCancelled {
                     fit,
                     scan: detail.run.scan,
                 });
@@ -234,57 +246,53 @@ impl Service {
     }
 
     async fn run_fit(&self, fit: FitRunId, permit: tokio::sync::OwnedSemaphorePermit) {
-        let worker = &self.inner.fits;
         // Running from the moment it leaves the queue until its end is recorded (every return
         // below), so that `status` never shows an idle worker while a fit's row still says
         // queued or running.
-        worker.running.fetch_add(1, Ordering::Relaxed);
-        worker.queued.fetch_sub(1, Ordering::Relaxed);
-        let running = CountedUntilDrop(&worker.running);
-        let cancel = worker.flag(fit).unwrap_or_default();
+        self.running.fetch_add(1, Ordering::Relaxed);
+        self.queued.fetch_sub(1, Ordering::Relaxed);
+        let running = CountedUntilDrop(&self.running);
+        let cancel = self.flag(fit).unwrap_or_default();
         let prepared = self.prepare_fit(fit).await;
         let (job, cost) = match prepared {
             Ok(Some(p)) => p,
             Ok(None) => {
-                worker.forget(fit);
+                self.forget(fit);
                 return;
             }
             Err(PrepareError { scan, error: e }) => {
                 let error = format!("cannot start the fit: {e}");
                 self.mark_failed(fit, &error).await;
                 match scan {
-                    Some(scan) => self
-                        .inner
-                        .events
-                        .send(Event::FitFailed { fit, scan, error }),
+                    Some(scan) => self.ctx.events.send(Event::FitFailed { fit, scan, error }),
                     // The fit could not even be read: there is no scan to name in an event.
                     None => tracing::warn!(%fit, %error, "fit failed before its scan was known"),
                 }
-                worker.forget(fit);
+                self.forget(fit);
                 return;
             }
         };
         let scan = job.scan;
         if cancel.load(Ordering::SeqCst) {
             self.mark_cancelled(fit).await;
-            self.inner.events.send(Event::FitCancelled { fit, scan });
-            worker.forget(fit);
+            self.ctx.events.send(Event::FitCancelled { fit, scan });
+            self.forget(fit);
             return;
         }
-        if let Err(e) = self.timed_store(self.inner.store.start_fit(fit)).await {
+        if let Err(e) = self.ctx.timed_store(self.ctx.store.start_fit(fit)).await {
             tracing::warn!(error = %e, %fit, "fit not started");
-            worker.forget(fit);
+            self.forget(fit);
             return;
         }
-        self.inner.events.send(Event::FitStarted {
+        self.ctx.events.send(Event::FitStarted {
             fit,
             scan,
             cost_function: cost,
         });
 
-        let events = self.inner.events.clone();
-        let stopping = self.inner.stopping.clone();
-        let fit_fn = worker.fit_fn.clone();
+        let events = self.ctx.events.clone();
+        let stopping = self.ctx.stop_flag();
+        let fit_fn = self.fit_fn.clone();
         let cancel_flag = cancel.clone();
         let started = Instant::now();
         let joined = tokio::task::spawn_blocking(move || {
@@ -308,7 +316,7 @@ impl Service {
             catch_unwind(AssertUnwindSafe(|| fit_fn(&job, &mut observer)))
         })
         .await;
-        Timings::add(&self.inner.timings.fit_ns, started.elapsed());
+        Timings::add(&self.ctx.timings.fit_ns, started.elapsed());
 
         let ended = match joined {
             Ok(Ok(Ok(report))) => Ended::Done(Box::new(report)),
@@ -331,7 +339,7 @@ impl Service {
             Err(join) => Ended::Failed(format!("the fit's thread ended abnormally: {join}")),
         };
         let stored = self.record_fit_end(fit, scan, cost, ended).await;
-        worker.forget(fit);
+        self.forget(fit);
         // The fit's end is recorded; its bootstrap is counted on its own.
         drop(running);
         if let Some(report) = stored {
@@ -344,18 +352,17 @@ impl Service {
     /// next scans' point estimates are not held up), then stored with the fit. Shutdown stops
     /// it between refits; a fit left without intervals shows none.
     async fn bootstrap_fit(&self, fit: FitRunId, report: FitReport) {
-        let resamples = self.inner.settings.bootstrap;
-        if resamples == 0 || self.inner.stopping.load(Ordering::Relaxed) {
+        let resamples = self.ctx.settings.bootstrap;
+        if resamples == 0 || self.ctx.is_stopping() {
             return;
         }
         // Counted from now until stored (or given up), for `status`.
-        let worker = &self.inner.fits;
-        worker.bootstraps_pending.fetch_add(1, Ordering::Relaxed);
-        let _pending = CountedUntilDrop(&worker.bootstraps_pending);
-        let Ok(permit) = worker.bootstrap_slot.clone().acquire_owned().await else {
+        self.bootstraps_pending.fetch_add(1, Ordering::Relaxed);
+        let _pending = CountedUntilDrop(&self.bootstraps_pending);
+        let Ok(permit) = self.bootstrap_slot.clone().acquire_owned().await else {
             return;
         };
-        let stopping = self.inner.stopping.clone();
+        let stopping = self.ctx.stop_flag();
         let opts = BootstrapOptions {
             resamples,
             seed: report.outcome.seed,
@@ -379,7 +386,8 @@ impl Service {
         match joined {
             Ok(Ok(Ok(u))) => {
                 if let Err(e) = self
-                    .timed_store(self.inner.store.set_fit_uncertainty(fit, &u))
+                    .ctx
+                    .timed_store(self.ctx.store.set_fit_uncertainty(fit, &u))
                     .await
                 {
                     tracing::warn!(error = %e, %fit, "cannot store the fit's uncertainty");
@@ -402,7 +410,8 @@ impl Service {
     /// event still goes out.
     async fn mark_failed(&self, fit: FitRunId, error: &str) {
         if let Err(e) = self
-            .timed_store(self.inner.store.fail_fit(fit, error))
+            .ctx
+            .timed_store(self.ctx.store.fail_fit(fit, error))
             .await
         {
             tracing::warn!(error = %e, %fit, reason = %error, "cannot mark the fit failed");
@@ -412,7 +421,7 @@ impl Service {
     /// Stores that `fit` was cancelled; a store that refuses is logged, as the fit's event
     /// still goes out.
     async fn mark_cancelled(&self, fit: FitRunId) {
-        if let Err(e) = self.timed_store(self.inner.store.cancel_fit(fit)).await {
+        if let Err(e) = self.ctx.timed_store(self.ctx.store.cancel_fit(fit)).await {
             tracing::warn!(error = %e, %fit, "cannot mark the fit cancelled");
         }
     }
@@ -422,8 +431,9 @@ impl Service {
         &self,
         fit: FitRunId,
     ) -> Result<Option<(FitJob, CostFunction)>, PrepareError> {
-        let store = &self.inner.store;
+        let store = &self.ctx.store;
         let detail = self
+            .ctx
             .timed_store(store.fit_detail(fit))
             .await
             .map_err(|e| PrepareError {
@@ -440,10 +450,12 @@ impl Service {
             error,
         };
         let processed = self
+            .ctx
             .timed_store(store.processed(run.processed))
             .await
             .map_err(|e| fail(e.into()))?;
         let scan_detail = self
+            .ctx
             .timed_store(store.scan_detail(scan))
             .await
             .map_err(|e| fail(e.into()))?;
@@ -461,7 +473,9 @@ impl Service {
                 reference_reflectance: scan_detail.reference.reference.rho_ref,
             },
             settings,
-            colorimetry: self.inner.settings.colorimetry,
+            // Recorded when queued; a fit queued before it was recorded keeps using the
+            // configured one, as it did then.
+            colorimetry: run.colorimetry.unwrap_or(self.ctx.settings.colorimetry),
         };
         Ok(Some((
             FitJob {
@@ -486,7 +500,7 @@ impl Service {
         cost: CostFunction,
         ended: Ended,
     ) -> Option<Box<FitReport>> {
-        let store = &self.inner.store;
+        let store = &self.ctx.store;
         match ended {
             Ended::Done(report) => {
                 let outcome = &report.outcome;
@@ -500,6 +514,7 @@ impl Service {
                 };
                 let e = &report.evaluation;
                 match self
+                    .ctx
                     .timed_store(store.finish_fit_with(
                         fit,
                         &result,
@@ -510,7 +525,7 @@ impl Service {
                     .await
                 {
                     Ok(()) => {
-                        self.inner.events.send(Event::FitDone {
+                        self.ctx.events.send(Event::FitDone {
                             fit,
                             scan,
                             cost_function: cost,
@@ -525,23 +540,19 @@ impl Service {
                     Err(err) => {
                         let error = format!("cannot store the result: {err}");
                         self.mark_failed(fit, &error).await;
-                        self.inner
-                            .events
-                            .send(Event::FitFailed { fit, scan, error });
+                        self.ctx.events.send(Event::FitFailed { fit, scan, error });
                     }
                 }
             }
             Ended::Failed(error) => {
-                if let Err(e) = self.timed_store(store.fail_fit(fit, &error)).await {
+                if let Err(e) = self.ctx.timed_store(store.fail_fit(fit, &error)).await {
                     tracing::error!(error = %e, %fit, "cannot mark the fit failed");
                 }
-                self.inner
-                    .events
-                    .send(Event::FitFailed { fit, scan, error });
+                self.ctx.events.send(Event::FitFailed { fit, scan, error });
             }
             Ended::Cancelled => {
                 self.mark_cancelled(fit).await;
-                self.inner.events.send(Event::FitCancelled { fit, scan });
+                self.ctx.events.send(Event::FitCancelled { fit, scan });
             }
             Ended::Stopped => {
                 tracing::info!(%fit, "fit interrupted by shutdown; it runs again at the next start");

@@ -42,6 +42,9 @@
 //! why (the parser's message names file, line and field); an existing name there gets `-2`,
 //! `-3`, … before its first dot. Each file gives an [`Event::FileImported`] or
 //! [`Event::FileRejected`], and `status` shows the folder's counts and last error.
+//!
+//! [`WatchFolder`] owns the folder's status (only its task changes it); the imported scans go
+//! to the pipeline to be fitted, as an import through the API would.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -57,9 +60,10 @@ use crate::safe_fs::{Dir, EntryKind, FsError, Replace};
 use crate::scan::Scan;
 use crate::store::{FileImport, ImportedScan, NewTexture, Provenance, Source, StoreError};
 
+use super::context::Context;
 use super::events::Event;
-use super::pipeline::{IMPORTED_SUFFIX, check_name, new_readings, new_textures};
-use super::{RefitRequest, Service, ServiceError};
+use super::pipeline::{IMPORTED_SUFFIX, Pipeline, check_name, new_readings, new_textures};
+use super::{RefitRequest, ServiceError};
 
 /// Where finished files go, and the folder of files being imported.
 pub const DONE: &str = "done";
@@ -439,10 +443,24 @@ fn read_unit(dir: &Dir, unit: &Unit, reference: &str, max: u64) -> Result<UnitCo
     Ok((hash, scans, textures))
 }
 
-impl Service {
+/// The running watch folder (module docs): its status, and what its task imports with.
+#[derive(Clone)]
+pub(super) struct WatchFolder {
+    ctx: Context,
+    /// Where imported scans are processed and their fits queued.
+    pipeline: Pipeline,
+    /// Changed by the folder's task alone; read by `status`.
+    status: Arc<Mutex<IngestStatus>>,
+}
+
+impl WatchFolder {
     /// Starts the watch-folder task: checks the folder, creates `done/`, `failed/` and
     /// `.importing/` in it, then polls until shutdown.
-    pub(super) async fn start_ingest(&self, settings: IngestSettings) -> Result<(), ServiceError> {
+    pub(super) async fn start(
+        ctx: Context,
+        pipeline: Pipeline,
+        settings: IngestSettings,
+    ) -> Result<WatchFolder, ServiceError> {
         let dir = &settings.dir;
         if !dir.is_dir() {
             return Err(ServiceError::BadRequest(format!(
@@ -466,19 +484,22 @@ impl Service {
             last_file: None,
             last_error: None,
         }));
-        // A OnceLock: if the task was started before, the status it set stays in use.
-        let _ = self.inner.ingest_status.set(status);
-        let (guard, mut stop) = self.task_slot().await?;
+        let watch_folder = WatchFolder {
+            ctx,
+            pipeline,
+            status,
+        };
+        let (guard, mut stop) = watch_folder.ctx.task_slot().await?;
         tracing::info!(dir = %dir.display(), "watching the folder for exports and scan files");
-        let service = self.clone();
+        let folder = watch_folder.clone();
         tokio::spawn(async move {
             let _guard = guard;
-            service.queue_pending_ingest_fits().await;
+            folder.queue_pending_ingest_fits().await;
             let mut watch = Watch::default();
             loop {
                 match folders.check(&settings.dir) {
-                    Ok(()) => service.ingest_pass(&settings, &folders, &mut watch).await,
-                    Err(e) => service.note_error(e),
+                    Ok(()) => folder.ingest_pass(&settings, &folders, &mut watch).await,
+                    Err(e) => folder.note_error(e),
                 }
                 tokio::select! {
                     _ = tokio::time::sleep(settings.poll) => {}
@@ -486,32 +507,28 @@ impl Service {
                 }
             }
         });
-        Ok(())
+        Ok(watch_folder)
     }
 
     fn ingest_stopping(&self) -> bool {
-        self.inner
-            .stopping
-            .load(std::sync::atomic::Ordering::SeqCst)
+        self.ctx.is_stopping()
     }
 
     fn with_ingest_status(&self, f: impl FnOnce(&mut IngestStatus)) {
-        if let Some(s) = self.inner.ingest_status.get() {
-            f(&mut s.lock().unwrap_or_else(|p| p.into_inner()));
-        }
+        f(&mut self.status.lock().unwrap_or_else(|p| p.into_inner()));
     }
 
-    /// The watch folder's state, when one is configured.
-    pub fn ingest_status(&self) -> Option<IngestStatus> {
-        self.inner
-            .ingest_status
-            .get()
-            .map(|s| s.lock().unwrap_or_else(|p| p.into_inner()).clone())
+    /// The watch folder's state now.
+    pub(super) fn status(&self) -> IngestStatus {
+        self.status
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
     }
 
     /// Queues the fits of imported files whose fits a stopped daemon had not queued yet.
     async fn queue_pending_ingest_fits(&self) {
-        let pending = match self.inner.store.ingested_awaiting_fits().await {
+        let pending = match self.ctx.store.ingested_awaiting_fits().await {
             Ok(p) => p,
             Err(e) => {
                 tracing::error!(error = %e, "cannot read the watch folder's imports");
@@ -527,7 +544,7 @@ impl Service {
     /// then records that this was done.
     async fn queue_ingest_fits(&self, file: &crate::store::IngestedFile) {
         for &scan in &file.scans {
-            match self.inner.store.fits_for_scan(scan).await {
+            match self.ctx.store.fits_for_scan(scan).await {
                 Ok(fits) if !fits.is_empty() => continue,
                 Ok(_) => {}
                 Err(e) => {
@@ -535,13 +552,17 @@ impl Service {
                     return;
                 }
             }
-            if let Err(e) = self.process_and_queue(scan, &RefitRequest::default()).await {
+            if let Err(e) = self
+                .pipeline
+                .process_and_queue(scan, &RefitRequest::default())
+                .await
+            {
                 // Not the file's fault once it is stored (e.g. a reading processing refuses):
                 // the scan stays, unfitted, as an import through the API would.
                 tracing::warn!(error = %e, %scan, file = %file.file_name, "imported scan not fitted");
             }
         }
-        if let Err(e) = self.inner.store.mark_ingest_fits_queued(file.id).await {
+        if let Err(e) = self.ctx.store.mark_ingest_fits_queued(file.id).await {
             tracing::error!(error = %e, "cannot record that the imported scans' fits are queued");
         }
     }
@@ -674,7 +695,7 @@ impl Service {
                     s.last_file = Some(name.to_string());
                     s.last_error = Some(reason.clone());
                 });
-                self.inner.events.send(Event::FileRejected {
+                self.ctx.events.send(Event::FileRejected {
                     file: name.to_string(),
                     reason,
                 });
@@ -764,7 +785,7 @@ impl Service {
                         s.imported += 1;
                         s.last_file = Some(file.clone());
                     });
-                    self.inner.events.send(Event::FileImported {
+                    self.ctx.events.send(Event::FileImported {
                         file,
                         scans,
                         sha256,
@@ -789,7 +810,7 @@ impl Service {
                     s.last_file = Some(file.clone());
                     s.last_error = Some(format!("{file}: {reason}"));
                 });
-                self.inner.events.send(Event::FileRejected { file, reason });
+                self.ctx.events.send(Event::FileRejected { file, reason });
             }
         }
     }
@@ -883,7 +904,8 @@ impl Service {
             })
             .collect();
         let stored = self
-            .timed_store(self.inner.store.import_file(
+            .ctx
+            .timed_store(self.ctx.store.import_file(
                 &hash,
                 &unit.main,
                 unit.partner.as_deref(),
@@ -893,7 +915,7 @@ impl Service {
         match stored {
             Ok(FileImport::Imported(file)) => {
                 for &scan in &file.scans {
-                    self.inner.events.send(Event::ScanComplete { scan });
+                    self.ctx.events.send(Event::ScanComplete { scan });
                 }
                 self.queue_ingest_fits(&file).await;
                 Ok(Some((unit.shown(), file.scans, hash)))

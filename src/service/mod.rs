@@ -10,17 +10,27 @@
 //! a semaphore, cancellable, a panic failing only that fit) → fits and ΔE00 stored →
 //! [`events::Event`]s to every subscriber all along.
 //!
-//! Each part owns its state, private to its module; this file wires them and holds only what
-//! they share:
+//! Each part is a type of its own that holds the handles it uses and owns its state, private
+//! to its module; `impl Service` is here alone, and only wires the parts at start and hands
+//! each API call to the part that answers it:
+//! - `context.rs` ([`context::Context`]): what every part shares — the store, the event bus,
+//!   the settings, the timings, and the stop flag with the task tracking; each part holds a
+//!   clone;
 //! - `acquisition.rs` ([`acquisition::Acquisition`]): the instruments, the busy claim, the
 //!   reference in force, each instrument's identity and connection state, and the device
 //!   watcher;
-//! - `orchestrator.rs`: the measurement runs (references and scans, one path);
-//! - `pipeline.rs`: processing, refits, imports, and the store ↔ scan-file conversion;
+//! - `orchestrator.rs` ([`orchestrator::Orchestrator`]): the measurement runs (references and
+//!   scans, one path), with the acquisition and the pipeline;
+//! - `pipeline.rs` ([`pipeline::Pipeline`]): processing, refits, imports, exports, and the
+//!   store ↔ scan-file conversion; it queues fits with everything they need recorded;
 //! - `fit_worker.rs` ([`fit_worker::FitWorker`]): the fit queue, permits, cancel flags and
 //!   counters, and the bootstraps;
-//! - shared here: the store, the event bus, the settings, the stop signal and task tracking,
-//!   the timings, and the status of the forwarder and the watch folder.
+//! - `ingest.rs` ([`ingest::WatchFolder`]): the watch folder and its status;
+//! - `forwarder.rs` ([`forwarder::Forwarding`]): forwarding to the central database and its
+//!   status.
+//!
+//! Dependencies point one way: the orchestrator uses the acquisition and the pipeline, the
+//! watch folder the pipeline, the pipeline the fit worker; none of them holds the [`Service`].
 //!
 //! - [`Service`] is the handle (cheap to clone) the HTTP API and the in-process callers use.
 //! - [`devices`] builds the instruments (simulated or real, with the recording tap).
@@ -34,18 +44,19 @@
 //! has put a new sample on the bench must not get the previous request's readings.
 
 mod acquisition;
+mod context;
 pub mod devices;
 mod error;
 pub mod events;
 mod fit_worker;
+mod forwarder;
 pub mod ingest;
 mod orchestrator;
 mod pipeline;
 pub mod shutdown;
 
-use std::future::Future;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
@@ -53,10 +64,11 @@ use tokio::sync::broadcast;
 
 use crate::config::Config;
 use crate::cost::CostFunction;
+use crate::formats::xrite_xlsx::TextureImage;
 use crate::optimise::{Method, Settings};
 use crate::processing::SpecularStrategy;
 use crate::scan::Scan;
-use crate::store::{ReferenceId, ReferenceSummary, ScanId, ScanState, Store};
+use crate::store::{FitRunId, Provenance, ReferenceId, ReferenceSummary, ScanId, ScanState, Store};
 
 pub use acquisition::{BusyStatus, DeviceStatus, Operation, SimulatedStatus};
 pub use devices::{DeviceSetupError, Devices};
@@ -67,8 +79,12 @@ pub use ingest::{IngestSettings, IngestStatus};
 pub use pipeline::{IMPORTED_SUFFIX, imported_provenance, scan_from_detail};
 
 use acquisition::Acquisition;
+use context::Context;
 use fit_worker::FitWorker;
-use shutdown::Coordinator;
+use forwarder::Forwarding;
+use ingest::WatchFolder;
+use orchestrator::Orchestrator;
+use pipeline::Pipeline;
 
 /// What the service does with a complete scan, from `[scan]` and `[fit]` of the configuration.
 #[derive(Debug, Clone, PartialEq)]
@@ -249,24 +265,22 @@ pub struct RefitRequest {
     pub allow_stale_reference: bool,
 }
 
-/// Shared state of the running service: the parts, and what they all use.
+/// The running service's parts, wired once at start.
 struct Inner {
-    store: Store,
-    events: EventBus,
-    settings: ServiceSettings,
+    /// What every part shares (`context.rs`).
+    ctx: Context,
     /// The instruments and what is known of them (`acquisition.rs`).
-    acquisition: Acquisition,
+    acquisition: Arc<Acquisition>,
+    /// The measurement runs (`orchestrator.rs`).
+    orchestrator: Orchestrator,
+    /// Processing, refits, imports and exports (`pipeline.rs`).
+    pipeline: Pipeline,
     /// The fit queue and its workers' state (`fit_worker.rs`).
-    fits: FitWorker,
-    coordinator: tokio::sync::Mutex<Coordinator>,
-    /// Set at shutdown, before the stop signal: fits break off at their next generation and are
-    /// left `running` for the next start to queue again.
-    stopping: Arc<AtomicBool>,
-    timings: Timings,
-    /// The forwarder's status, once it started.
-    sync_status: std::sync::OnceLock<Arc<Mutex<crate::sync::SyncStatus>>>,
-    /// The watch folder's status, once it started.
-    ingest_status: std::sync::OnceLock<Arc<Mutex<IngestStatus>>>,
+    fits: Arc<FitWorker>,
+    /// Forwarding to the central database (`forwarder.rs`), when configured.
+    forwarding: Option<Forwarding>,
+    /// The watch folder (`ingest.rs`), when configured.
+    watch_folder: Option<WatchFolder>,
 }
 
 /// The running service; clones share it.
@@ -302,70 +316,40 @@ impl Service {
         // The newest measured reference: a newer one that came with an imported scan is never
         // in force.
         let reference = store.latest_measured_reference().await?.map(|r| r.id);
-        let (fits, fit_rx) = FitWorker::new(options.fit_fn.unwrap_or_else(default_fit_fn));
-        let inner = Arc::new(Inner {
-            store,
-            events: EventBus::new(),
-            settings,
-            acquisition: Acquisition::new(devices, reference),
-            fits,
-            coordinator: tokio::sync::Mutex::new(Coordinator::new()),
-            stopping: Arc::new(AtomicBool::new(false)),
-            timings: Timings::default(),
-            sync_status: std::sync::OnceLock::new(),
-            ingest_status: std::sync::OnceLock::new(),
-        });
-        let service = Service { inner };
-        service.start_fit_worker(fit_rx).await;
-        service.watch_devices().await;
-        for fit in service.inner.store.queued_fits().await? {
-            service.inner.fits.submit(fit.id);
+        let ctx = Context::new(store, settings);
+        let (fits, fit_rx) =
+            FitWorker::new(ctx.clone(), options.fit_fn.unwrap_or_else(default_fit_fn));
+        let acquisition = Arc::new(Acquisition::new(ctx.clone(), devices, reference));
+        let pipeline = Pipeline::new(ctx.clone(), fits.clone());
+        let orchestrator = Orchestrator::new(ctx.clone(), acquisition.clone(), pipeline.clone());
+        fits.start(fit_rx).await;
+        acquisition.watch_devices().await;
+        for fit in ctx.store.queued_fits().await? {
+            fits.submit(fit.id);
         }
-        if let Some(options) = service.inner.settings.sync.clone() {
-            service.start_forwarder(options).await?;
-        }
-        if let Some(ingest) = service.inner.settings.ingest.clone() {
-            service.start_ingest(ingest).await?;
-        }
-        Ok(service)
-    }
-
-    /// Starts forwarding the store to the central database (src/sync/) as a task that stops
-    /// with the service. It only reads what the store committed, so acquisition never waits on
-    /// it; an unreachable server is retried with back-off and shown in `status`.
-    async fn start_forwarder(
-        &self,
-        options: crate::sync::ForwarderOptions,
-    ) -> Result<(), ServiceError> {
-        tracing::info!(
-            station = %options.station,
-            central = %crate::sync::redact(&options.url),
-            "forwarding the store to the central database"
-        );
-        let forwarder = crate::sync::Forwarder::for_store(&self.inner.store, options)
-            .await
-            .map_err(|e| crate::store::StoreError::from(sqlx::Error::Protocol(e.to_string())))?;
-        // A OnceLock: if the task was started before, the status it set stays in use.
-        let _ = self.inner.sync_status.set(forwarder.status());
-        let (mut stop, guard) = {
-            let c = self.inner.coordinator.lock().await;
-            (c.listener(), c.guard())
+        let forwarding = match ctx.settings.sync.clone() {
+            Some(options) => Some(Forwarding::start(&ctx, options).await?),
+            None => None,
         };
-        tokio::spawn(async move {
-            let _guard = guard;
-            let mut on_batch = |r: &crate::sync::BatchReport| {
-                tracing::debug!("forwarded: {r}");
-            };
-            forwarder
-                .run(async move { stop.recv().await }, &mut on_batch)
-                .await;
+        let watch_folder = match ctx.settings.ingest.clone() {
+            Some(ingest) => Some(WatchFolder::start(ctx.clone(), pipeline.clone(), ingest).await?),
+            None => None,
+        };
+        let inner = Arc::new(Inner {
+            ctx,
+            acquisition,
+            orchestrator,
+            pipeline,
+            fits,
+            forwarding,
+            watch_folder,
         });
-        Ok(())
+        Ok(Service { inner })
     }
 
     /// The store the service writes to.
     pub fn store(&self) -> &Store {
-        &self.inner.store
+        &self.inner.ctx.store
     }
 
     /// The instruments.
@@ -374,25 +358,17 @@ impl Service {
     }
 
     pub fn settings(&self) -> &ServiceSettings {
-        &self.inner.settings
+        &self.inner.ctx.settings
     }
 
     /// Events from now on.
     pub fn subscribe(&self) -> broadcast::Receiver<Event> {
-        self.inner.events.subscribe()
+        self.inner.ctx.events.subscribe()
     }
 
     /// Cumulated timings since start-up.
     pub fn timings(&self) -> TimingSplit {
-        self.inner.timings.split()
-    }
-
-    /// Runs a store call, adding its time to the store timing.
-    async fn timed_store<T>(&self, fut: impl Future<Output = T>) -> T {
-        let t = Instant::now();
-        let out = fut.await;
-        Timings::add(&self.inner.timings.store_ns, t.elapsed());
-        out
+        self.inner.ctx.timings.split()
     }
 
     /// What the instruments are doing now.
@@ -406,12 +382,69 @@ impl Service {
         self.inner.acquisition.abort()
     }
 
+    /// Starts measuring the white reference tile on both instruments. Returns at once with the
+    /// new reference set's id; progress comes as events. Refused while the instruments are
+    /// busy or the daemon is stopping.
+    pub async fn request_reference(&self) -> Result<ReferenceId, ServiceError> {
+        self.inner.orchestrator.request_reference().await
+    }
+
+    /// Starts a scan of sample `sample` against the reference in force. Returns at once with
+    /// the scan's id; progress comes as events. Refused while the instruments are busy, before
+    /// any reference was measured, or while the daemon is stopping.
+    pub async fn request_scan(&self, sample: &str) -> Result<ScanId, ServiceError> {
+        self.inner.orchestrator.request_scan(sample).await
+    }
+
+    /// Queues fits of a complete scan again (other cost functions, method or seed).
+    pub async fn refit(
+        &self,
+        scan: ScanId,
+        request: &RefitRequest,
+    ) -> Result<Vec<FitRunId>, ServiceError> {
+        self.inner.pipeline.refit(scan, request).await
+    }
+
+    /// Cancels a queued or running fit. A running fit stops at its next generation.
+    pub async fn cancel_fit(&self, fit: FitRunId) -> Result<(), ServiceError> {
+        self.inner.fits.cancel_fit(fit).await
+    }
+
+    /// Imports a `brdfd.scan/1` scan: its reference readings become a reference set (named
+    /// with [`IMPORTED_SUFFIX`]; never the reference in force for new scans), its readings a
+    /// complete scan, all in one transaction, which is then processed and fitted like a
+    /// measured one. Returns the scan's id and its fits.
+    pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
+        self.inner.pipeline.import_scan(file).await
+    }
+
+    /// [`Service::import_scan`] with what the file says of its origin: the instruments and
+    /// source (`provenance`), when the readings were taken (`taken_at_ms`, else now), and the
+    /// instrument camera's images of the measurement, kept with the scan.
+    pub async fn import_scan_as(
+        &self,
+        file: &Scan,
+        provenance: &Provenance,
+        taken_at_ms: Option<i64>,
+        textures: &[TextureImage],
+    ) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
+        let pipeline = &self.inner.pipeline;
+        pipeline
+            .import_scan_as(file, provenance, taken_at_ms, textures)
+            .await
+    }
+
+    /// Exports a complete scan as a `brdfd.scan/1` scan (with its reference readings).
+    pub async fn export_scan(&self, scan: ScanId) -> Result<Scan, ServiceError> {
+        self.inner.pipeline.export_scan(scan).await
+    }
+
     /// The reference in force, with its age.
     pub async fn reference_in_force(&self) -> Result<Option<ReferenceInForce>, ServiceError> {
         let Some(id) = self.inner.acquisition.reference_in_force() else {
             return Ok(None);
         };
-        let detail = self.inner.store.reference_detail(id).await?;
+        let detail = self.inner.ctx.store.reference_detail(id).await?;
         Ok(Some(self.in_force_view(&detail.reference)))
     }
 
@@ -423,7 +456,7 @@ impl Service {
             name: r.name.clone(),
             completed_at_ms: r.completed_at_ms,
             age_hours,
-            stale: age_hours * 3600.0 > self.inner.settings.reference_max_age.as_secs_f64(),
+            stale: age_hours * 3600.0 > self.settings().reference_max_age.as_secs_f64(),
         }
     }
 
@@ -441,13 +474,14 @@ impl Service {
             simulated: acquisition.simulated(),
             devices: self.device_statuses(),
             timings: self.timings(),
-            sync: self
-                .inner
-                .sync_status
-                .get()
-                .map(|s| s.lock().unwrap_or_else(|p| p.into_inner()).clone()),
+            sync: self.inner.forwarding.as_ref().map(Forwarding::status),
             ingest: self.ingest_status(),
         })
+    }
+
+    /// The watch folder's state, when one is configured.
+    pub fn ingest_status(&self) -> Option<IngestStatus> {
+        self.inner.watch_folder.as_ref().map(WatchFolder::status)
     }
 
     /// Each instrument's connection state and identity, MA-T12 first.
@@ -467,14 +501,15 @@ impl Service {
         if self.current_operation() == Some(Operation::Scan { scan }) {
             return Ok(false);
         }
-        let detail = self.inner.store.scan_detail(scan).await?;
+        let store = self.store();
+        let detail = store.scan_detail(scan).await?;
         if matches!(
             detail.scan.state,
             ScanState::Requested | ScanState::Measuring
         ) {
             return Ok(false);
         }
-        let fits = self.inner.store.fits_for_scan(scan).await?;
+        let fits = store.fits_for_scan(scan).await?;
         Ok(fits.iter().all(|f| {
             !matches!(
                 f.status,
@@ -514,19 +549,6 @@ impl Service {
         true
     }
 
-    /// Exports a complete scan as a `brdfd.scan/1` scan (with its reference readings).
-    pub async fn export_scan(&self, scan: ScanId) -> Result<Scan, ServiceError> {
-        let detail = self.inner.store.scan_detail(scan).await?;
-        if detail.scan.state != ScanState::Complete {
-            return Err(ServiceError::NotComplete {
-                scan,
-                state: detail.scan.state,
-                action: "exporting it",
-            });
-        }
-        Ok(scan_from_detail(&detail)?)
-    }
-
     /// Graceful shutdown: the reference or scan in progress is aborted (its readings kept, a
     /// scan marked `aborted` with the reason), running fits stop at their next generation and
     /// are left to be queued again at the next start, the instruments' connections are closed,
@@ -534,21 +556,19 @@ impl Service {
     /// the grace period.
     pub async fn shutdown(&self) -> bool {
         let all_ended = self.stop_keeping_store().await;
-        self.inner.store.close().await;
+        self.store().close().await;
         all_ended
     }
 
     /// [`Service::shutdown`] without closing the store, for callers that read it afterwards
     /// (`brdfd replay`, `brdfd demo`, tests).
     pub async fn stop_keeping_store(&self) -> bool {
-        self.inner.stopping.store(true, Ordering::SeqCst);
-        self.inner.events.send(Event::ShuttingDown);
-        let grace = self.inner.settings.shutdown_grace;
-        let all_ended = self.inner.coordinator.lock().await.stop(grace).await;
+        let grace = self.settings().shutdown_grace;
+        let all_ended = self.inner.ctx.stop(grace).await;
         if !all_ended {
             tracing::warn!("some tasks did not stop within {} s", grace.as_secs());
         }
-        if let Err(e) = self.inner.acquisition.devices().clone().shutdown().await {
+        if let Err(e) = self.devices().clone().shutdown().await {
             tracing::warn!(error = %e, "the session recording is incomplete");
         }
         all_ended

@@ -1,9 +1,13 @@
 //! The scan orchestrator: measures a reference or a scan on both instruments at once, stores
 //! every reading the moment its event arrives, decides how the measurement ends (complete,
 //! failed with the devices' reasons, or aborted), and hands a complete scan to the pipeline
-//! (`pipeline.rs`). References and scans take one path, [`Service::start_measurement`] then
-//! `run`, parameterised by the [`Target`] they fill; the instruments are claimed through
+//! (`pipeline.rs`). References and scans take one path, [`Orchestrator::start_measurement`]
+//! then `run`, parameterised by the [`Target`] they fill; the instruments are claimed through
 //! `acquisition.rs`.
+//!
+//! [`Orchestrator`] holds no state of its own between measurements: what one run knows lives
+//! in its task ([`Acquired`]); the instruments and the busy claim are the acquisition's, the
+//! fits the pipeline's.
 //!
 //! Decisions:
 //! - Readings are taken from the drivers' event stream, not from the result of
@@ -22,6 +26,7 @@
 
 use std::collections::HashSet;
 use std::future::Future;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use drivers::{DriverError, Instrument, ReadingValue, ReceivedReading};
@@ -30,11 +35,12 @@ use tokio::sync::{Notify, broadcast};
 use crate::geometry::{self, Device, GEOMETRY_COUNT, Geometry};
 use crate::store::{Provenance, ReadingValues, ReferenceId, ScanId, Source, Store, StoreError};
 
-use super::acquisition::{BusyClaim, Operation};
+use super::acquisition::{Acquisition, BusyClaim, Operation};
+use super::context::Context;
 use super::events::{Event, ReadingShown};
-use super::pipeline::check_name;
+use super::pipeline::{Pipeline, check_name};
 use super::shutdown::{Shutdown, TaskGuard};
-use super::{RefitRequest, Service, ServiceError, Timings};
+use super::{RefitRequest, ServiceError, Timings};
 
 /// What a measurement is for: the store row its readings go to.
 #[derive(Debug, Clone, Copy)]
@@ -180,11 +186,32 @@ where
     }
 }
 
-impl Service {
+/// The measurement runs (module docs).
+#[derive(Clone)]
+pub(super) struct Orchestrator {
+    ctx: Context,
+    acquisition: Arc<Acquisition>,
+    /// Where a complete scan goes.
+    pipeline: Pipeline,
+}
+
+impl Orchestrator {
+    pub(super) fn new(
+        ctx: Context,
+        acquisition: Arc<Acquisition>,
+        pipeline: Pipeline,
+    ) -> Orchestrator {
+        Orchestrator {
+            ctx,
+            acquisition,
+            pipeline,
+        }
+    }
+
     /// Starts measuring the white reference tile on both instruments. Returns at once with the
     /// new reference set's id; progress comes as events. Refused while the instruments are
     /// busy or the daemon is stopping.
-    pub async fn request_reference(&self) -> Result<ReferenceId, ServiceError> {
+    pub(super) async fn request_reference(&self) -> Result<ReferenceId, ServiceError> {
         match self.start_measurement(Plan::Reference).await? {
             Target::Reference(reference) => Ok(reference),
             Target::Scan(scan) => unreachable!("a reference request started scan {scan}"),
@@ -194,7 +221,7 @@ impl Service {
     /// Starts a scan of sample `sample` against the reference in force. Returns at once with
     /// the scan's id; progress comes as events. Refused while the instruments are busy, before
     /// any reference was measured, or while the daemon is stopping.
-    pub async fn request_scan(&self, sample: &str) -> Result<ScanId, ServiceError> {
+    pub(super) async fn request_scan(&self, sample: &str) -> Result<ScanId, ServiceError> {
         let sample = sample.trim();
         if sample.is_empty() {
             return Err(ServiceError::BadRequest(
@@ -215,18 +242,19 @@ impl Service {
     /// provenance refused, or another request won the instruments between the check and the
     /// claim) is marked failed with the reason.
     async fn start_measurement(&self, plan: Plan<'_>) -> Result<Target, ServiceError> {
-        let (guard, listener) = self.task_slot().await?;
-        let acquisition = &self.inner.acquisition;
+        let (guard, listener) = self.ctx.task_slot().await?;
+        let acquisition = &self.acquisition;
         acquisition.check_idle()?;
-        let store = &self.inner.store;
+        let store = &self.ctx.store;
         // With the SRA turned off, references and scans have the 12 MA-T12 geometries.
         let with_sra = acquisition.devices().has_sra();
         let (target, started) = match plan {
             Plan::Reference => {
                 let reference = self
+                    .ctx
                     .timed_store(store.begin_reference_of(
                         "Munsell N9",
-                        self.inner.settings.reference_reflectance.as_ref(),
+                        self.ctx.settings.reference_reflectance.as_ref(),
                         with_sra,
                     ))
                     .await?;
@@ -240,6 +268,7 @@ impl Service {
                     .reference_in_force()
                     .ok_or(ServiceError::NoReference)?;
                 let scan = self
+                    .ctx
                     .timed_store(store.request_scan_of(sample, reference, with_sra))
                     .await?;
                 let started = Event::ScanStarted {
@@ -252,6 +281,7 @@ impl Service {
         };
         let provenance = acquisition.provenance(Source::Measured, None);
         if let Err(e) = self
+            .ctx
             .timed_store(target.set_provenance(store, &provenance))
             .await
         {
@@ -282,15 +312,16 @@ impl Service {
         if let Some(detail) = replayed {
             let provenance = acquisition.provenance(Source::Measured, Some(detail));
             if let Err(e) = self
+                .ctx
                 .timed_store(target.set_provenance(store, &provenance))
                 .await
             {
                 tracing::warn!(error = %e, ?target, "cannot record which recording answers");
             }
         }
-        self.inner.events.send(started);
-        let service = self.clone();
-        tokio::spawn(service.run_claimed(target, claim, guard, listener));
+        self.ctx.events.send(started);
+        let orchestrator = self.clone();
+        tokio::spawn(orchestrator.run_claimed(target, claim, guard, listener));
         Ok(target)
     }
 
@@ -307,20 +338,6 @@ impl Service {
         drop(guard);
     }
 
-    /// A guard and a stop listener for a new task, or `ShuttingDown`.
-    pub(super) async fn task_slot(&self) -> Result<(TaskGuard, Shutdown), ServiceError> {
-        if self
-            .inner
-            .stopping
-            .load(std::sync::atomic::Ordering::SeqCst)
-        {
-            return Err(ServiceError::ShuttingDown);
-        }
-        let c = self.inner.coordinator.lock().await;
-        let guard = c.guard().ok_or(ServiceError::ShuttingDown)?;
-        Ok((guard, c.listener()))
-    }
-
     /// Writes how a reference or scan ended (failed or aborted), retrying while the store
     /// fails for a reason that may pass (a locked or full disk, an I/O error): up to
     /// [`END_WRITE_ATTEMPTS`] tries, backing off from 100 ms to 1.6 s. The readings are already
@@ -331,7 +348,7 @@ impl Service {
         F: FnMut() -> Fut,
         Fut: Future<Output = Result<(), StoreError>>,
     {
-        if let Err(e) = self.timed_store(retry_store_write(write)).await {
+        if let Err(e) = self.ctx.timed_store(retry_store_write(write)).await {
             tracing::error!(
                 error = %e,
                 what,
@@ -344,9 +361,9 @@ impl Service {
     /// Measures `target` and records how it ended: complete (a reference set then in force, a
     /// scan handed to the pipeline), failed with every device's reason, or stopped early.
     async fn run(&self, target: Target, abort: &Notify, stop: &mut Shutdown) {
-        let store = &self.inner.store;
+        let store = &self.ctx.store;
         if let Target::Scan(scan) = target
-            && let Err(e) = self.timed_store(store.start_measuring(scan)).await
+            && let Err(e) = self.ctx.timed_store(store.start_measuring(scan)).await
         {
             let reason = format!("cannot start measuring: {e}");
             self.end_failed(target, reason).await;
@@ -357,26 +374,24 @@ impl Service {
             let (what, id) = target.named();
             self.record_end(what, id, || target.stop(store, &reason))
                 .await;
-            self.inner.events.send(target.stopped(reason));
+            self.ctx.events.send(target.stopped(reason));
             return;
         }
         if !acquired.errors.is_empty() {
             self.end_failed(target, acquired.errors.join("; ")).await;
             return;
         }
-        if let Err(e) = self.timed_store(target.complete(store)).await {
+        if let Err(e) = self.ctx.timed_store(target.complete(store)).await {
             self.end_failed(target, e.to_string()).await;
             return;
         }
         match target {
             Target::Reference(reference) => {
-                self.inner.acquisition.put_in_force(reference);
-                self.inner
-                    .events
-                    .send(Event::ReferenceComplete { reference });
+                self.acquisition.put_in_force(reference);
+                self.ctx.events.send(Event::ReferenceComplete { reference });
             }
             Target::Scan(scan) => {
-                self.inner.events.send(Event::ScanComplete { scan });
+                self.ctx.events.send(Event::ScanComplete { scan });
                 self.fit_measured_scan(scan).await;
             }
         }
@@ -384,17 +399,21 @@ impl Service {
 
     /// Records that `target` failed with `reason` and says so.
     async fn end_failed(&self, target: Target, reason: String) {
-        let store = &self.inner.store;
+        let store = &self.ctx.store;
         let (what, id) = target.named();
         self.record_end(what, id, || target.fail(store, &reason))
             .await;
-        self.inner.events.send(target.failed(reason));
+        self.ctx.events.send(target.failed(reason));
     }
 
     /// Hands a scan just measured to the pipeline. A failure here leaves a complete scan
     /// without fits; the event says why, and `brdfd refit` can try again.
     async fn fit_measured_scan(&self, scan: ScanId) {
-        match self.process_and_queue(scan, &RefitRequest::default()).await {
+        match self
+            .pipeline
+            .process_and_queue(scan, &RefitRequest::default())
+            .await
+        {
             Ok(_) => {}
             Err(ServiceError::StaleReference {
                 reference,
@@ -402,14 +421,14 @@ impl Service {
                 max_age_hours,
                 ..
             }) => {
-                self.inner.events.send(Event::ReferenceStale {
+                self.ctx.events.send(Event::ReferenceStale {
                     scan,
                     reference,
                     age_hours,
                     max_age_hours,
                 });
             }
-            Err(e) => self.inner.events.send(Event::ProcessingFailed {
+            Err(e) => self.ctx.events.send(Event::ProcessingFailed {
                 scan,
                 reason: e.to_string(),
             }),
@@ -420,7 +439,7 @@ impl Service {
     /// arrives, until both are done (or aborted).
     async fn acquire(&self, target: Target, abort: &Notify, stop: &mut Shutdown) -> Acquired {
         let started = Instant::now();
-        let devices = self.inner.acquisition.devices();
+        let devices = self.acquisition.devices();
         // Subscribe before the commands go out, so no reading event can be missed.
         let mut rx_m = devices.ma_t12.subscribe();
         let mut rx_s = devices.sra.as_ref().map(|h| h.subscribe());
@@ -457,11 +476,11 @@ impl Service {
                 r = &mut s, if s_done.is_none() => s_done = Some(r),
                 _ = abort.notified(), if acquired.aborted.is_none() => {
                     acquired.aborted = Some("aborted by the operator".into());
-                    self.inner.acquisition.abort_devices();
+                    self.acquisition.abort_devices();
                 }
                 _ = stop.recv(), if acquired.aborted.is_none() => {
                     acquired.aborted = Some("the daemon was shut down during the measurement".into());
-                    self.inner.acquisition.abort_devices();
+                    self.acquisition.abort_devices();
                 }
             }
         }
@@ -489,7 +508,7 @@ impl Service {
                 Err(e) => acquired.errors.push(e.to_string()),
             }
         }
-        Timings::add(&self.inner.timings.acquire_ns, started.elapsed());
+        Timings::add(&self.ctx.timings.acquire_ns, started.elapsed());
         acquired
     }
 
@@ -538,14 +557,16 @@ impl Service {
             }
         };
         let raw = &received.raw;
-        let store = &self.inner.store;
+        let store = &self.ctx.store;
         let stored = match target {
             Target::Scan(scan) => {
-                self.timed_store(store.add_reading(scan, device, geometry, &values, raw))
+                self.ctx
+                    .timed_store(store.add_reading(scan, device, geometry, &values, raw))
                     .await
             }
             Target::Reference(r) => {
-                self.timed_store(store.add_reference_reading(r, device, geometry, &values, raw))
+                self.ctx
+                    .timed_store(store.add_reference_reading(r, device, geometry, &values, raw))
                     .await
             }
         };
@@ -556,7 +577,7 @@ impl Service {
                 let device = device.key().to_string();
                 let geometry = geometry.name.to_string();
                 let reading = ReadingShown::of(&values, crate::store::now_ms());
-                self.inner.events.send(match target {
+                self.ctx.events.send(match target {
                     Target::Scan(scan) => Event::ScanReading {
                         scan,
                         device,

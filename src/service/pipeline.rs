@@ -6,8 +6,13 @@
 //! the report use too, and the name rules every sample and reference name passes.
 //!
 //! Measured and imported scans enter here the same way: measured ones from the orchestrator
-//! when their 14th reading is stored, imported ones from [`Service::import_scan`] (the API,
-//! `brdfd import`, the watch folder).
+//! when their 14th reading is stored, imported ones from [`Pipeline::import_scan`] (the API,
+//! `brdfd import`) and the watch folder.
+//!
+//! [`Pipeline`] holds no state of its own: the shared handles, and the fit worker it hands
+//! each queued fit to. Everything a fit needs is recorded with it when it is queued (the
+//! processed scan, every optimiser setting, the colorimetry), so that running it, or running
+//! it again after a restart, never reads the configuration of the day.
 
 use crate::formats::xrite_xlsx::TextureImage;
 use crate::geometry::{Device, MA_T12_COUNT};
@@ -18,8 +23,12 @@ use crate::store::{
     ReadingValues, ScanDetail, ScanId, ScanState, Source, StoreError,
 };
 
+use std::sync::Arc;
+
+use super::context::Context;
 use super::events::Event;
-use super::{RefitRequest, Service, ServiceError};
+use super::fit_worker::FitWorker;
+use super::{RefitRequest, ServiceError};
 
 /// Appended to the name of a reference set that came with an imported scan; such a set is
 /// never the reference in force for new scans.
@@ -62,17 +71,28 @@ fn origin_of(scan: &crate::store::ScanSummary) -> crate::scan::Origin {
     }
 }
 
-impl Service {
+/// From a complete scan to queued fits (module docs).
+#[derive(Clone)]
+pub(super) struct Pipeline {
+    ctx: Context,
+    fits: Arc<FitWorker>,
+}
+
+impl Pipeline {
+    pub(super) fn new(ctx: Context, fits: Arc<FitWorker>) -> Pipeline {
+        Pipeline { ctx, fits }
+    }
+
     /// Processes a complete scan (once per specular strategy) and queues one fit per cost
     /// function asked for. Refused when the scan's reference is too old, unless allowed.
-    pub(crate) async fn process_and_queue(
+    pub(super) async fn process_and_queue(
         &self,
         scan: ScanId,
         request: &RefitRequest,
     ) -> Result<Vec<FitRunId>, ServiceError> {
-        let settings = &self.inner.settings;
-        let store = &self.inner.store;
-        let detail = self.timed_store(store.scan_detail(scan)).await?;
+        let settings = &self.ctx.settings;
+        let store = &self.ctx.store;
+        let detail = self.ctx.timed_store(store.scan_detail(scan)).await?;
         if detail.scan.state != ScanState::Complete {
             return Err(ServiceError::NotComplete {
                 scan,
@@ -93,6 +113,7 @@ impl Service {
             });
         }
         let processed = match self
+            .ctx
             .timed_store(store.processed_for_scan(scan))
             .await?
             .into_iter()
@@ -106,7 +127,8 @@ impl Service {
                     reference_reflectance: reference.rho_ref,
                 };
                 let brdf = processing::process(&file, &options)?;
-                self.timed_store(store.add_processed(scan, settings.specular, &brdf))
+                self.ctx
+                    .timed_store(store.add_processed(scan, settings.specular, &brdf))
                     .await?
             }
         };
@@ -133,21 +155,25 @@ impl Service {
                     })
                 })?,
                 seed,
+                colorimetry: settings.colorimetry,
             };
-            let id = self.timed_store(store.queue_fit(processed, &new)).await?;
-            self.inner.events.send(Event::FitQueued {
+            let id = self
+                .ctx
+                .timed_store(store.queue_fit(processed, &new))
+                .await?;
+            self.ctx.events.send(Event::FitQueued {
                 fit: id,
                 scan,
                 cost_function: cost,
             });
-            self.inner.fits.submit(id);
+            self.fits.submit(id);
             ids.push(id);
         }
         Ok(ids)
     }
 
     /// Queues fits of a complete scan again (other cost functions, method or seed).
-    pub async fn refit(
+    pub(super) async fn refit(
         &self,
         scan: ScanId,
         request: &RefitRequest,
@@ -169,7 +195,10 @@ impl Service {
     /// with [`IMPORTED_SUFFIX`]; never the reference in force for new scans), its readings a
     /// complete scan, all in one transaction, which is then processed and fitted like a
     /// measured one. Returns the scan's id and its fits.
-    pub async fn import_scan(&self, file: &Scan) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
+    pub(super) async fn import_scan(
+        &self,
+        file: &Scan,
+    ) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
         let (mut provenance, taken_at_ms) = imported_provenance(file, "brdfd.scan/1 file")?;
         // A file that says where its readings came from (every scan file brdfd exports does)
         // keeps that account as it is, so that export → import → export gives the same file.
@@ -180,10 +209,10 @@ impl Service {
             .await
     }
 
-    /// [`Service::import_scan`] with what the file says of its origin: the instruments and
+    /// [`Pipeline::import_scan`] with what the file says of its origin: the instruments and
     /// source (`provenance`), when the readings were taken (`taken_at_ms`, else now), and the
     /// instrument camera's images of the measurement, kept with the scan.
-    pub async fn import_scan_as(
+    pub(super) async fn import_scan_as(
         &self,
         file: &Scan,
         provenance: &Provenance,
@@ -193,13 +222,14 @@ impl Service {
         file.validate()?;
         check_name("sample name", &file.sample)?;
         check_name("reference name", file.reference_label())?;
-        let store = &self.inner.store;
+        let store = &self.ctx.store;
         let name = format!("{}{IMPORTED_SUFFIX}", file.reference_label());
         let reference_readings = file.reference.as_ref().map(|r| new_readings(&r.readings));
         let readings = new_readings(&file.readings);
         let textures = new_textures(textures);
         // One transaction: a failure leaves no half-imported reference or scan behind.
         let (_reference, scan) = self
+            .ctx
             .timed_store(store.import(&ImportedScan {
                 sample_name: &file.sample,
                 reference_name: &name,
@@ -210,11 +240,24 @@ impl Service {
                 textures: &textures,
             }))
             .await?;
-        self.inner.events.send(Event::ScanComplete { scan });
+        self.ctx.events.send(Event::ScanComplete { scan });
         let fits = self
             .process_and_queue(scan, &RefitRequest::default())
             .await?;
         Ok((scan, fits))
+    }
+
+    /// Exports a complete scan as a `brdfd.scan/1` scan (with its reference readings).
+    pub(super) async fn export_scan(&self, scan: ScanId) -> Result<Scan, ServiceError> {
+        let detail = self.ctx.store.scan_detail(scan).await?;
+        if detail.scan.state != ScanState::Complete {
+            return Err(ServiceError::NotComplete {
+                scan,
+                state: detail.scan.state,
+                action: "exporting it",
+            });
+        }
+        Ok(scan_from_detail(&detail)?)
     }
 }
 

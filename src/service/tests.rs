@@ -4,18 +4,27 @@ use super::*;
 use crate::store::ScanState;
 use drivers::Instrument;
 
-/// The busy claim as the service's parts see it (`acquisition.rs`).
-impl Service {
-    fn claim(&self, operation: Operation) -> Result<acquisition::BusyClaim, ServiceError> {
-        self.inner.acquisition.claim(operation)
-    }
+/// Claims the instruments as the orchestrator does (`acquisition.rs`).
+fn claim(s: &Service, operation: Operation) -> Result<acquisition::BusyClaim, ServiceError> {
+    s.inner.acquisition.claim(operation)
+}
 
-    fn check_idle(&self) -> Result<(), ServiceError> {
-        self.inner.acquisition.check_idle()
-    }
+/// Whether a request would find the instruments free.
+fn check_idle(s: &Service) -> Result<(), ServiceError> {
+    s.inner.acquisition.check_idle()
 }
 
 async fn service() -> Service {
+    service_on(
+        Store::open_in_memory().await.unwrap(),
+        ServiceSettings::default(),
+        ServiceOptions::default(),
+    )
+    .await
+}
+
+/// A service on `store` with simulated instruments.
+async fn service_on(store: Store, settings: ServiceSettings, options: ServiceOptions) -> Service {
     let devices = Devices::simulated(
         mock_devices::recordings::playlist(Instrument::MaT12).unwrap(),
         mock_devices::recordings::playlist(Instrument::Sra).unwrap(),
@@ -23,39 +32,36 @@ async fn service() -> Service {
         [None, None],
     )
     .unwrap();
-    Service::start(
-        Store::open_in_memory().await.unwrap(),
-        devices,
-        ServiceSettings::default(),
-        ServiceOptions::default(),
-    )
-    .await
-    .unwrap()
+    Service::start(store, devices, settings, options)
+        .await
+        .unwrap()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_instruments_are_claimed_by_one_operation_at_a_time() {
     let s = service().await;
-    let first = s.claim(Operation::Scan { scan: ScanId(3) }).unwrap();
-    let e = s
-        .claim(Operation::Reference {
+    let first = claim(&s, Operation::Scan { scan: ScanId(3) }).unwrap();
+    let e = claim(
+        &s,
+        Operation::Reference {
             reference: ReferenceId(1),
-        })
-        .unwrap_err();
+        },
+    )
+    .unwrap_err();
     let msg = e.to_string();
     assert!(
         msg.starts_with("the instruments are busy: scan 3 is in progress"),
         "{msg}"
     );
     assert!(msg.contains("brdfd abort"), "{msg}");
-    assert!(matches!(s.check_idle(), Err(ServiceError::Busy { .. })));
+    assert!(matches!(check_idle(&s), Err(ServiceError::Busy { .. })));
     // Abort reaches the claimant.
     assert_eq!(s.abort().unwrap(), Operation::Scan { scan: ScanId(3) });
     tokio::time::timeout(Duration::from_secs(1), first.notified())
         .await
         .expect("abort notified");
     drop(first);
-    assert!(s.check_idle().is_ok());
+    assert!(check_idle(&s).is_ok());
     assert!(matches!(s.abort(), Err(ServiceError::Idle)));
     s.shutdown().await;
 }
@@ -63,14 +69,14 @@ async fn the_instruments_are_claimed_by_one_operation_at_a_time() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_task_that_panics_frees_the_instruments() {
     let s = service().await;
-    let claim = s.claim(Operation::Scan { scan: ScanId(4) }).unwrap();
-    assert!(s.check_idle().is_err());
+    let held = claim(&s, Operation::Scan { scan: ScanId(4) }).unwrap();
+    assert!(check_idle(&s).is_err());
     let task = tokio::spawn(async move {
-        let _claim = claim;
+        let _claim = held;
         panic!("a bug in the scan task");
     });
     assert!(task.await.unwrap_err().is_panic());
-    assert!(s.check_idle().is_ok(), "the claim outlived its task");
+    assert!(check_idle(&s).is_ok(), "the claim outlived its task");
     assert!(matches!(s.abort(), Err(ServiceError::Idle)));
     s.shutdown().await;
 }
@@ -194,6 +200,119 @@ async fn a_refit_can_ask_for_the_luminance_sra_model() {
     let dl = d.specular_delta_l.unwrap();
     assert!(dl.mean < 0.01, "{dl:?}");
     s.shutdown().await;
+}
+
+/// A fit runs with the colorimetry it was queued with: one queued under a 10° observer with
+/// ASTM E308 weighting, interrupted by a stop, and run after a start whose configuration says
+/// the paper's 2° summation, is computed and stored under 10° E308.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fit_keeps_the_colorimetry_it_was_queued_with() {
+    use crate::colour::{Colorimetry, Observer, Weighting};
+    use crate::fit::FitScanError;
+    use crate::optimise::{FitError, Progress};
+    use crate::synth::{SynthOptions, paper_samples, synth_scan};
+    use std::sync::Mutex;
+
+    let queued_with = Colorimetry {
+        observer: Observer::Cie1964TenDegree,
+        weighting: Weighting::AstmE308,
+    };
+    let configured = |colorimetry| ServiceSettings {
+        cost_functions: vec![CostFunction::Cf2],
+        bootstrap: 0,
+        colorimetry,
+        ..ServiceSettings::default()
+    };
+    assert_ne!(configured(Colorimetry::default()).colorimetry, queued_with);
+    let store = Store::open_in_memory().await.unwrap();
+
+    // First run: the fit starts and runs until the daemon stops.
+    let (started_tx, started_rx) = std::sync::mpsc::channel();
+    let started_tx = Mutex::new(started_tx);
+    let until_stopped: FitFn = Arc::new(move |job, observer| {
+        let _ = started_tx.lock().unwrap().send(());
+        let progress = Progress {
+            generation: 1,
+            generations_total: 1,
+            best_cost: 1.0,
+            evaluations: 1,
+        };
+        loop {
+            if observer(&progress).is_break() {
+                return Err(FitScanError::Fit {
+                    sample: job.sample.clone(),
+                    cost: job.request.settings.cost,
+                    source: FitError::Cancelled,
+                });
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    });
+    let first = service_on(
+        store.clone(),
+        configured(queued_with),
+        ServiceOptions {
+            fit_fn: Some(until_stopped),
+        },
+    )
+    .await;
+    let file = synth_scan(&paper_samples()[1], &SynthOptions::default()).unwrap();
+    let (scan, fits) = first.import_scan(&file).await.unwrap();
+    assert_eq!(fits.len(), 1);
+    let fit = fits[0];
+    assert_eq!(
+        store.fit_detail(fit).await.unwrap().run.colorimetry,
+        Some(queued_with)
+    );
+    tokio::task::spawn_blocking(move || started_rx.recv_timeout(Duration::from_secs(60)).unwrap())
+        .await
+        .unwrap();
+    assert!(first.stop_keeping_store().await);
+    let left = store.fit_detail(fit).await.unwrap();
+    assert_eq!(left.run.status, crate::store::FitStatus::Running);
+
+    // Second run, configured with the paper's colorimetry: the fit is queued again and runs
+    // with what it was queued with.
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let recording: FitFn = {
+        let seen = seen.clone();
+        let real = default_fit_fn();
+        Arc::new(move |job, observer| {
+            seen.lock().unwrap().push(job.request.colorimetry);
+            real(job, observer)
+        })
+    };
+    let second = service_on(
+        store.clone(),
+        configured(Colorimetry::default()),
+        ServiceOptions {
+            fit_fn: Some(recording),
+        },
+    )
+    .await;
+    assert!(
+        second
+            .wait_settled(scan, Duration::from_secs(300))
+            .await
+            .unwrap()
+    );
+    assert_eq!(*seen.lock().unwrap(), [queued_with]);
+    let done = store.fit_detail(fit).await.unwrap();
+    assert_eq!(
+        done.run.status,
+        crate::store::FitStatus::Done,
+        "{:?}",
+        done.run.error
+    );
+    assert_eq!(done.colorimetry, Some(queued_with));
+    assert_eq!(done.run.colorimetry, Some(queued_with));
+    // A fit queued now takes the colorimetry configured now.
+    let refit = second.refit(scan, &RefitRequest::default()).await.unwrap();
+    assert_eq!(
+        store.fit_detail(refit[0]).await.unwrap().run.colorimetry,
+        Some(Colorimetry::default())
+    );
+    second.shutdown().await;
 }
 
 #[tokio::test]

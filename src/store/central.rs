@@ -211,7 +211,8 @@ pub async fn load_scans(
         &format!(
             "{SELECTED}
          SELECT f.station, f.id, f.scan_id, f.processed_id, p.specular, f.method,
-                f.cost_function, f.settings_json, f.seed, f.status, f.error, f.cost,
+                f.cost_function, f.settings_json, f.seed, f.fit_observer, f.fit_weighting,
+                f.status, f.error, f.cost,
                 f.params_json, f.best_cost_per_generation_json, f.evaluations, f.generations,
                 f.wall_ms, f.queued_at_ms, f.started_at_ms, f.finished_at_ms,
                 f.uncertainty_json, e.observer, e.weighting

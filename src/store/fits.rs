@@ -30,6 +30,11 @@ pub(super) struct FitRow {
     cost_function: String,
     settings_json: String,
     seed: String,
+    /// Migration 0020; absent from a central row read before its step 9, NULL before then.
+    #[sqlx(default)]
+    fit_observer: Option<String>,
+    #[sqlx(default)]
+    fit_weighting: Option<String>,
     status: String,
     error: Option<String>,
     cost: Option<f64>,
@@ -45,8 +50,8 @@ pub(super) struct FitRow {
 
 const FIT_RUN: &str = "\
     SELECT f.id, f.scan_id, f.processed_id, p.specular, f.method, f.cost_function,
-           f.settings_json, f.seed, f.status, f.error, f.cost, f.params_json,
-           f.best_cost_per_generation_json, f.evaluations, f.generations, f.wall_ms,
+           f.settings_json, f.seed, f.fit_observer, f.fit_weighting, f.status, f.error, f.cost,
+           f.params_json, f.best_cost_per_generation_json, f.evaluations, f.generations, f.wall_ms,
            f.queued_at_ms, f.started_at_ms, f.finished_at_ms
     FROM fit_runs f JOIN processed p ON p.id = f.processed_id";
 
@@ -63,6 +68,22 @@ impl FitRow {
                 .map_err(|e| corrupt(format!("{field}: {e}")))
         };
         let status: FitStatus = self.status.parse().map_err(corrupt)?;
+        let colorimetry = match (&self.fit_observer, &self.fit_weighting) {
+            (Some(observer), Some(weighting)) => Some(Colorimetry {
+                observer: observer
+                    .parse()
+                    .map_err(|e: crate::colour::ColorimetryError| corrupt(e.to_string()))?,
+                weighting: weighting
+                    .parse()
+                    .map_err(|e: crate::colour::ColorimetryError| corrupt(e.to_string()))?,
+            }),
+            (None, None) => None,
+            _ => {
+                return Err(corrupt(
+                    "fit_observer and fit_weighting: one is set without the other".into(),
+                ));
+            }
+        };
         let result = match (
             self.cost,
             &self.params_json,
@@ -107,6 +128,7 @@ impl FitRow {
                 .seed
                 .parse()
                 .map_err(|e| corrupt(format!("seed \"{}\": {e}", self.seed)))?,
+            colorimetry,
             status,
             error: self.error,
             result,
@@ -135,8 +157,8 @@ impl Store {
         }
         let id: Option<i64> = sqlx::query_scalar(
             "INSERT INTO fit_runs (scan_id, processed_id, method, cost_function, settings_json,
-                                   seed, status, queued_at_ms, sra)
-             SELECT p.scan_id, p.id, $2, $3, $4, $5, 'queued', $6, $7
+                                   seed, status, queued_at_ms, sra, fit_observer, fit_weighting)
+             SELECT p.scan_id, p.id, $2, $3, $4, $5, 'queued', $6, $7, $8, $9
              FROM processed p WHERE p.id = $1
              RETURNING id",
         )
@@ -147,6 +169,8 @@ impl Store {
         .bind(fit.seed.to_string())
         .bind(now_ms())
         .bind(fit.sra_model()?.name())
+        .bind(fit.colorimetry.observer.to_string())
+        .bind(fit.colorimetry.weighting.to_string())
         .fetch_optional(&self.writer)
         .await?;
         id.map(FitRunId).ok_or(StoreError::NotFound {

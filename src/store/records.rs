@@ -570,6 +570,9 @@ pub struct NewFit {
     /// Every optimiser setting, as serde serialises them, so the fit can be re-run exactly.
     pub settings: serde_json::Value,
     pub seed: u64,
+    /// The colorimetry its ΔE00 are computed with, recorded with it (migration 0020) so that
+    /// the fit does not depend on the configuration when it runs.
+    pub colorimetry: crate::colour::Colorimetry,
 }
 
 impl NewFit {
@@ -615,6 +618,9 @@ pub struct FitRun {
     pub cost_function: CostFunction,
     pub settings: serde_json::Value,
     pub seed: u64,
+    /// The colorimetry it was queued with; `None` for a fit queued before it was recorded
+    /// (migration 0020), which runs with the configured one.
+    pub colorimetry: Option<crate::colour::Colorimetry>,
     pub status: FitStatus,
     /// Why it failed.
     pub error: Option<String>,

@@ -78,6 +78,7 @@ fn new_fit(cf: CostFunction) -> NewFit {
         cost_function: cf,
         settings: serde_json::json!({"population": 64, "generations": 200, "seed": u64::MAX}),
         seed: u64::MAX,
+        colorimetry: Default::default(),
     }
 }
 

@@ -177,6 +177,9 @@ pub static TABLES: [Table; 10] = [
             ("uncertainty_json", Text),
             // Migration 0015 (central 0003): the SRA reading model.
             ("sra", Text),
+            // Migration 0020 (central 0009): the colorimetry the fit was queued with.
+            ("fit_observer", Text),
+            ("fit_weighting", Text),
         ],
     },
     Table {
