@@ -58,8 +58,8 @@ pub const SHIPPED: &str = include_str!("../../config/brdfd.toml");
 /// Where the systemd unit in `config/brdfd.service` points `--config`.
 pub const SYSTEM_PATH: &str = "/etc/brdfd/brdfd.toml";
 
-/// The checked configuration.
-#[derive(Debug, Clone, PartialEq)]
+/// The checked configuration; its `Default` is every section's.
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Config {
     pub store: StoreConfig,
     pub api: ApiConfig,
@@ -73,24 +73,6 @@ pub struct Config {
     pub sync: SyncConfig,
     pub reference: ReferenceConfig,
     pub ingest: IngestConfig,
-}
-
-impl Default for Config {
-    fn default() -> Self {
-        Config {
-            store: StoreConfig::default(),
-            api: ApiConfig::default(),
-            devices: DevicesConfig::default(),
-            scan: ScanConfig::default(),
-            fit: FitConfig::default(),
-            colour: crate::colour::Colorimetry::default(),
-            log: LogConfig::default(),
-            station: StationConfig::default(),
-            sync: SyncConfig::default(),
-            reference: ReferenceConfig::default(),
-            ingest: IngestConfig::default(),
-        }
-    }
 }
 
 // ---- Stage 1: the file's shape (each section's raw struct is in its file) -------------------
