@@ -10,16 +10,21 @@
 //! - [`optimise`]: fits the 34 model parameters: the paper's GA and the default separable search.
 //! - [`colour`]: spectra → CIE XYZ/CIELAB (D65, 2°), CIEDE2000, 8-bit sRGB swatches.
 //! - [`evaluation`]: ΔE00 between measured and estimated BRDF per geometry, with summaries.
-//! - [`stats`]: study statistics: mean ΔE00 with 95 % t interval, exact sign test.
+//! - [`stats`]: study statistics: mean ΔE00 with 95 % t interval, exact sign test; the one
+//!   standard normal draw the noise and the bootstrap share.
 //! - [`uncertainty`]: parameter intervals of a fit by a parametric bootstrap (SCIENCE.md §10).
 //!
 //! Scans and fits (pure, synchronous; file I/O only at the edges):
 //! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
 //! - [`synth`]: synthetic scans from a known ground truth (ColorChecker spectra, matt lobes).
 //! - [`fit`]: one scan → processing → optimiser → ΔE00 evaluation, and the fit report (JSON).
+//! - [`study`]: the study model (per sample: scan, measured BRDF, one fit per cost function) and
+//!   its loader from a store; what reports, exports and previews are built from.
 //! - [`report`]: study reports: the paper's figures 4–12 and Fig. 13 (PNG, SVG), statistics, HTML/Markdown.
 //! - [`formats`]: exchange formats: CGATS.17, CxF3, CSV, JSON exports; instrument-software imports.
 //! - [`render`]: spectral sphere previews of fitted materials (PNG).
+//! - [`fonts`]: the embedded typeface of every figure and preview.
+//! - [`names`]: file-name slugs of sample names.
 //! - [`safe_fs`]: every file written outside the store: no links followed, never onto the store.
 //!
 //! Command line:
@@ -42,9 +47,11 @@ pub mod config;
 pub mod cost;
 pub mod evaluation;
 pub mod fit;
+pub mod fonts;
 pub mod formats;
 pub mod geometry;
 pub mod model;
+pub mod names;
 pub mod optimise;
 pub mod processing;
 pub mod render;
@@ -56,6 +63,7 @@ pub mod spectral;
 pub mod sra_reading;
 pub mod stats;
 pub mod store;
+pub mod study;
 pub mod sync;
 pub mod synth;
 #[cfg(test)]

@@ -31,11 +31,11 @@ use plotters::prelude::*;
 use crate::colour::srgb::xyz_to_srgb_unclipped;
 use crate::colour::{Xyz, brdf_to_reflectance, reflectance_to_xyz, xyz_to_srgb8};
 use crate::cost::CostFunction;
+use crate::fonts::{font, register_font};
 use crate::geometry::{GEOMETRIES, MA_T12_COUNT, Vec3};
 use crate::model::{FresnelCosine, Params, SpecularGeometry, specular_term};
-use crate::report::SampleStudy;
-use crate::report::figures::{font, register_font};
 use crate::spectral::flat;
+use crate::study::SampleStudy;
 
 /// Direction toward the light in the camera frame: up-left, 45° from the view direction.
 pub const DEFAULT_LIGHT: Vec3 = [-0.5, 0.5, std::f64::consts::FRAC_1_SQRT_2];
@@ -426,8 +426,8 @@ pub fn write_preview(
 pub(crate) mod tests {
     use super::*;
     use crate::model::{self, SpecularGeometry};
-    use crate::report::study::{DoneFit, FitState, FitStudy};
     use crate::spectral::BANDS;
+    use crate::study::{DoneFit, FitState, FitStudy};
 
     fn params() -> Params {
         // A saturated orange with a fairly sharp lobe, so the highlight clips.

@@ -437,7 +437,7 @@ impl Dir {
     /// made elsewhere (by a library writing to a path) and then published with
     /// [`Dir::publish_from`].
     pub fn staging(&self, prefix: &str) -> Result<Dir, FsError> {
-        let name = format!("{prefix}{}", crate::api::access::random_hex(8));
+        let name = format!("{prefix}{}", crate::names::random_hex(8));
         let c = cstr(OsStr::new(&name)).map_err(|e| FsError::io("create", self.at(&name), e))?;
         if unsafe { libc::mkdirat(self.fd.as_raw_fd(), c.as_ptr(), 0o700) } != 0 {
             return Err(FsError::io(
@@ -587,7 +587,7 @@ impl Dir {
             }
             (Some(e), Replace::OwnKind) => {
                 self.replaceable(name, &e)?;
-                let tmp = format!(".{name}.brdfd-{}", crate::api::access::random_hex(6));
+                let tmp = format!(".{name}.brdfd-{}", crate::names::random_hex(6));
                 let mut f = self.create_new(&tmp, 0o644)?;
                 let written = f.write_all(bytes).and_then(|()| f.sync_all());
                 drop(f);

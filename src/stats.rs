@@ -5,7 +5,12 @@
 //! The t quantile is `statrs`'s (`StudentsT::inverse_cdf`, no default features, so no
 //! nalgebra or rand); the tests pin it to textbook values. The binomial tail of the sign test is
 //! summed exactly here: it is a short loop and the checks in SCIENCE.md §8 need 10 digits.
+//!
+//! [`standard_normal`] is the one normal draw the synthetic scans' noise and the bootstrap's
+//! resampling share, so both stay reproducible from their seeds.
 
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
@@ -136,6 +141,13 @@ pub fn sign_test(a: &[f64], b: &[f64]) -> SignTest {
         ties,
         p,
     }
+}
+
+/// One standard normal draw by the Box–Muller transform (keeps the crate free of rand_distr).
+pub(crate) fn standard_normal(rng: &mut ChaCha8Rng) -> f64 {
+    let u1 = 1.0 - rng.random::<f64>(); // (0, 1]: ln is finite
+    let u2 = rng.random::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
 #[cfg(test)]

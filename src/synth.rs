@@ -23,7 +23,7 @@
 use std::f64::consts::PI;
 use std::sync::LazyLock;
 
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -151,25 +151,9 @@ pub fn flatten_sra(brdf: &mut [Spectrum; GEOMETRY_COUNT]) {
     }
 }
 
-/// One standard normal draw by the Box–Muller transform (keeps the crate free of rand_distr).
-pub(crate) fn standard_normal(rng: &mut ChaCha8Rng) -> f64 {
-    let u1 = 1.0 - rng.random::<f64>(); // (0, 1]: ln is finite
-    let u2 = rng.random::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
-}
-
-/// A file-system friendly name: "T.Freesia pink" → "t-freesia-pink".
-pub fn slug(sample: &str) -> String {
-    let mut out = String::new();
-    for c in sample.chars() {
-        if c.is_ascii_alphanumeric() {
-            out.push(c.to_ascii_lowercase());
-        } else if !out.ends_with('-') && !out.is_empty() {
-            out.push('-');
-        }
-    }
-    out.trim_end_matches('-').to_string()
-}
+/// The file-name slug lives in [`crate::names`]; re-exported here for the callers that name
+/// synthetic scans' files.
+pub use crate::names::slug;
 
 /// Eight matt samples named like the paper's. The paper names three ("T.Freesia pink",
 /// "T.Prairie green", "T.Manzana green"); the other five names are made up in the same style.
@@ -331,7 +315,7 @@ impl Noise {
             return 1.0;
         }
         loop {
-            let f = 1.0 + self.sigma * standard_normal(&mut self.rng);
+            let f = 1.0 + self.sigma * crate::stats::standard_normal(&mut self.rng);
             if f > 0.0 {
                 return f;
             }
@@ -439,12 +423,6 @@ mod tests {
         slugs.dedup();
         assert_eq!(slugs.len(), 8);
         assert!(samples.iter().any(|s| s.sample == "T.Prairie green"));
-    }
-
-    #[test]
-    fn slugs() {
-        assert_eq!(slug("T.Freesia pink"), "t-freesia-pink");
-        assert_eq!(slug("  A--b__c "), "a-b-c");
     }
 
     #[test]

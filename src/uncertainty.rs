@@ -335,7 +335,7 @@ fn factor(sigma: f64, rng: &mut ChaCha8Rng) -> f64 {
         return 1.0;
     }
     loop {
-        let f = 1.0 + sigma * crate::synth::standard_normal(rng);
+        let f = 1.0 + sigma * crate::stats::standard_normal(rng);
         if f > 0.0 {
             return f;
         }

@@ -189,12 +189,8 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
-/// `n` random bytes as hex (names of temporary files).
-pub fn random_hex(n: usize) -> String {
-    let mut bytes = vec![0u8; n];
-    rand::rng().fill_bytes(&mut bytes);
-    hex::encode(&bytes)
-}
+/// Random hex names live in [`crate::names`] (the files brdfd writes use them too).
+pub use crate::names::random_hex;
 
 /// The web page's session cookie.
 pub const SESSION_COOKIE: &str = "brdfd_session";

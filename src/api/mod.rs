@@ -607,10 +607,10 @@ async fn fit_preview(State(s): State<Service>, Path(id): Path<String>) -> Respon
         Ok(d) => d.run,
         Err(e) => return ApiError::from(e).into_response(),
     };
-    let selection = crate::report::load::Selection::Scans(vec![run.scan]);
-    let study = match crate::report::load::from_store(s.store(), &selection).await {
+    let selection = crate::study::load::Selection::Scans(vec![run.scan]);
+    let study = match crate::study::load::from_store(s.store(), &selection).await {
         Ok(study) => study,
-        Err(crate::report::load::LoadError::Store(e)) => return ApiError::from(e).into_response(),
+        Err(crate::study::load::LoadError::Store(e)) => return ApiError::from(e).into_response(),
         Err(e) => return refuse(StatusCode::CONFLICT, e.to_string()),
     };
     let cost = run.cost_function;
@@ -621,15 +621,15 @@ async fn fit_preview(State(s): State<Service>, Path(id): Path<String>) -> Respon
             .next()
             .ok_or("the scan has no study")?;
         // The study holds the latest finished fit per cost function; draw this one.
-        let state = crate::report::load::fit_state(run.scan, &run, &sample.measured)
+        let state = crate::study::load::fit_state(run.scan, &run, &sample.measured)
             .map_err(|e| e.to_string())?;
-        if !matches!(state, crate::report::FitState::Done(_)) {
+        if !matches!(state, crate::study::FitState::Done(_)) {
             return Err(format!(
                 "fit {fit} is {}, not done: it has no material to draw yet",
                 run.status
             ));
         }
-        sample.fits = vec![crate::report::FitStudy {
+        sample.fits = vec![crate::study::FitStudy {
             cost,
             method: run.method.clone(),
             state,

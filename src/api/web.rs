@@ -38,9 +38,9 @@ use serde::Deserialize;
 use super::access::{self, Access, SESSION_LIFETIME, Sessions, TICKET_LIFETIME};
 use super::{ApiError, ErrorBody, parse_id};
 use crate::formats::{self, ExportOptions, Format};
-use crate::report::load::{LoadError, Selection};
 use crate::service::{Service, ServiceError};
 use crate::store::ScanId;
+use crate::study::load::{LoadError, Selection};
 use crate::wire::{
     self, Bench, BenchFit, BenchKind, BenchOperation, BenchReading, FittedSwatches, Swatch,
     Swatches,
@@ -278,11 +278,11 @@ async fn export_format(
         Ok(f) => f,
         Err(e) => return ApiError(ServiceError::BadRequest(e)).into_response(),
     };
-    let study =
-        match crate::report::load::from_store(s.store(), &Selection::Scans(vec![scan])).await {
-            Ok(study) => study,
-            Err(e) => return load_refusal(e),
-        };
+    let study = match crate::study::load::from_store(s.store(), &Selection::Scans(vec![scan])).await
+    {
+        Ok(study) => study,
+        Err(e) => return load_refusal(e),
+    };
     match formats::export(&study, format, &ExportOptions::default()) {
         Ok(text) => {
             let content_type = match format {
@@ -323,11 +323,11 @@ async fn swatches(State(s): State<Service>, Path(id): Path<String>) -> Response 
         Ok(s) => s,
         Err(e) => return e.into_response(),
     };
-    let study =
-        match crate::report::load::from_store(s.store(), &Selection::Scans(vec![scan])).await {
-            Ok(study) => study,
-            Err(e) => return load_refusal(e),
-        };
+    let study = match crate::study::load::from_store(s.store(), &Selection::Scans(vec![scan])).await
+    {
+        Ok(study) => study,
+        Err(e) => return load_refusal(e),
+    };
     let Some(sample) = study.samples.into_iter().next() else {
         return ApiError(ServiceError::BadRequest(format!(
             "scan {scan} has no study"
@@ -506,7 +506,7 @@ async fn report_html(
             ids.len()
         ));
     }
-    let study = match crate::report::load::from_store(s.store(), &Selection::Scans(ids)).await {
+    let study = match crate::study::load::from_store(s.store(), &Selection::Scans(ids)).await {
         Ok(study) => study,
         Err(e) => return load_refusal(e),
     };

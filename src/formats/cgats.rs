@@ -18,8 +18,8 @@ use std::fmt::Write as _;
 
 use super::table::Table;
 use super::{ExportOptions, FormatError, rows};
-use crate::report::study::Study;
 use crate::spectral::wavelengths_nm;
+use crate::study::Study;
 
 /// Fields that are not CGATS.17 standard ones and so are declared with `KEYWORD`: the row's
 /// kind, reference, fit and geometry, then the sample's provenance

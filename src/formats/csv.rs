@@ -11,8 +11,8 @@
 
 use super::table::Table;
 use super::{FormatError, PROVENANCE_FIELDS, rows};
-use crate::report::study::Study;
 use crate::spectral::wavelengths_nm;
+use crate::study::Study;
 
 /// The column names, in order.
 pub fn header() -> Vec<String> {

@@ -31,8 +31,8 @@ use super::{
     device_spectrum, geometry_named, parse_number, reflectance,
 };
 use crate::geometry::{Device, GEOMETRIES, Geometry};
-use crate::report::study::Study;
 use crate::spectral::{BANDS, FIRST_NM, STEP_NM, Spectrum, wavelengths_nm};
+use crate::study::Study;
 
 /// The CxF3 core namespace.
 pub const NAMESPACE: &str = "http://colorexchangeformat.com/CxF3-core";

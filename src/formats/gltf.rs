@@ -20,7 +20,7 @@ use std::fmt::Write as _;
 use serde_json::json;
 
 use crate::colour::{brdf_to_reflectance, reflectance_to_xyz};
-use crate::report::{DoneFit, SampleStudy, Study};
+use crate::study::{DoneFit, SampleStudy, Study};
 
 use super::{ExportOptions, FormatError};
 
@@ -253,7 +253,7 @@ pub fn files(study: &Study, opts: &ExportOptions) -> Result<Vec<(String, Vec<u8>
     for s in &study.samples {
         for f in &s.fits {
             if let Some(d) = f.done() {
-                let name = format!("{}-{}.gltf", crate::synth::slug(&s.name), f.cost);
+                let name = format!("{}-{}.gltf", crate::names::slug(&s.name), f.cost);
                 let doc = document(s, f.cost, &f.method, d, opts);
                 let text =
                     serde_json::to_vec_pretty(&doc).map_err(|e| FormatError::Unwritable {
@@ -321,7 +321,7 @@ mod tests {
         let doc = document(&s, crate::cost::CostFunction::Cf1, "separable", &d, &opts);
         assert_eq!(doc["asset"]["extras"]["brdfd"]["simulated"], false);
         assert!(doc["asset"]["extras"]["brdfd"]["provenance"].is_null());
-        s.origin = Some(crate::report::Origin {
+        s.origin = Some(crate::study::Origin {
             station: None,
             measured_at_ms: 0,
             provenance: crate::store::Provenance {

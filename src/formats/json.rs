@@ -13,9 +13,9 @@ use serde::ser::Serializer;
 
 use super::{ExportOptions, FormatError, reflectance};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
-use crate::report::study::{FitState, Study};
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
+use crate::study::{FitState, Study};
 
 /// The format tag of the study document.
 pub const FORMAT: &str = "brdfd.study/1";

@@ -37,8 +37,8 @@ use std::fmt::Write as _;
 
 use crate::model::FresnelCosine;
 use crate::render::{AMBIENT, DEFAULT_LIGHT, SPHERE_PX};
-use crate::report::{DoneFit, SampleStudy};
 use crate::spectral::wavelengths_nm;
+use crate::study::{DoneFit, SampleStudy};
 
 use super::{ExportOptions, FormatError};
 
@@ -195,14 +195,14 @@ pub fn scene(
 
 /// Every finished fit of the study as `(file name, scene)`: `<sample>-<cost>.xml`.
 pub fn scenes(
-    study: &crate::report::Study,
+    study: &crate::study::Study,
     opts: &ExportOptions,
 ) -> Result<Vec<(String, String)>, FormatError> {
     let mut out = Vec::new();
     for s in &study.samples {
         for f in &s.fits {
             if let Some(d) = f.done() {
-                let name = format!("{}-{}.xml", crate::synth::slug(&s.name), f.cost);
+                let name = format!("{}-{}.xml", crate::names::slug(&s.name), f.cost);
                 out.push((name, scene(s, f.cost, &f.method, d, opts)?));
             }
         }
@@ -258,7 +258,7 @@ mod tests {
         assert!(xml.contains("Readings: provenance not recorded"));
         // A simulated scan's scene says so, with the recording that answered.
         let mut simulated = s.clone();
-        simulated.origin = Some(crate::report::Origin {
+        simulated.origin = Some(crate::study::Origin {
             station: None,
             measured_at_ms: 0,
             provenance: crate::store::Provenance {
@@ -299,7 +299,7 @@ mod tests {
         assert!(xml.contains("Fresnel exact"));
         assert!(xml.contains("so Mitsuba's BSDF is brdfd's model"));
         let names: Vec<String> = scenes(
-            &crate::report::Study {
+            &crate::study::Study {
                 samples: vec![s.clone()],
             },
             &ExportOptions::default(),

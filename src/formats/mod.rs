@@ -54,10 +54,10 @@ use std::str::FromStr;
 
 use crate::cost::CostFunction;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, MA_T12_COUNT};
-use crate::report::study::{DoneFit, SampleStudy, Study};
 use crate::scan::{DeviceReadings, Origin, OriginInstrument, Reference, Scan, ScanError};
 use crate::spectral::{BANDS, Spectrum};
 use crate::store::Provenance;
+use crate::study::{DoneFit, SampleStudy, Study};
 
 /// The reference tile's name when an instrument file does not say.
 pub const DEFAULT_REFERENCE: &str = "Munsell N9";
@@ -887,7 +887,7 @@ pub fn rfc3339_utc(secs: i64) -> String {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::report::study::tests::study_from_truth;
+    use crate::study::tests::study_from_truth;
 
     /// Options with a fixed time, so exports are reproducible.
     pub(crate) fn fixed() -> ExportOptions {
@@ -904,8 +904,8 @@ pub(crate) mod tests {
     /// [`study`] as loaded from a store: scan ids 11, 12, 13, measured by one real MA-T12
     /// (serial MT-7) and a simulated SRA, on station "bench-2".
     pub(crate) fn stored_study() -> Study {
-        use crate::report::study::Origin;
         use crate::store::{InstrumentProvenance, Source};
+        use crate::study::Origin;
         let mut s = study();
         for (i, sample) in s.samples.iter_mut().enumerate() {
             sample.scan_id = Some(11 + i as i64);
@@ -997,7 +997,7 @@ pub(crate) mod tests {
     /// The test study with made-up intervals on its first fit: kd ± 10 %.
     fn study_with_intervals() -> Study {
         let mut study = study();
-        let crate::report::study::FitState::Done(d) = &mut study.samples[0].fits[0].state else {
+        let crate::study::FitState::Done(d) = &mut study.samples[0].fits[0].state else {
             panic!("the first fit is done");
         };
         let p = d.params;
@@ -1094,8 +1094,8 @@ pub(crate) mod proptests {
     use std::sync::LazyLock;
 
     use super::*;
-    use crate::report::study::tests::study_from_truth;
     use crate::scan::proptests::assert_names_a_problem;
+    use crate::study::tests::study_from_truth;
     use proptest::prelude::*;
 
     /// A two-sample study (the second with a failed fit) exported in every format, made once:

@@ -18,8 +18,8 @@
 //! of [`super::PROVENANCE_FIELDS`].
 
 use super::{FormatError, device_spectrum, provenance_values, reflectance};
-use crate::report::study::{FitState, Study};
 use crate::spectral::wavelengths_nm;
+use crate::study::{FitState, Study};
 
 /// The two files: (file name, contents).
 pub fn files(study: &Study) -> Result<Vec<(String, String)>, FormatError> {

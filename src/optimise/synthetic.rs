@@ -100,11 +100,11 @@ pub fn with_noise(measured: &MeasuredBrdf, relative_sigma: f64, seed: u64) -> Me
         match GEOMETRIES[g].device {
             Device::MaT12 => {
                 for x in out.values[g].iter_mut() {
-                    *x *= 1.0 + relative_sigma * crate::synth::standard_normal(&mut rng);
+                    *x *= 1.0 + relative_sigma * crate::stats::standard_normal(&mut rng);
                 }
             }
             Device::Sra => {
-                let f = 1.0 + relative_sigma * crate::synth::standard_normal(&mut rng);
+                let f = 1.0 + relative_sigma * crate::stats::standard_normal(&mut rng);
                 for x in out.values[g].iter_mut() {
                     *x *= f;
                 }

@@ -22,7 +22,7 @@ use crate::cost::CostFunction;
 use crate::evaluation::Evaluation;
 use crate::stats::{MeanCi, SignTest, mean_ci95, sign_test};
 
-use super::study::{DoneFit, SampleStudy, Study};
+use crate::study::{DoneFit, SampleStudy, Study};
 
 /// A sample left out of the comparison, and why.
 #[derive(Debug, Clone, PartialEq)]
@@ -282,8 +282,8 @@ pub fn format_p(p: f64) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::super::study::tests::study_from_truth;
     use super::*;
+    use crate::study::tests::study_from_truth;
 
     #[test]
     fn a_sample_failed_under_one_cost_function_is_left_out_of_all() {
@@ -313,7 +313,7 @@ mod tests {
     /// samples' geometries.
     #[test]
     fn a_recording_replayed_twice_counts_once() {
-        let study = super::super::study::tests::replayed_twice(8);
+        let study = crate::study::tests::replayed_twice(8);
         assert_eq!(study.samples.len(), 16);
         let a = Analysis::of(&study);
         assert_eq!(a.included, (8..16).collect::<Vec<_>>());

@@ -7,7 +7,6 @@
 //! names the method and cost function(s); axes say their quantity and unit.
 
 use std::path::{Path, PathBuf};
-use std::sync::Once;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -21,19 +20,8 @@ use crate::spectral::{Spectrum, wavelengths_nm};
 
 use super::ReportError;
 use super::analysis::Analysis;
-use super::study::{SampleStudy, Study, simulated_statement};
-
-static FONT: &[u8] = include_bytes!("fonts/DejaVuSans.ttf");
-const FAMILY: &str = "sans-serif";
-
-pub(crate) fn register_font() {
-    static ONCE: Once = Once::new();
-    ONCE.call_once(|| {
-        if plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_err() {
-            panic!("the embedded DejaVu Sans does not load");
-        }
-    });
-}
+use crate::fonts::{font, register_font};
+use crate::study::{SampleStudy, Study, simulated_statement};
 
 /// Okabe & Ito (2008) colour-blind-safe palette, black first.
 const PALETTE: [RGBColor; 8] = [
@@ -214,10 +202,6 @@ fn sample_styles(study: &Study) -> Vec<(String, SampleStyle)> {
 }
 
 type DrawResult<DB> = Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
-
-pub(crate) fn font(size: u32) -> TextStyle<'static> {
-    (FAMILY, size).into_font().color(&BLACK)
-}
 
 /// One figure of the report.
 #[derive(Debug, Clone, PartialEq)]
@@ -428,7 +412,7 @@ fn figure_list(study: &Study) -> Vec<Figure> {
             " Error bars: the 95 % bootstrap intervals of the estimates.".to_string()
         };
         out.push(Figure {
-            stem: format!("fig08-spectra-{}", crate::synth::slug(&s.name)),
+            stem: format!("fig08-spectra-{}", crate::names::slug(&s.name)),
             caption: format!(
                 "Fig. 8 ({}). Measured (black) and estimated reflectance factor R = π·f against wavelength at each of the 14 geometries for sample \"{}\"; estimates per cost function ({cost_list}), method {method}, drawn widest first so that estimates which coincide show as nested lines.{bars}",
                 s.name, s.name
@@ -1688,6 +1672,7 @@ fn specular_delta_l_points<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fonts::FONT;
 
     /// `text` drawn in the report's font at `size` px, black on white, as coverage (0–255 of
     /// ink) per pixel, `w` × `h`.
@@ -1765,7 +1750,7 @@ mod tests {
         }
     }
 
-    use crate::report::study::tests::study_from_truth;
+    use crate::study::tests::study_from_truth;
 
     /// One element of an SVG figure: its tag and attributes, and its text for `<text>`.
     #[derive(Debug)]

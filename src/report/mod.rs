@@ -1,26 +1,27 @@
 //! Study reports: the paper's figures 4–12, Fig. 13 (where the model misses) and the statistics (SCIENCE.md §8–9), built from an
 //! in-memory [`Study`] so that everything is testable without a database.
 //!
-//! - [`study`]: the study model (samples, measured BRDF, fits per cost function).
 //! - [`analysis`]: which samples take part, mean ΔE00 with 95 % CI, sign tests.
 //! - [`figures`]: figures 4–13 as PNG and SVG (plotters, embedded DejaVu Sans).
 //! - [`summary`]: the summary page in Markdown and HTML.
-//! - [`load`]: builds a study from the store.
+//!
+//! The study model and its loader live in [`crate::study`] (the exports and previews use them
+//! too); they are re-exported here as `report::study` and `report::load`.
 //!
 //! [`write_report`] writes all of it into one directory, showing progress on stderr.
 
 pub mod analysis;
 pub mod figures;
-pub mod load;
-pub mod study;
 pub mod summary;
+
+pub use crate::study::{self, load};
 
 use std::path::{Path, PathBuf};
 
 use crate::cost::CostFunction;
 
+pub use crate::study::{DoneFit, FitState, FitStudy, Origin, SampleStudy, Study};
 pub use analysis::Analysis;
-pub use study::{DoneFit, FitState, FitStudy, Origin, SampleStudy, Study};
 
 /// Why a report could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -240,7 +241,7 @@ fn draw_report(
         if !CostFunction::ALL.iter().any(|c| s.done(*c).is_some()) {
             continue;
         }
-        let name = format!("preview-{}.png", crate::synth::slug(&s.name));
+        let name = format!("preview-{}.png", crate::names::slug(&s.name));
         let path = dir.join(&name);
         progress(&name, figs.len(), total);
         crate::render::write_preview(s, &CostFunction::ALL, &path).map_err(|e| {
@@ -313,8 +314,8 @@ fn html_escape(s: &str) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::study::tests::study_from_truth;
     use super::*;
+    use crate::study::tests::study_from_truth;
 
     #[test]
     fn a_report_writes_every_figure_and_both_summaries() {
@@ -400,7 +401,7 @@ mod tests {
             !dir.path()
                 .join(format!(
                     "fig08-spectra-{}.png",
-                    crate::synth::slug(&study.samples[2].name)
+                    crate::names::slug(&study.samples[2].name)
                 ))
                 .exists()
         );
@@ -412,7 +413,7 @@ mod tests {
     /// why.
     #[test]
     fn a_report_of_replayed_scans_says_so_and_counts_each_recording_once() {
-        let study = study::tests::replayed_twice(3);
+        let study = crate::study::tests::replayed_twice(3);
         let dir = tempfile::tempdir().unwrap();
         let files = write_report(&study, dir.path(), &mut |_, _, _| {}).unwrap();
         let md = std::fs::read_to_string(&files.markdown).unwrap();

@@ -8,7 +8,7 @@ use crate::stats::MeanCi;
 
 use super::analysis::{Analysis, SignRow, format_p};
 use super::figures::Figure;
-use super::study::{DoneFit, FitState, FitStudy, Study, simulated_statement};
+use crate::study::{DoneFit, FitState, FitStudy, Study, simulated_statement};
 
 /// The columns of the sign-test tables (Table 3 on ΔE00, Table 8 on |ΔL*|).
 const SIGN_TEST_HEAD: [&str; 7] = ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"];

@@ -19,7 +19,7 @@ use crate::store::{
     FitRun, FitStatus, Processed, ScanDetail, ScanFilter, ScanId, ScanState, Store, StoreError,
 };
 
-use super::study::{DoneFit, FitState, FitStudy, Origin, SampleStudy, Study};
+use super::{DoneFit, FitState, FitStudy, Origin, SampleStudy, Study};
 
 /// Which scans a report covers.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -1,11 +1,14 @@
-//! The study model a report and the exchange-format exports are built from: per sample, the
-//! scan, its measured BRDF and one fit per cost function (done, failed or unfinished).
+//! The study model a report, the exchange-format exports and the sphere previews are built
+//! from: per sample, the scan, its measured BRDF and one fit per cost function (done, failed or
+//! unfinished).
 //!
 //! It is plain data with no I/O, so the figures, the statistics and the exports are tested on
-//! studies built in memory ([`Study::from_fit_reports`]); [`super::load`] builds one from the
-//! store. The estimated BRDF of a fit is always the model evaluated at the fit's parameters
+//! studies built in memory ([`Study::from_fit_reports`]); [`load`] builds one from the store
+//! or the lab's central database. The estimated BRDF of a fit is always the model evaluated at the fit's parameters
 //! (with the Fresnel cosine it was fitted with), and its evaluation is recomputed from measured
 //! and estimated, so the three can never disagree.
+
+pub mod load;
 
 use crate::colour::Colorimetry;
 use crate::cost::CostFunction;
@@ -489,7 +492,7 @@ pub(crate) mod tests {
         let recordings: Vec<String> = once
             .samples
             .iter()
-            .map(|s| format!("synthetic-{} ({})", crate::synth::slug(&s.name), s.name))
+            .map(|s| format!("synthetic-{} ({})", crate::names::slug(&s.name), s.name))
             .collect();
         let refs: Vec<&str> = recordings.iter().map(String::as_str).collect();
         let mut samples = Vec::new();

@@ -1,0 +1,151 @@
+//! `[ingest]`: the watch folder for instrument-software exports and scan files
+//! (src/service/ingest.rs).
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use serde::Deserialize;
+
+use super::check::{Checker, ConfigError, S, bounded_count};
+
+/// `[ingest]`: the watch folder (src/service/ingest.rs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IngestConfig {
+    /// The folder watched for instrument-software exports and scan files; `None`: no folder.
+    pub watch: Option<PathBuf>,
+    /// A file is imported once its size and modification time stayed the same this long.
+    pub settle: Duration,
+    /// How often the folder is listed.
+    pub poll: Duration,
+    /// How long an MA-T12 export waits for its SRA CSV (and an SRA CSV for its export) before
+    /// it is imported alone (or, for an SRA CSV, rejected).
+    pub pair_wait: Duration,
+    /// In an instrument's export, the object with this name is the white reference tile.
+    pub reference: String,
+    /// The largest file read, in bytes (`max_file_mib`); a larger one goes to `failed/`
+    /// unread.
+    pub max_file_bytes: u64,
+}
+
+impl Default for IngestConfig {
+    fn default() -> Self {
+        IngestConfig {
+            watch: None,
+            settle: Duration::from_millis(defaults::INGEST_SETTLE_MS),
+            poll: Duration::from_millis(defaults::INGEST_POLL_MS),
+            pair_wait: Duration::from_millis(defaults::INGEST_PAIR_WAIT_MS),
+            reference: crate::formats::DEFAULT_REFERENCE.to_string(),
+            max_file_bytes: defaults::INGEST_MAX_FILE_MIB << 20,
+        }
+    }
+}
+
+/// Defaults of this section, shared by its `Default` and its checks (and written out in
+/// `SHIPPED`).
+mod defaults {
+    pub const INGEST_SETTLE_MS: u64 = 2_000;
+    pub const INGEST_POLL_MS: u64 = 1_000;
+    pub const INGEST_PAIR_WAIT_MS: u64 = 60_000;
+    /// An export of a whole session is a few MiB at most.
+    pub const INGEST_MAX_FILE_MIB: u64 = 32;
+}
+
+// ---- Stage 1: the section's shape ----------------------------------------------------------
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawIngest {
+    watch: S<String>,
+    settle_ms: S<u64>,
+    poll_ms: S<u64>,
+    pair_wait_ms: S<u64>,
+    reference: S<String>,
+    max_file_mib: S<u64>,
+}
+
+// ---- Stage 2: its checks ------------------------------------------------------------------
+
+impl Checker<'_> {
+    /// `[ingest]`
+    pub(super) fn ingest(&self, raw: &RawIngest) -> Result<IngestConfig, ConfigError> {
+        let ms_in = |lo: u64, hi: u64| {
+            move |ms: u64| {
+                if (lo..=hi).contains(&ms) {
+                    Ok(Duration::from_millis(ms))
+                } else {
+                    Err(format!("{ms} is out of range: {lo} to {hi} ms"))
+                }
+            }
+        };
+        Ok(IngestConfig {
+            watch: self.path("ingest.watch", &raw.watch)?,
+            settle: self.value(
+                "ingest.settle_ms",
+                &raw.settle_ms,
+                defaults::INGEST_SETTLE_MS,
+                ms_in(10, 3_600_000),
+            )?,
+            poll: self.value(
+                "ingest.poll_ms",
+                &raw.poll_ms,
+                defaults::INGEST_POLL_MS,
+                ms_in(10, 60_000),
+            )?,
+            pair_wait: self.value(
+                "ingest.pair_wait_ms",
+                &raw.pair_wait_ms,
+                defaults::INGEST_PAIR_WAIT_MS,
+                ms_in(0, 86_400_000),
+            )?,
+            reference: self.value(
+                "ingest.reference",
+                &raw.reference,
+                crate::formats::DEFAULT_REFERENCE.to_string(),
+                |r| {
+                    if r.trim().is_empty() {
+                        Err("must name the reference tile, e.g. \"Munsell N9\"".into())
+                    } else {
+                        Ok(r)
+                    }
+                },
+            )?,
+            max_file_bytes: self.value(
+                "ingest.max_file_mib",
+                &raw.max_file_mib,
+                defaults::INGEST_MAX_FILE_MIB,
+                |n| bounded_count(n, 1, 1024).map(|n| (n as u64) << 20),
+            )?,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::tests::parse;
+    use crate::config::*;
+
+    #[test]
+    fn ingest_settings() {
+        let d = Config::default().ingest;
+        assert_eq!(d.watch, None);
+        assert_eq!(d.settle, Duration::from_secs(2));
+        let c = parse(
+            "[ingest]\nwatch = \"/srv/inbox\"\nsettle_ms = 50\npoll_ms = 20\npair_wait_ms = 0\n\
+             reference = \"N9 tile\"\n",
+        )
+        .unwrap();
+        assert_eq!(c.ingest.watch, Some(PathBuf::from("/srv/inbox")));
+        assert_eq!(c.ingest.settle, Duration::from_millis(50));
+        assert_eq!(c.ingest.poll, Duration::from_millis(20));
+        assert_eq!(c.ingest.pair_wait, Duration::ZERO);
+        assert_eq!(c.ingest.reference, "N9 tile");
+        let e = parse("[ingest]\nsettle_ms = 5\n").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "test.toml:2: ingest.settle_ms: 5 is out of range: 10 to 3600000 ms"
+        );
+        let e = parse("[ingest]\nwatch = \"\"\n").unwrap_err().to_string();
+        assert!(e.contains("ingest.watch: must not be empty"), "{e}");
+    }
+}
