@@ -364,9 +364,9 @@ mod defaults {
     pub const REFERENCE_MAX_AGE_HOURS: f64 = 24.0;
     pub const SEED: u64 = 1;
     pub const BOOTSTRAP: u32 = 200;
-    /// The paper's flat SRA model; the measured coverage favours `luminance` (SCIENCE.md §10),
-    /// which a lab sets in `[fit] sra`.
-    pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::Flat;
+    /// The luminance SRA model for measured scans (SCIENCE.md §10); `brdfd demo` asks for the
+    /// paper's flat one.
+    pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::Luminance;
     pub const LEVEL: &str = "info";
     pub const SYNC_BATCH: u64 = 500;
     pub const INGEST_SETTLE_MS: u64 = 2_000;
@@ -1896,7 +1896,7 @@ mod tests {
     #[test]
     fn sra_setting() {
         use crate::sra_reading::SraModel;
-        assert_eq!(parse("").unwrap().fit.sra, SraModel::Flat);
+        assert_eq!(parse("").unwrap().fit.sra, SraModel::Luminance);
         let c = parse("[fit]\nsra = \"flat\"\n").unwrap();
         assert_eq!(c.fit.sra, SraModel::Flat);
         let e = parse("[fit]\nsra = \"grey\"\n").unwrap_err().to_string();

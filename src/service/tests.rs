@@ -149,10 +149,11 @@ fn settings_follow_the_configuration() {
         (f.cost, f.method, f.seed),
         (CostFunction::Cf1, Method::Paper, 4)
     );
-    assert_eq!(f.sra, crate::sra_reading::SraReading::FLAT);
-    config.fit.sra = crate::sra_reading::SraModel::Luminance;
-    let f = ServiceSettings::from_config(&config).fit_settings(CostFunction::Cf1, Method::Paper, 4);
+    // Measured scans are fitted under the luminance SRA model unless `[fit] sra` says "flat".
     assert_eq!(f.sra, crate::sra_reading::SraReading::LUMINANCE);
+    config.fit.sra = crate::sra_reading::SraModel::Flat;
+    let f = ServiceSettings::from_config(&config).fit_settings(CostFunction::Cf1, Method::Paper, 4);
+    assert_eq!(f.sra, crate::sra_reading::SraReading::FLAT);
 }
 
 /// A refit may ask for the luminance SRA model (`POST /scans/{id}/refit` `{"sra": …}`): the fit
