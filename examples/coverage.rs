@@ -25,6 +25,8 @@ use std::time::Instant;
 use brdfd::cost::CostFunction;
 use brdfd::fit::{FitRequest, fit_scan};
 use brdfd::optimise::Settings;
+use brdfd::processing::{ProcessingOptions, process};
+use brdfd::scan::Scan;
 use brdfd::spectral::BANDS;
 use brdfd::sra_reading::{SraModel, SraReading};
 use brdfd::synth::{SraResponse, SynthOptions, paper_samples, synth_scan};
@@ -41,6 +43,19 @@ fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
+/// `scan` as an MA-T12-only scan: its 12 processed spectra (the readings' noise included) as
+/// the instrument's own reflectance factors, no reference tile, no SRA readings.
+fn ma_t12_only(scan: &Scan) -> Scan {
+    let m = process(scan, &ProcessingOptions::default()).expect("processing");
+    let mut out = scan.clone();
+    out.reference = None;
+    out.readings.sra = None;
+    for (g, values) in out.readings.ma_t12.iter_mut().enumerate() {
+        *values = m.values[g].map(|f| f * std::f64::consts::PI);
+    }
+    out
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let trials: u64 = arg(&args, "--trials", 200);
@@ -54,6 +69,7 @@ fn main() {
         SraModel::Luminance => SraResponse::Luminance,
     };
     let response: SraResponse = arg(&args, "--sra-response", matched);
+    let no_sra = args.iter().any(|a| a == "--no-sra");
     let costs: String = arg(&args, "--costs", "cf1,cf2,m2".to_string());
     let costs: Vec<CostFunction> = costs
         .split(',')
@@ -65,8 +81,12 @@ fn main() {
     let se = (0.95 * 0.05 / trials as f64).sqrt();
     println!(
         "coverage of the 95 % bootstrap intervals: {trials} trials (the 8 example samples in turn), \
-         noise σ = {noise} per reading, {resamples} resamples, SRA model {sra}, simulated SRA reads \
-         the {response}; sampling error of a coverage near 95 %: ±{:.1} % (1 s.e.)",
+         noise σ = {noise} per reading, {resamples} resamples, {}; sampling error of a coverage near 95 %: ±{:.1} % (1 s.e.)",
+        if no_sra {
+            "MA-T12-only scans (12 geometries, no SRA readings)".to_string()
+        } else {
+            format!("SRA model {sra}, simulated SRA reads the {response}")
+        },
         100.0 * se
     );
     println!(
@@ -91,6 +111,7 @@ fn main() {
                 },
             )
             .expect("synthetic scan");
+            let scan = if no_sra { ma_t12_only(&scan) } else { scan };
             let request = FitRequest {
                 settings: Settings {
                     cost: cf,

@@ -106,12 +106,14 @@ fn unrated() -> Option<String> {
 }
 
 /// The measured coverage of the 95 % intervals (per cent of trials whose interval holds the
-/// truth) for one cost function and SRA reading model, from `examples/coverage.rs` (the
-/// command is in [`CALIBRATION`]): ks, α, μ, and the lowest over the 31 kd bands.
+/// truth) for one cost function on one kind of scan, from `examples/coverage.rs` (the commands
+/// are in [`CALIBRATION`]): ks, α, μ, and the lowest over the 31 kd bands.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Coverage {
     pub cost: CostFunction,
-    pub sra: SraModel,
+    /// The SRA reading model; `None`: scans without SRA readings (the 12 MA-T12 geometries),
+    /// where no SRA model enters the cost.
+    pub sra: Option<SraModel>,
     /// Synthetic trials measured.
     pub trials: u32,
     pub ks: f64,
@@ -127,6 +129,14 @@ impl Coverage {
             .iter()
             .all(|c| *c >= CALIBRATED_AT)
     }
+
+    /// "with the luminance SRA model" or "on scans without SRA readings".
+    fn scans(&self) -> String {
+        match self.sra {
+            Some(m) => format!("with the {m} SRA model"),
+            None => "on scans without SRA readings".into(),
+        }
+    }
 }
 
 /// The coverage (per cent) every parameter must reach for intervals to count as calibrated 95 %
@@ -135,7 +145,7 @@ pub const CALIBRATED_AT: f64 = 90.0;
 
 const fn row(
     cost: CostFunction,
-    sra: SraModel,
+    sra: Option<SraModel>,
     trials: u32,
     [ks, alpha, ior, kd_lowest]: [f64; 4],
 ) -> Coverage {
@@ -150,53 +160,36 @@ const fn row(
     }
 }
 
-/// Measured coverage per cost function and SRA reading model: `cargo run --release --example
-/// coverage -- --resamples 100 --sra luminance` (200 trials) and `-- --trials 96 --resamples
-/// 100 --sra flat` (1 % noise per reading, the paper's Fresnel; the simulated SRA reads what
-/// the model assumes: the luminance, or the band mean). SCIENCE.md §12.3 quotes the
-/// same runs.
+const LUMINANCE: Option<SraModel> = Some(SraModel::Luminance);
+const FLAT: Option<SraModel> = Some(SraModel::Flat);
+
+/// Measured coverage per cost function and kind of scan, 1 % noise per reading, the paper's
+/// Fresnel, 100 resamples: `cargo run --release --example coverage -- --resamples 100 --sra
+/// luminance` (200 trials; the simulated SRA reads the luminance) and `-- --trials 96
+/// --resamples 100 --sra flat` (the simulated SRA reads the band mean, what the flat model
+/// assumes). SCIENCE.md §12.3 quotes the same runs. Scans without SRA readings have no row
+/// yet (`-- --no-sra` measures them): their intervals are rated not calibrated.
 pub const CALIBRATION: [Coverage; 6] = [
-    row(
-        CostFunction::Cf1,
-        SraModel::Luminance,
-        200,
-        [91.0, 91.0, 90.0, 89.0],
-    ),
-    row(
-        CostFunction::Cf2,
-        SraModel::Luminance,
-        200,
-        [84.0, 79.5, 82.5, 90.0],
-    ),
-    row(
-        CostFunction::M2,
-        SraModel::Luminance,
-        200,
-        [91.5, 91.5, 90.0, 88.5],
-    ),
-    row(
-        CostFunction::Cf1,
-        SraModel::Flat,
-        96,
-        [90.6, 88.5, 87.5, 5.2],
-    ),
-    row(
-        CostFunction::Cf2,
-        SraModel::Flat,
-        96,
-        [72.9, 62.5, 78.1, 71.9],
-    ),
-    row(
-        CostFunction::M2,
-        SraModel::Flat,
-        96,
-        [42.7, 44.8, 61.5, 5.2],
-    ),
+    row(CostFunction::Cf1, LUMINANCE, 200, [91.0, 91.0, 90.0, 89.0]),
+    row(CostFunction::Cf2, LUMINANCE, 200, [84.0, 79.5, 82.5, 90.0]),
+    row(CostFunction::M2, LUMINANCE, 200, [91.5, 91.5, 90.0, 88.5]),
+    row(CostFunction::Cf1, FLAT, 96, [90.6, 88.5, 87.5, 5.2]),
+    row(CostFunction::Cf2, FLAT, 96, [72.9, 62.5, 78.1, 71.9]),
+    row(CostFunction::M2, FLAT, 96, [42.7, 44.8, 61.5, 5.2]),
 ];
 
-/// Whether the bootstrap intervals of a fit with these settings are calibrated 95 % intervals,
-/// and if not, why: `Ok(())` or `Err(note)`.
-pub fn calibration(settings: &Settings) -> Result<(), String> {
+/// The row of [`CALIBRATION`] for a fit with `settings` of a scan with or without SRA readings;
+/// `None` where the coverage was not measured.
+pub fn coverage(settings: &Settings, has_sra: bool) -> Option<&'static Coverage> {
+    let sra = has_sra.then_some(settings.sra.model);
+    CALIBRATION
+        .iter()
+        .find(|c| c.cost == settings.cost && c.sra == sra)
+}
+
+/// Whether the bootstrap intervals of a fit with these settings, of a scan with or without SRA
+/// readings, are calibrated 95 % intervals, and if not, why: `Ok(())` or `Err(note)`.
+pub fn calibration(settings: &Settings, has_sra: bool) -> Result<(), String> {
     if settings.model != crate::model::ModelKind::Paper {
         return Err(format!(
             "coverage was measured with the paper's model, not {} (its extra parameters are \
@@ -212,10 +205,13 @@ pub fn calibration(settings: &Settings) -> Result<(), String> {
             settings.fresnel.name()
         ));
     }
-    let c = CALIBRATION
-        .iter()
-        .find(|c| c.cost == settings.cost && c.sra == settings.sra.model)
-        .expect("every cost function and SRA model is measured");
+    let Some(c) = coverage(settings, has_sra) else {
+        return Err(format!(
+            "coverage under {} was not measured on scans without SRA readings: these are \
+             bootstrap intervals, not calibrated 95 % intervals",
+            settings.cost
+        ));
+    };
     if c.holds() {
         return Ok(());
     }
@@ -230,11 +226,10 @@ pub fn calibration(settings: &Settings) -> Result<(), String> {
     .map(|(n, v)| format!("{n} {v:.1} %"))
     .collect();
     Err(format!(
-        "not calibrated 95 % intervals: under {} with the {} SRA model they held the truth in \
-         only {} of {} synthetic trials (SCIENCE.md §10); read them as a lower bound on the \
-         uncertainty",
+        "not calibrated 95 % intervals: under {} {} they held the truth in only {} of {} \
+         synthetic trials (SCIENCE.md §10); read them as a lower bound on the uncertainty",
         c.cost,
-        c.sra,
+        c.scans(),
         low.join(", "),
         c.trials,
     ))
@@ -434,7 +429,7 @@ pub fn bootstrap(
         interval(&mut xs)
     };
     let kd: Vec<Interval> = (0..BANDS).map(|b| col(&|d| d.params.kd[b])).collect();
-    let rated = calibration(settings);
+    let rated = calibration(settings, measured.geometries.has_sra());
     Ok(Uncertainty {
         calibrated: rated.is_ok(),
         note: rated.err(),
@@ -588,8 +583,8 @@ mod tests {
         assert!(u.delta_e00_mean[0] <= u.delta_e00_mean[1]);
         assert!((u.noise / (0.01 * 2f64.sqrt()) - 1.0).abs() < 0.2);
         // The verdict of `calibration` travels with the intervals, in the JSON too.
-        assert_eq!(u.calibrated, calibration(&request.settings).is_ok());
-        assert_eq!(u.note, calibration(&request.settings).err());
+        assert_eq!(u.calibrated, calibration(&request.settings, true).is_ok());
+        assert_eq!(u.note, calibration(&request.settings, true).err());
         let json = serde_json::to_value(&u).unwrap();
         assert_eq!(json["calibrated"], u.calibrated);
         // Intervals stored before the verdict existed read as not calibrated, with a note.
@@ -609,20 +604,32 @@ mod tests {
             sra: SraReading::default().with_model(sra),
             ..Settings::default()
         };
-        // Every cost function and SRA model has a measurement, and the verdict follows it.
+        // Every cost function has a measurement under each SRA model, and the verdict follows
+        // it.
         for cost in CostFunction::ALL {
             for sra in SraModel::ALL {
-                let c = CALIBRATION
-                    .iter()
-                    .find(|c| c.cost == cost && c.sra == sra)
-                    .unwrap();
-                match calibration(&settings(cost, sra)) {
+                let c = coverage(&settings(cost, sra), true).unwrap();
+                assert_eq!((c.cost, c.sra), (cost, Some(sra)));
+                match calibration(&settings(cost, sra), true) {
                     Ok(()) => assert!(c.holds(), "{cost} {sra}"),
                     Err(note) => {
                         assert!(!c.holds(), "{cost} {sra}");
                         assert!(note.contains("not calibrated 95 % intervals"), "{note}");
-                        assert!(note.contains(&format!("under {cost} with the {sra} SRA model")));
+                        let scans = format!("under {cost} with the {sra} SRA model");
+                        assert!(note.contains(&scans), "{note}");
                     }
+                }
+            }
+            // Without SRA readings the SRA model does not enter: one verdict per cost
+            // function, not calibrated until measured.
+            for sra in SraModel::ALL {
+                let got = calibration(&settings(cost, sra), false);
+                match coverage(&settings(cost, sra), false) {
+                    Some(c) => assert_eq!(got.is_ok(), c.holds()),
+                    None => assert!(
+                        got.unwrap_err()
+                            .contains("not measured on scans without SRA")
+                    ),
                 }
             }
         }
@@ -631,7 +638,7 @@ mod tests {
             fresnel: FresnelCosine::Exact,
             ..settings(CostFunction::Cf1, SraModel::Luminance)
         };
-        assert!(calibration(&exact).unwrap_err().contains("not exact"));
+        assert!(calibration(&exact, true).unwrap_err().contains("not exact"));
     }
 
     #[test]
