@@ -210,7 +210,8 @@ async fn copy_store(station: &Station, url: &str) {
 
 /// The stations measuring without faults for `seconds` (a reference, then scans back to back,
 /// at the recordings' pace); then each station's lag from local commit to central commit
-/// over the entries it forwarded (`status.sync.lag`), printed per station and for the worst.
+/// over the entries it forwarded while measuring (`status.sync.lag`), printed per station and
+/// for the worst; then they come to rest and central must be their union.
 async fn lag_phase(stations: &[Station], url: &str, seconds: u64) {
     let t0 = Instant::now();
     let mut n = 0;
@@ -221,10 +222,8 @@ async fn lag_phase(stations: &[Station], url: &str, seconds: u64) {
         }
         tokio::time::sleep(Duration::from_millis(500)).await;
     }
-    for s in stations {
-        let _ = s.client().post("/abort", None);
-    }
-    converged(stations, url, Duration::from_secs(180)).await;
+    // The lag as the stations forwarded while measuring (read before they come to rest: the
+    // fits' bootstraps of the scans that finished can take minutes in a debug build).
     let mut worst = (0.0_f64, 0.0_f64, 0.0_f64);
     let mut entries = 0;
     for s in stations {
@@ -253,6 +252,10 @@ async fn lag_phase(stations: &[Station], url: &str, seconds: u64) {
         worst.1,
         worst.2
     );
+    for s in stations {
+        let _ = s.client().post("/abort", None);
+    }
+    converged(stations, url, Duration::from_secs(900)).await;
 }
 
 async fn soak(faults: &[Fault], seed: u64, lag_seconds: u64) {
