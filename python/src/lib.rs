@@ -284,7 +284,11 @@ fn evaluate(
         return Err(PyValueError::new_err(format!(
             "model \"{kind}\" has {} extra parameters ({}), {} given",
             names.len(),
-            if names.is_empty() { "none".to_string() } else { names.join(", ") },
+            if names.is_empty() {
+                "none".to_string()
+            } else {
+                names.join(", ")
+            },
             given.len()
         )));
     }
