@@ -148,11 +148,7 @@ pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
         let started = Instant::now();
         let mut print = |r: &crate::sync::BatchReport| {
             if json {
-                let rows: serde_json::Map<String, serde_json::Value> = r
-                    .rows
-                    .iter()
-                    .map(|(t, n)| (t.to_string(), serde_json::Value::from(*n)))
-                    .collect();
+                let rows = rows_by_table(&r.rows);
                 println!(
                     "{}",
                     serde_json::json!({
@@ -276,11 +272,7 @@ async fn retire_old(
         central.close().await;
         let retired = retired?;
         if json {
-            let rows: serde_json::Map<String, serde_json::Value> = retired
-                .rows
-                .iter()
-                .map(|(t, n)| (t.to_string(), serde_json::Value::from(*n)))
-                .collect();
+            let rows = rows_by_table(&retired.rows);
             println!(
                 "{}",
                 serde_json::json!({
@@ -321,4 +313,13 @@ async fn retire_old(
     .await;
     store.close().await;
     result
+}
+
+/// Row counts per table as the JSON object of `--json` lines.
+fn rows_by_table<N: Copy + Into<serde_json::Value>>(
+    rows: &[(&str, N)],
+) -> serde_json::Map<String, serde_json::Value> {
+    rows.iter()
+        .map(|(t, n)| (t.to_string(), (*n).into()))
+        .collect()
 }

@@ -1000,15 +1000,25 @@ pub(super) async fn advance_station(
     .execute(&mut *tx)
     .await
     .map_err(|e| central.error(e))?;
+    record_incarnation(tx, station, incarnation)
+        .await
+        .map_err(|e| central.error(e))
+}
+
+/// Records that `incarnation` forwarded for `station` (first and last seen), in `tx`.
+pub(super) async fn record_incarnation(
+    tx: &mut sqlx::PgConnection,
+    station: &str,
+    incarnation: &str,
+) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO station_incarnations (station, incarnation) VALUES ($1, $2)
          ON CONFLICT (station, incarnation) DO UPDATE SET last_seen = now()",
     )
     .bind(station)
     .bind(incarnation)
-    .execute(&mut *tx)
-    .await
-    .map_err(|e| central.error(e))?;
+    .execute(tx)
+    .await?;
     Ok(())
 }
 

@@ -177,15 +177,9 @@ pub async fn retire(
     .execute(&mut *tx)
     .await
     .map_err(err)?;
-    sqlx::query(
-        "INSERT INTO station_incarnations (station, incarnation) VALUES ($1, $2)
-         ON CONFLICT (station, incarnation) DO UPDATE SET last_seen = now()",
-    )
-    .bind(station)
-    .bind(incarnation)
-    .execute(&mut *tx)
-    .await
-    .map_err(err)?;
+    super::forward::record_incarnation(&mut tx, station, incarnation)
+        .await
+        .map_err(err)?;
     tx.commit().await.map_err(err)?;
     Ok(Retired { rows, host })
 }
