@@ -242,7 +242,7 @@ impl ApiOptions {
 #[derive(Debug, Clone)]
 struct EventPermits(Arc<Semaphore>, Duration);
 
-/// The API's routes on a service, with every request behind [`access::guard`]. This is the
+/// The API's routes on a service, with every request behind [`access::guard()`]. This is the
 /// only router brdfd serves.
 pub fn router(service: Service, options: &ApiOptions) -> Router {
     let access = Arc::new(options.access.clone());
