@@ -8,6 +8,8 @@
 //!   every failure. `backend.rs` holds every SQLite-specific bit (pragmas, pools, upserts).
 //! - `ingest.rs` holds the watch folder's verbs: a dropped file's scans and its content hash
 //!   in one transaction (`[ingest] watch`).
+//! - `lineage.rs` records each opening for writing as a new incarnation of the store, which
+//!   the sync's fork check reads (`src/sync/lineage.rs`).
 //! - [`central`] reads the lab's central PostgreSQL database (see `src/sync/`) back into
 //!   these same records, for reports across stations.
 //! - The schema lives in `migrations/` (one commented step per file), embedded in the binary
@@ -33,6 +35,7 @@ mod fits;
 mod guarded;
 pub mod ids;
 mod ingest;
+mod lineage;
 pub mod lock;
 pub mod records;
 mod references;
@@ -48,6 +51,7 @@ use sqlx::Row;
 pub use error::StoreError;
 pub use ids::{FitRunId, InstrumentId, ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
 pub use ingest::{FileImport, IngestedFile};
+pub use lineage::begin_incarnation;
 pub use lock::{LockError, StoreLock};
 pub use records::{
     DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, Instrument,
@@ -105,8 +109,8 @@ impl Store {
                 source,
             })?;
         MIGRATOR.run(&pools.writer).await?;
-        // A writer opened it: a new incarnation of the store (src/sync/lineage.rs).
-        crate::sync::lineage::begin_incarnation(&pools.writer).await?;
+        // A writer opened it: a new incarnation of the store (lineage.rs).
+        lineage::begin_incarnation(&pools.writer).await?;
         Ok(Store {
             writer: pools.writer,
             reader: pools.reader,

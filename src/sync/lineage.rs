@@ -44,20 +44,8 @@ pub struct Standing {
     pub horizon: i64,
 }
 
-/// Begins a new incarnation of the store behind `writer` (called by `Store::open` after its
-/// migrations, before anything is written).
-pub async fn begin_incarnation(writer: &SqlitePool) -> Result<(), sqlx::Error> {
-    sqlx::query(
-        "INSERT INTO sync_lineage (incarnation, born_after, started_at_ms)
-         VALUES (lower(hex(randomblob(16))),
-                 MAX(COALESCE((SELECT seq FROM sqlite_sequence WHERE name = 'sync_outbox'), 0),
-                     COALESCE((SELECT MAX(seq) FROM sync_outbox), 0)),
-                 CAST((julianday('now') - 2440587.5) * 86400000.0 AS INTEGER))",
-    )
-    .execute(writer)
-    .await?;
-    Ok(())
-}
+/// Begins a new incarnation of a store; the store records it when it opens for writing.
+pub use crate::store::begin_incarnation;
 
 /// The store's incarnations, oldest first (the last is the one writing now).
 pub async fn read<'e, E>(executor: E) -> Result<Vec<Incarnation>, sqlx::Error>
