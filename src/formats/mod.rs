@@ -393,6 +393,7 @@ pub(crate) mod tests {
             resamples: 200,
             noise: 0.014,
             seed: 1,
+            percentile_level: 0.95,
             ks: [p.ks * 0.8, p.ks * 1.2],
             alpha: [p.alpha * 0.8, p.alpha * 1.2],
             ior: [p.ior * 0.9, p.ior * 1.1],

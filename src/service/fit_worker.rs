@@ -368,6 +368,7 @@ impl FitWorker {
             seed: report.outcome.seed,
             threads: 1,
             noise: None,
+            ..Default::default()
         };
         let joined = tokio::task::spawn_blocking(move || {
             let _permit = permit;

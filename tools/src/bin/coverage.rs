@@ -3,22 +3,28 @@
 //! the documented noise model, per cost function and SRA reading model.
 //!
 //! Trial `t` simulates the paper sample `t mod 8` (`brdfd::synth`) with multiplicative N(1, σ)
-//! noise on every reading (sample and reference), seed `t`, and a simulated SRA that reads what
-//! the SRA model assumes (`--sra luminance`: the luminance; `--sra flat`: the band mean; or
-//! `--sra-response` to mismatch them); fits it with each cost function (default method and
-//! settings, that SRA model) and bootstraps the fit; then records, per cost function and
-//! parameter, whether the interval holds the truth, and the median interval width relative to
-//! the truth. kd is summarised by the lowest coverage over the 31 bands and the mean over them.
-//! A well-calibrated 95 % interval covers in 90–99 % of trials; the binomial sampling error of a
-//! coverage p over n trials, √(p(1 − p)/n), is printed at p = 95 %.
+//! noise on every reading (sample and reference), noise and bootstrap seed `first seed + t`, and
+//! a simulated SRA that reads what the SRA model assumes (`--sra luminance`: the luminance;
+//! `--sra flat`: the band mean; or `--sra-response` to mismatch them); fits it with each cost
+//! function (default method and settings, that SRA model) and bootstraps the fit as the daemon
+//! does; then records, per cost function and parameter, whether the interval holds the truth,
+//! and the median interval width relative to the truth. kd is summarised by the lowest coverage
+//! over the 31 bands and the mean over them. The binomial sampling error of a coverage p over n
+//! trials, √(p(1 − p)/n), is printed at p = 95 %.
 //!
 //! `--require P` (e.g. 0.9) makes the run exit non-zero when any cell (ks, α, μ, or any kd
-//! band) of any cost function covers less than P: CI runs it that way.
+//! band) of any cost function covers less than P: CI runs it that way, on noise draws
+//! (`--first-seed 10000`) other than those the calibration table was measured on (seeds 0–199).
+//! `--refit warm-start|full-search` overrides how every cost function refits (the default is
+//! the daemon's, `brdfd::uncertainty::Refit::for_cost`); `--dump FILE` writes one JSON line per
+//! trial with the truth, the point fit and every refit's parameters, to study other interval
+//! constructions on the same draws.
 //!
-//! Run: `cargo run --release --example coverage [-- --trials 200 --resamples 200 --noise 0.01
-//! --costs cf1,cf2,m2 --sra luminance --threads 2 --require 0.9]` (defaults shown, but for
-//! `--require`, off by default). SCIENCE.md §12.3 quotes its output.
+//! Run: `cargo run --release -p brdfd-tools --bin coverage [-- --trials 200 --resamples 200
+//! --noise 0.01 --costs cf1,cf2,m2 --sra luminance --threads 2 --first-seed 0 --require 0.9]`
+//! (defaults shown, but for `--require`, off by default). SCIENCE.md §12.3 quotes its output.
 
+use std::io::Write;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -30,7 +36,7 @@ use brdfd::scan::Scan;
 use brdfd::spectral::BANDS;
 use brdfd::sra_reading::{SraModel, SraReading};
 use brdfd::synth::{SraResponse, SynthOptions, paper_samples, synth_scan};
-use brdfd::uncertainty::{BootstrapOptions, bootstrap};
+use brdfd::uncertainty::{BootstrapOptions, Refit, Uncertainty, draw};
 
 fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
     args.iter()
@@ -70,6 +76,19 @@ fn main() {
     };
     let response: SraResponse = arg(&args, "--sra-response", matched);
     let no_sra = args.iter().any(|a| a == "--no-sra");
+    let first_seed: u64 = arg(&args, "--first-seed", 0);
+    let refit = match arg(&args, "--refit", "by-cost".to_string()).as_str() {
+        "by-cost" => Refit::ByCost,
+        "warm-start" => Refit::WarmStart,
+        "full-search" => Refit::FullSearch,
+        other => panic!("--refit: {other:?} is not by-cost, warm-start or full-search"),
+    };
+    // `--dump FILE`: one JSON line per trial with the truth, the point fit and every draw.
+    let mut dump = args
+        .iter()
+        .position(|a| a == "--dump")
+        .and_then(|i| args.get(i + 1))
+        .map(|f| std::io::BufWriter::new(std::fs::File::create(f).expect("create --dump file")));
     let costs: String = arg(&args, "--costs", "cf1,cf2,m2".to_string());
     let costs: Vec<CostFunction> = costs
         .split(',')
@@ -81,7 +100,8 @@ fn main() {
     let se = (0.95 * 0.05 / trials as f64).sqrt();
     println!(
         "coverage of the 95 % bootstrap intervals: {trials} trials (the 8 example samples in turn), \
-         noise σ = {noise} per reading, {resamples} resamples, {}; sampling error of a coverage near 95 %: ±{:.1} % (1 s.e.)",
+         noise σ = {noise} per reading, seeds {first_seed}–{}, {resamples} resamples, {}; sampling error of a coverage near 95 %: ±{:.1} % (1 s.e.)",
+        first_seed + trials - 1,
         if no_sra {
             "MA-T12-only scans (12 geometries, no SRA readings)".to_string()
         } else {
@@ -105,7 +125,7 @@ fn main() {
                 truth,
                 &SynthOptions {
                     noise,
-                    seed: t,
+                    seed: first_seed + t,
                     sra_response: response,
                     ..Default::default()
                 },
@@ -122,20 +142,39 @@ fn main() {
             };
             let report = fit_scan(&scan, &request).expect("fit");
             let started = Instant::now();
-            let u = bootstrap(
+            let opts = BootstrapOptions {
+                resamples,
+                seed: first_seed + t,
+                threads,
+                noise: None,
+                refit,
+            };
+            let draws = draw(
                 &report.measured,
                 &request.settings,
                 request.colorimetry,
                 &report.outcome.params,
-                &BootstrapOptions {
-                    resamples,
-                    seed: t,
-                    threads,
-                    noise: None,
-                },
+                &opts,
                 &never,
             )
             .expect("bootstrap");
+            let u = Uncertainty::from_draws(
+                &draws,
+                &request.settings,
+                report.measured.geometries.has_sra(),
+                &opts,
+            );
+            if let Some(out) = dump.as_mut() {
+                let line = serde_json::json!({
+                    "cost": cf.to_string(),
+                    "seed": first_seed + t,
+                    "sigma": draws.sigma,
+                    "truth": truth.params,
+                    "point": report.outcome.params,
+                    "draws": draws.draws.iter().map(|d| d.params).collect::<Vec<_>>(),
+                });
+                writeln!(out, "{line}").expect("write --dump");
+            }
             seconds += started.elapsed().as_secs_f64();
             let p = &truth.params;
             for (k, (name, v, iv)) in [
