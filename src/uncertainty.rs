@@ -404,12 +404,19 @@ pub fn quantile(xs: &mut [f64], q: f64) -> f64 {
     xs[lo] + (h - lo as f64) * (xs[hi] - xs[lo])
 }
 
-/// The central `level` share of `xs`: its (1 − level)/2 and (1 + level)/2 quantiles.
+/// The central `level` share of `xs`: its (1 − level)/2 and (1 + level)/2 quantiles (type 7),
+/// the upper taken at the mirror position of the lower, so that both ends are exact order
+/// statistics wherever the level puts them on one (0.95 of 201 values: the 6th and the 196th).
 fn interval(xs: &mut [f64], level: f64) -> Interval {
-    [
-        quantile(xs, (1.0 - level) / 2.0),
-        quantile(xs, (1.0 + level) / 2.0),
-    ]
+    xs.sort_by(f64::total_cmp);
+    // (1 − 0.95)/2 is 0.025000000000000022 in binary; rounded to 1e-9 it is 0.025.
+    let tail = ((1.0 - level) / 2.0 * 1e9).round() / 1e9;
+    let last = (xs.len() - 1) as f64;
+    let at = |h: f64| {
+        let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+        xs[lo] + (h - lo as f64) * (xs[hi] - xs[lo])
+    };
+    [at(last * tail), at(last - last * tail)]
 }
 
 /// What one refit contributes: its parameters and its ΔE00 summaries against its resample.

@@ -148,7 +148,7 @@ impl Tally {
 #[test]
 fn cf1_intervals_cover_the_truth_and_match_the_scatter_under_either_sra_model() {
     // The measured-scan default first, then the paper's flat model on its own instrument.
-    for (sra, first_seed) in [(SraModel::MEASURED_DEFAULT, 2000), (SraModel::Flat, 1000)] {
+    for (sra, first_seed) in [(SraModel::Luminance, 2000), (SraModel::Flat, 1000)] {
         cf1_check(sra, first_seed);
     }
 }
@@ -179,7 +179,7 @@ fn cf1_check(sra: SraModel, first_seed: u64) {
             "{sra} {name}: intervals {width:.4} wide (relative) against a scatter of {scatter:.4}"
         );
     }
-    if sra == SraModel::MEASURED_DEFAULT {
+    if sra == SraModel::Luminance {
         // Rated calibrated by the table, the kd bands must hold too.
         let settings = Settings {
             cost: CostFunction::Cf1,
