@@ -54,7 +54,8 @@ How to run (python3 with numpy and scipy)
     $B import-format tests/data/real-mat12/*.xlsx --out /tmp/peer/real
     python3 tools/peer/scipy_fit.py --brdfd $B /tmp/peer/synth/*.scan.json /tmp/peer/real/*.scan.json
 
-``--json FILE`` also writes every row as JSON.
+``--json FILE`` also writes every row as JSON; ``--fit-args "--sra flat"`` (or ``"--method paper"``)
+passes more arguments to ``brdfd fit``, the peer then fitting under the SRA model brdfd reports.
 """
 
 import os
@@ -66,6 +67,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import shlex  # noqa: E402
 import statistics  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -267,9 +269,9 @@ def measured_brdf(scan):
     return out
 
 
-def run_brdfd(brdfd, scan_path, cost):
+def run_brdfd(brdfd, scan_path, cost, extra):
     out = subprocess.run(
-        [brdfd, "fit", "--input", scan_path, "--cost", cost, "--json"],
+        [brdfd, "fit", "--input", scan_path, "--cost", cost, "--json", *extra],
         check=True, capture_output=True, text=True,
     ).stdout
     return json.loads(out)
@@ -306,6 +308,10 @@ def main():
     ap.add_argument("--starts", type=int, default=8)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", help="also write every row as JSON to this file")
+    ap.add_argument(
+        "--fit-args", default="",
+        help='more arguments for "brdfd fit", e.g. "--sra flat" or "--method paper" (the model must stay the paper\'s)',
+    )
     args = ap.parse_args()
 
     rows, bad = [], 0
@@ -315,7 +321,7 @@ def main():
         measured = measured_brdf(scan)
         kind = "synthetic" if len(measured) == 14 else "real"
         for cf in args.costs.split(","):
-            fit = run_brdfd(args.brdfd, path, cf)
+            fit = run_brdfd(args.brdfd, path, cf, shlex.split(args.fit_args))
             sra = fit.get("sra", {})
             if len(measured) == 14 and sra.get("model") == "luminance":
                 if (sra.get("illuminant"), sra.get("observer")) != ("C", "2"):
