@@ -262,9 +262,12 @@ async fn serve(config: Config, explicit_config: bool) -> anyhow::Result<()> {
     if created {
         tracing::info!(file = %token_path.display(), "created the API token file");
     }
+    // Listening for SIGTERM before saying "serving" (and READY=1 to systemd): a stop sent the
+    // moment the daemon says it is up must find the handler, not the default action.
+    let stop = StopSignals::listen()?;
     tracing::info!(addr = %api.local_addr(), store = %config.store.path.display(), "serving");
     notify_systemd(&service, api.local_addr());
-    wait_for_signal().await?;
+    stop.wait().await?;
     tracing::info!("shutting down");
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     // The measurement in progress is aborted at once (its readings kept, the scan marked
@@ -313,22 +316,39 @@ fn notify_systemd(service: &Service, addr: std::net::SocketAddr) {
     });
 }
 
-/// SIGTERM (systemd's stop) or SIGINT (Ctrl-C).
-async fn wait_for_signal() -> anyhow::Result<()> {
+/// SIGTERM (systemd's stop) or SIGINT (Ctrl-C), listened for from [`StopSignals::listen`] on.
+struct StopSignals {
     #[cfg(unix)]
-    {
-        use tokio::signal::unix::{SignalKind, signal};
-        let mut term = signal(SignalKind::terminate()).context("cannot listen for SIGTERM")?;
-        tokio::select! {
-            _ = term.recv() => {}
-            r = tokio::signal::ctrl_c() => r.context("cannot listen for SIGINT")?,
+    term: tokio::signal::unix::Signal,
+    #[cfg(unix)]
+    int: tokio::signal::unix::Signal,
+}
+
+impl StopSignals {
+    fn listen() -> anyhow::Result<Self> {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            let term = signal(SignalKind::terminate()).context("cannot listen for SIGTERM")?;
+            let int = signal(SignalKind::interrupt()).context("cannot listen for SIGINT")?;
+            Ok(StopSignals { term, int })
         }
+        #[cfg(not(unix))]
+        Ok(StopSignals {})
     }
-    #[cfg(not(unix))]
-    tokio::signal::ctrl_c()
-        .await
-        .context("cannot listen for Ctrl-C")?;
-    Ok(())
+
+    async fn wait(mut self) -> anyhow::Result<()> {
+        #[cfg(unix)]
+        tokio::select! {
+            _ = self.term.recv() => {}
+            _ = self.int.recv() => {}
+        }
+        #[cfg(not(unix))]
+        tokio::signal::ctrl_c()
+            .await
+            .context("cannot listen for Ctrl-C")?;
+        Ok(())
+    }
 }
 
 #[cfg(test)]
