@@ -28,8 +28,7 @@ use std::time::Duration;
 use brdfd::client::{Client, ClientError};
 use brdfd::fit::FitScanError;
 use brdfd::optimise::{FitError, GaSettings, Method, Progress};
-use brdfd::service::{Devices, FitFn, FitJob, ServiceOptions, ServiceSettings, default_fit_fn};
-use drivers::Instrument;
+use brdfd::service::{FitFn, FitJob, ServiceOptions, ServiceSettings, default_fit_fn};
 use serde_json::{Value, json};
 
 use common::*;
@@ -174,13 +173,7 @@ async fn refit_cancel_abort_and_every_operator_error_through_http_and_the_cli() 
         let (fit_fn, probe, started) = probed_fit_fn();
         // Recorded timing: a measurement takes ~2.4 s, so an abort sent after the first reading
         // lands while the scan is measuring.
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &mock_devices::ReplayOptions::lenient(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&mock_devices::ReplayOptions::lenient());
         let d = start(
             devices,
             ServiceSettings {
@@ -508,13 +501,7 @@ async fn a_stale_reference_is_refused_by_refit_until_allowed() {
     bounded(async {
         // A zero age limit: the reference is stale from the first millisecond after it
         // completes. The test waits for the daemon to say so instead of sleeping.
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&strict_fast());
         let d = start(
             devices,
             ServiceSettings {

@@ -667,13 +667,7 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
         );
         store.close().await;
 
-        let devices = brdfd::service::Devices::simulated(
-            playlist(drivers::Instrument::MaT12),
-            playlist(drivers::Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&strict_fast());
         let store = brdfd::store::Store::open(&db).await.unwrap();
         let settings = brdfd::service::ServiceSettings {
             cost_functions: vec![brdfd::cost::CostFunction::Cf2],
@@ -768,13 +762,7 @@ async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
         .execute(&mut raw)
         .await
         .unwrap();
-        let devices = brdfd::service::Devices::simulated(
-            playlist(drivers::Instrument::MaT12),
-            playlist(drivers::Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&strict_fast());
         let settings = brdfd::service::ServiceSettings {
             cost_functions: vec![brdfd::cost::CostFunction::Cf2],
             bootstrap: 0,
