@@ -63,11 +63,7 @@ fn request(method: &str, path: &str, headers: &[(&str, &str)], body: &str) -> St
 
 /// Row counts of the tables an attack could change, read through the read-only store.
 fn counts(dir: &Path) -> Vec<(String, i64)> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let store = brdfd::store::Store::open_read_only(dir.join("brdfd.db"))
             .await
             .expect("read-only open beside the daemon");

@@ -201,11 +201,7 @@ fn scans(client: &Client) -> Vec<Value> {
 
 /// The rows of `ingested_files` (hash, file name), from the stopped daemon's store.
 fn ingested(lab: &Lab) -> Vec<(String, String)> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let store = brdfd::store::Store::open(lab.dir.join("brdfd.db"))
             .await
             .unwrap();

@@ -72,6 +72,15 @@ pub fn strict_fast() -> ReplayOptions {
     ReplayOptions::strict().accelerated()
 }
 
+/// Runs `body` to its end on a current-thread runtime of its own (from a synchronous test).
+pub fn block_on<F: Future>(body: F) -> F::Output {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("a runtime")
+        .block_on(body)
+}
+
 /// Both instruments simulated, replaying every embedded recording with `options`.
 pub fn simulated(options: &ReplayOptions) -> Devices {
     Devices::simulated(
