@@ -21,22 +21,8 @@ use serde_json::json;
 
 const IDLE_TIMEOUT: Duration = Duration::from_secs(5);
 
-fn raise_fd_limit() {
-    // SAFETY: plain getrlimit/setrlimit on this process.
-    unsafe {
-        let mut lim = libc::rlimit {
-            rlim_cur: 0,
-            rlim_max: 0,
-        };
-        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 {
-            lim.rlim_cur = lim.rlim_max.min(65_536);
-            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
-        }
-    }
-}
-
 fn main() -> anyhow::Result<()> {
-    raise_fd_limit();
+    brdfd::api::server::raise_fd_limit();
     let args = common::counts();
     let idle_count = args.first().copied().unwrap_or(500);
     let subscribers = args.get(1).copied().unwrap_or(200);

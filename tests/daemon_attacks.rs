@@ -780,21 +780,6 @@ fn report_and_export_never_write_through_a_link_or_onto_the_store() {
     }
 }
 
-/// The file-descriptor limit of this test process, raised for the flood.
-fn raise_fd_limit() {
-    // SAFETY: getrlimit/setrlimit on this process with a valid struct.
-    unsafe {
-        let mut lim = libc::rlimit {
-            rlim_cur: 0,
-            rlim_max: 0,
-        };
-        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 {
-            lim.rlim_cur = lim.rlim_max.min(65_536);
-            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
-        }
-    }
-}
-
 /// An event stream opened by hand: the request sent and the answer's head read.
 fn open_stream(addr: SocketAddr, token: &str) -> TcpStream {
     let mut s = TcpStream::connect(addr).unwrap();
@@ -819,7 +804,7 @@ fn open_stream(addr: SocketAddr, token: &str) -> TcpStream {
 #[test]
 fn silent_sockets_and_idle_event_streams_cannot_keep_the_operator_out() {
     let _serial = serial();
-    raise_fd_limit();
+    brdfd::api::server::raise_fd_limit();
     let dir = tempfile::tempdir().unwrap();
     // Long timeouts: what keeps the operator in is the cap's rule, not a timer.
     let cfg = write_simulated_config(

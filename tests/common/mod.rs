@@ -15,6 +15,9 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
+use brdfd::cost::CostFunction;
+use brdfd::fit::{FitReport, FitRequest, fit_scan};
+use brdfd::optimise::Settings;
 use brdfd::service::{Devices, Service, ServiceOptions, ServiceSettings};
 use brdfd::store::{ReferenceId, ReferenceStatus, ScanDetail, ScanId, ScanState, Store};
 use drivers::{DriverConfig, Instrument};
@@ -70,6 +73,21 @@ pub fn playlist(instrument: Instrument) -> Script {
 /// Strict, accelerated replay.
 pub fn strict_fast() -> ReplayOptions {
     ReplayOptions::strict().accelerated()
+}
+
+/// One fit of `scan` per cost function, in [`CostFunction::ALL`]'s order, each with `settings`
+/// but its cost function.
+pub fn fit_every_cost(scan: &brdfd::scan::Scan, settings: Settings) -> Vec<FitReport> {
+    CostFunction::ALL
+        .iter()
+        .map(|&cost| {
+            let request = FitRequest {
+                settings: Settings { cost, ..settings },
+                ..FitRequest::default()
+            };
+            fit_scan(scan, &request).unwrap()
+        })
+        .collect()
 }
 
 /// Runs `body` to its end on a current-thread runtime of its own (from a synchronous test).
