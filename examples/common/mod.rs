@@ -1,5 +1,8 @@
-//! What the API load examples share: their counts from the command line, a two-thread runtime,
-//! and the service on a fresh store with the simulated instruments of the embedded recordings.
+//! What the examples share: their arguments from the command line, a two-thread runtime, the
+//! service on a fresh store with the simulated instruments of the embedded recordings, and a
+//! percentile.
+
+#![allow(dead_code)] // each example uses a different subset
 
 use std::path::Path;
 
@@ -13,6 +16,18 @@ pub fn counts() -> Vec<usize> {
         .skip(1)
         .map(|a| a.parse().expect("counts are whole numbers"))
         .collect()
+}
+
+/// The value after the option `name` in `args`, else `default`.
+pub fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .map(|v| {
+            v.parse()
+                .unwrap_or_else(|_| panic!("{name}: cannot read {v:?}"))
+        })
+        .unwrap_or(default)
 }
 
 /// A multi-threaded runtime on two workers.

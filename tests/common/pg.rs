@@ -310,8 +310,14 @@ impl Cluster {
 
     /// `pg_ctl stop -m immediate`: the server dies as in a crash, connections cut.
     pub fn stop_immediate(&self) {
+        let out = self.pg_stop();
+        self.check("pg_ctl stop", out);
+    }
+
+    /// `pg_ctl stop -m immediate`, whatever it answers.
+    fn pg_stop(&self) -> std::process::Output {
         let data = self.data();
-        let out = self.run(
+        self.run(
             "pg_ctl",
             &[
                 "-D",
@@ -321,8 +327,7 @@ impl Cluster {
                 "-w",
                 "stop",
             ],
-        );
-        self.check("pg_ctl stop", out);
+        )
     }
 
     /// Starts the server again on the same port (crash recovery replays its WAL).
@@ -345,18 +350,7 @@ impl Cluster {
 
 impl Drop for Cluster {
     fn drop(&mut self) {
-        let data = self.data();
-        let _ = self.run(
-            "pg_ctl",
-            &[
-                "-D",
-                data.to_str().unwrap(),
-                "-m",
-                "immediate",
-                "-w",
-                "stop",
-            ],
-        );
+        let _ = self.pg_stop();
     }
 }
 
