@@ -232,6 +232,32 @@ fn write_in_pieces(path: &Path, bytes: &[u8], pieces: usize, between: impl Fn(us
     }
 }
 
+/// A service on `store` with the simulated instruments (strict, accelerated), fitting cf2
+/// only and without bootstrap, watching `inbox` (settling 50 ms, polling every 20 ms).
+async fn watching_service(store: &brdfd::store::Store, inbox: &Path) -> brdfd::service::Service {
+    let settings = brdfd::service::ServiceSettings {
+        cost_functions: vec![brdfd::cost::CostFunction::Cf2],
+        bootstrap: 0,
+        ingest: Some(brdfd::service::IngestSettings {
+            dir: inbox.to_path_buf(),
+            settle: Duration::from_millis(50),
+            poll: Duration::from_millis(20),
+            pair_wait: Duration::from_secs(600),
+            reference: "Munsell N9".into(),
+            max_file_bytes: 32 << 20,
+        }),
+        ..settings()
+    };
+    brdfd::service::Service::start(
+        store.clone(),
+        simulated(&strict_fast()),
+        settings,
+        brdfd::service::ServiceOptions::default(),
+    )
+    .await
+    .unwrap()
+}
+
 #[test]
 fn files_written_slowly_in_pieces_are_imported_whole_and_fitted() {
     let _serial = serial();
@@ -663,29 +689,8 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
         );
         store.close().await;
 
-        let devices = simulated(&strict_fast());
         let store = brdfd::store::Store::open(&db).await.unwrap();
-        let settings = brdfd::service::ServiceSettings {
-            cost_functions: vec![brdfd::cost::CostFunction::Cf2],
-            bootstrap: 0,
-            ingest: Some(brdfd::service::IngestSettings {
-                dir: inbox.clone(),
-                settle: Duration::from_millis(50),
-                poll: Duration::from_millis(20),
-                pair_wait: Duration::from_secs(600),
-                reference: "Munsell N9".into(),
-                max_file_bytes: 32 << 20,
-            }),
-            ..settings()
-        };
-        let service = brdfd::service::Service::start(
-            store.clone(),
-            devices,
-            settings,
-            brdfd::service::ServiceOptions::default(),
-        )
-        .await
-        .unwrap();
+        let service = watching_service(&store, &inbox).await;
         let deadline = Instant::now() + STEP_TIMEOUT;
         loop {
             let files = store.ingested_files().await.unwrap();
@@ -758,28 +763,7 @@ async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
         .execute(&mut raw)
         .await
         .unwrap();
-        let devices = simulated(&strict_fast());
-        let settings = brdfd::service::ServiceSettings {
-            cost_functions: vec![brdfd::cost::CostFunction::Cf2],
-            bootstrap: 0,
-            ingest: Some(brdfd::service::IngestSettings {
-                dir: inbox.clone(),
-                settle: Duration::from_millis(50),
-                poll: Duration::from_millis(20),
-                pair_wait: Duration::from_secs(600),
-                reference: "Munsell N9".into(),
-                max_file_bytes: 32 << 20,
-            }),
-            ..settings()
-        };
-        let service = brdfd::service::Service::start(
-            store.clone(),
-            devices,
-            settings,
-            brdfd::service::ServiceOptions::default(),
-        )
-        .await
-        .unwrap();
+        let service = watching_service(&store, &inbox).await;
         let text = example("t-lavender-blue").to_json_pretty().unwrap();
         std::fs::write(inbox.join("l.scan.json"), &text).unwrap();
         let deadline = Instant::now() + STEP_TIMEOUT;
