@@ -59,6 +59,19 @@ fn percentile(sorted: &[Duration], p: f64) -> Duration {
     sorted[i]
 }
 
+/// The 14 readings of scan `k`, each with its geometry's frame from `frames`.
+fn readings(frames: &[Vec<u8>], k: u64) -> Vec<NewReading<'_>> {
+    GEOMETRIES
+        .iter()
+        .map(|g| NewReading {
+            device: g.device,
+            geometry: g,
+            values: values(g, k),
+            raw_frame: &frames[g.index],
+        })
+        .collect()
+}
+
 fn report(what: &str, mut t: Vec<Duration>) {
     t.sort_unstable();
     let mean = t.iter().sum::<Duration>() / t.len() as u32;
@@ -105,15 +118,7 @@ fn store_benches(c: &mut Criterion) {
         let scans = measuring_scans(&store, reference, SCANS).await;
         let mut whole = Vec::new();
         for (k, scan) in scans.iter().enumerate() {
-            let batch: Vec<NewReading> = GEOMETRIES
-                .iter()
-                .map(|g| NewReading {
-                    device: g.device,
-                    geometry: g,
-                    values: values(g, k as u64),
-                    raw_frame: &frames[g.index],
-                })
-                .collect();
+            let batch = readings(&frames, k as u64);
             let t0 = Instant::now();
             store.add_readings_tx(*scan, &batch).await.unwrap();
             whole.push(t0.elapsed());
@@ -149,15 +154,7 @@ fn store_benches(c: &mut Criterion) {
                 let scans = measuring_scans(&store, reference, iters).await;
                 let t0 = Instant::now();
                 for (k, scan) in scans.iter().enumerate() {
-                    let batch: Vec<NewReading> = GEOMETRIES
-                        .iter()
-                        .map(|g| NewReading {
-                            device: g.device,
-                            geometry: g,
-                            values: values(g, k as u64),
-                            raw_frame: &frames[g.index],
-                        })
-                        .collect();
+                    let batch = readings(&frames, k as u64);
                     black_box(store.add_readings_tx(*scan, &batch).await.unwrap());
                 }
                 t0.elapsed()

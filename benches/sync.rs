@@ -14,6 +14,9 @@
 //! URL; default `postgres://postgres@127.0.0.1:5432/postgres`); the bench creates its databases
 //! and drops them. `BRDFD_BENCH_SCANS` changes the 10,000.
 
+#[path = "../tests/common/pg.rs"]
+mod pg;
+
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -24,6 +27,7 @@ use brdfd::store::Store;
 use brdfd::store::central::CentralSelection;
 use brdfd::sync::tables::TABLES;
 use brdfd::sync::{BatchReport, Central, Forwarder, ForwarderOptions};
+use pg::highest_seq;
 
 const STATIONS: usize = 8;
 
@@ -59,24 +63,6 @@ fn percentile(sorted: &[i64], p: f64) -> i64 {
     }
     let i = ((sorted.len() - 1) as f64 * p).round() as usize;
     sorted[i]
-}
-
-/// The highest outbox entry the store file at `path` ever queued (read afresh).
-async fn highest_seq(path: &std::path::Path) -> i64 {
-    let pool = sqlx::SqlitePool::connect_with(
-        sqlx::sqlite::SqliteConnectOptions::new()
-            .filename(path)
-            .read_only(true),
-    )
-    .await
-    .unwrap();
-    let seq: Option<i64> =
-        sqlx::query_scalar("SELECT seq FROM sqlite_sequence WHERE name = 'sync_outbox'")
-            .fetch_optional(&pool)
-            .await
-            .unwrap();
-    pool.close().await;
-    seq.unwrap_or(0)
 }
 
 #[derive(Default)]

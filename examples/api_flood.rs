@@ -9,15 +9,15 @@
 //! `cargo run --release --example api_flood [-- SILENT STREAMS HALF]` (defaults 500 500 100).
 //! Exits non-zero if a `/status` took 1 s or more, or failed.
 
+mod common;
+
+use common::percentile;
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
 use brdfd::api::{Access, ApiOptions, ApiServer, Token};
 use brdfd::client::Client;
-use brdfd::service::{Devices, Service, ServiceOptions, ServiceSettings};
-use brdfd::store::Store;
-use drivers::Instrument;
 
 /// This process's anonymous resident memory (heap, stacks), KiB.
 fn rss_anon_kib() -> u64 {
@@ -30,11 +30,6 @@ fn rss_anon_kib() -> u64 {
                 .and_then(|v| v.parse().ok())
         })
         .unwrap_or(0)
-}
-
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
 }
 
 fn open_stream(addr: SocketAddr, token: &Token) -> anyhow::Result<Option<TcpStream>> {
@@ -57,34 +52,15 @@ fn open_stream(addr: SocketAddr, token: &Token) -> anyhow::Result<Option<TcpStre
 
 fn main() -> anyhow::Result<()> {
     let limit = brdfd::api::server::raise_fd_limit();
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .map(|a| a.parse().expect("counts are whole numbers"))
-        .collect();
+    let args = common::counts();
     let silent_count = args.first().copied().unwrap_or(500);
     let stream_count = args.get(1).copied().unwrap_or(500);
     let half_count = args.get(2).copied().unwrap_or(100);
     let dir = tempfile::tempdir()?;
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()?;
+    let rt = common::runtime()?;
     let token = Token::generate();
     let (api, service) = rt.block_on(async {
-        let store = Store::open(dir.path().join("brdfd.db")).await?;
-        let devices = Devices::simulated(
-            mock_devices::recordings::playlist(Instrument::MaT12)?,
-            mock_devices::recordings::playlist(Instrument::Sra)?,
-            &mock_devices::ReplayOptions::lenient(),
-            [None, None],
-        )?;
-        let service = Service::start(
-            store,
-            devices,
-            ServiceSettings::default(),
-            ServiceOptions::default(),
-        )
-        .await?;
+        let service = common::simulated_service(dir.path()).await?;
         // The shipped bounds: brdfd.toml's [api] as it comes.
         let options = ApiOptions::new(Access::new(token.clone()));
         println!(

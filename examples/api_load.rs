@@ -8,67 +8,29 @@
 //! The API's caps are raised for the run (max_connections 1000, max_event_subscribers 300) and
 //! the idle timeout lowered to 5 s; nothing else differs from `brdfd serve`.
 
+mod common;
+
+use common::percentile;
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
 use brdfd::api::{Access, ApiOptions, ApiServer, Token};
 use brdfd::client::Client;
-use brdfd::service::{Devices, Service, ServiceOptions, ServiceSettings};
-use brdfd::store::Store;
-use drivers::Instrument;
 use serde_json::json;
 
 const IDLE_TIMEOUT: Duration = Duration::from_secs(5);
 
-fn raise_fd_limit() {
-    // SAFETY: plain getrlimit/setrlimit on this process.
-    unsafe {
-        let mut lim = libc::rlimit {
-            rlim_cur: 0,
-            rlim_max: 0,
-        };
-        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 {
-            lim.rlim_cur = lim.rlim_max.min(65_536);
-            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
-        }
-    }
-}
-
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
-}
-
 fn main() -> anyhow::Result<()> {
-    raise_fd_limit();
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .map(|a| a.parse().expect("counts are whole numbers"))
-        .collect();
+    brdfd::api::server::raise_fd_limit();
+    let args = common::counts();
     let idle_count = args.first().copied().unwrap_or(500);
     let subscribers = args.get(1).copied().unwrap_or(200);
     let dir = tempfile::tempdir()?;
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()?;
+    let rt = common::runtime()?;
     let token = Token::generate();
     let (api, service) = rt.block_on(async {
-        let store = Store::open(dir.path().join("brdfd.db")).await?;
-        let devices = Devices::simulated(
-            mock_devices::recordings::playlist(Instrument::MaT12)?,
-            mock_devices::recordings::playlist(Instrument::Sra)?,
-            &mock_devices::ReplayOptions::lenient(),
-            [None, None],
-        )?;
-        let service = Service::start(
-            store,
-            devices,
-            ServiceSettings::default(),
-            ServiceOptions::default(),
-        )
-        .await?;
+        let service = common::simulated_service(dir.path()).await?;
         let mut options = ApiOptions::new(Access::new(token.clone()));
         options.connections.max_connections = 1000;
         options.connections.idle_timeout = IDLE_TIMEOUT;

@@ -9,6 +9,8 @@
 //! `--reps 1` it is also the driver for `valgrind --tool=callgrind`, whose instruction counts
 //! do not depend on what else the machine is doing.
 
+mod common;
+
 use std::time::Instant;
 
 use brdfd::cost::CostFunction;
@@ -16,16 +18,7 @@ use brdfd::optimise::{Settings, fit};
 use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
 use brdfd::scan::Scan;
 
-fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .map(|v| {
-            v.parse()
-                .unwrap_or_else(|_| panic!("{name}: cannot read {v:?}"))
-        })
-        .unwrap_or(default)
-}
+use common::arg;
 
 fn median(xs: &mut [f64]) -> f64 {
     xs.sort_by(f64::total_cmp);

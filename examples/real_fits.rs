@@ -24,7 +24,7 @@ use brdfd::colour::{Colorimetry, Observer, Weighting};
 use brdfd::cost::CostFunction;
 use brdfd::evaluation::{evaluate_with, lab_per_geometry_with};
 use brdfd::geometry::{GEOMETRIES, GeometrySet, MA_T12_COUNT};
-use brdfd::model::{self, FresnelCosine, ModelKind, SpecularGeometry};
+use brdfd::model::{self, FresnelCosine, ModelKind, Params, SpecularGeometry};
 use brdfd::optimise::{Settings, fit};
 use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
 
@@ -105,14 +105,12 @@ fn main() {
                     fresnel,
                     ..Settings::default()
                 };
+                let estimate = |params: &Params| {
+                    model::evaluate_model(params, model, fresnel, &SpecularGeometry::all())
+                };
                 let out = fit(m, &settings).expect("a real scan fits");
                 fitted_params.push(out.params);
-                let est = model::evaluate_model(
-                    &out.params,
-                    model,
-                    settings.fresnel,
-                    &SpecularGeometry::all(),
-                );
+                let est = estimate(&out.params);
                 let e = evaluate_with(&m.values, &est, colorimetry, m.geometries);
                 means.push(e.all.mean);
                 let lab_m = lab_per_geometry_with(&m.values, colorimetry);
@@ -127,12 +125,7 @@ fn main() {
                         ..*m
                     };
                     let out = fit(&held, &settings).expect("11 geometries fit");
-                    let est = model::evaluate_model(
-                        &out.params,
-                        model,
-                        settings.fresnel,
-                        &SpecularGeometry::all(),
-                    );
+                    let est = estimate(&out.params);
                     let e = evaluate_with(&m.values, &est, colorimetry, m.geometries);
                     let lab_e = lab_per_geometry_with(&est, colorimetry);
                     de_out[g].push(e.per_geometry[g]);

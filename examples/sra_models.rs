@@ -18,6 +18,8 @@
 //! Run: `cargo run --release --example sra_models [-- --trials 40 --noise 0.01]` (defaults
 //! shown). SCIENCE.md §12.2 quotes its output, BENCHMARKS.md its run time.
 
+mod common;
+
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -29,16 +31,7 @@ use brdfd::optimise::Settings;
 use brdfd::sra_reading::{SraReading, specular_delta_l};
 use brdfd::synth::{SraResponse, SynthOptions, paper_samples, synth_scan};
 
-fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .map(|v| {
-            v.parse()
-                .unwrap_or_else(|_| panic!("{name}: cannot read {v:?}"))
-        })
-        .unwrap_or(default)
-}
+use common::arg;
 
 /// Sums of the table's columns over the trials.
 #[derive(Default, Clone, Copy)]

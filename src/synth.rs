@@ -521,24 +521,17 @@ mod tests {
         assert_ne!(a, b);
         // Relative deviations of the 12·31 reference values: mean ≈ 0, sd ≈ 0.01.
         let clean = synth_scan(truth, &SynthOptions::default()).unwrap();
-        let dev: Vec<f64> = a
-            .reference
-            .as_ref()
-            .unwrap()
-            .readings
-            .ma_t12
-            .iter()
-            .flatten()
-            .zip(
-                clean
-                    .reference
-                    .as_ref()
-                    .unwrap()
-                    .readings
-                    .ma_t12
-                    .iter()
-                    .flatten(),
-            )
+        fn reference_values(s: &Scan) -> impl Iterator<Item = &f64> {
+            s.reference
+                .as_ref()
+                .unwrap()
+                .readings
+                .ma_t12
+                .iter()
+                .flatten()
+        }
+        let dev: Vec<f64> = reference_values(&a)
+            .zip(reference_values(&clean))
             .map(|(n, c)| n / c - 1.0)
             .collect();
         let n = dev.len() as f64;

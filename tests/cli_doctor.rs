@@ -12,12 +12,10 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
 
 use serde_json::Value;
 
@@ -87,6 +85,18 @@ impl Doctor {
 
     fn fix(&self, name: &str) -> String {
         self.check(name)["fix"].as_str().unwrap_or("").to_string()
+    }
+
+    /// Asserts that check `name`'s detail says `part`, with the whole answer if not.
+    #[track_caller]
+    fn assert_detail(&self, name: &str, part: &str) {
+        assert!(self.detail(name).contains(part), "{}", self.json);
+    }
+
+    /// Asserts that check `name`'s fix says `part`, with the whole answer if not.
+    #[track_caller]
+    fn assert_fix(&self, name: &str, part: &str) {
+        assert!(self.fix(name).contains(part), "{}", self.json);
     }
 }
 
@@ -168,14 +178,7 @@ fn with_a_daemon_running_on_simulated_instruments_every_check_passes() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let stdout = child.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let _ = BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(line);
-    });
-    let line = rx.recv_timeout(STEP_TIMEOUT).unwrap();
+    let line = serve::first_line(&mut child).unwrap();
     let addr = line
         .split("http://")
         .nth(1)
@@ -197,11 +200,7 @@ fn with_a_daemon_running_on_simulated_instruments_every_check_passes() {
             .contains("held by the running daemon")
     );
     assert_eq!(d.status("daemon"), "ok");
-    assert!(
-        d.detail("daemon").contains("accepts the token"),
-        "{}",
-        d.json
-    );
+    d.assert_detail("daemon", "accepts the token");
     for device in ["MA-T12 (USB)", "SRA (serial)"] {
         assert_eq!(d.status(device), "skipped");
         assert_eq!(d.detail(device), "simulated: skipped");
@@ -222,7 +221,7 @@ fn a_config_that_does_not_parse_fails_naming_its_line() {
     let d = doctor(&cfg, None);
     assert!(!d.success);
     assert_eq!(d.status("config"), "fail");
-    assert!(d.detail("config").contains("brdfd.toml:2"), "{}", d.json);
+    d.assert_detail("config", "brdfd.toml:2");
     assert_eq!(d.status("daemon"), "skipped");
     assert_eq!(d.status("clock"), "ok");
 }
@@ -244,17 +243,9 @@ fn a_store_directory_the_user_cannot_write_fails_with_its_fix() {
     std::fs::set_permissions(&store, std::fs::Permissions::from_mode(0o755)).unwrap();
     assert!(!d.success);
     assert_eq!(d.status("store"), "fail", "{}", d.json);
-    assert!(
-        d.detail("store").contains("cannot create files in"),
-        "{}",
-        d.json
-    );
-    assert!(
-        d.detail("store").contains("Permission denied"),
-        "{}",
-        d.json
-    );
-    assert!(d.fix("store").contains("chown"), "{}", d.json);
+    d.assert_detail("store", "cannot create files in");
+    d.assert_detail("store", "Permission denied");
+    d.assert_fix("store", "chown");
     assert!(d.text.contains("FAIL store:"), "{}", d.text);
     assert!(d.text.contains("fix: run brdfd as the user"), "{}", d.text);
     // And nothing was left behind by the probe of a writable directory.
@@ -276,21 +267,15 @@ fn no_daemon_no_mat12_and_no_serial_port_fail_with_their_fixes() {
     let d = doctor(&cfg, None);
     assert!(!d.success);
     assert_eq!(d.status("daemon"), "fail");
-    assert!(d.fix("daemon").contains("brdfd serve"), "{}", d.json);
+    d.assert_fix("daemon", "brdfd serve");
     assert_eq!(d.status("MA-T12 (USB)"), "fail");
     // No X-Rite device with this (unused) product id is attached to a test machine.
-    assert!(d.detail("MA-T12 (USB)").contains("7fff"), "{}", d.json);
-    assert!(
-        d.fix("MA-T12 (USB)").contains("lsusb -d 0765:"),
-        "{}",
-        d.json
-    );
+    d.assert_detail("MA-T12 (USB)", "7fff");
+    d.assert_fix("MA-T12 (USB)", "lsusb -d 0765:");
     assert_eq!(d.status("SRA (serial)"), "fail");
-    assert!(
-        d.detail("SRA (serial)")
-            .contains("/dev/brdfd-test-no-such-port ([devices.sra] port) is not there"),
-        "{}",
-        d.json
+    d.assert_detail(
+        "SRA (serial)",
+        "/dev/brdfd-test-no-such-port ([devices.sra] port) is not there",
     );
     assert!(d.fix("SRA (serial)").contains("/dev/serial/by-id/"));
     assert_eq!(d.status("store"), "ok");
@@ -322,21 +307,9 @@ fn a_serial_port_in_a_group_the_user_is_not_in_fails_naming_the_group() {
     let d = doctor(&cfg, Some(NOBODY));
     assert!(!d.success);
     assert_eq!(d.status("SRA (serial)"), "fail", "{}", d.json);
-    assert!(
-        d.detail("SRA (serial)").contains("belongs to group root"),
-        "{}",
-        d.json
-    );
-    assert!(
-        d.detail("SRA (serial)").contains("is not in it"),
-        "{}",
-        d.json
-    );
-    assert!(
-        d.fix("SRA (serial)").contains("usermod -aG root"),
-        "{}",
-        d.json
-    );
+    d.assert_detail("SRA (serial)", "belongs to group root");
+    d.assert_detail("SRA (serial)", "is not in it");
+    d.assert_fix("SRA (serial)", "usermod -aG root");
     // The owner's group is fine.
     let d = doctor(&cfg, None);
     assert_eq!(d.status("SRA (serial)"), "ok", "{}", d.json);
@@ -360,11 +333,7 @@ fn a_lock_held_by_a_live_process_without_a_daemon_fails() {
         "{}",
         d.json
     );
-    assert!(
-        d.fix("store lock").contains(&format!("kill {pid}")),
-        "{}",
-        d.json
-    );
+    d.assert_fix("store lock", &format!("kill {pid}"));
     drop(lock);
     // Released: the file still names this process, which no longer holds it.
     let d = doctor(&cfg, None);
@@ -397,11 +366,9 @@ fn a_lock_naming_a_process_that_has_ended() {
     .unwrap();
     let d = doctor(&cfg, None);
     assert_eq!(d.status("store lock"), "ok", "{}", d.json);
-    assert!(
-        d.detail("store lock")
-            .contains(&format!("names pid {dead}, which no longer holds it")),
-        "{}",
-        d.json
+    d.assert_detail(
+        "store lock",
+        &format!("names pid {dead}, which no longer holds it"),
     );
 
     // Held, but by a process other than the one named (one that inherited the descriptor of a
@@ -416,7 +383,7 @@ fn a_lock_naming_a_process_that_has_ended() {
     drop(lock);
     assert!(!d.success);
     assert_eq!(d.status("store lock"), "fail", "{}", d.json);
-    assert!(d.detail("store lock").contains("has ended"), "{}", d.json);
+    d.assert_detail("store lock", "has ended");
     assert!(
         d.fix("store lock")
             .contains(&format!("fuser -v {}", lock_file.display())),

@@ -31,13 +31,26 @@ fn config(dir: &Path, api_extra: &str) -> PathBuf {
     )
 }
 
-/// One raw HTTP/1.1 request; returns the status code and the body.
-fn raw(addr: SocketAddr, request: &str) -> (u16, String) {
-    let mut s = TcpStream::connect(addr).unwrap();
+/// A new connection to `addr` whose reads give up after [`STEP_TIMEOUT`].
+fn connect(addr: SocketAddr) -> TcpStream {
+    let s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(STEP_TIMEOUT)).unwrap();
+    s
+}
+
+/// Sends one raw request on a new connection and reads the answer until the server closes
+/// it (or [`STEP_TIMEOUT`] passes).
+fn answer(addr: SocketAddr, request: &str) -> String {
+    let mut s = connect(addr);
     s.write_all(request.as_bytes()).unwrap();
     let mut out = String::new();
     let _ = s.read_to_string(&mut out);
+    out
+}
+
+/// One raw HTTP/1.1 request; returns the status code and the body.
+fn raw(addr: SocketAddr, request: &str) -> (u16, String) {
+    let out = answer(addr, request);
     let status = out
         .split_whitespace()
         .nth(1)
@@ -63,11 +76,7 @@ fn request(method: &str, path: &str, headers: &[(&str, &str)], body: &str) -> St
 
 /// Row counts of the tables an attack could change, read through the read-only store.
 fn counts(dir: &Path) -> Vec<(String, i64)> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let store = brdfd::store::Store::open_read_only(dir.join("brdfd.db"))
             .await
             .expect("read-only open beside the daemon");
@@ -449,8 +458,7 @@ fn half_sent_headers_are_closed_and_connections_and_streams_are_capped() {
     let host = d.addr.to_string();
     let mut held: Vec<TcpStream> = (0..12)
         .map(|_| {
-            let mut s = TcpStream::connect(d.addr).unwrap();
-            s.set_read_timeout(Some(STEP_TIMEOUT)).unwrap();
+            let mut s = connect(d.addr);
             let keep_alive = request("GET", "/healthz", &[("host", &host)], "")
                 .replace("connection: close", "connection: keep-alive");
             s.write_all(keep_alive.as_bytes()).unwrap();
@@ -479,8 +487,7 @@ fn half_sent_headers_are_closed_and_connections_and_streams_are_capped() {
     let bearer = format!("Bearer {}", d.token);
     let busy: Vec<TcpStream> = (0..12)
         .map(|_| {
-            let mut s = TcpStream::connect(d.addr).unwrap();
-            s.set_read_timeout(Some(STEP_TIMEOUT)).unwrap();
+            let mut s = connect(d.addr);
             s.write_all(
                 format!(
                     "POST /scans/import HTTP/1.1\r\nhost: {host}\r\nauthorization: {bearer}\r\n\
@@ -784,25 +791,9 @@ fn report_and_export_never_write_through_a_link_or_onto_the_store() {
     }
 }
 
-/// The file-descriptor limit of this test process, raised for the flood.
-fn raise_fd_limit() {
-    // SAFETY: getrlimit/setrlimit on this process with a valid struct.
-    unsafe {
-        let mut lim = libc::rlimit {
-            rlim_cur: 0,
-            rlim_max: 0,
-        };
-        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 {
-            lim.rlim_cur = lim.rlim_max.min(65_536);
-            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
-        }
-    }
-}
-
 /// An event stream opened by hand: the request sent and the answer's head read.
 fn open_stream(addr: SocketAddr, token: &str) -> TcpStream {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(STEP_TIMEOUT)).unwrap();
+    let mut s = connect(addr);
     s.write_all(
         format!("GET /events HTTP/1.1\r\nhost: {addr}\r\nauthorization: Bearer {token}\r\n\r\n")
             .as_bytes(),
@@ -823,7 +814,7 @@ fn open_stream(addr: SocketAddr, token: &str) -> TcpStream {
 #[test]
 fn silent_sockets_and_idle_event_streams_cannot_keep_the_operator_out() {
     let _serial = serial();
-    raise_fd_limit();
+    brdfd::api::server::raise_fd_limit();
     let dir = tempfile::tempdir().unwrap();
     // Long timeouts: what keeps the operator in is the cap's rule, not a timer.
     let cfg = write_simulated_config(
@@ -952,8 +943,7 @@ fn an_idle_connection_closes_at_the_configured_idle_timeout() {
         "",
     );
     let d = spawn_serve(&cfg, &[]);
-    let mut s = TcpStream::connect(d.addr).unwrap();
-    s.set_read_timeout(Some(STEP_TIMEOUT)).unwrap();
+    let mut s = connect(d.addr);
     let keep_alive = request("GET", "/healthz", &[("host", &d.addr.to_string())], "")
         .replace("connection: close", "connection: keep-alive");
     s.write_all(keep_alive.as_bytes()).unwrap();
@@ -976,11 +966,7 @@ fn an_idle_connection_closes_at_the_configured_idle_timeout() {
 
 /// One raw request's status and its whole answer (head and body).
 fn raw_full(addr: SocketAddr, request: &str) -> (u16, String) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(STEP_TIMEOUT)).unwrap();
-    s.write_all(request.as_bytes()).unwrap();
-    let mut out = String::new();
-    let _ = s.read_to_string(&mut out);
+    let out = answer(addr, request);
     let status = out
         .split_whitespace()
         .nth(1)

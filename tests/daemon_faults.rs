@@ -135,13 +135,7 @@ async fn an_unplugged_instrument_fails_the_scan_keeping_its_readings_and_the_nex
         // Plugged back in: the next scan reconnects and completes with the next recording.
         plugged.store(true, Ordering::SeqCst);
         let ok = scan_and_settle(service, second).await;
-        let detail = d.store.scan_detail(ok).await.unwrap();
-        assert_eq!(
-            detail.scan.state,
-            ScanState::Complete,
-            "{:?}",
-            detail.scan.reason
-        );
+        let detail = complete_scan(&d.store, ok).await;
         assert_eq!(detail.readings.len(), 14);
         let fits = d.store.fits_for_scan(ok).await.unwrap();
         assert_eq!(fits.len(), 3);
@@ -196,13 +190,7 @@ async fn damaged_replies_and_garbage_leave_only_the_frames_received_whole_in_the
         let service = &d.service;
         measure_reference(service).await;
         let scan = scan_and_settle(service, first).await;
-        let detail = d.store.scan_detail(scan).await.unwrap();
-        assert_eq!(
-            detail.scan.state,
-            ScanState::Complete,
-            "{:?}",
-            detail.scan.reason
-        );
+        let detail = complete_scan(&d.store, scan).await;
         // Every stored frame is the recorded reply, byte for byte: neither a damaged copy nor
         // the garbage before it.
         let frames = recorded_fetch_replies(&mock_devices::recordings::all()[1]);
@@ -246,13 +234,7 @@ async fn a_fit_that_panics_is_recorded_as_failed_and_the_daemon_goes_on() {
             }
             real(job, observer)
         });
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&strict_fast());
         let d = start(
             devices,
             settings(),
@@ -307,13 +289,7 @@ async fn a_fit_that_panics_is_recorded_as_failed_and_the_daemon_goes_on() {
 async fn a_scan_against_a_stale_reference_is_flagged_not_fitted_until_allowed() {
     let _serial = serial();
     bounded(async {
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&strict_fast());
         let settings = ServiceSettings {
             reference_max_age: Duration::from_millis(20),
             ..settings()
@@ -401,13 +377,7 @@ async fn a_running_fit_can_be_cancelled_and_a_scan_aborted_keeping_its_readings(
             }
         });
         // Recorded timing, ten times faster: a scan takes about a quarter of a second.
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &ReplayOptions::lenient().speed(10.0),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&ReplayOptions::lenient().speed(10.0));
         let settings = ServiceSettings {
             cost_functions: vec![CostFunction::Cf2],
             max_concurrent_fits: 1,

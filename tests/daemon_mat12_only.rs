@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use brdfd::geometry::{Device, MA_T12_COUNT};
 use brdfd::service::devices::Devices;
 use brdfd::service::{ServiceError, ServiceOptions};
-use brdfd::store::{FitStatus, ScanState, StoreError};
+use brdfd::store::{FitStatus, StoreError};
 use drivers::Instrument;
 use mock_devices::ReplayOptions;
 
@@ -48,13 +48,7 @@ async fn with_the_sra_off_a_reference_and_a_scan_have_12_readings_and_fit_with_i
         );
 
         let scan = scan_and_settle(service, "T.Sky blue").await;
-        let detail = d.store.scan_detail(scan).await.unwrap();
-        assert_eq!(
-            detail.scan.state,
-            ScanState::Complete,
-            "{:?}",
-            detail.scan.reason
-        );
+        let detail = complete_scan(&d.store, scan).await;
         assert!(!detail.scan.specular_readings);
         assert_eq!(detail.readings.len(), MA_T12_COUNT);
 
@@ -100,13 +94,7 @@ async fn with_the_sra_off_a_reference_and_a_scan_have_12_readings_and_fit_with_i
 
         // The SRA is back: the same store, both instruments. The reference in force has no SRA
         // readings, so a scan (which now has them) is refused with the fix.
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &lenient_fast(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&lenient_fast());
         let store = brdfd::store::Store::open(&d.db).await.unwrap();
         let again = brdfd::service::Service::start(
             store.clone(),
@@ -137,13 +125,7 @@ async fn with_the_sra_off_a_reference_and_a_scan_have_12_readings_and_fit_with_i
             .await
             .expect("scan accepted");
         assert!(again.wait_settled(scan, STEP_TIMEOUT).await.unwrap());
-        let detail = store.scan_detail(scan).await.unwrap();
-        assert_eq!(
-            detail.scan.state,
-            ScanState::Complete,
-            "{:?}",
-            detail.scan.reason
-        );
+        let detail = complete_scan(&store, scan).await;
         assert!(detail.scan.specular_readings);
         assert_eq!(detail.readings.len(), 14);
         again.shutdown().await;

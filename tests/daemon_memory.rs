@@ -10,9 +10,7 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
 use std::time::Duration;
 
 use common::*;
@@ -38,14 +36,7 @@ fn serve_idles_with_under_16_mib_of_its_own_memory() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let stdout = child.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let _ = BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(line);
-    });
-    let line = rx.recv_timeout(STEP_TIMEOUT);
+    let line = serve::first_line(&mut child);
     std::thread::sleep(Duration::from_millis(500));
     let rss = status_kib(child.id(), "VmRSS");
     let anon = status_kib(child.id(), "RssAnon");

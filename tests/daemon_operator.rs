@@ -28,8 +28,7 @@ use std::time::Duration;
 use brdfd::client::{Client, ClientError};
 use brdfd::fit::FitScanError;
 use brdfd::optimise::{FitError, GaSettings, Method, Progress};
-use brdfd::service::{Devices, FitFn, FitJob, ServiceOptions, ServiceSettings, default_fit_fn};
-use drivers::Instrument;
+use brdfd::service::{FitFn, FitJob, ServiceOptions, ServiceSettings, default_fit_fn};
 use serde_json::{Value, json};
 
 use common::*;
@@ -119,6 +118,16 @@ fn cli(addr: &str, token_file: &Path, args: &[&str]) -> std::process::Output {
     run_brdfd(&all, None)
 }
 
+/// [`cli`] on the blocking pool.
+async fn cli_blocking(
+    addr: &str,
+    token_file: &Path,
+    args: Vec<&'static str>,
+) -> std::process::Output {
+    let (addr, token_file) = (addr.to_string(), token_file.to_path_buf());
+    blocking(move || cli(&addr, &token_file, &args)).await
+}
+
 /// Exit status 0, or the test fails with what the command said.
 fn ok(out: &std::process::Output, what: &str) -> String {
     assert!(
@@ -174,13 +183,7 @@ async fn refit_cancel_abort_and_every_operator_error_through_http_and_the_cli() 
         let (fit_fn, probe, started) = probed_fit_fn();
         // Recorded timing: a measurement takes ~2.4 s, so an abort sent after the first reading
         // lands while the scan is measuring.
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &mock_devices::ReplayOptions::lenient(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&mock_devices::ReplayOptions::lenient());
         let d = start(
             devices,
             ServiceSettings {
@@ -194,13 +197,7 @@ async fn refit_cancel_abort_and_every_operator_error_through_http_and_the_cli() 
         .await;
         let (api, client, token_file) = start_api(&d.service, d.dir.path()).await;
         let addr = api.local_addr().to_string();
-        let run = {
-            let (addr, token_file) = (addr.clone(), token_file.clone());
-            move |args: Vec<&'static str>| {
-                let (addr, token_file) = (addr.clone(), token_file.clone());
-                async move { blocking(move || cli(&addr, &token_file, &args)).await }
-            }
-        };
+        let run = |args: Vec<&'static str>| cli_blocking(&addr, &token_file, args);
 
         // Errors before anything is measured: one line naming what to do; exit 6 where the
         // daemon's state refuses it, 1 for a bad file.
@@ -508,13 +505,7 @@ async fn a_stale_reference_is_refused_by_refit_until_allowed() {
     bounded(async {
         // A zero age limit: the reference is stale from the first millisecond after it
         // completes. The test waits for the daemon to say so instead of sleeping.
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&strict_fast());
         let d = start(
             devices,
             ServiceSettings {
@@ -526,13 +517,7 @@ async fn a_stale_reference_is_refused_by_refit_until_allowed() {
         .await;
         let (api, client, token_file) = start_api(&d.service, d.dir.path()).await;
         let addr = api.local_addr().to_string();
-        let run = {
-            let (addr, token_file) = (addr.clone(), token_file.clone());
-            move |args: Vec<&'static str>| {
-                let (addr, token_file) = (addr.clone(), token_file.clone());
-                async move { blocking(move || cli(&addr, &token_file, &args)).await }
-            }
-        };
+        let run = |args: Vec<&'static str>| cli_blocking(&addr, &token_file, args);
         ok(&run(vec!["reference"]).await, "reference");
         let c = client.clone();
         blocking(move || {

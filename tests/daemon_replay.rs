@@ -87,11 +87,7 @@ fn demo_replays_the_recordings_into_a_local_store_and_runs_twice() {
         "{fit}"
     );
 
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let store = Store::open(dir.path().join("brdfd-demo/brdfd.db"))
             .await
             .unwrap();

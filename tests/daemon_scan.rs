@@ -17,7 +17,7 @@ use brdfd::geometry::{Device, GEOMETRIES};
 use brdfd::optimise::{Method, Settings};
 use brdfd::processing::{self, ProcessingOptions, SpecularStrategy};
 use brdfd::service::{Event, RefitRequest};
-use brdfd::store::{FitStatus, ReadingValues, ReferenceStatus, ScanState};
+use brdfd::store::{FitStatus, ReadingValues, ReferenceStatus};
 use drivers::protocol::{Codec, Response};
 use drivers::sra::codec::SraCodec;
 use drivers::{Instrument, ReadingValue};
@@ -89,13 +89,7 @@ async fn a_reference_a_scan_and_three_fits_land_in_the_store_with_every_row() {
         let first = &mock_devices::recordings::samples()[0];
         let sample = first.sample.unwrap();
         let scan = scan_and_settle(service, sample).await;
-        let detail = d.store.scan_detail(scan).await.unwrap();
-        assert_eq!(
-            detail.scan.state,
-            ScanState::Complete,
-            "{:?}",
-            detail.scan.reason
-        );
+        let detail = complete_scan(&d.store, scan).await;
         assert_eq!(detail.scan.sample, sample);
         assert_eq!(detail.scan.reference_id, reference);
         assert_eq!(detail.readings.len(), 14);

@@ -89,11 +89,7 @@ fn signal_stops_a_long_fit_which_runs_again_at_the_next_start(signal: &str) {
     );
 
     // Stopped, not finished and not failed: left `running` for the next start.
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let store = Store::open(&db).await.unwrap();
         let f = store.fit_detail(FitRunId(fit)).await.unwrap();
         assert_eq!(f.run.status, FitStatus::Running, "{signal}: {:?}", f.run);
@@ -170,11 +166,7 @@ fn sigterm_aborts_a_scan_that_has_readings_still_to_come_at_once() {
     let status = d.child.wait().unwrap();
     assert!(status.success(), "{status}");
     drop(events);
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let store = Store::open(&db).await.unwrap();
         let detail = store.scan_detail(brdfd::store::ScanId(scan)).await.unwrap();
         assert_eq!(

@@ -12,13 +12,13 @@
 //! preview agree, on the same brightness scale (no factor applied to Mitsuba's film), in mean
 //! colour within the ΔE00 GUIDE.md and SCIENCE.md §11 state, and in mean luminance within 2 %.
 
+mod common;
+
 use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
 use brdfd::colour::{Xyz, ciede2000, white_point, xyz_to_lab};
-use brdfd::cost::CostFunction;
-use brdfd::fit::{FitRequest, fit_scan};
 use brdfd::formats::{ExportOptions, mitsuba};
 use brdfd::geometry::GEOMETRIES;
 use brdfd::model::{self, FresnelCosine, SpecularGeometry};
@@ -28,6 +28,8 @@ use brdfd::report::Study;
 use brdfd::scan::Scan;
 use brdfd::spectral::wavelengths_nm;
 use serde_json::{Value, json};
+
+use common::fit_every_cost;
 
 fn python() -> PathBuf {
     let p = std::env::var_os("BRDFD_MITSUBA_PYTHON").map_or_else(
@@ -67,25 +69,13 @@ fn study(fresnel: FresnelCosine) -> Study {
         .iter()
         .map(|n| Scan::read_file(PathBuf::from(format!("{dir}/{n}.noisy.scan.json"))).unwrap())
         .collect();
+    let settings = Settings {
+        fresnel,
+        ..Settings::default()
+    };
     let reports: Vec<Vec<_>> = scans
         .iter()
-        .map(|scan| {
-            CostFunction::ALL
-                .iter()
-                .map(|&cost| {
-                    let request = FitRequest {
-                        processing: Default::default(),
-                        settings: Settings {
-                            cost,
-                            fresnel,
-                            ..Settings::default()
-                        },
-                        ..FitRequest::default()
-                    };
-                    fit_scan(scan, &request).unwrap()
-                })
-                .collect()
-        })
+        .map(|scan| fit_every_cost(scan, settings))
         .collect();
     Study::from_fit_reports(&scans, &reports)
 }

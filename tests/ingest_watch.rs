@@ -201,11 +201,7 @@ fn scans(client: &Client) -> Vec<Value> {
 
 /// The rows of `ingested_files` (hash, file name), from the stopped daemon's store.
 fn ingested(lab: &Lab) -> Vec<(String, String)> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let store = brdfd::store::Store::open(lab.dir.join("brdfd.db"))
             .await
             .unwrap();
@@ -234,6 +230,32 @@ fn write_in_pieces(path: &Path, bytes: &[u8], pieces: usize, between: impl Fn(us
         f.flush().unwrap();
         between(i);
     }
+}
+
+/// A service on `store` with the simulated instruments (strict, accelerated), fitting cf2
+/// only and without bootstrap, watching `inbox` (settling 50 ms, polling every 20 ms).
+async fn watching_service(store: &brdfd::store::Store, inbox: &Path) -> brdfd::service::Service {
+    let settings = brdfd::service::ServiceSettings {
+        cost_functions: vec![brdfd::cost::CostFunction::Cf2],
+        bootstrap: 0,
+        ingest: Some(brdfd::service::IngestSettings {
+            dir: inbox.to_path_buf(),
+            settle: Duration::from_millis(50),
+            poll: Duration::from_millis(20),
+            pair_wait: Duration::from_secs(600),
+            reference: "Munsell N9".into(),
+            max_file_bytes: 32 << 20,
+        }),
+        ..settings()
+    };
+    brdfd::service::Service::start(
+        store.clone(),
+        simulated(&strict_fast()),
+        settings,
+        brdfd::service::ServiceOptions::default(),
+    )
+    .await
+    .unwrap()
 }
 
 #[test]
@@ -667,35 +689,8 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
         );
         store.close().await;
 
-        let devices = brdfd::service::Devices::simulated(
-            playlist(drivers::Instrument::MaT12),
-            playlist(drivers::Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
         let store = brdfd::store::Store::open(&db).await.unwrap();
-        let settings = brdfd::service::ServiceSettings {
-            cost_functions: vec![brdfd::cost::CostFunction::Cf2],
-            bootstrap: 0,
-            ingest: Some(brdfd::service::IngestSettings {
-                dir: inbox.clone(),
-                settle: Duration::from_millis(50),
-                poll: Duration::from_millis(20),
-                pair_wait: Duration::from_secs(600),
-                reference: "Munsell N9".into(),
-                max_file_bytes: 32 << 20,
-            }),
-            ..settings()
-        };
-        let service = brdfd::service::Service::start(
-            store.clone(),
-            devices,
-            settings,
-            brdfd::service::ServiceOptions::default(),
-        )
-        .await
-        .unwrap();
+        let service = watching_service(&store, &inbox).await;
         let deadline = Instant::now() + STEP_TIMEOUT;
         loop {
             let files = store.ingested_files().await.unwrap();
@@ -768,34 +763,7 @@ async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
         .execute(&mut raw)
         .await
         .unwrap();
-        let devices = brdfd::service::Devices::simulated(
-            playlist(drivers::Instrument::MaT12),
-            playlist(drivers::Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
-        let settings = brdfd::service::ServiceSettings {
-            cost_functions: vec![brdfd::cost::CostFunction::Cf2],
-            bootstrap: 0,
-            ingest: Some(brdfd::service::IngestSettings {
-                dir: inbox.clone(),
-                settle: Duration::from_millis(50),
-                poll: Duration::from_millis(20),
-                pair_wait: Duration::from_secs(600),
-                reference: "Munsell N9".into(),
-                max_file_bytes: 32 << 20,
-            }),
-            ..settings()
-        };
-        let service = brdfd::service::Service::start(
-            store.clone(),
-            devices,
-            settings,
-            brdfd::service::ServiceOptions::default(),
-        )
-        .await
-        .unwrap();
+        let service = watching_service(&store, &inbox).await;
         let text = example("t-lavender-blue").to_json_pretty().unwrap();
         std::fs::write(inbox.join("l.scan.json"), &text).unwrap();
         let deadline = Instant::now() + STEP_TIMEOUT;

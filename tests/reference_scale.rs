@@ -12,7 +12,6 @@ use brdfd::config::Config;
 use brdfd::processing::{self, ProcessingOptions, Scale};
 use brdfd::service::{ServiceOptions, ServiceSettings};
 use brdfd::spectral::BANDS;
-use drivers::Instrument;
 
 use common::*;
 
@@ -39,13 +38,7 @@ fn a_calibrated_tile_is_recorded_and_scales_the_measured_brdf() {
                 cost_functions: vec![brdfd::cost::CostFunction::Cf1],
                 ..ServiceSettings::from_config(&config)
             };
-            let devices = brdfd::service::Devices::simulated(
-                playlist(Instrument::MaT12),
-                playlist(Instrument::Sra),
-                &strict_fast(),
-                [None, None],
-            )
-            .unwrap();
+            let devices = simulated(&strict_fast());
             let d = start(devices, settings, ServiceOptions::default()).await;
             let reference = measure_reference(&d.service).await;
             let detail = d.store.reference_detail(reference).await.unwrap();

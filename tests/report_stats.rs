@@ -3,12 +3,14 @@
 //! 95 % t interval from the textbook formula, and the sign test from an exact binomial sum in
 //! integers.
 
-use brdfd::cost::CostFunction;
-use brdfd::fit::{FitRequest, fit_scan};
+mod common;
+
 use brdfd::optimise::Settings;
 use brdfd::report::{Analysis, Study};
 use brdfd::scan::Scan;
 use statrs::distribution::{ContinuousCDF, StudentsT};
+
+use common::fit_every_cost;
 
 const SCANS: [&str; 8] = [
     include_str!("data/t-freesia-pink.noisy.scan.json"),
@@ -28,21 +30,7 @@ fn demo_study() -> Study {
         .collect();
     let reports: Vec<Vec<_>> = scans
         .iter()
-        .map(|scan| {
-            CostFunction::ALL
-                .iter()
-                .map(|&cost| {
-                    let request = FitRequest {
-                        settings: Settings {
-                            cost,
-                            ..Settings::default()
-                        },
-                        ..FitRequest::default()
-                    };
-                    fit_scan(scan, &request).unwrap()
-                })
-                .collect()
-        })
+        .map(|scan| fit_every_cost(scan, Settings::default()))
         .collect();
     Study::from_fit_reports(&scans, &reports)
 }

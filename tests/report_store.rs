@@ -147,6 +147,20 @@ async fn fill(path: &Path) -> Vec<Scan> {
     scans
 }
 
+/// `brdfd ARGS… --all --db DB --out OUT --json`'s answer.
+fn all_as_json(args: &[&str], db: &str, out: &std::path::Path) -> Value {
+    let mut all = args.to_vec();
+    all.extend([
+        "--all",
+        "--db",
+        db,
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    serde_json::from_slice(&brdfd(&all).stdout).unwrap()
+}
+
 fn brdfd(args: &[&str]) -> std::process::Output {
     let out = Command::new(env!("CARGO_BIN_EXE_brdfd"))
         .args(args)
@@ -481,18 +495,7 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
 
     // --json: what was written, as JSON on stdout (the tidy tables and a second report).
     let tidy = dir.path().join("tidy");
-    let out = brdfd(&[
-        "export-format",
-        "--format",
-        "tidy",
-        "--all",
-        "--db",
-        db_s,
-        "--out",
-        tidy.to_str().unwrap(),
-        "--json",
-    ]);
-    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = all_as_json(&["export-format", "--format", "tidy"], db_s, &tidy);
     assert_eq!(v["samples"], 3, "{v}");
     assert_eq!(v["format"], "tidy", "{v}");
     for f in v["files"].as_array().unwrap() {
@@ -501,16 +504,7 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
     let spectra = std::fs::read_to_string(tidy.join("spectra.csv")).unwrap();
     assert_eq!(spectra.lines().count(), 1 + 3 * 14 * 31);
     let second = dir.path().join("rep-json");
-    let out = brdfd(&[
-        "report",
-        "--all",
-        "--db",
-        db_s,
-        "--out",
-        second.to_str().unwrap(),
-        "--json",
-    ]);
-    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = all_as_json(&["report"], db_s, &second);
     assert_eq!(v["samples"], 3, "{v}");
     assert!(
         std::path::Path::new(v["html"].as_str().unwrap()).exists(),

@@ -21,16 +21,15 @@ use std::time::Duration;
 
 use brdfd::formats::{ExportOptions, Format};
 use brdfd::report::load::{Selection, from_central, from_store};
-use brdfd::service::{Devices, ServiceOptions, ServiceSettings};
+use brdfd::service::{ServiceOptions, ServiceSettings};
 use brdfd::store::Store;
 use brdfd::store::central::CentralSelection;
 use brdfd::sync::tables::TABLES;
 use brdfd::sync::{Central, Forwarder, ForwarderOptions, SyncError};
-use drivers::Instrument;
 use sqlx::Row;
 
 use common::*;
-use pg::{Cluster, TestDb, central_tables, local_tables, wait_for};
+use pg::{Cluster, TestDb, central_tables, highest_seq, local_tables, wait_for};
 
 /// Forwarding settings for tests: small batches, quick polls and retries.
 fn forwarding(station: &str, url: &str, batch: usize) -> ForwarderOptions {
@@ -44,13 +43,7 @@ fn forwarding(station: &str, url: &str, batch: usize) -> ForwarderOptions {
 
 /// A station: the daemon in-process on the replayed recordings, forwarding as `station`.
 async fn station(station: &str, url: &str, batch: usize) -> TestDaemon {
-    let devices = Devices::simulated(
-        playlist(Instrument::MaT12),
-        playlist(Instrument::Sra),
-        &strict_fast(),
-        [None, None],
-    )
-    .expect("simulated instruments");
+    let devices = simulated(&strict_fast());
     let settings = ServiceSettings {
         sync: Some(forwarding(station, url, batch)),
         // Intervals are forwarded like every other column; a few resamples make them quickly
@@ -76,24 +69,6 @@ async fn measure(d: &TestDaemon, n: usize) {
     for s in samples(n) {
         scan_and_settle(&d.service, s).await;
     }
-}
-
-/// The highest outbox entry the store at `db` ever queued, read afresh from the file.
-async fn highest_seq(db: &Path) -> i64 {
-    let pool = sqlx::SqlitePool::connect_with(
-        sqlx::sqlite::SqliteConnectOptions::new()
-            .filename(db)
-            .read_only(true),
-    )
-    .await
-    .unwrap();
-    let seq: Option<i64> =
-        sqlx::query_scalar("SELECT seq FROM sqlite_sequence WHERE name = 'sync_outbox'")
-            .fetch_optional(&pool)
-            .await
-            .unwrap();
-    pool.close().await;
-    seq.unwrap_or(0)
 }
 
 /// Waits until the central database acknowledged everything the store at `db` has queued
@@ -379,13 +354,7 @@ async fn a_station_restarted_mid_forward_loses_and_doubles_nothing() {
 
         // The second life, on the same store: forwarding resumes from the central cursor.
         let store = Store::open(&d.db).await.unwrap();
-        let devices = Devices::simulated(
-            playlist(Instrument::MaT12),
-            playlist(Instrument::Sra),
-            &strict_fast(),
-            [None, None],
-        )
-        .unwrap();
+        let devices = simulated(&strict_fast());
         let settings = ServiceSettings {
             sync: Some(forwarding("bench-r", &db.url, 50)),
             ..settings()
@@ -594,13 +563,7 @@ async fn station_on(
     batch: usize,
 ) -> (Store, brdfd::service::Service) {
     let store = Store::open(db).await.unwrap();
-    let devices = Devices::simulated(
-        playlist(Instrument::MaT12),
-        playlist(Instrument::Sra),
-        &strict_fast(),
-        [None, None],
-    )
-    .unwrap();
+    let devices = simulated(&strict_fast());
     let settings = ServiceSettings {
         sync: Some(forwarding(name, url, batch)),
         bootstrap: 5,
@@ -1113,13 +1076,7 @@ async fn the_central_views_decode_as_the_stations_and_pool_across_stations() {
         }
         let pg = sqlx::PgPool::connect(&db.url).await.unwrap();
         for (d, n) in stations.iter().zip(names) {
-            let local = sqlx::SqlitePool::connect_with(
-                sqlx::sqlite::SqliteConnectOptions::new()
-                    .filename(&d.db)
-                    .read_only(true),
-            )
-            .await
-            .unwrap();
+            let local = pg::read_only_store(&d.db).await;
             // Every decoded value, bit for bit, station view vs central view.
             for (view, id) in [
                 ("reading_values", "reading_id"),

@@ -9,7 +9,7 @@ mod common;
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
-use common::{Rig, TEST_TIMEOUT, assert_bit_eq, fast_config, pty_lock, scan};
+use common::{Rig, TEST_TIMEOUT, assert_bit_eq, fast_config, pty_lock, scan, within};
 use drivers::protocol::{ErrorCode, Reading, RequestKind};
 use drivers::session::Fault;
 use drivers::{DriverConfig, DriverError, Instrument};
@@ -64,15 +64,9 @@ async fn recorded_timing_is_kept_and_a_speed_factor_scales_it() {
     let want = script.readings();
     let rig = Rig::new(script, ReplayOptions::strict(), DriverConfig::default());
     // Introduced with IDENTIFY already (or about to be); time MEASURE-ALL and the FETCHes.
-    tokio::time::timeout(TEST_TIMEOUT, rig.handle.identify())
-        .await
-        .unwrap()
-        .unwrap();
+    within(rig.handle.identify()).await.unwrap();
     let start = Instant::now();
-    let got = tokio::time::timeout(TEST_TIMEOUT, rig.handle.measure_all())
-        .await
-        .unwrap()
-        .unwrap();
+    let got = within(rig.handle.measure_all()).await.unwrap();
     let took = start.elapsed();
     assert_bit_eq(&got, &want, "N9 on the SRA at recorded timing");
     println!(
@@ -100,10 +94,7 @@ async fn recorded_timing_is_kept_and_a_speed_factor_scales_it() {
         DriverConfig::default(),
     );
     let start = Instant::now();
-    let got = tokio::time::timeout(TEST_TIMEOUT, rig.handle.measure_all())
-        .await
-        .unwrap()
-        .unwrap();
+    let got = within(rig.handle.measure_all()).await.unwrap();
     let took = start.elapsed();
     println!("MA-T12 N9 at 8x: {took:?}");
     assert_bit_eq(&got, &want, "N9 on the MA-T12 at 8x");
@@ -119,10 +110,7 @@ async fn strict_mode_refuses_a_request_out_of_order_and_reports_it() {
         let script = recordings::reference().script(instrument).unwrap();
         let last = *instrument.geometries().last().unwrap();
         let rig = Rig::new(script, ReplayOptions::strict().accelerated(), fast_config());
-        let err = tokio::time::timeout(TEST_TIMEOUT, rig.handle.measure_one(last))
-            .await
-            .unwrap()
-            .unwrap_err();
+        let err = within(rig.handle.measure_one(last)).await.unwrap_err();
         assert_eq!(
             err,
             DriverError::Refused {
@@ -157,16 +145,12 @@ async fn lenient_mode_answers_repeated_scans_and_refuses_what_was_never_recorded
         };
         let rig = Rig::new(script, options, fast_config());
         for round in 0..3 {
-            let got = tokio::time::timeout(TEST_TIMEOUT, rig.handle.measure_all())
+            let got = within(rig.handle.measure_all())
                 .await
-                .unwrap()
                 .unwrap_or_else(|e| panic!("{instrument} round {round}: {e}"));
             assert_bit_eq(&got, &want, &format!("{instrument} round {round}"));
         }
-        let err = tokio::time::timeout(TEST_TIMEOUT, rig.handle.status())
-            .await
-            .unwrap()
-            .unwrap_err();
+        let err = within(rig.handle.status()).await.unwrap_err();
         assert!(
             matches!(
                 err,
@@ -241,10 +225,7 @@ async fn the_sra_port_opened_by_name_like_a_real_one_replays_too() {
     let sim = SimSra::new(script, ReplayOptions::strict().accelerated()).unwrap();
     let factory_sim = sim.clone();
     let handle = drivers::spawn_sra(move || factory_sim.connect_by_name(), fast_config());
-    let got = tokio::time::timeout(TEST_TIMEOUT, handle.measure_all())
-        .await
-        .unwrap()
-        .unwrap();
+    let got = within(handle.measure_all()).await.unwrap();
     assert_bit_eq(&got, &want, "T.Sky blue via open_serial");
     handle.shutdown().await;
     assert!(sim.report().mismatches.is_empty());

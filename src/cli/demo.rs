@@ -125,11 +125,7 @@ fn row(sample: &str, scan: i64, f: &FitDetail) -> anyhow::Result<DemoRow> {
             f.run.id,
             f.run.cost_function,
             f.run.status,
-            f.run
-                .error
-                .as_deref()
-                .map(|e| format!(": {e}"))
-                .unwrap_or_default()
+            super::fit_error_suffix(&f.run)
         );
     };
     Ok(DemoRow {

@@ -236,6 +236,14 @@ pub fn distinct_file_stems<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<
         .collect()
 }
 
+/// `": ERROR"` after a fit's status when the fit recorded an error, else nothing.
+pub(crate) fn fit_error_suffix(run: &crate::store::FitRun) -> String {
+    run.error
+        .as_deref()
+        .map(|e| format!(": {e}"))
+        .unwrap_or_default()
+}
+
 /// An error chain on one line: `outer: inner: root`, with any line breaks inside a message
 /// folded, so stderr always gets exactly one line.
 pub fn one_line(err: &anyhow::Error) -> String {

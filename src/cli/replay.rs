@@ -379,11 +379,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
                         f.run.id,
                         f.run.cost_function.name(),
                         f.run.status,
-                        f.run
-                            .error
-                            .as_deref()
-                            .map(|e| format!(": {e}"))
-                            .unwrap_or_default()
+                        super::fit_error_suffix(&f.run)
                     ),
                 }
             }

@@ -52,30 +52,11 @@ pub fn sample_table<const N: usize>(
 ) -> Result<[[f64; N]; BANDS], CieTableError> {
     let mut out = [[f64::NAN; N]; BANDS];
     let mut found = [false; BANDS];
-    for (i, raw) in csv.lines().enumerate() {
-        let text = raw.trim();
-        if text.is_empty() || text.starts_with('#') || text.starts_with("nm") {
-            continue;
-        }
-        let bad = || CieTableError::BadRow {
-            table,
-            line: i + 1,
-            text: text.to_string(),
-            expected: N + 1,
-        };
-        let fields: Vec<f64> = text
-            .split(',')
-            .map(|f| f.trim().parse::<f64>())
-            .collect::<Result<_, _>>()
-            .map_err(|_| bad())?;
-        if fields.len() != N + 1 || fields.iter().any(|v| !v.is_finite()) {
-            return Err(bad());
-        }
+    for (nm, values) in all_rows::<N>(table, csv)? {
         // Wavelengths in these tables are whole nanometres; anything else is not a band centre.
-        let nm = fields[0];
         for (band, &centre) in wavelengths_nm().iter().enumerate() {
             if nm == f64::from(centre) {
-                out[band].copy_from_slice(&fields[1..]);
+                out[band] = values;
                 found[band] = true;
             }
         }

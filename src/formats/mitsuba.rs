@@ -220,18 +220,23 @@ pub fn scenes(
 mod tests {
     use super::*;
 
+    /// The scene of `fit` as cf1's, by the separable method, with the default options.
+    fn cf1_scene(sample: &SampleStudy, fit: &DoneFit) -> String {
+        scene(
+            sample,
+            crate::cost::CostFunction::Cf1,
+            "separable",
+            fit,
+            &ExportOptions::default(),
+        )
+        .unwrap()
+    }
+
     #[test]
     fn a_scene_holds_the_material_sphere_camera_and_light() {
         let s = crate::render::tests::sample(true);
         let d = s.done(crate::cost::CostFunction::Cf1).unwrap();
-        let xml = scene(
-            &s,
-            crate::cost::CostFunction::Cf1,
-            "separable",
-            d,
-            &ExportOptions::default(),
-        )
-        .unwrap();
+        let xml = cf1_scene(&s, d);
         roxmltree::Document::parse(&xml).unwrap();
         assert!(xml.contains("absolute scale"));
         assert!(xml.contains(&format!(
@@ -271,14 +276,7 @@ mod tests {
                 ..crate::store::Provenance::unknown()
             },
         });
-        let xml = scene(
-            &simulated,
-            crate::cost::CostFunction::Cf1,
-            "separable",
-            d,
-            &ExportOptions::default(),
-        )
-        .unwrap();
+        let xml = cf1_scene(&simulated, d);
         roxmltree::Document::parse(&xml).unwrap();
         assert!(
             xml.contains("Readings: simulated — replayed from synthetic-t-sky-blue."),
@@ -288,14 +286,7 @@ mod tests {
             fresnel: FresnelCosine::Exact,
             ..d.clone()
         };
-        let xml = scene(
-            &s,
-            crate::cost::CostFunction::Cf1,
-            "separable",
-            &exact,
-            &ExportOptions::default(),
-        )
-        .unwrap();
+        let xml = cf1_scene(&s, &exact);
         assert!(xml.contains("Fresnel exact"));
         assert!(xml.contains("so Mitsuba's BSDF is brdfd's model"));
         let names: Vec<String> = scenes(

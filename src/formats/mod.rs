@@ -387,23 +387,7 @@ pub(crate) mod tests {
         let crate::study::FitState::Done(d) = &mut study.samples[0].fits[0].state else {
             panic!("the first fit is done");
         };
-        let p = d.params;
-        d.uncertainty = Some(crate::uncertainty::Uncertainty {
-            method: crate::uncertainty::METHOD.into(),
-            resamples: 200,
-            noise: 0.014,
-            seed: 1,
-            percentile_level: 0.95,
-            ks: [p.ks * 0.8, p.ks * 1.2],
-            alpha: [p.alpha * 0.8, p.alpha * 1.2],
-            ior: [p.ior * 0.9, p.ior * 1.1],
-            kd: p.kd.iter().map(|k| [k * 0.9, k * 1.1]).collect(),
-            delta_e00_mean: [0.1, 0.2],
-            delta_e00_diffuse_mean: [0.1, 0.2],
-            delta_e00_specular_mean: Some([1.0, 2.0]),
-            calibrated: true,
-            note: None,
-        });
+        d.uncertainty = Some(crate::test_support::made_up_uncertainty(&d.params, true));
         study
     }
 

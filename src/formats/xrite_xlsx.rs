@@ -569,6 +569,12 @@ impl Sheet {
         self.cols().all(|c| self.text(row, c).is_none())
     }
 
+    /// The rows below `header` that hold anything.
+    fn data_rows(&self, header: u32) -> impl Iterator<Item = u32> + '_ {
+        self.rows()
+            .filter(move |&r| r > header && !self.row_is_empty(r))
+    }
+
     fn sheet_error(&self, message: impl Into<String>) -> XlsxError {
         XlsxError::Sheet {
             file: self.file.clone(),
@@ -780,10 +786,7 @@ impl Sheet {
         let band_cols = self.wavelength_columns(header, geo_col)?;
 
         let mut out: Vec<SpectralMeasurement> = Vec::new();
-        for row in self.rows().filter(|&r| r > header) {
-            if self.row_is_empty(row) {
-                continue;
-            }
+        for row in self.data_rows(header) {
             let name = self
                 .text(row, name_col)
                 .ok_or_else(|| self.empty(row, name_col, "the measurement's name"))?;
@@ -942,10 +945,7 @@ impl Sheet {
         let mut cells: Vec<[Option<String>; MA_T12_COUNT]> =
             vec![Default::default(); measurements.len()];
         let mut names: Vec<Option<(String, String)>> = vec![None; measurements.len()];
-        for row in self.rows().filter(|&r| r > header) {
-            if self.row_is_empty(row) {
-                continue;
-            }
+        for row in self.data_rows(header) {
             let name = self
                 .text(row, name_col)
                 .ok_or_else(|| self.empty(row, name_col, "the measurement's name"))?;

@@ -503,22 +503,7 @@ pub fn fit_with_observer(
     } else {
         options::run(measured, settings, observer)?
     };
-    let model = evaluate_model(
-        &run.params,
-        settings.model,
-        settings.fresnel,
-        &SpecularGeometry::all(),
-    );
-    Ok(FitOutcome {
-        params: run.params,
-        cost: cost_with(settings.cost, settings.sra, measured, &model),
-        evaluations: run.tracker.evaluations,
-        generations: run.tracker.history.len() as u32,
-        wall_ms: started.elapsed().as_secs_f64() * 1e3,
-        best_cost_per_generation: run.tracker.history,
-        method: settings.method,
-        seed: settings.seed,
-    })
+    Ok(outcome(measured, settings, run, settings.method, started))
 }
 
 /// A local refit of `measured` warm-started at `start`: the separable method's search and
@@ -535,22 +520,7 @@ pub fn refit_local(
     let problem = options::problem(measured, settings, &start.extra);
     let mut run = separable::run_local(&problem, &settings.separable, start);
     run.params.extra = start.extra;
-    let model = evaluate_model(
-        &run.params,
-        settings.model,
-        settings.fresnel,
-        &SpecularGeometry::all(),
-    );
-    Ok(FitOutcome {
-        params: run.params,
-        cost: cost_with(settings.cost, settings.sra, measured, &model),
-        evaluations: run.tracker.evaluations,
-        generations: run.tracker.history.len() as u32,
-        wall_ms: started.elapsed().as_secs_f64() * 1e3,
-        best_cost_per_generation: run.tracker.history,
-        method: Method::Separable,
-        seed: settings.seed,
-    })
+    Ok(outcome(measured, settings, run, Method::Separable, started))
 }
 
 fn check_input(measured: &MeasuredBrdf, cf: CostFunction) -> Result<(), FitError> {
@@ -572,6 +542,33 @@ fn check_input(measured: &MeasuredBrdf, cf: CostFunction) -> Result<(), FitError
         }
     }
     Ok(())
+}
+
+/// The outcome of `run` by `method`: its parameters, their cost under `settings` against
+/// `measured`, its trace, and the time since `started`.
+fn outcome(
+    measured: &MeasuredBrdf,
+    settings: &Settings,
+    run: Run,
+    method: Method,
+    started: Instant,
+) -> FitOutcome {
+    let model = evaluate_model(
+        &run.params,
+        settings.model,
+        settings.fresnel,
+        &SpecularGeometry::all(),
+    );
+    FitOutcome {
+        params: run.params,
+        cost: cost_with(settings.cost, settings.sra, measured, &model),
+        evaluations: run.tracker.evaluations,
+        generations: run.tracker.history.len() as u32,
+        wall_ms: started.elapsed().as_secs_f64() * 1e3,
+        best_cost_per_generation: run.tracker.history,
+        method,
+        seed: settings.seed,
+    }
 }
 
 /// What a method hands back: the parameters and its bookkeeping.

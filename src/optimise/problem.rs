@@ -1018,6 +1018,11 @@ mod tests {
         eprintln!("ln_1p_recip: worst {worst:.3} ulp");
     }
 
+    /// The problem of `m` under `cf`, incidence-angle Fresnel, default bounds.
+    fn problem(m: &MeasuredBrdf, cf: CostFunction) -> Problem {
+        Problem::new(m, cf, FresnelCosine::Incidence, Bounds::default())
+    }
+
     fn scan() -> (MeasuredBrdf, Params) {
         let truth = synthetic::cases()[3].truth;
         (synthetic::measured(&truth, FresnelCosine::Incidence), truth)
@@ -1033,7 +1038,7 @@ mod tests {
         p.kd[4] += 0.01;
         let a = evaluate(&p, FresnelCosine::Incidence, &geos);
         for cf in CostFunction::ALL {
-            let prob = Problem::new(&m, cf, FresnelCosine::Incidence, Bounds::default());
+            let prob = problem(&m, cf);
             let got = prob.full_cost(&p.kd, p.ks, p.alpha, p.ior);
             let want = cost(cf, &m, &a);
             assert!(((got - want) / want).abs() < 1e-13, "{cf}: {got} vs {want}");
@@ -1055,8 +1060,7 @@ mod tests {
         p.alpha *= 0.9;
         let a = evaluate(&p, FresnelCosine::Incidence, &geos);
         for cf in CostFunction::ALL {
-            let prob = Problem::new(&m, cf, FresnelCosine::Incidence, Bounds::default())
-                .with_sra(&m, SraReading::LUMINANCE);
+            let prob = problem(&m, cf).with_sra(&m, SraReading::LUMINANCE);
             let got = prob.full_cost(&p.kd, p.ks, p.alpha, p.ior);
             let want = cost_with(cf, SraReading::LUMINANCE, &m, &a);
             assert!(((got - want) / want).abs() < 1e-12, "{cf}: {got} vs {want}");
@@ -1073,8 +1077,7 @@ mod tests {
                 let k = y / luminance_with(&c, &tilt);
                 m2.values[g] = tilt.map(|x| x * k);
             }
-            let prob2 = Problem::new(&m2, cf, FresnelCosine::Incidence, Bounds::default())
-                .with_sra(&m2, SraReading::LUMINANCE);
+            let prob2 = problem(&m2, cf).with_sra(&m2, SraReading::LUMINANCE);
             let mut kd2 = [0.0; BANDS];
             let f2 = prob2.profile(cf.into(), p.ks, p.alpha, p.ior, &mut kd2);
             // The SRA terms see the reading's luminance only (recomputed here, so equal to
@@ -1144,7 +1147,7 @@ mod tests {
         let (m, truth) = scan();
         let m = synthetic::with_noise(&m, 0.02, 3);
         for cf in CostFunction::ALL {
-            let prob = Problem::new(&m, cf, FresnelCosine::Incidence, Bounds::default());
+            let prob = problem(&m, cf);
             let (ks, alpha, ior) = (truth.ks * 1.2, truth.alpha * 0.9, truth.ior);
             let mut kd = [0.0; BANDS];
             let f = prob.profile(cf.into(), ks, alpha, ior, &mut kd);
@@ -1189,12 +1192,7 @@ mod tests {
     fn l1_profile_kd_is_the_weighted_median() {
         let (m, truth) = scan();
         let m = synthetic::with_noise(&m, 0.02, 3);
-        let prob = Problem::new(
-            &m,
-            CostFunction::Cf2,
-            FresnelCosine::Incidence,
-            Bounds::default(),
-        );
+        let prob = problem(&m, CostFunction::Cf2);
         let (ks, alpha, ior) = (truth.ks * 1.2, truth.alpha * 0.9, truth.ior);
         let mut kd = [0.0; BANDS];
         let f = prob.profile(Criterion::L1, ks, alpha, ior, &mut kd);
@@ -1234,12 +1232,7 @@ mod tests {
     fn kink_solves_match_a_band_by_band_enumeration() {
         let (m, truth) = scan();
         let m = synthetic::with_noise(&m, 0.02, 5);
-        let prob = Problem::new(
-            &m,
-            CostFunction::Cf2,
-            FresnelCosine::Incidence,
-            Bounds::default(),
-        );
+        let prob = problem(&m, CostFunction::Cf2);
         let w = weights();
         for (ks, alpha, ior) in [
             (truth.ks, truth.alpha, truth.ior),
@@ -1296,7 +1289,7 @@ mod tests {
             let (m, truth) = scan();
             let m = synthetic::with_noise(&m, 0.01, 9);
             for cf in CostFunction::ALL {
-                let prob = Problem::new(&m, cf, FresnelCosine::Incidence, Bounds::default());
+                let prob = problem(&m, cf);
                 for criterion in CRITERIA {
                     for (ks, alpha, ior) in [
                         (truth.ks, truth.alpha, truth.ior),
@@ -1326,12 +1319,7 @@ mod tests {
         let (m, truth) = scan();
         for noise in [0.0, 0.01, 0.05] {
             let m = synthetic::with_noise(&m, noise, 11);
-            let prob = Problem::new(
-                &m,
-                CostFunction::M2,
-                FresnelCosine::Incidence,
-                Bounds::default(),
-            );
+            let prob = problem(&m, CostFunction::M2);
             for (ks, alpha, ior) in [
                 (truth.ks, truth.alpha, truth.ior),
                 (truth.ks * 1.4, truth.alpha * 0.6, 2.1),
@@ -1390,12 +1378,7 @@ mod tests {
     fn profile_at_the_truth_of_a_consistent_scan_is_zero() {
         let truth = synthetic::cases()[1].truth;
         let m = synthetic::consistent(&truth, FresnelCosine::Incidence);
-        let prob = Problem::new(
-            &m,
-            CostFunction::Cf2,
-            FresnelCosine::Incidence,
-            Bounds::default(),
-        );
+        let prob = problem(&m, CostFunction::Cf2);
         for criterion in CRITERIA {
             let mut kd = [0.0; BANDS];
             let f = prob.profile(criterion, truth.ks, truth.alpha, truth.ior, &mut kd);

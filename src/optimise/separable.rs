@@ -102,6 +102,22 @@ impl Map {
     }
 }
 
+/// What a search ends with: the lobe at the unit point `t`, the `kd` profiled there, and
+/// the search's trace.
+fn answer(map: &Map, t: &[f64; 3], kd: [f64; BANDS], tracker: Tracker) -> Run {
+    let (ks, alpha, ior) = map.params(t);
+    Run {
+        params: Params {
+            kd,
+            ks,
+            alpha,
+            ior,
+            extra: [0.0; crate::model::EXTRA],
+        },
+        tracker,
+    }
+}
+
 /// A local refit warm-started at `start` (the bootstrap's refits, `crate::uncertainty`): one
 /// Nelder–Mead search from `start`, then the usual polishing — no survey, no continuation.
 /// A resample moves the optimum by about the noise, so the search only has to follow it
@@ -135,17 +151,7 @@ pub(super) fn run_local(problem: &Problem, s: &SeparableSettings, start: &Params
     .unwrap_or((t0, f0));
     cost_at(&best_t);
     tracker.evaluations = count.get();
-    let (ks, alpha, ior) = map.params(&best_t);
-    Run {
-        params: Params {
-            kd,
-            ks,
-            alpha,
-            ior,
-            extra: [0.0; crate::model::EXTRA],
-        },
-        tracker,
-    }
+    answer(&map, &best_t, kd, tracker)
 }
 
 fn distance_inf(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -275,17 +281,7 @@ pub(super) fn run(
     // The kd of the best point: one more profile, which writes it.
     cost_at(&best_t);
     tracker.evaluations = count.get();
-    let (ks, alpha, ior) = map.params(&best_t);
-    Ok(Run {
-        params: Params {
-            kd,
-            ks,
-            alpha,
-            ior,
-            extra: [0.0; crate::model::EXTRA],
-        },
-        tracker,
-    })
+    Ok(answer(&map, &best_t, kd, tracker))
 }
 
 /// Steps 2 and 3 for one criterion whose design costs are `costs`: Nelder–Mead searches from

@@ -47,6 +47,11 @@ enum Block {
     },
 }
 
+/// A paragraph, then the list it introduces.
+fn introduced_list(intro: String, items: impl Iterator<Item = String>) -> [Block; 2] {
+    [Block::Para(intro), Block::List(items.collect())]
+}
+
 fn ci(c: &Option<MeanCi>) -> String {
     match c {
         Some(c) => format!(
@@ -135,28 +140,24 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
         }));
     }
     if !analysis.repeats.is_empty() {
-        b.push(Block::Para(format!(
-            "Counted once: {} scans repeat a measurement another scan of the study already holds (the same recording replayed again, or the same readings). One measurement is one sample: each counts once, as the last of its scans whose fits all finished, in every table, figure and statistic below; the repeats are left out:",
-            analysis.repeats.len()
-        )));
-        b.push(Block::List(
+        b.extend(introduced_list(
+            format!(
+                "Counted once: {} scans repeat a measurement another scan of the study already holds (the same recording replayed again, or the same readings). One measurement is one sample: each counts once, as the last of its scans whose fits all finished, in every table, figure and statistic below; the repeats are left out:",
+                analysis.repeats.len()
+            ),
             analysis
                 .repeats
                 .iter()
-                .map(|r| format!("{}: {}, counted as {}", r.sample, r.shared, r.counted_as))
-                .collect(),
+                .map(|r| format!("{}: {}, counted as {}", r.sample, r.shared, r.counted_as)),
         ));
     }
     if !analysis.rescanned.is_empty() {
-        b.push(Block::Para(
+        b.extend(introduced_list(
             "Counted per scan: these samples were scanned more than once with different readings; every scan counts as one sample in the means, intervals and sign tests, so n counts scans, not distinct physical samples:".into(),
-        ));
-        b.push(Block::List(
             analysis
                 .rescanned
                 .iter()
-                .map(|r| format!("{}: {}", r.sample, r.scans.join(", ")))
-                .collect(),
+                .map(|r| format!("{}: {}", r.sample, r.scans.join(", "))),
         ));
     }
     b.push(Block::Heading(
@@ -449,15 +450,12 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             "None: every sample's fit finished under every cost function.".into(),
         ));
     } else {
-        b.push(Block::Para(
+        b.extend(introduced_list(
             "A sample whose fit failed under any cost function is left out of the means, the confidence intervals and the sign tests for all cost functions (as the paper did); its finished fits still appear in Table 1 and the figures.".into(),
-        ));
-        b.push(Block::List(
             analysis
                 .excluded
                 .iter()
-                .map(|e| format!("{}: {}", e.sample, e.reasons.join("; ")))
-                .collect(),
+                .map(|e| format!("{}: {}", e.sample, e.reasons.join("; "))),
         ));
     }
     b.push(Block::Heading("Figures".into()));

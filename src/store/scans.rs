@@ -348,27 +348,8 @@ impl Store {
     /// requested | measuring → failed, with the reason (e.g. "MA-T12 timed out at 45as25").
     /// The readings already stored are kept.
     pub async fn fail_scan(&self, scan: ScanId, reason: &str) -> Result<(), StoreError> {
-        if reason.trim().is_empty() {
-            return Err(StoreError::Empty {
-                field: "failure reason",
-            });
-        }
-        let done = sqlx::query(
-            "UPDATE scans SET state = 'failed', reason = $2, finished_at_ms = $3
-             WHERE id = $1 AND state IN ('requested', 'measuring')",
-        )
-        .bind(scan.0)
-        .bind(reason)
-        .bind(now_ms())
-        .execute(&self.writer)
-        .await?;
-        self.changed(
-            scan,
-            done.rows_affected(),
-            "requested or measuring",
-            "fail it",
-        )
-        .await
+        self.end_unfinished(scan, "failed", reason, "failure reason", "fail it")
+            .await
     }
 
     /// requested | measuring → aborted (the operator stopped it). Readings are kept.
@@ -380,27 +361,35 @@ impl Store {
     /// requested | measuring → aborted, with the reason (e.g. "the daemon was shut down
     /// during the measurement"). Readings are kept.
     pub async fn abort_scan_because(&self, scan: ScanId, reason: &str) -> Result<(), StoreError> {
+        self.end_unfinished(scan, "aborted", reason, "abort reason", "abort it")
+            .await
+    }
+
+    /// requested | measuring → `state` (`failed` or `aborted`) with `reason`, which must not
+    /// be blank (it is the `field`); `action` names the change if the scan is in no such state.
+    async fn end_unfinished(
+        &self,
+        scan: ScanId,
+        state: &str,
+        reason: &str,
+        field: &'static str,
+        action: &'static str,
+    ) -> Result<(), StoreError> {
         if reason.trim().is_empty() {
-            return Err(StoreError::Empty {
-                field: "abort reason",
-            });
+            return Err(StoreError::Empty { field });
         }
         let done = sqlx::query(
-            "UPDATE scans SET state = 'aborted', reason = $3, finished_at_ms = $2
+            "UPDATE scans SET state = $4, reason = $2, finished_at_ms = $3
              WHERE id = $1 AND state IN ('requested', 'measuring')",
         )
         .bind(scan.0)
-        .bind(now_ms())
         .bind(reason)
+        .bind(now_ms())
+        .bind(state)
         .execute(&self.writer)
         .await?;
-        self.changed(
-            scan,
-            done.rows_affected(),
-            "requested or measuring",
-            "abort it",
-        )
-        .await
+        self.changed(scan, done.rows_affected(), "requested or measuring", action)
+            .await
     }
 
     /// At start-up: every scan a crash left `requested` or `measuring` becomes `failed` with

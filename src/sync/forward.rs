@@ -199,6 +199,20 @@ impl std::fmt::Debug for Forwarder {
     }
 }
 
+/// One read-only connection to the store file at `path`, waiting up to 5 s on its writer.
+async fn open_read_only(path: &Path) -> Result<SqlitePool, SyncError> {
+    SqlitePoolOptions::new()
+        .max_connections(1)
+        .connect_with(
+            SqliteConnectOptions::new()
+                .filename(path)
+                .read_only(true)
+                .busy_timeout(Duration::from_secs(5)),
+        )
+        .await
+        .map_err(SyncError::Local)
+}
+
 async fn store_uid(pool: &SqlitePool, path: &str) -> Result<String, SyncError> {
     let has: i64 = sqlx::query_scalar(
         "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'sync_outbox'",
@@ -275,16 +289,7 @@ impl Forwarder {
                 format!("no store at {}", path.display()).into(),
             )));
         }
-        let pool = SqlitePoolOptions::new()
-            .max_connections(1)
-            .connect_with(
-                SqliteConnectOptions::new()
-                    .filename(path)
-                    .read_only(true)
-                    .busy_timeout(Duration::from_secs(5)),
-            )
-            .await
-            .map_err(SyncError::Local)?;
+        let pool = open_read_only(path).await?;
         let uid = store_uid(&pool, &path.display().to_string()).await?;
         let f = Forwarder::new(options, pool, None, uid);
         f.refresh_backlog().await;
@@ -798,16 +803,7 @@ async fn diagnose_on(central: &Central, path: &Path, station: &str) -> Result<St
             path.display()
         ));
     }
-    let source = SqlitePoolOptions::new()
-        .max_connections(1)
-        .connect_with(
-            SqliteConnectOptions::new()
-                .filename(path)
-                .read_only(true)
-                .busy_timeout(Duration::from_secs(5)),
-        )
-        .await
-        .map_err(SyncError::Local)?;
+    let source = open_read_only(path).await?;
     let uid = store_uid(&source, &path.display().to_string()).await?;
     let mut c = source.acquire().await.map_err(SyncError::Local)?;
     let highest = highest_seq(&mut c).await.map_err(SyncError::Local)?;

@@ -15,8 +15,11 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
+use brdfd::cost::CostFunction;
+use brdfd::fit::{FitReport, FitRequest, fit_scan};
+use brdfd::optimise::Settings;
 use brdfd::service::{Devices, Service, ServiceOptions, ServiceSettings};
-use brdfd::store::{ReferenceId, ReferenceStatus, ScanId, Store};
+use brdfd::store::{ReferenceId, ReferenceStatus, ScanDetail, ScanId, ScanState, Store};
 use drivers::{DriverConfig, Instrument};
 use mock_devices::{ReplayOptions, Script};
 use tempfile::TempDir;
@@ -72,6 +75,41 @@ pub fn strict_fast() -> ReplayOptions {
     ReplayOptions::strict().accelerated()
 }
 
+/// One fit of `scan` per cost function, in [`CostFunction::ALL`]'s order, each with `settings`
+/// but its cost function.
+pub fn fit_every_cost(scan: &brdfd::scan::Scan, settings: Settings) -> Vec<FitReport> {
+    CostFunction::ALL
+        .iter()
+        .map(|&cost| {
+            let request = FitRequest {
+                settings: Settings { cost, ..settings },
+                ..FitRequest::default()
+            };
+            fit_scan(scan, &request).unwrap()
+        })
+        .collect()
+}
+
+/// Runs `body` to its end on a current-thread runtime of its own (from a synchronous test).
+pub fn block_on<F: Future>(body: F) -> F::Output {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("a runtime")
+        .block_on(body)
+}
+
+/// Both instruments simulated, replaying every embedded recording with `options`.
+pub fn simulated(options: &ReplayOptions) -> Devices {
+    Devices::simulated(
+        playlist(Instrument::MaT12),
+        playlist(Instrument::Sra),
+        options,
+        [None, None],
+    )
+    .expect("simulated instruments")
+}
+
 /// A service and the temporary directory of its store.
 pub struct TestDaemon {
     pub service: Service,
@@ -102,14 +140,7 @@ pub async fn start(
 
 /// Starts a service on simulated instruments replaying every embedded recording.
 pub async fn start_builtin(options: ReplayOptions) -> TestDaemon {
-    let devices = Devices::simulated(
-        playlist(Instrument::MaT12),
-        playlist(Instrument::Sra),
-        &options,
-        [None, None],
-    )
-    .expect("simulated instruments");
-    start(devices, settings(), ServiceOptions::default()).await
+    start(simulated(&options), settings(), ServiceOptions::default()).await
 }
 
 /// Measures the reference and checks it completed.
@@ -137,6 +168,18 @@ pub async fn scan_and_settle(service: &Service, sample: &str) -> ScanId {
         "scan {id} and its fits end"
     );
     id
+}
+
+/// The stored detail of `scan`, checked complete (with the reason it is not, if not).
+pub async fn complete_scan(store: &Store, scan: ScanId) -> ScanDetail {
+    let detail = store.scan_detail(scan).await.unwrap();
+    assert_eq!(
+        detail.scan.state,
+        ScanState::Complete,
+        "{:?}",
+        detail.scan.reason
+    );
+    detail
 }
 
 /// The reply frame a session file holds for each FETCH, by geometry: the `<` line that follows

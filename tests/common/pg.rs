@@ -310,8 +310,14 @@ impl Cluster {
 
     /// `pg_ctl stop -m immediate`: the server dies as in a crash, connections cut.
     pub fn stop_immediate(&self) {
+        let out = self.pg_stop();
+        self.check("pg_ctl stop", out);
+    }
+
+    /// `pg_ctl stop -m immediate`, whatever it answers.
+    fn pg_stop(&self) -> std::process::Output {
         let data = self.data();
-        let out = self.run(
+        self.run(
             "pg_ctl",
             &[
                 "-D",
@@ -321,8 +327,7 @@ impl Cluster {
                 "-w",
                 "stop",
             ],
-        );
-        self.check("pg_ctl stop", out);
+        )
     }
 
     /// Starts the server again on the same port (crash recovery replays its WAL).
@@ -345,18 +350,7 @@ impl Cluster {
 
 impl Drop for Cluster {
     fn drop(&mut self) {
-        let data = self.data();
-        let _ = self.run(
-            "pg_ctl",
-            &[
-                "-D",
-                data.to_str().unwrap(),
-                "-m",
-                "immediate",
-                "-w",
-                "stop",
-            ],
-        );
+        let _ = self.pg_stop();
     }
 }
 
@@ -409,37 +403,68 @@ pub fn cell_pg(row: &sqlx::postgres::PgRow, i: usize, kind: Kind) -> String {
 
 pub type Tables = BTreeMap<&'static str, Vec<Vec<String>>>;
 
-/// Every forwarded table of a station's store file, every forwarded column, in key order.
-pub async fn local_tables(db: &Path) -> Tables {
-    let pool = sqlx::SqlitePool::connect_with(
+/// A read-only pool on the store file at `db`, beside whatever else has it open.
+pub async fn read_only_store(db: &Path) -> sqlx::SqlitePool {
+    sqlx::SqlitePool::connect_with(
         sqlx::sqlite::SqliteConnectOptions::new()
             .filename(db)
             .read_only(true),
     )
     .await
-    .unwrap();
+    .unwrap()
+}
+
+/// The highest outbox entry the store at `db` ever queued, read afresh from the file.
+pub async fn highest_seq(db: &Path) -> i64 {
+    let pool = read_only_store(db).await;
+    let seq: Option<i64> =
+        sqlx::query_scalar("SELECT seq FROM sqlite_sequence WHERE name = 'sync_outbox'")
+            .fetch_optional(&pool)
+            .await
+            .unwrap();
+    pool.close().await;
+    seq.unwrap_or(0)
+}
+
+/// The query of every forwarded column of `t`, in key order, `filter` (a `WHERE` clause or
+/// nothing) between.
+fn select_all(t: &brdfd::sync::tables::Table, filter: &str) -> String {
+    let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
+    format!(
+        "SELECT {} FROM {} {filter}ORDER BY {}",
+        cols.join(", "),
+        t.name,
+        t.key.join(", ")
+    )
+}
+
+/// The rows of `t` as text, one cell per forwarded column, by `cell`.
+fn as_text<R>(
+    t: &brdfd::sync::tables::Table,
+    rows: &[R],
+    cell: fn(&R, usize, Kind) -> String,
+) -> Vec<Vec<String>> {
+    rows.iter()
+        .map(|r| {
+            t.columns
+                .iter()
+                .enumerate()
+                .map(|(i, (_, k))| cell(r, i, *k))
+                .collect()
+        })
+        .collect()
+}
+
+/// Every forwarded table of a station's store file, every forwarded column, in key order.
+pub async fn local_tables(db: &Path) -> Tables {
+    let pool = read_only_store(db).await;
     let mut out = BTreeMap::new();
     for t in &TABLES {
-        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
-        let sql = format!(
-            "SELECT {} FROM {} ORDER BY {}",
-            cols.join(", "),
-            t.name,
-            t.key.join(", ")
-        );
-        let rows = sqlx::query(&sql).fetch_all(&pool).await.unwrap();
-        out.insert(
-            t.name,
-            rows.iter()
-                .map(|r| {
-                    t.columns
-                        .iter()
-                        .enumerate()
-                        .map(|(i, (_, k))| cell_sqlite(r, i, *k))
-                        .collect()
-                })
-                .collect(),
-        );
+        let rows = sqlx::query(&select_all(t, ""))
+            .fetch_all(&pool)
+            .await
+            .unwrap();
+        out.insert(t.name, as_text(t, &rows, cell_sqlite));
     }
     pool.close().await;
     out
@@ -450,30 +475,12 @@ pub async fn central_tables(url: &str, station: &str) -> Tables {
     let pool = sqlx::PgPool::connect(url).await.unwrap();
     let mut out = BTreeMap::new();
     for t in &TABLES {
-        let cols: Vec<&str> = t.columns.iter().map(|(n, _)| *n).collect();
-        let sql = format!(
-            "SELECT {} FROM {} WHERE station = $1 ORDER BY {}",
-            cols.join(", "),
-            t.name,
-            t.key.join(", ")
-        );
-        let rows = sqlx::query(&sql)
+        let rows = sqlx::query(&select_all(t, "WHERE station = $1 "))
             .bind(station)
             .fetch_all(&pool)
             .await
             .unwrap();
-        out.insert(
-            t.name,
-            rows.iter()
-                .map(|r| {
-                    t.columns
-                        .iter()
-                        .enumerate()
-                        .map(|(i, (_, k))| cell_pg(r, i, *k))
-                        .collect()
-                })
-                .collect(),
-        );
+        out.insert(t.name, as_text(t, &rows, cell_pg));
     }
     pool.close().await;
     out

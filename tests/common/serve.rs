@@ -61,16 +61,7 @@ pub fn spawn_serve(config: &Path, extra_args: &[&str]) -> ServeChild {
         .stderr(Stdio::null())
         .spawn()
         .expect("brdfd serve starts");
-    let stdout = child.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let _ = BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(line);
-    });
-    let line = rx
-        .recv_timeout(STEP_TIMEOUT)
-        .expect("the daemon prints where it listens");
+    let line = first_line(&mut child).expect("the daemon prints where it listens");
     let addr: SocketAddr = line
         .split("http://")
         .nth(1)
@@ -89,6 +80,19 @@ pub fn spawn_serve(config: &Path, extra_args: &[&str]) -> ServeChild {
         token,
         dir,
     }
+}
+
+/// The first line `child` prints on its piped stdout (read on a thread of its own), or the
+/// timeout after [`STEP_TIMEOUT`].
+pub fn first_line(child: &mut Child) -> Result<String, mpsc::RecvTimeoutError> {
+    let stdout = child.stdout.take().expect("a piped stdout");
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        let _ = BufReader::new(stdout).read_line(&mut line);
+        let _ = tx.send(line);
+    });
+    rx.recv_timeout(STEP_TIMEOUT)
 }
 
 /// Polls until `done`, failing after [`STEP_TIMEOUT`].

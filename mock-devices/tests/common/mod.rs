@@ -14,6 +14,13 @@ use mock_devices::{ReplayOptions, ReplayReport, Script, SimMat12, SimSra};
 /// Every test body runs under this; a hang fails the test instead of stalling the suite.
 pub const TEST_TIMEOUT: Duration = Duration::from_secs(30);
 
+/// `body`'s output, failing the test if it takes longer than [`TEST_TIMEOUT`].
+pub async fn within<F: std::future::Future>(body: F) -> F::Output {
+    tokio::time::timeout(TEST_TIMEOUT, body)
+        .await
+        .expect("within the test timeout")
+}
+
 /// Tests that open pseudo-terminal pairs take this lock: the pairs come from one kernel pool,
 /// and timing-sensitive pty tests should not compete with each other for the two cores.
 static PTY: Mutex<()> = Mutex::new(());

@@ -504,15 +504,17 @@ mod tests {
         let host = ("host", "127.0.0.1:7878");
         let json = ("content-type", "application/json");
         let own = ("sec-fetch-site", "same-origin");
+        let session = ("cookie", jar.as_str());
+        let with_csrf = (CSRF_HEADER, csrf.as_str());
         let run = |method: &Method, path: &str, h: &[(&str, &str)]| {
             check_for_test(&a, method, path, &headers(h))
         };
         assert_eq!(
-            run(&Method::GET, "/status", &[host, ("cookie", &jar), own]),
+            run(&Method::GET, "/status", &[host, session, own]),
             StatusCode::OK
         );
         assert_eq!(
-            run(&Method::GET, "/status", &[host, ("cookie", &jar)]),
+            run(&Method::GET, "/status", &[host, session]),
             StatusCode::OK
         );
         // From another site or another origin of the same site (another loopback port).
@@ -521,7 +523,7 @@ mod tests {
                 run(
                     &Method::GET,
                     "/status",
-                    &[host, ("cookie", &jar), ("sec-fetch-site", site)]
+                    &[host, session, ("sec-fetch-site", site)]
                 ),
                 StatusCode::FORBIDDEN,
                 "{site}"
@@ -529,11 +531,7 @@ mod tests {
         }
         // A POST needs the CSRF header with the session's value.
         assert_eq!(
-            run(
-                &Method::POST,
-                "/reference",
-                &[host, ("cookie", &jar), own, json]
-            ),
+            run(&Method::POST, "/reference", &[host, session, own, json]),
             StatusCode::FORBIDDEN
         );
         assert_eq!(
@@ -542,7 +540,7 @@ mod tests {
                 "/reference",
                 &[
                     host,
-                    ("cookie", &jar),
+                    session,
                     own,
                     json,
                     (CSRF_HEADER, "0".repeat(64).as_str())
@@ -554,13 +552,7 @@ mod tests {
             run(
                 &Method::POST,
                 "/reference",
-                &[
-                    host,
-                    ("cookie", &jar),
-                    own,
-                    json,
-                    (CSRF_HEADER, csrf.as_str())
-                ]
+                &[host, session, own, json, with_csrf]
             ),
             StatusCode::OK
         );
@@ -569,7 +561,7 @@ mod tests {
             run(
                 &Method::POST,
                 "/reference",
-                &[host, ("cookie", &jar), own, (CSRF_HEADER, csrf.as_str())]
+                &[host, session, own, with_csrf]
             ),
             StatusCode::UNSUPPORTED_MEDIA_TYPE
         );
@@ -578,13 +570,7 @@ mod tests {
             run(
                 &Method::POST,
                 TICKET_PATH,
-                &[
-                    host,
-                    ("cookie", &jar),
-                    own,
-                    json,
-                    (CSRF_HEADER, csrf.as_str())
-                ]
+                &[host, session, own, json, with_csrf]
             ),
             StatusCode::UNAUTHORIZED
         );
