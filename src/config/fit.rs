@@ -53,8 +53,8 @@ mod defaults {
     pub const SEED: u64 = 1;
     pub const BOOTSTRAP: u32 = 200;
     /// The paper's flat SRA model. `luminance` is the one to recommend (calibrated intervals,
-    /// SCIENCE.md §10) once the default method reaches its cost's minimum under it; today its
-    /// kd solve leaves the SRA terms out (SCIENCE.md §5.1).
+    /// SCIENCE.md §10); it becomes the default once cf2's kd solve takes its SRA terms in and
+    /// m2's joint solve is as fast as its band solves (SCIENCE.md §10).
     pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::Flat;
 }
 
