@@ -33,6 +33,7 @@
 
 use std::collections::BTreeMap;
 use std::io::{Cursor, Read};
+use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::Path;
 
 use calamine::{Data, Range, Reader, Xlsx};
@@ -320,7 +321,14 @@ pub fn read(bytes: &[u8], file_name: &str) -> Result<XriteExport, XlsxError> {
         file: file.clone(),
         message,
     };
-    let mut book = Xlsx::new(Cursor::new(bytes)).map_err(|e| not_xlsx(e.to_string()))?;
+    // calamine is the reader of the workbook's cells; a file it cannot handle must come back
+    // as a refusal, so a panic inside it (seen: an integer overflow on a corrupted cell
+    // reference) is caught and reported as such.
+    let calamine_panicked =
+        |what: &str| not_xlsx(format!("the spreadsheet reader failed on {what}"));
+    let mut book = catch_unwind(AssertUnwindSafe(|| Xlsx::new(Cursor::new(bytes))))
+        .map_err(|_| calamine_panicked("the workbook"))?
+        .map_err(|e| not_xlsx(e.to_string()))?;
     let names = book.sheet_names();
     let mut sheet = |name: &'static str, required: bool| -> Result<Option<Sheet>, XlsxError> {
         if !names.iter().any(|n| n == name) {
@@ -337,8 +345,8 @@ pub fn read(bytes: &[u8], file_name: &str) -> Result<XriteExport, XlsxError> {
                     .join(", "),
             });
         }
-        let range = book
-            .worksheet_range(name)
+        let range = catch_unwind(AssertUnwindSafe(|| book.worksheet_range(name)))
+            .map_err(|_| calamine_panicked(&format!("sheet \"{name}\"")))?
             .map_err(|e| not_xlsx(format!("sheet \"{name}\": {e}")))?;
         Ok(Some(Sheet {
             file: file.clone(),
