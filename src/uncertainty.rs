@@ -399,9 +399,13 @@ fn factor(sigma: f64, rng: &mut ChaCha8Rng) -> f64 {
 /// (Hyndman & Fan type 7, the default of R and NumPy).
 pub fn quantile(xs: &mut [f64], q: f64) -> f64 {
     xs.sort_by(f64::total_cmp);
-    let h = (xs.len() - 1) as f64 * q;
+    at_position(xs, (xs.len() - 1) as f64 * q)
+}
+
+/// The value at 0-based position `h` of the sorted `xs`, interpolated between its neighbours.
+fn at_position(sorted: &[f64], h: f64) -> f64 {
     let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
-    xs[lo] + (h - lo as f64) * (xs[hi] - xs[lo])
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
 }
 
 /// The central `level` share of `xs`: its (1 − level)/2 and (1 + level)/2 quantiles (type 7),
@@ -412,11 +416,10 @@ fn interval(xs: &mut [f64], level: f64) -> Interval {
     // (1 − 0.95)/2 is 0.025000000000000022 in binary; rounded to 1e-9 it is 0.025.
     let tail = ((1.0 - level) / 2.0 * 1e9).round() / 1e9;
     let last = (xs.len() - 1) as f64;
-    let at = |h: f64| {
-        let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
-        xs[lo] + (h - lo as f64) * (xs[hi] - xs[lo])
-    };
-    [at(last * tail), at(last - last * tail)]
+    [
+        at_position(xs, last * tail),
+        at_position(xs, last - last * tail),
+    ]
 }
 
 /// What one refit contributes: its parameters and its ΔE00 summaries against its resample.
