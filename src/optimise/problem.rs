@@ -484,9 +484,11 @@ impl Problem {
     ///
     /// Under the luminance SRA model ([`Problem::with_sra`]) the SRA luminance terms couple all
     /// 31 bands through `K = Σ c_b kd_b`. cf1 takes them into its kd solve exactly
-    /// ([`Lum::cf1_kd`]); the other criteria solve each band's kd from its 12 MA-T12 terms and
-    /// add the luminance terms at that kd, so their profile is an upper bound of the cost's
-    /// least value over kd (SCIENCE.md §5.1, §10).
+    /// ([`Lum::cf1_kd`]), m2 by Newton steps on the joint cost ([`Problem::m2_joint`]), cf2 by
+    /// moving one band at a time between the vertices its minimum lies on
+    /// ([`Problem::cf2_joint`]); the weighted L1 error, a stepping stone only, solves each
+    /// band's kd from its 12 MA-T12 terms and adds the luminance terms at that kd, so its
+    /// profile is an upper bound of its least value over kd (SCIENCE.md §5.1, §10).
     ///
     /// Where the CPU has AVX2 the same code is compiled for it (4 doubles a SIMD lane instead
     /// of 2): the per-band and per-geometry loops vectorise, the operations on each value are
@@ -581,7 +583,10 @@ impl Problem {
                 // every band (the SIMD loop), then each band's pick.
                 let d = self.residuals(&s);
                 let f_at = kinks_lanes(&d, &self.w23, pow23);
-                let (k, f) = pick_kinks(&d, &f_at, &self.w23, lo, hi, pow23);
+                let (mut k, mut f) = pick_kinks(&d, &f_at, &self.w23, lo, hi, pow23);
+                if let Some(lum) = &self.lum {
+                    self.cf2_joint(lum, &s, &d, &f_at, &mut k, &mut f, lo, hi);
+                }
                 for b in 0..BANDS {
                     kd[b] = k[b];
                     sum += f[b];
@@ -678,6 +683,137 @@ impl Problem {
             }
         }
         (solve.k, solve.f)
+    }
+
+    /// cf2's kd under the luminance terms, which couple the bands through `K = Σ c_b kd_b`:
+    /// the joint cost `Σ_b F_b(kd_b) + G(K)` (`F_b` band b's 12 MA-T12 terms, `G` the SRA
+    /// terms, both sums of `|·|^(2/3)`) is concave in every region where no residual changes
+    /// sign, and such a region is a box of kd intervals cut by at most two planes `K = const`,
+    /// so the minimum lies at one of its vertices: every band at one of its own kinks or a
+    /// bound, except at most one band, which puts K where an SRA residual vanishes. Starting
+    /// from the band-by-band solve (`k`, `f` from [`pick_kinks`]), each band in turn moves to
+    /// the best of those candidates with the other bands fixed (its kinks `d[·][b]`, the
+    /// bounds, and the kd that zeroes either SRA residual), sweep after sweep until no band
+    /// moves: a point no single-band move to another vertex improves (at most 8 sweeps; one
+    /// or two in practice). Leaves `k` (padded bands too) and `f` at that point.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn cf2_joint(
+        &self,
+        lum: &Lum,
+        s: &[f64; G],
+        d: &[[f64; BP]; G],
+        f_at: &[[f64; BP]; G],
+        k: &mut [f64; BP],
+        f: &mut [f64; BP],
+        lo: f64,
+        hi: f64,
+    ) {
+        let bands = BANDS as f64;
+        // SRA residual j at luminance K: `a_j − w_j K`.
+        let a: [f64; SRA_COUNT] =
+            std::array::from_fn(|j| lum.wy[j] - lum.w[j] * s[MA_T12_COUNT + j]);
+        let g_of = |big_k: f64| {
+            let mut t = 0.0;
+            for j in 0..SRA_COUNT {
+                t += pow23(a[j] - lum.w[j] * big_k);
+            }
+            bands * t
+        };
+        // The luminance of kd at which SRA residual j vanishes.
+        let zero: [f64; SRA_COUNT] =
+            std::array::from_fn(|j| lum.wy[j] / lum.w[j] - s[MA_T12_COUNT + j]);
+        let band_f = |b: usize, kb: f64| (0..G).map(|g| self.w23[g] * pow23(d[g][b] - kb)).sum();
+        let mut at_bounds = [[0.0; BP]; 2];
+        for g in 0..G {
+            for b in 0..BP {
+                at_bounds[0][b] += self.w23[g] * pow23(d[g][b] - lo);
+                at_bounds[1][b] += self.w23[g] * pow23(d[g][b] - hi);
+            }
+        }
+        let spectrum = |k: &[f64; BP]| -> Spectrum { std::array::from_fn(|b| k[b]) };
+        let start = f[..BANDS].iter().sum::<f64>() + g_of(luminance_with(&lum.c, &spectrum(k)));
+        // A move must gain more than rounding can, or two bands could trade places forever.
+        let margin = 1e-13 * start;
+        // G at either zero: only the other SRA term is left.
+        let g_at_zero: [f64; SRA_COUNT] = std::array::from_fn(|j| g_of(zero[j]));
+        let g_least = g_at_zero.into_iter().fold(f64::INFINITY, f64::min);
+        for _ in 0..8 {
+            let mut big_k = luminance_with(&lum.c, &spectrum(k));
+            let mut g_here = g_of(big_k);
+            let mut moved = false;
+            for b in 0..BANDS {
+                let cb = lum.c[b];
+                let rest = big_k - cb * k[b];
+                let mut best = (k[b], f[b], f[b] + g_here - margin, g_here);
+                // The band's kinks: G at each in SIMD lanes, then the pick.
+                let kinks: [f64; G] = std::array::from_fn(|g| d[g][b]);
+                let mut g_at = [0.0; G];
+                for g in 0..G {
+                    g_at[g] = g_of(rest + cb * kinks[g]);
+                }
+                for g in 0..G {
+                    let (kink, fb) = (kinks[g], f_at[g][b]);
+                    let total = fb + g_at[g];
+                    if self.w[g] != 0.0 && kink >= lo && kink <= hi && total < best.2 {
+                        best = (kink, fb, total, g_at[g]);
+                    }
+                }
+                // G is least at one of its zeros, so a candidate whose F with that least G
+                // is no better cannot win.
+                let mut consider = |kb: f64, fb: f64| {
+                    if fb + g_least < best.2 {
+                        let g = g_of(rest + cb * kb);
+                        if fb + g < best.2 {
+                            best = (kb, fb, fb + g, g);
+                        }
+                    }
+                };
+                consider(lo, at_bounds[0][b]);
+                consider(hi, at_bounds[1][b]);
+                if cb > 0.0 {
+                    for (j, z) in zero.into_iter().enumerate() {
+                        let kb = (z - rest) / cb;
+                        if !(kb >= lo && kb <= hi) {
+                            continue;
+                        }
+                        // F is concave between neighbouring kinks (or a kink and a bound),
+                        // so it is at least the lesser of its values there.
+                        let (mut below, mut above) = ((lo, at_bounds[0][b]), (hi, at_bounds[1][b]));
+                        for g in 0..G {
+                            let kink = d[g][b];
+                            if self.w[g] != 0.0 {
+                                if kink <= kb && kink > below.0 {
+                                    below = (kink, f_at[g][b]);
+                                }
+                                if kink >= kb && kink < above.0 {
+                                    above = (kink, f_at[g][b]);
+                                }
+                            }
+                        }
+                        if below.1.min(above.1) + g_at_zero[j] < best.2 {
+                            let fb = band_f(b, kb);
+                            let g = g_of(rest + cb * kb);
+                            if fb + g < best.2 {
+                                best = (kb, fb, fb + g, g);
+                            }
+                        }
+                    }
+                }
+                if best.0 != k[b] {
+                    (k[b], f[b]) = (best.0, best.1);
+                    big_k = rest + cb * best.0;
+                    g_here = best.3;
+                    moved = true;
+                }
+            }
+            if !moved {
+                break;
+            }
+        }
+        for b in BANDS..BP {
+            (k[b], f[b]) = (k[BANDS - 1], f[BANDS - 1]);
+        }
     }
 
     /// m2's kd under the luminance terms, which couple the bands through `K = Σ c_b kd_b`:
@@ -1089,13 +1225,13 @@ mod tests {
         }
     }
 
-    /// Under the luminance SRA model cf1's and m2's profile kd is the joint minimiser over all
-    /// 31 bands (the SRA terms couple them): no perturbation of one band, of all bands together
-    /// or along the luminance weights lowers the full cost, and cf1's is below the cost at each
-    /// band's MA-T12-only kd.
+    /// Under the luminance SRA model every cost function's profile kd is a joint minimiser
+    /// over all 31 bands (the SRA terms couple them): no perturbation of one band, of all
+    /// bands together or along the luminance weights lowers the full cost, and cf1's and cf2's
+    /// are below the cost at each band's MA-T12-only kd.
     #[test]
-    fn cf1_and_m2_luminance_kd_is_the_joint_minimiser() {
-        for cf in [CostFunction::Cf1, CostFunction::M2] {
+    fn luminance_kd_is_a_joint_minimiser() {
+        for cf in CostFunction::ALL {
             luminance_kd_is_the_joint_minimiser(cf);
         }
     }
@@ -1127,17 +1263,25 @@ mod tests {
                 }
             }
         }
-        if cf != CostFunction::Cf1 {
-            return;
-        }
-        // The band-by-band kd of the 12 MA-T12 geometries alone (each band's w²-weighted mean
-        // of M − s over them) costs more.
+        // The band-by-band kd of the 12 MA-T12 geometries alone costs more: for cf1 each
+        // band's w²-weighted mean of M − s over them, for cf2 each band's best kink.
         let sp = prob.specular(ks, alpha, ior);
-        let sum_w2s: f64 = (0..G).map(|g| prob.w2[g] * sp[g]).sum();
-        let alone: Spectrum =
-            std::array::from_fn(|b| ((prob.sum_w2m[b] - sum_w2s) / prob.sum_w2).max(0.0));
+        let alone: Spectrum = match cf {
+            CostFunction::Cf1 => {
+                let sum_w2s: f64 = (0..G).map(|g| prob.w2[g] * sp[g]).sum();
+                std::array::from_fn(|b| ((prob.sum_w2m[b] - sum_w2s) / prob.sum_w2).max(0.0))
+            }
+            CostFunction::Cf2 => {
+                let (lo, hi) = prob.bounds.kd;
+                let d = prob.residuals(&sp);
+                let f_at = kinks_lanes(&d, &prob.w23, pow23);
+                let k = pick_kinks(&d, &f_at, &prob.w23, lo, hi, pow23).0;
+                std::array::from_fn(|b| k[b])
+            }
+            CostFunction::M2 => return,
+        };
         let alone = prob.full_cost(&alone, ks, alpha, ior);
-        assert!(f < alone, "joint {f} against band by band {alone}");
+        assert!(f < alone, "{cf}: joint {f} against band by band {alone}");
     }
 
     /// The profile's kd must beat every nearby kd, band by band: perturbing any one band of
