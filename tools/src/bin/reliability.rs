@@ -113,7 +113,7 @@ struct Options {
     seeds: u64,
     which: Which,
     costs: Vec<CostFunction>,
-    sra: SraModel,
+    sra: SraReading,
     only_separable: bool,
 }
 
@@ -122,7 +122,7 @@ fn options() -> Result<Options, String> {
         seeds: 10,
         which: Which::All,
         costs: CostFunction::ALL.to_vec(),
-        sra: SraModel::Flat,
+        sra: SraReading::FLAT,
         only_separable: false,
     };
     let mut args = std::env::args().skip(1);
@@ -154,11 +154,12 @@ fn options() -> Result<Options, String> {
                     .collect::<Result<_, _>>()?;
             }
             "--sra" => {
-                o.sra = args
+                let model: SraModel = args
                     .next()
                     .unwrap_or_default()
                     .parse()
                     .map_err(|e| format!("--sra: {e}"))?;
+                o.sra = SraReading::default().with_model(model);
             }
             "--only-separable" => o.only_separable = true,
             other => {
@@ -173,11 +174,11 @@ fn options() -> Result<Options, String> {
 }
 
 /// The generous separable fit that stands in for the paper GA's runs in `--only-separable`.
-fn reference_settings(cf: CostFunction, sra: SraModel) -> Settings {
+fn reference_settings(cf: CostFunction, sra: SraReading) -> Settings {
     let mut s = Settings {
         cost: cf,
         seed: 1 << 40,
-        sra: SraReading::default().with_model(sra),
+        sra,
         ..Settings::default()
     };
     s.separable.samples *= 8;
@@ -245,7 +246,7 @@ fn main() -> ExitCode {
                             cost: cf,
                             method,
                             seed,
-                            sra: SraReading::default().with_model(sra),
+                            sra,
                             ..Settings::default()
                         };
                         let out = fit(m, &s).expect("synthetic scans are valid");
