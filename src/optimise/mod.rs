@@ -492,13 +492,17 @@ pub fn fit_with_observer(
     settings.validate()?;
     check_input(measured, settings.cost)?;
     let run = if settings.model == ModelKind::Paper {
-        let problem = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds)
-            .with_sra(measured, settings.sra);
+        let flat = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds);
+        let problem = flat.clone().with_sra(measured, settings.sra);
         match settings.method {
             Method::Paper => ga::run(&problem, &settings.paper, settings.seed, observer)?,
-            Method::Separable => {
-                separable::run(&problem, &settings.separable, settings.seed, observer)?
-            }
+            Method::Separable => separable::run(
+                &problem,
+                &flat,
+                &settings.separable,
+                settings.seed,
+                observer,
+            )?,
         }
     } else {
         options::run(measured, settings, observer)?

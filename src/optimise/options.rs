@@ -80,9 +80,13 @@ pub(super) fn run(
     let mut fit_at = |t: &[f64], tracker: &mut Tracker| -> Result<f64, FitError> {
         let extra = extra_at(kind, settings, t);
         let problem = problem(measured, settings, &extra);
-        let mut run = separable::run(&problem, &settings.separable, settings.seed, &mut |_| {
-            ControlFlow::Continue(())
-        })?;
+        let mut run = separable::run(
+            &problem,
+            &problem,
+            &settings.separable,
+            settings.seed,
+            &mut |_| ControlFlow::Continue(()),
+        )?;
         run.params.extra = extra;
         let f = run.tracker.history.last().copied().unwrap_or(f64::INFINITY);
         tracker.evaluations += run.tracker.evaluations;
