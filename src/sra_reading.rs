@@ -5,10 +5,12 @@
 //! 31 bands (`crate::processing`); how the fit and the evaluation then read that flat spectrum
 //! is the [`SraModel`]:
 //!
-//! - [`SraModel::Flat`] (the paper's, the default): the reading *is* a grey spectrum. The cost
+//! - [`SraModel::Flat`] (the paper's, the type's default and `brdfd demo`'s): the reading *is* a
+//!   grey spectrum. The cost
 //!   compares the model with it band by band (31 terms per SRA geometry) and the evaluation
 //!   takes ΔE00 against it. Bit for bit what brdfd did before the option existed.
-//! - [`SraModel::Luminance`]: the reading is the sample's luminous reflectance at that geometry,
+//! - [`SraModel::Luminance`] ([`SraModel::MEASURED_DEFAULT`]: what a measured scan is fitted
+//!   with unless told otherwise): the reading is the sample's luminous reflectance at that geometry,
 //!   `Y = Σ S(λ) ȳ(λ) f(λ) / Σ S(λ) ȳ(λ)` under the instrument's illuminant `S` and observer `ȳ`
 //!   ([`SraReading`]; ISO 2813's CIE illuminant C and the 2° V(λ) by default), which is what a
 //!   gloss meter or surface reflectance analyser is built to read. The cost compares the model's
@@ -43,7 +45,13 @@ pub enum SraModel {
 }
 
 impl SraModel {
-    /// Both models, the default first.
+    /// The model a measured scan is fitted with unless told otherwise (`brdfd fit`, `[fit] sra`,
+    /// the Python package): `luminance`, the one whose bootstrap intervals are calibrated and
+    /// the only one that can be right on a real SRA (SCIENCE.md §10). The type's `Default`
+    /// stays the paper's `flat`, which settings stored without an SRA model were fitted with.
+    pub const MEASURED_DEFAULT: SraModel = SraModel::Luminance;
+
+    /// Both models, the type's default first.
     pub const ALL: [SraModel; 2] = [SraModel::Flat, SraModel::Luminance];
 
     /// The name used on the command line, in settings, in the store and in reports.

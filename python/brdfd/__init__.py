@@ -185,7 +185,7 @@ def fit(
     model: Optional[str] = None,
 ) -> FitResult:
     """Fits a scan as ``brdfd fit`` does with the same options (``cost``: cf1, cf2, m2;
-    ``method``: the default or "paper"; ``sra``: "flat" or "luminance"; ``bootstrap``:
+    ``method``: the default or "paper"; ``sra``: "luminance" (the default) or "flat"; ``bootstrap``:
     resamples for 95 % intervals, 0 skips them; ``model``: "paper" (the default), "oren-nayar"
     or "two-lobe"; ``fresnel``: "incidence" (the default), "light-half" or "exact").  Runs
     without holding the GIL."""

@@ -17,6 +17,7 @@ use brdfd::geometry::{Device, GEOMETRIES, Geometry, by_name};
 use brdfd::model::{self, Params, SpecularGeometry};
 use brdfd::scan::Scan;
 use brdfd::spectral::{BANDS, wavelengths_nm};
+use brdfd::sra_reading::SraModel;
 
 /// An error of the library, with its whole chain of causes, as a Python exception.
 fn value_error(e: anyhow::Error) -> PyErr {
@@ -198,7 +199,7 @@ fn fit(
         sra: sra
             .map(|s| parse("SRA model", s))
             .transpose()?
-            .unwrap_or_default(),
+            .unwrap_or(SraModel::MEASURED_DEFAULT),
         sra_illuminant: sra_illuminant
             .map(|s| parse("SRA illuminant", s))
             .transpose()?

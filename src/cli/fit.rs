@@ -69,12 +69,12 @@ pub struct FitArgs {
     #[arg(long, value_name = "summation|astm-e308", default_value_t = Weighting::default())]
     pub weighting: Weighting,
 
-    /// How the SRA's one achromatic reading per geometry enters the cost: `luminance`
-    /// (recommended for a measured scan: the sample's luminous reflectance Y under CIE
-    /// illuminant C and the 2° V(λ), as ISO 2813 specifies; compared with the model's Y) or
-    /// `flat` (the paper's, the default: a grey spectrum, compared band by band). SCIENCE.md
-    /// §5.1, §10.
-    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::Flat)]
+    /// How the SRA's one achromatic reading per geometry enters the cost: `luminance` (the
+    /// default for a measured scan: the sample's luminous reflectance Y under CIE illuminant C
+    /// and the 2° V(λ), as ISO 2813 specifies; compared with the model's Y) or `flat` (the
+    /// paper's: a grey spectrum, compared band by band; `brdfd demo` uses it to reproduce the
+    /// paper). SCIENCE.md §5.1, §10.
+    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::MEASURED_DEFAULT)]
     pub sra: SraModel,
 
     /// Illuminant of the SRA's luminance (the `luminance` model's cost and the specular |ΔL*|

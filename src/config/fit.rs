@@ -52,10 +52,9 @@ impl Default for FitConfig {
 mod defaults {
     pub const SEED: u64 = 1;
     pub const BOOTSTRAP: u32 = 200;
-    /// The paper's flat SRA model. `luminance` is the one to recommend (calibrated intervals,
-    /// SCIENCE.md §10); it becomes the default once cf2's kd solve takes its SRA terms in and
-    /// m2's joint solve is as fast as its band solves (SCIENCE.md §10).
-    pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::Flat;
+    /// Measured scans are fitted under the luminance SRA model (SCIENCE.md §10); the paper's
+    /// `flat` stays a setting.
+    pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::MEASURED_DEFAULT;
 }
 
 // ---- Stage 1: the section's shape ----------------------------------------------------------
@@ -214,7 +213,7 @@ mod tests {
     #[test]
     fn sra_setting() {
         use crate::sra_reading::SraModel;
-        assert_eq!(parse("").unwrap().fit.sra, SraModel::Flat);
+        assert_eq!(parse("").unwrap().fit.sra, SraModel::Luminance);
         let c = parse("[fit]\nsra = \"flat\"\n").unwrap();
         assert_eq!(c.fit.sra, SraModel::Flat);
         let e = parse("[fit]\nsra = \"grey\"\n").unwrap_err().to_string();

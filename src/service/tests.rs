@@ -155,20 +155,28 @@ fn settings_follow_the_configuration() {
         (f.cost, f.method, f.seed),
         (CostFunction::Cf1, Method::Paper, 4)
     );
-    assert_eq!(f.sra, crate::sra_reading::SraReading::FLAT);
-    config.fit.sra = crate::sra_reading::SraModel::Luminance;
-    let f = ServiceSettings::from_config(&config).fit_settings(CostFunction::Cf1, Method::Paper, 4);
+    // Measured scans are fitted under the luminance SRA model unless configured otherwise.
     assert_eq!(f.sra, crate::sra_reading::SraReading::LUMINANCE);
+    config.fit.sra = crate::sra_reading::SraModel::Flat;
+    let f = ServiceSettings::from_config(&config).fit_settings(CostFunction::Cf1, Method::Paper, 4);
+    assert_eq!(f.sra, crate::sra_reading::SraReading::FLAT);
 }
 
-/// A refit may ask for the luminance SRA model (`POST /scans/{id}/refit` `{"sra": …}`): the fit
-/// records it in its settings and its detail, and on a scan whose SRA reads the luminance it
-/// reproduces the readings' lightness.
+/// A refit may ask for the luminance SRA model (`POST /scans/{id}/refit` `{"sra": …}`) on a
+/// station configured with the paper's flat one: the fit records it in its settings and its
+/// detail, and on a scan whose SRA reads the luminance it reproduces the readings' lightness.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_refit_can_ask_for_the_luminance_sra_model() {
     use crate::sra_reading::{SraModel, SraReading};
     use crate::synth::{SraResponse, SynthOptions, paper_samples, synth_scan};
-    let s = service().await;
+    let mut config = Config::default();
+    config.fit.sra = SraModel::Flat;
+    let s = service_on(
+        Store::open_in_memory().await.unwrap(),
+        ServiceSettings::from_config(&config),
+        ServiceOptions::default(),
+    )
+    .await;
     let opts = SynthOptions {
         sra_response: SraResponse::Luminance,
         ..SynthOptions::default()
