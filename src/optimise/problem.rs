@@ -782,6 +782,9 @@ impl Problem {
                 .abs()
                 .max(f64::MIN_POSITIVE);
         let mut seed = (start, *k, *f);
+        // Neighbouring multipliers often pick the same kinks; a configuration already
+        // completed would only repeat its completion.
+        let mut tried: [[f64; BANDS]; 2 * LAMBDA_STEPS + 1] = [[0.0; BANDS]; 2 * LAMBDA_STEPS + 1];
         for m in 0..=2 * LAMBDA_STEPS {
             let (mut kk, mut ff) = (*k, *f);
             if m > 0 {
@@ -803,6 +806,10 @@ impl Problem {
                     }
                     (kk[b], ff[b]) = (best.0, best.1);
                 }
+            }
+            tried[m] = std::array::from_fn(|b| kk[b]);
+            if tried[..m].contains(&tried[m]) {
+                continue;
             }
             let big_k = luminance_with(&lum.c, &spectrum(&kk));
             let sum_f: f64 = ff[..BANDS].iter().sum();
