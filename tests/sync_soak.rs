@@ -44,8 +44,13 @@ struct Station {
     daemon: Option<ServeChild>,
 }
 
+/// The stations fit under the paper's flat SRA model: cf2's full-search bootstrap under the
+/// luminance default takes minutes per scan in a debug build, longer than a round may take to
+/// converge when a scan is let run to its end.
 fn sections(name: &str, url: &str) -> String {
-    format!("[station]\nid = \"{name}\"\n\n[sync]\nurl = \"{url}\"\nbatch = 20\n\n")
+    format!(
+        "[station]\nid = \"{name}\"\n\n[sync]\nurl = \"{url}\"\nbatch = 20\n\n[fit]\nsra = \"flat\"\n\n"
+    )
 }
 
 impl Station {
