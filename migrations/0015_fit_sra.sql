@@ -1,4 +1,4 @@
--- Step 15: the SRA reading model of each fit (issue 16, SCIENCE.md §5.1).
+-- Step 15: the SRA reading model of each fit (SCIENCE.md §5.1).
 --
 -- `fit_runs.sra`: how the fit's cost read the two SRA readings — 'flat' (the paper's: the one
 -- achromatic value spread over the 31 bands, compared band by band) or 'luminance' (the reading

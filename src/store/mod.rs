@@ -68,6 +68,43 @@ use backend::Pool;
 /// when a migration is added or changed).
 pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!();
 
+/// Applied migrations whose file was later reworded without changing what it does (its
+/// comments only): the version and the SHA-384 checksum that stores recorded when they applied
+/// the earlier wording. sqlx refuses a store whose recorded checksum differs from the embedded
+/// file's, so [`adopt_reworded_migrations`] moves such a store to the current checksum first.
+/// Only a comment may ever be reworded this way; a change to what a step does is a new step.
+const REWORDED_MIGRATIONS: &[(i64, &str)] = &[(
+    15,
+    "78e8e5f8fbfb9ce3c9af1e21f0be8af5a9397c1c4d44ec608f60ae099862bd1510a990cdba274afeca6547fbc04726ea",
+)];
+
+/// Records the current checksum of each [`REWORDED_MIGRATIONS`] step in a store that applied
+/// its earlier wording, so that [`MIGRATOR`] accepts the store. A step recorded with any other
+/// checksum is left alone (sqlx then refuses the store, as it should).
+async fn adopt_reworded_migrations(pool: &Pool) -> Result<(), StoreError> {
+    let has_table: i64 = sqlx::query_scalar(
+        "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = '_sqlx_migrations'",
+    )
+    .fetch_one(pool)
+    .await?;
+    if has_table == 0 {
+        return Ok(());
+    }
+    for (version, earlier) in REWORDED_MIGRATIONS {
+        let Some(current) = MIGRATOR.iter().find(|m| m.version == *version) else {
+            continue;
+        };
+        let earlier = hex::decode(earlier).expect("a checksum in hex");
+        sqlx::query("UPDATE _sqlx_migrations SET checksum = ? WHERE version = ? AND checksum = ?")
+            .bind(current.checksum.as_ref())
+            .bind(version)
+            .bind(earlier)
+            .execute(pool)
+            .await?;
+    }
+    Ok(())
+}
+
 /// A handle on the store. Clones share the same connections.
 #[derive(Debug, Clone)]
 pub struct Store {
@@ -108,6 +145,7 @@ impl Store {
                 path: path.to_path_buf(),
                 source,
             })?;
+        adopt_reworded_migrations(&pools.writer).await?;
         MIGRATOR.run(&pools.writer).await?;
         // A writer opened it: a new incarnation of the store (lineage.rs).
         lineage::begin_incarnation(&pools.writer).await?;

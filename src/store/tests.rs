@@ -1124,6 +1124,43 @@ async fn a_file_store_reopens_without_reapplying_migrations() {
 }
 
 #[tokio::test]
+async fn a_store_that_applied_an_earlier_wording_of_a_reworded_migration_opens() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("brdfd.db");
+    let store = Store::open(&path).await.unwrap();
+    let reference = complete_reference(&store).await;
+    let (scan, _) = measuring_scan(&store, reference, "S", 3).await;
+    let current = applied(&store).await;
+    // As a store written before the rewording recorded it.
+    for (version, earlier) in super::REWORDED_MIGRATIONS {
+        sqlx::query("UPDATE _sqlx_migrations SET checksum = ? WHERE version = ?")
+            .bind(hex::decode(earlier).unwrap())
+            .bind(version)
+            .execute(&store.writer)
+            .await
+            .unwrap();
+    }
+    assert_ne!(applied(&store).await, current);
+    store.close().await;
+
+    let store = Store::open(&path).await.unwrap();
+    assert_eq!(applied(&store).await, current, "the current checksums are recorded");
+    assert_eq!(store.scan_detail(scan).await.unwrap().readings.len(), 3);
+    store.close().await;
+
+    // A checksum that is neither wording is still refused.
+    let store = Store::open(&path).await.unwrap();
+    sqlx::query("UPDATE _sqlx_migrations SET checksum = x'00' WHERE version = ?")
+        .bind(super::REWORDED_MIGRATIONS[0].0)
+        .execute(&store.writer)
+        .await
+        .unwrap();
+    store.close().await;
+    let refused = Store::open(&path).await.unwrap_err();
+    assert!(refused.to_string().contains("15"), "{refused}");
+}
+
+#[tokio::test]
 async fn spectra_round_trip_bit_for_bit_through_a_file() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("exact.db");
