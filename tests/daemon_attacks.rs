@@ -48,14 +48,18 @@ fn answer(addr: SocketAddr, request: &str) -> String {
     out
 }
 
-/// One raw HTTP/1.1 request; returns the status code and the body.
-fn raw(addr: SocketAddr, request: &str) -> (u16, String) {
-    let out = answer(addr, request);
-    let status = out
+/// The status code on a raw answer's status line, if it has one.
+fn status_of(answer: &str) -> Option<u16> {
+    answer
         .split_whitespace()
         .nth(1)
         .and_then(|c| c.parse().ok())
-        .unwrap_or_else(|| panic!("no status line in {out:?}"));
+}
+
+/// One raw HTTP/1.1 request; returns the status code and the body.
+fn raw(addr: SocketAddr, request: &str) -> (u16, String) {
+    let out = answer(addr, request);
+    let status = status_of(&out).unwrap_or_else(|| panic!("no status line in {out:?}"));
     let body = out.split("\r\n\r\n").nth(1).unwrap_or("").to_string();
     (status, body)
 }
@@ -72,6 +76,34 @@ fn request(method: &str, path: &str, headers: &[(&str, &str)], body: &str) -> St
     r.push_str("\r\n");
     r.push_str(body);
     r
+}
+
+/// [`raw`] of a [`request`] whose `Host` is `addr` itself (sent first, as a browser on the
+/// daemon's own page would), then `headers`.
+fn ask(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &str,
+) -> (u16, String) {
+    let host = addr.to_string();
+    let mut all = vec![("host", host.as_str())];
+    all.extend_from_slice(headers);
+    raw(addr, &request(method, path, &all, body))
+}
+
+/// Reads `s` until what it has read contains `marker`, failing with `closed` if the server
+/// closes it first; returns what was read.
+fn read_until(s: &mut TcpStream, marker: &str, closed: &str) -> String {
+    let mut seen = Vec::new();
+    let mut buf = [0u8; 1024];
+    while !String::from_utf8_lossy(&seen).contains(marker) {
+        let n = s.read(&mut buf).unwrap();
+        assert!(n > 0, "{closed}");
+        seen.extend_from_slice(&buf[..n]);
+    }
+    String::from_utf8_lossy(&seen).into_owned()
 }
 
 /// Row counts of the tables an attack could change, read through the read-only store.
@@ -93,11 +125,39 @@ fn idle(client: &Client) -> bool {
     client.get("/status").unwrap()["busy"].is_null()
 }
 
+/// A daemon on [`config`]`(dir, api_extra)` in a new temporary directory: the directory, the
+/// configuration file and the daemon (bound in this order, the daemon is dropped first).
+fn serve_fresh(api_extra: &str) -> (tempfile::TempDir, PathBuf, ServeChild) {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path(), api_extra);
+    let d = spawn_serve(&cfg, &[]);
+    (dir, cfg, d)
+}
+
+/// Runs `brdfd serve --config CFG EXTRA_ARGS…`, checks that it fails, and returns its stderr.
+fn serve_refused(cfg: &Path, extra_args: &[&str]) -> String {
+    let mut args = vec!["serve", "--config", cfg.to_str().unwrap()];
+    args.extend_from_slice(extra_args);
+    let out = run_brdfd(&args, None);
+    assert_ne!(out.status.code(), Some(0));
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Measures the reference, waits for it, and starts a scan of T.Sky blue; returns its id.
+fn reference_and_scan(d: &ServeChild) -> i64 {
+    d.client.post("/reference", None).unwrap();
+    wait_until("the reference", || idle(&d.client));
+    d.client
+        .post("/scans", Some(&json!({"sample": "T.Sky blue"})))
+        .unwrap()["scan"]
+        .as_i64()
+        .unwrap()
+}
+
 #[test]
 fn a_web_page_cannot_measure_abort_cancel_or_import() {
     let _serial = serial();
-    let dir = tempfile::tempdir().unwrap();
-    let d = spawn_serve(&config(dir.path(), ""), &[]);
+    let (_dir, _, d) = serve_fresh("");
     let host = d.addr.to_string();
     let bearer = format!("Bearer {}", d.token);
     let before = counts(&d.dir);
@@ -234,7 +294,7 @@ fn a_web_page_cannot_measure_abort_cancel_or_import() {
         assert!(!v["error"].as_str().unwrap().is_empty());
     }
     // The 401 says which file the token is in, but not where on the machine.
-    let (_, body) = raw(d.addr, &request("GET", "/scans", &[("host", &host)], ""));
+    let (_, body) = ask(d.addr, "GET", "/scans", &[], "");
     assert!(body.contains("brdfd.token"), "{body}");
     assert!(!body.contains(&*d.dir.to_string_lossy()), "{body}");
     // Nothing started, nothing imported.
@@ -245,7 +305,7 @@ fn a_web_page_cannot_measure_abort_cancel_or_import() {
     );
     assert_eq!(counts(&d.dir), before);
     // Monitoring needs no token; the operator's client works.
-    let (status, _) = raw(d.addr, &request("GET", "/healthz", &[("host", &host)], ""));
+    let (status, _) = ask(d.addr, "GET", "/healthz", &[], "");
     assert_eq!(status, 200);
     assert!(
         d.client
@@ -271,19 +331,7 @@ fn a_web_page_cannot_measure_abort_cancel_or_import() {
 fn listening_beyond_loopback_needs_allow_remote_on_the_command_line_too() {
     let _serial = serial();
     let dir = tempfile::tempdir().unwrap();
-    let cfg = config(dir.path(), "");
-    let out = run_brdfd(
-        &[
-            "serve",
-            "--config",
-            cfg.to_str().unwrap(),
-            "--listen",
-            "0.0.0.0:0",
-        ],
-        None,
-    );
-    assert_ne!(out.status.code(), Some(0));
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = serve_refused(&config(dir.path(), ""), &["--listen", "0.0.0.0:0"]);
     assert!(
         stderr.contains("--listen 0.0.0.0:0") && stderr.contains("allow_remote"),
         "{stderr}"
@@ -297,30 +345,10 @@ fn listening_beyond_loopback_needs_allow_remote_on_the_command_line_too() {
 #[test]
 fn a_second_daemon_on_the_same_store_is_refused_and_the_first_scan_completes() {
     let _serial = serial();
-    let dir = tempfile::tempdir().unwrap();
-    let cfg = config(dir.path(), "");
-    let d = spawn_serve(&cfg, &[]);
-    d.client.post("/reference", None).unwrap();
-    wait_until("the reference", || idle(&d.client));
-    let scan = d
-        .client
-        .post("/scans", Some(&json!({"sample": "T.Sky blue"})))
-        .unwrap()["scan"]
-        .as_i64()
-        .unwrap();
+    let (dir, cfg, d) = serve_fresh("");
+    let scan = reference_and_scan(&d);
     // While it measures, a second daemon on the same store is refused at once.
-    let out = run_brdfd(
-        &[
-            "serve",
-            "--config",
-            cfg.to_str().unwrap(),
-            "--listen",
-            "127.0.0.1:0",
-        ],
-        None,
-    );
-    assert_ne!(out.status.code(), Some(0));
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = serve_refused(&cfg, &["--listen", "127.0.0.1:0"]);
     assert!(stderr.contains("in use by another brdfd"), "{stderr}");
     assert!(
         stderr.contains(&format!("pid {}", d.child.id())),
@@ -360,16 +388,8 @@ fn a_second_daemon_on_the_same_store_is_refused_and_the_first_scan_completes() {
 #[test]
 fn a_refit_naming_one_cost_function_two_thousand_times_queues_it_once() {
     let _serial = serial();
-    let dir = tempfile::tempdir().unwrap();
-    let d = spawn_serve(&config(dir.path(), ""), &[]);
-    d.client.post("/reference", None).unwrap();
-    wait_until("the reference", || idle(&d.client));
-    let scan = d
-        .client
-        .post("/scans", Some(&json!({"sample": "T.Sky blue"})))
-        .unwrap()["scan"]
-        .as_i64()
-        .unwrap();
+    let (_dir, _, d) = serve_fresh("");
+    let scan = reference_and_scan(&d);
     wait_until("the scan", || idle(&d.client));
     let before = counts(&d.dir);
     let names: Vec<&str> = ["cf1", "cf2"].iter().cycle().take(2000).copied().collect();
@@ -411,14 +431,7 @@ fn a_refit_naming_one_cost_function_two_thousand_times_queues_it_once() {
 #[test]
 fn half_sent_headers_are_closed_and_connections_and_streams_are_capped() {
     let _serial = serial();
-    let dir = tempfile::tempdir().unwrap();
-    let d = spawn_serve(
-        &config(
-            dir.path(),
-            "max_connections = 12\nmax_event_subscribers = 2",
-        ),
-        &[],
-    );
+    let (_dir, _, d) = serve_fresh("max_connections = 12\nmax_event_subscribers = 2");
     // Slowloris: half a header on each of 10 connections; the server closes them after the
     // header timeout (500 ms here), and not before it.
     let opened = Instant::now();
@@ -462,17 +475,15 @@ fn half_sent_headers_are_closed_and_connections_and_streams_are_capped() {
             let keep_alive = request("GET", "/healthz", &[("host", &host)], "")
                 .replace("connection: close", "connection: keep-alive");
             s.write_all(keep_alive.as_bytes()).unwrap();
-            let mut seen = Vec::new();
-            let mut buf = [0u8; 512];
-            while !String::from_utf8_lossy(&seen).contains("{\"ok\":true}") {
-                let n = s.read(&mut buf).unwrap();
-                assert!(n > 0, "the connection closed before its answer");
-                seen.extend_from_slice(&buf[..n]);
-            }
+            read_until(
+                &mut s,
+                "{\"ok\":true}",
+                "the connection closed before its answer",
+            );
             s
         })
         .collect();
-    let (status, body) = raw(d.addr, &request("GET", "/healthz", &[("host", &host)], ""));
+    let (status, body) = ask(d.addr, "GET", "/healthz", &[], "");
     assert_eq!(status, 200, "{body}");
     let mut buf = [0u8; 64];
     assert!(
@@ -504,12 +515,12 @@ fn half_sent_headers_are_closed_and_connections_and_streams_are_capped() {
             s
         })
         .collect();
-    let (status, body) = raw(d.addr, &request("GET", "/healthz", &[("host", &host)], ""));
+    let (status, body) = ask(d.addr, "GET", "/healthz", &[], "");
     assert_eq!(status, 503, "{body}");
     assert!(body.contains("max_connections"), "{body}");
     drop(busy);
     wait_until("the cap to free", || {
-        raw(d.addr, &request("GET", "/healthz", &[("host", &host)], "")).0 == 200
+        ask(d.addr, "GET", "/healthz", &[], "").0 == 200
     });
     // Event streams: two at once, the third is refused.
     let a = d.client.events().unwrap();
@@ -534,9 +545,7 @@ fn a_recording_named_like_the_store_is_refused_and_old_recordings_are_kept() {
     );
     std::fs::write(&cfg, text).unwrap();
     std::fs::write(dir.path().join("brdfd.db"), b"precious").unwrap();
-    let out = run_brdfd(&["serve", "--config", cfg.to_str().unwrap()], None);
-    assert_ne!(out.status.code(), Some(0));
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = serve_refused(&cfg, &[]);
     assert!(stderr.contains("same file as [store] path"), "{stderr}");
     assert_eq!(
         std::fs::read(dir.path().join("brdfd.db")).unwrap(),
@@ -583,11 +592,7 @@ fn serve_with_a_scan(dir: &Path, sections: &str) -> ServeChild {
         sections,
     );
     let d = spawn_serve(&dir.join("brdfd.toml"), &[]);
-    d.client.post("/reference", None).unwrap();
-    wait_until("the reference", || idle(&d.client));
-    d.client
-        .post("/scans", Some(&json!({"sample": "T.Sky blue"})))
-        .unwrap();
+    reference_and_scan(&d);
     wait_until("the scan", || idle(&d.client));
     d
 }
@@ -747,16 +752,7 @@ fn report_and_export_never_write_through_a_link_or_onto_the_store() {
     let link = dir.join("to-store.json");
     for target in [db_s, wal.as_str(), link.to_str().unwrap()] {
         for force in [false, true] {
-            let mut args = vec![
-                "export-format",
-                "--format",
-                "json",
-                "--all",
-                "--db",
-                db_s,
-                "--out",
-                target,
-            ];
+            let mut args = export_json(db_s, target);
             if force {
                 args.push("--force");
             }
@@ -765,21 +761,11 @@ fn report_and_export_never_write_through_a_link_or_onto_the_store() {
         }
     }
     // A hard link to the store under another name is refused too.
-    std::fs::hard_link(&db, dir.join("copy.json")).unwrap();
-    refused(
-        &[
-            "export-format",
-            "--format",
-            "json",
-            "--all",
-            "--db",
-            db_s,
-            "--out",
-            dir.join("copy.json").to_str().unwrap(),
-            "--force",
-        ],
-        "never",
-    );
+    let copy = dir.join("copy.json");
+    std::fs::hard_link(&db, &copy).unwrap();
+    let mut args = export_json(db_s, copy.to_str().unwrap());
+    args.push("--force");
+    refused(&args, "never");
     assert_eq!(store_bytes(dir), before, "the store's file changed");
     // The store and the token are the daemon's user's only.
     use std::os::unix::fs::PermissionsExt;
@@ -793,6 +779,20 @@ fn report_and_export_never_write_through_a_link_or_onto_the_store() {
     }
 }
 
+/// The arguments of `brdfd export-format` writing every scan of the store `db` as JSON to `out`.
+fn export_json<'a>(db: &'a str, out: &'a str) -> Vec<&'a str> {
+    vec![
+        "export-format",
+        "--format",
+        "json",
+        "--all",
+        "--db",
+        db,
+        "--out",
+        out,
+    ]
+}
+
 /// An event stream opened by hand: the request sent and the answer's head read.
 fn open_stream(addr: SocketAddr, token: &str) -> TcpStream {
     let mut s = connect(addr);
@@ -801,14 +801,7 @@ fn open_stream(addr: SocketAddr, token: &str) -> TcpStream {
             .as_bytes(),
     )
     .unwrap();
-    let mut seen = Vec::new();
-    let mut buf = [0u8; 1024];
-    while !String::from_utf8_lossy(&seen).contains("\r\n\r\n") {
-        let n = s.read(&mut buf).unwrap();
-        assert!(n > 0, "the stream closed before its head");
-        seen.extend_from_slice(&buf[..n]);
-    }
-    let head = String::from_utf8_lossy(&seen);
+    let head = read_until(&mut s, "\r\n\r\n", "the stream closed before its head");
     assert!(head.starts_with("HTTP/1.1 200"), "{head}");
     s
 }
@@ -868,8 +861,7 @@ fn silent_sockets_and_idle_event_streams_cannot_keep_the_operator_out() {
 #[test]
 fn a_body_promised_over_the_limit_is_refused_before_it_is_sent() {
     let _serial = serial();
-    let dir = tempfile::tempdir().unwrap();
-    let d = spawn_serve(&config(dir.path(), ""), &[]);
+    let (_dir, _, d) = serve_fresh("");
     let before = counts(&d.dir);
     let mut s = TcpStream::connect(d.addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
@@ -890,34 +882,28 @@ fn a_body_promised_over_the_limit_is_refused_before_it_is_sent() {
     assert!(started.elapsed() < Duration::from_secs(2));
     // A body just over 1 MiB, sent whole, is refused too.
     let big = format!("{{\"x\": \"{}\"}}", "a".repeat(1 << 20));
-    let (status, body) = raw(
+    let (status, body) = ask(
         d.addr,
-        &request(
-            "POST",
-            "/scans/import",
-            &[
-                ("host", &d.addr.to_string()),
-                ("authorization", &format!("Bearer {}", d.token)),
-                ("content-type", "application/json"),
-            ],
-            &big,
-        ),
+        "POST",
+        "/scans/import",
+        &[
+            ("authorization", &format!("Bearer {}", d.token)),
+            ("content-type", "application/json"),
+        ],
+        &big,
     );
     assert_eq!(status, 413, "{body}");
     // A CORS preflight is never granted.
-    let (status, _) = raw(
+    let (status, _) = ask(
         d.addr,
-        &request(
-            "OPTIONS",
-            "/reference",
-            &[
-                ("host", &d.addr.to_string()),
-                ("origin", "https://evil.example"),
-                ("access-control-request-method", "POST"),
-                ("access-control-request-headers", "authorization"),
-            ],
-            "",
-        ),
+        "OPTIONS",
+        "/reference",
+        &[
+            ("origin", "https://evil.example"),
+            ("access-control-request-method", "POST"),
+            ("access-control-request-headers", "authorization"),
+        ],
+        "",
     );
     assert!(status >= 400, "preflight answered {status}");
     // A refused body shape says what to send, not the parser's field list.
@@ -969,21 +955,13 @@ fn an_idle_connection_closes_at_the_configured_idle_timeout() {
 /// One raw request's status and its whole answer (head and body).
 fn raw_full(addr: SocketAddr, request: &str) -> (u16, String) {
     let out = answer(addr, request);
-    let status = out
-        .split_whitespace()
-        .nth(1)
-        .and_then(|c| c.parse().ok())
-        .unwrap_or(0);
-    (status, out)
+    (status_of(&out).unwrap_or(0), out)
 }
 
 #[test]
 fn a_logged_out_session_stays_logged_out_across_a_restart() {
     let _serial = serial();
-    let dir = tempfile::tempdir().unwrap();
-    let cfg = config(dir.path(), "");
-    let d = spawn_serve(&cfg, &[]);
-    let host = d.addr.to_string();
+    let (_dir, cfg, d) = serve_fresh("");
     let cookie_of = |d: &ServeChild| {
         let ticket = d.client.post("/session/ticket", None).unwrap()["ticket"]
             .as_str()
@@ -1009,18 +987,15 @@ fn a_logged_out_session_stays_logged_out_across_a_restart() {
     let ended = cookie_of(&d);
     let kept = cookie_of(&d);
     let status_with = |addr: SocketAddr, cookie: &str| {
-        raw(
+        ask(
             addr,
-            &request(
-                "GET",
-                "/status",
-                &[
-                    ("host", &addr.to_string()),
-                    ("cookie", &format!("brdfd_session={cookie}")),
-                    ("sec-fetch-site", "same-origin"),
-                ],
-                "",
-            ),
+            "GET",
+            "/status",
+            &[
+                ("cookie", &format!("brdfd_session={cookie}")),
+                ("sec-fetch-site", "same-origin"),
+            ],
+            "",
         )
         .0
     };
@@ -1028,33 +1003,22 @@ fn a_logged_out_session_stays_logged_out_across_a_restart() {
     // Log out as the page does: its CSRF value from /session, then the POST.
     let jar = format!("brdfd_session={ended}");
     let own = ("sec-fetch-site", "same-origin");
-    let (_, body) = raw(
-        d.addr,
-        &request(
-            "GET",
-            "/session",
-            &[("host", &host), ("cookie", &jar), own],
-            "",
-        ),
-    );
+    let (_, body) = ask(d.addr, "GET", "/session", &[("cookie", &jar), own], "");
     let csrf = serde_json::from_str::<Value>(&body).unwrap()["csrf"]
         .as_str()
         .unwrap()
         .to_string();
-    let (status, body) = raw(
+    let (status, body) = ask(
         d.addr,
-        &request(
-            "POST",
-            "/session/logout",
-            &[
-                ("host", &host),
-                ("cookie", &jar),
-                own,
-                ("content-type", "application/json"),
-                ("x-brdfd-csrf", &csrf),
-            ],
-            "",
-        ),
+        "POST",
+        "/session/logout",
+        &[
+            ("cookie", &jar),
+            own,
+            ("content-type", "application/json"),
+            ("x-brdfd-csrf", &csrf),
+        ],
+        "",
     );
     assert_eq!(status, 200, "{body}");
     assert_eq!(status_with(d.addr, &ended), 401);
@@ -1075,9 +1039,7 @@ fn a_token_file_that_is_a_pipe_is_refused_at_start_without_hanging() {
     assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
     let cfg = config(dir.path(), "");
     let started = Instant::now();
-    let out = run_brdfd(&["serve", "--config", cfg.to_str().unwrap()], None);
-    assert_ne!(out.status.code(), Some(0));
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = serve_refused(&cfg, &[]);
     assert!(stderr.contains("not a regular file"), "{stderr}");
     assert!(started.elapsed() < Duration::from_secs(20));
 }

@@ -16,12 +16,13 @@ mod common;
 mod pg;
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::Output;
 use std::time::Duration;
 
 use brdfd::formats::{ExportOptions, Format};
 use brdfd::report::load::{Selection, from_central, from_store};
-use brdfd::service::{ServiceOptions, ServiceSettings};
+use brdfd::service::{Service, ServiceOptions, ServiceSettings};
 use brdfd::store::Store;
 use brdfd::store::central::CentralSelection;
 use brdfd::sync::tables::TABLES;
@@ -41,17 +42,25 @@ fn forwarding(station: &str, url: &str, batch: usize) -> ForwarderOptions {
     }
 }
 
-/// A station: the daemon in-process on the replayed recordings, forwarding as `station`.
-async fn station(station: &str, url: &str, batch: usize) -> TestDaemon {
-    let devices = simulated(&strict_fast());
-    let settings = ServiceSettings {
+/// The service settings of a station forwarding as `station`.
+fn station_settings(station: &str, url: &str, batch: usize) -> ServiceSettings {
+    ServiceSettings {
         sync: Some(forwarding(station, url, batch)),
         // Intervals are forwarded like every other column; a few resamples make them quickly
         // enough for the comparison to wait for them (`bootstraps_pending`).
         bootstrap: 5,
         ..settings()
-    };
-    start(devices, settings, ServiceOptions::default()).await
+    }
+}
+
+/// A station: the daemon in-process on the replayed recordings, forwarding as `station`.
+async fn station(station: &str, url: &str, batch: usize) -> TestDaemon {
+    start(
+        simulated(&strict_fast()),
+        station_settings(station, url, batch),
+        ServiceOptions::default(),
+    )
+    .await
 }
 
 /// The first `n` samples of the recordings.
@@ -73,7 +82,7 @@ async fn measure(d: &TestDaemon, n: usize) {
 
 /// Waits until the central database acknowledged everything the store at `db` has queued
 /// (the status alone may predate the last commit).
-async fn drained_service(service: &brdfd::service::Service, db: &Path) {
+async fn drained_service(service: &Service, db: &Path) {
     wait_for(
         "the central cursor to reach the store's last entry",
         STEP_TIMEOUT,
@@ -91,6 +100,46 @@ async fn drained_service(service: &brdfd::service::Service, db: &Path) {
 
 async fn drained(d: &TestDaemon) {
     drained_service(&d.service, &d.db).await;
+}
+
+/// Waits until the station's forwarder has sent its first rows.
+async fn some_rows_forwarded(service: &Service, what: &str) {
+    wait_for(what, STEP_TIMEOUT, || async {
+        service.status().await.unwrap().sync.unwrap().rows_forwarded > 0
+    })
+    .await;
+}
+
+/// Runs `brdfd sync --db DB --to URL --station STATION EXTRA…`.
+fn brdfd_sync(db: &Path, url: &str, station: &str, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "sync",
+        "--db",
+        db.to_str().unwrap(),
+        "--to",
+        url,
+        "--station",
+        station,
+    ];
+    args.extend_from_slice(extra);
+    run_brdfd(&args, None)
+}
+
+/// Checks that a `brdfd` run succeeded, showing its stderr if not.
+fn assert_ran(out: &Output) {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The NDJSON lines a `brdfd sync --json` run printed.
+fn ndjson(out: &Output) -> Vec<serde_json::Value> {
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
 }
 
 /// Rows per station in the central database, per table.
@@ -291,17 +340,7 @@ async fn the_server_killed_mid_forward_and_restarted_loses_and_doubles_nothing()
         measure_reference(&d.service).await;
         let first = samples(3);
         let scan = d.service.request_scan(first[0]).await.unwrap();
-        wait_for("some rows forwarded", STEP_TIMEOUT, || async {
-            d.service
-                .status()
-                .await
-                .unwrap()
-                .sync
-                .unwrap()
-                .rows_forwarded
-                > 0
-        })
-        .await;
+        some_rows_forwarded(&d.service, "some rows forwarded").await;
         cluster.stop_immediate();
         // The station goes on measuring with the server gone.
         assert!(d.service.wait_settled(scan, STEP_TIMEOUT).await.unwrap());
@@ -336,40 +375,20 @@ async fn a_station_restarted_mid_forward_loses_and_doubles_nothing() {
         // forwarder's transaction under way.
         let d = station("bench-r", &db.url, 1).await;
         measure_reference(&d.service).await;
-        wait_for("the first rows forwarded", STEP_TIMEOUT, || async {
-            d.service
-                .status()
-                .await
-                .unwrap()
-                .sync
-                .unwrap()
-                .rows_forwarded
-                > 0
-        })
-        .await;
+        some_rows_forwarded(&d.service, "the first rows forwarded").await;
         d.service.stop_keeping_store().await;
         let before = d.service.status().await.unwrap().sync.unwrap();
         assert!(before.backlog > 0, "stopped mid-forward: {before:?}");
         d.store.close().await;
 
         // The second life, on the same store: forwarding resumes from the central cursor.
-        let store = Store::open(&d.db).await.unwrap();
-        let devices = simulated(&strict_fast());
         let settings = ServiceSettings {
             sync: Some(forwarding("bench-r", &db.url, 50)),
             ..settings()
         };
-        let service = brdfd::service::Service::start(
-            store.clone(),
-            devices,
-            settings,
-            ServiceOptions::default(),
-        )
-        .await
-        .unwrap();
+        let (store, service) = service_on(&d.db, settings).await;
         measure_reference(&service).await;
-        scan_and_settle(&service, samples(1)[0]).await;
-        drained_service(&service, &d.db).await;
+        scan_and_drain(&service, &d.db, samples(1)[0]).await;
         service.stop_keeping_store().await;
         assert_same(&d.db, &db.url, "bench-r").await;
         store.close().await;
@@ -436,19 +455,7 @@ async fn a_taken_station_id_and_a_newer_central_schema_are_refused() {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("brdfd.db");
         Store::open(&file).await.unwrap().close().await;
-        let out = run_brdfd(
-            &[
-                "sync",
-                "--db",
-                file.to_str().unwrap(),
-                "--to",
-                &db.url,
-                "--station",
-                "bench-z",
-                "--once",
-            ],
-            None,
-        );
+        let out = brdfd_sync(&file, &db.url, "bench-z", &["--once"]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success());
         assert_eq!(err.trim().lines().count(), 1, "{err}");
@@ -488,19 +495,7 @@ async fn a_bad_url_or_a_wrong_password_is_one_line_and_the_station_keeps_measuri
             ("postgres://postgres@127.0.0.1:1/x", "cannot connect"),
             ("postgres://postgres@127.0.0.1:notaport/x", "not valid"),
         ] {
-            let out = run_brdfd(
-                &[
-                    "sync",
-                    "--db",
-                    d.db.to_str().unwrap(),
-                    "--to",
-                    url,
-                    "--station",
-                    "bench-w",
-                    "--once",
-                ],
-                None,
-            );
+            let out = brdfd_sync(&d.db, url, "bench-w", &["--once"]);
             let err = String::from_utf8_lossy(&out.stderr);
             assert!(!out.status.success(), "{url}");
             assert_eq!(err.trim().lines().count(), 1, "{url}: {err}");
@@ -508,29 +503,14 @@ async fn a_bad_url_or_a_wrong_password_is_one_line_and_the_station_keeps_measuri
             assert!(!err.contains("not-the-password"), "{err}");
         }
         // With the right password it sends everything; --json says so in NDJSON.
-        let out = run_brdfd(
-            &[
-                "sync",
-                "--db",
-                d.db.to_str().unwrap(),
-                "--to",
-                &cluster.admin_url(),
-                "--station",
-                "bench-w",
-                "--once",
-                "--json",
-            ],
-            None,
+        let out = brdfd_sync(
+            &d.db,
+            &cluster.admin_url(),
+            "bench-w",
+            &["--once", "--json"],
         );
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
-            .lines()
-            .map(|l| serde_json::from_str(l).unwrap())
-            .collect();
+        assert_ran(&out);
+        let lines = ndjson(&out);
         assert_eq!(lines[0]["type"], "start", "{lines:?}");
         assert_eq!(lines[0]["station"], "bench-w", "{lines:?}");
         let last = lines.last().unwrap();
@@ -554,26 +534,76 @@ async fn a_bad_url_or_a_wrong_password_is_one_line_and_the_station_keeps_measuri
     .await;
 }
 
-/// A station daemon in-process on the store file `db` (opened as its owner: a new incarnation
-/// of that store), forwarding as `name`.
-async fn station_on(
-    db: &Path,
-    name: &str,
-    url: &str,
-    batch: usize,
-) -> (Store, brdfd::service::Service) {
+/// A daemon in-process on the replayed recordings and the store file `db` (opened as its
+/// owner: a new incarnation of that store), with `settings`.
+async fn service_on(db: &Path, settings: ServiceSettings) -> (Store, Service) {
     let store = Store::open(db).await.unwrap();
     let devices = simulated(&strict_fast());
-    let settings = ServiceSettings {
-        sync: Some(forwarding(name, url, batch)),
-        bootstrap: 5,
-        ..settings()
-    };
-    let service =
-        brdfd::service::Service::start(store.clone(), devices, settings, ServiceOptions::default())
-            .await
-            .unwrap();
+    let service = Service::start(store.clone(), devices, settings, ServiceOptions::default())
+        .await
+        .unwrap();
     (store, service)
+}
+
+/// [`service_on`] as a station forwarding as `name` in batches of 20, after it measured the
+/// reference and scanned `sample`.
+async fn station_on_scanned(db: &Path, name: &str, url: &str, sample: &str) -> (Store, Service) {
+    let (store, service) = service_on(db, station_settings(name, url, 20)).await;
+    measure_reference(&service).await;
+    scan_and_settle(&service, sample).await;
+    (store, service)
+}
+
+/// Scans `sample`, then waits until the central database acknowledged all the store at `db`
+/// queued.
+async fn scan_and_drain(service: &Service, db: &Path, sample: &str) {
+    scan_and_settle(service, sample).await;
+    drained_service(service, db).await;
+}
+
+/// Stops a station, keeping its store, and closes the store.
+async fn stop_station(store: &Store, service: &Service) {
+    service.stop_keeping_store().await;
+    store.close().await;
+}
+
+/// A station whose store was copied while it ran, and the copy refused under its id.
+struct CopiedStation {
+    /// Holds both store files.
+    dir: tempfile::TempDir,
+    orig: PathBuf,
+    copy: PathBuf,
+    /// The original station, still running.
+    store: Store,
+    service: Service,
+    /// Why the central database refused the copy.
+    refusal: String,
+}
+
+/// A station `name` on a new store measures, scans and forwards a first sample; its store is
+/// copied while it runs (`VACUUM INTO`, as a backup tool copies it), and it scans and forwards
+/// a second sample. The copy then starts under `name`, scans `copy_sample`, is refused (and
+/// told that `--adopt` is a way out) and is stopped.
+async fn copied_station(name: &str, url: &str, copy_sample: &str) -> CopiedStation {
+    let dir = tempfile::tempdir().unwrap();
+    let orig = dir.path().join("orig.db");
+    let copy = dir.path().join("copy.db");
+    let (store, service) = station_on_scanned(&orig, name, url, samples(1)[0]).await;
+    drained_service(&service, &orig).await;
+    vacuum_into(&orig, &copy).await;
+    scan_and_drain(&service, &orig, samples(2)[1]).await;
+    let (cs, csvc) = station_on_scanned(&copy, name, url, copy_sample).await;
+    let refusal = refused(&csvc).await;
+    assert!(refusal.contains("--adopt NEW_ID"), "{refusal}");
+    stop_station(&cs, &csvc).await;
+    CopiedStation {
+        dir,
+        orig,
+        copy,
+        store,
+        service,
+        refusal,
+    }
 }
 
 /// `VACUUM INTO`: a consistent copy of a live store, as a backup tool takes it.
@@ -592,7 +622,7 @@ async fn vacuum_into(db: &Path, copy: &Path) {
 }
 
 /// Waits until the station's forwarder says the central database refuses its store.
-async fn refused(service: &brdfd::service::Service) -> String {
+async fn refused(service: &Service) -> String {
     let deadline = std::time::Instant::now() + STEP_TIMEOUT;
     loop {
         let s = service.status().await.unwrap().sync.unwrap();
@@ -620,56 +650,39 @@ async fn a_copied_store_is_refused_and_nothing_of_it_is_mixed_in() {
     let _serial = serial();
     let db = TestDb::create("fork");
     bounded(async {
-        let dir = tempfile::tempdir().unwrap();
-        let orig = dir.path().join("orig.db");
-        // The original's first life: a reference and a scan, forwarded.
-        let (store, service) = station_on(&orig, "bench-f", &db.url, 20).await;
-        measure_reference(&service).await;
-        scan_and_settle(&service, samples(1)[0]).await;
-        drained_service(&service, &orig).await;
-        // A copy of the live store (a backup tool's), then the original goes on.
-        let live_copy = dir.path().join("live-copy.db");
-        vacuum_into(&orig, &live_copy).await;
-        scan_and_settle(&service, samples(2)[1]).await;
-        drained_service(&service, &orig).await;
-
-        // The live copy starts while the original runs: the original forwarded past the
-        // point it was copied at, so the copy is refused, whatever it measures.
-        let (cs, csvc) = station_on(&live_copy, "bench-f", &db.url, 20).await;
-        measure_reference(&csvc).await;
-        scan_and_settle(&csvc, samples(1)[0]).await;
-        let e = refused(&csvc).await;
+        // The original's first life: a reference and a scan, forwarded; a copy of the live
+        // store (a backup tool's), then the original goes on. The live copy starts while the
+        // original runs: the original forwarded past the point it was copied at, so the copy
+        // is refused, whatever it measures.
+        let CopiedStation {
+            dir,
+            orig,
+            store,
+            service,
+            refusal: e,
+            ..
+        } = copied_station("bench-f", &db.url, samples(1)[0]).await;
         assert!(e.contains("copied from the station at outbox entry"), "{e}");
-        assert!(e.contains("--adopt NEW_ID"), "{e}");
-        csvc.stop_keeping_store().await;
-        cs.close().await;
 
         // The original stops; its checkpointed file is copied; the original starts again
         // (a new incarnation after everything it sent: accepted) and goes on.
-        service.stop_keeping_store().await;
-        store.close().await;
+        stop_station(&store, &service).await;
         let file_copy = dir.path().join("file-copy.db");
         std::fs::copy(&orig, &file_copy).unwrap();
-        let (store, service) = station_on(&orig, "bench-f", &db.url, 20).await;
-        measure_reference(&service).await;
-        scan_and_settle(&service, samples(1)[0]).await;
+        let (store, service) = station_on_scanned(&orig, "bench-f", &db.url, samples(1)[0]).await;
         drained_service(&service, &orig).await;
 
         // The file copy starts second: refused (the station went on as an incarnation this
         // copy never had).
-        let (cs, csvc) = station_on(&file_copy, "bench-f", &db.url, 20).await;
-        measure_reference(&csvc).await;
-        scan_and_settle(&csvc, samples(1)[0]).await;
+        let (cs, csvc) = station_on_scanned(&file_copy, "bench-f", &db.url, samples(1)[0]).await;
         let e = refused(&csvc).await;
         assert!(e.contains("never had"), "{e}");
         let status = csvc.status().await.unwrap().sync.unwrap();
         assert!(status.backlog > 0, "its rows wait: {status:?}");
-        csvc.stop_keeping_store().await;
-        cs.close().await;
+        stop_station(&cs, &csvc).await;
 
         // The original went on through it all; the central database holds its rows, exactly.
-        scan_and_settle(&service, samples(2)[1]).await;
-        drained_service(&service, &orig).await;
+        scan_and_drain(&service, &orig, samples(2)[1]).await;
         service.stop_keeping_store().await;
         assert_same(&orig, &db.url, "bench-f").await;
         let pool = sqlx::PgPool::connect(&db.url).await.unwrap();
@@ -721,22 +734,7 @@ async fn a_copied_store_is_refused_and_nothing_of_it_is_mixed_in() {
         assert!(c["fix"].as_str().unwrap().contains("--adopt"), "{c}");
 
         // `brdfd sync` of the copy: exit status 6, one line naming the way out.
-        let copy = file_copy.to_str().unwrap();
-        let sync = |station: &str| {
-            run_brdfd(
-                &[
-                    "sync",
-                    "--db",
-                    copy,
-                    "--to",
-                    &db.url,
-                    "--station",
-                    station,
-                    "--once",
-                ],
-                None,
-            )
-        };
+        let sync = |station: &str| brdfd_sync(&file_copy, &db.url, station, &["--once"]);
         let out = sync("bench-f");
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(6), "{err}");
@@ -744,19 +742,11 @@ async fn a_copied_store_is_refused_and_nothing_of_it_is_mixed_in() {
         assert!(err.contains("--adopt"), "{err}");
         // The way out: adopt the copy as a station of its own; it then forwards everything
         // it holds under the new id, and the original's rows are untouched.
+        let copy = file_copy.to_str().unwrap();
         let out = run_brdfd(&["sync", "--db", copy, "--adopt", "bench-f2"], None);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        assert_ran(&out);
         assert!(String::from_utf8_lossy(&out.stdout).contains("[station] id = \"bench-f2\""));
-        let out = sync("bench-f2");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        assert_ran(&sync("bench-f2"));
         assert_same(&file_copy, &db.url, "bench-f2").await;
         assert_same(&orig, &db.url, "bench-f").await;
     })
@@ -777,44 +767,20 @@ async fn a_bench_moved_to_a_new_pc_takes_its_station_id_over_by_retiring_the_old
     let _serial = serial();
     let db = TestDb::create("retire");
     bounded(async {
-        let dir = tempfile::tempdir().unwrap();
-        let old = dir.path().join("old-pc.db");
-        let (store, service) = station_on(&old, "bench-r", &db.url, 20).await;
-        measure_reference(&service).await;
-        scan_and_settle(&service, samples(1)[0]).await;
-        drained_service(&service, &old).await;
-        // The store is copied to the bench's new PC, but the old PC goes on for a while.
-        let new = dir.path().join("new-pc.db");
-        vacuum_into(&old, &new).await;
-        scan_and_settle(&service, samples(2)[1]).await;
-        drained_service(&service, &old).await;
-        // The new PC measures under the station id: refused, and told both ways out.
-        let (ns, nsvc) = station_on(&new, "bench-r", &db.url, 20).await;
-        measure_reference(&nsvc).await;
-        scan_and_settle(&nsvc, samples(3)[2]).await;
-        let e = refused(&nsvc).await;
-        assert!(e.contains("--adopt NEW_ID"), "{e}");
+        // The store is copied to the bench's new PC, but the old PC goes on for a while. The
+        // new PC measures under the station id: refused, and told both ways out.
+        let CopiedStation {
+            dir: _dir,
+            orig: old,
+            copy: new,
+            store,
+            service,
+            refusal: e,
+        } = copied_station("bench-r", &db.url, samples(3)[2]).await;
         assert!(e.contains("--retire-old ARCHIVE_ID"), "{e}");
-        nsvc.stop_keeping_store().await;
-        ns.close().await;
 
-        let new_path = new.to_str().unwrap();
-        let retire = |archive: &str| {
-            run_brdfd(
-                &[
-                    "sync",
-                    "--db",
-                    new_path,
-                    "--to",
-                    &db.url,
-                    "--station",
-                    "bench-r",
-                    "--retire-old",
-                    archive,
-                ],
-                None,
-            )
-        };
+        let retire =
+            |archive: &str| brdfd_sync(&new, &db.url, "bench-r", &["--retire-old", archive]);
         // Retiring while the old store still forwards is refused, and changes nothing.
         let out = retire("bench-r-old-pc");
         let err = String::from_utf8_lossy(&out.stderr);
@@ -825,8 +791,7 @@ async fn a_bench_moved_to_a_new_pc_takes_its_station_id_over_by_retiring_the_old
 
         // The old PC is stopped; once it has fallen silent, retiring keeps its rows as the
         // archive and gives the station id to the new PC's store, which sends all it holds.
-        service.stop_keeping_store().await;
-        store.close().await;
+        stop_station(&store, &service).await;
         let deadline = std::time::Instant::now() + Duration::from_secs(30);
         let out = loop {
             let out = retire("bench-r-old-pc");
@@ -837,11 +802,7 @@ async fn a_bench_moved_to_a_new_pc_takes_its_station_id_over_by_retiring_the_old
             assert!(std::time::Instant::now() < deadline, "{err}");
             tokio::time::sleep(Duration::from_millis(500)).await;
         };
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        assert_ran(&out);
         let stdout = String::from_utf8_lossy(&out.stdout);
         assert!(
             stdout.contains("are now station bench-r-old-pc"),
@@ -865,38 +826,20 @@ async fn a_bench_moved_to_a_new_pc_takes_its_station_id_over_by_retiring_the_old
         assert_same(&new, &db.url, "bench-r").await;
 
         // The new PC's daemon goes on as the station.
-        let (ns, nsvc) = station_on(&new, "bench-r", &db.url, 20).await;
-        measure_reference(&nsvc).await;
-        scan_and_settle(&nsvc, samples(4)[3]).await;
+        let (ns, nsvc) = station_on_scanned(&new, "bench-r", &db.url, samples(4)[3]).await;
         drained_service(&nsvc, &new).await;
         assert_same(&new, &db.url, "bench-r").await;
 
         // The old PC, started again, is refused, and nothing of it is mixed in anywhere.
         let archived = central_rows(&db.url, "bench-r-old-pc").await;
-        let (os, osvc) = station_on(&old, "bench-r", &db.url, 20).await;
-        measure_reference(&osvc).await;
-        scan_and_settle(&osvc, samples(1)[0]).await;
+        let (os, osvc) = station_on_scanned(&old, "bench-r", &db.url, samples(1)[0]).await;
         refused(&osvc).await;
-        osvc.stop_keeping_store().await;
-        os.close().await;
-        nsvc.stop_keeping_store().await;
-        ns.close().await;
+        stop_station(&os, &osvc).await;
+        stop_station(&ns, &nsvc).await;
         assert_same(&new, &db.url, "bench-r").await;
         assert_eq!(central_rows(&db.url, "bench-r-old-pc").await, archived);
         // Nothing forwards under the archive id.
-        let out = run_brdfd(
-            &[
-                "sync",
-                "--db",
-                old.to_str().unwrap(),
-                "--to",
-                &db.url,
-                "--station",
-                "bench-r-old-pc",
-                "--once",
-            ],
-            None,
-        );
+        let out = brdfd_sync(&old, &db.url, "bench-r-old-pc", &["--once"]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(6), "{err}");
         assert!(
@@ -934,30 +877,9 @@ async fn a_central_database_restored_from_a_backup_is_caught_up() {
         d.service.stop_keeping_store().await;
         assert_same(&d.db, &db.url, "bench-b").await;
         // A second comparison finds everything in place and sends nothing.
-        let out = run_brdfd(
-            &[
-                "sync",
-                "--db",
-                d.db.to_str().unwrap(),
-                "--to",
-                &db.url,
-                "--station",
-                "bench-b",
-                "--verify",
-                "--once",
-                "--json",
-            ],
-            None,
-        );
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
-            .lines()
-            .map(|l| serde_json::from_str(l).unwrap())
-            .collect();
+        let out = brdfd_sync(&d.db, &db.url, "bench-b", &["--verify", "--once", "--json"]);
+        assert_ran(&out);
+        let lines = ndjson(&out);
         let verify = lines
             .iter()
             .find(|l| l["type"] == "verify")
@@ -1050,6 +972,45 @@ async fn brdfd_sync_keeps_forwarding_through_outages_and_resumes_at_once() {
     .await;
 }
 
+/// A decoded value of a values view: row id, band key, wavelength and the value's bits.
+type ValueRow = (i64, i64, Option<i64>, Option<u64>);
+
+/// The rows of a values view as [`ValueRow`]s; `T` is the integer type of the database's
+/// band and wavelength columns (64-bit in the station's SQLite, 32-bit in PostgreSQL).
+fn value_rows<T: Into<i64>>(
+    rows: Result<Vec<(i64, T, Option<T>, Option<f64>)>, sqlx::Error>,
+) -> Vec<ValueRow> {
+    rows.unwrap()
+        .into_iter()
+        .map(|(id, k, nm, v)| (id, k.into(), nm.map(Into::into), v.map(f64::to_bits)))
+        .collect()
+}
+
+/// The station's finished fits: id, cost function and the three parameters.
+const LOCAL_FITS: &str = "
+    SELECT id, cost_function, json_extract(params_json, '$.ks'),
+           json_extract(params_json, '$.alpha'), json_extract(params_json, '$.ior')
+    FROM fit_runs WHERE status = 'done' ORDER BY id";
+
+/// [`LOCAL_FITS`] from the central `fit_results` view, for the station bound as `$1`.
+const CENTRAL_FITS: &str = "
+    SELECT fit_run_id, cost_function, ks, alpha, mu FROM fit_results
+    WHERE station = $1 AND simulated AND measured_at > now() - interval '1 hour'
+      AND de00_mean IS NOT NULL
+    ORDER BY fit_run_id";
+
+/// Fit rows from [`LOCAL_FITS`] or [`CENTRAL_FITS`], the parameters bit for bit.
+fn fit_rows(
+    rows: Result<Vec<(i64, String, f64, f64, f64)>, sqlx::Error>,
+) -> Vec<(i64, String, u64, u64, u64)> {
+    rows.unwrap()
+        .into_iter()
+        .map(|(id, cost, ks, alpha, third)| {
+            (id, cost, ks.to_bits(), alpha.to_bits(), third.to_bits())
+        })
+        .collect()
+}
+
 /// The pooled query of GUIDE.md "The central database with SQL".
 const POOLED_QUERY: &str = "
     SELECT lab_sample, cost_function, COUNT(DISTINCT station) AS stations, COUNT(*) AS fits,
@@ -1094,79 +1055,14 @@ async fn the_central_views_decode_as_the_stations_and_pool_across_stations() {
                         if station { "WHERE station = $1" } else { "" }
                     )
                 };
-                let a: Vec<(i64, i64, Option<i64>, Option<u64>)> = sqlx::query(&sql(false))
-                    .fetch_all(&local)
-                    .await
-                    .unwrap()
-                    .iter()
-                    .map(|r| {
-                        (
-                            r.get(0),
-                            r.get(1),
-                            r.get(2),
-                            r.get::<Option<f64>, _>(3).map(f64::to_bits),
-                        )
-                    })
-                    .collect();
-                let b: Vec<(i64, i64, Option<i64>, Option<u64>)> = sqlx::query(&sql(true))
-                    .bind(n)
-                    .fetch_all(&pg)
-                    .await
-                    .unwrap()
-                    .iter()
-                    .map(|r| {
-                        (
-                            r.get(0),
-                            r.get::<i32, _>(1) as i64,
-                            r.get::<Option<i32>, _>(2).map(i64::from),
-                            r.get::<Option<f64>, _>(3).map(f64::to_bits),
-                        )
-                    })
-                    .collect();
+                let a = value_rows::<i64>(sqlx::query_as(&sql(false)).fetch_all(&local).await);
+                let b = value_rows::<i32>(sqlx::query_as(&sql(true)).bind(n).fetch_all(&pg).await);
                 assert!(!a.is_empty(), "{view}");
                 assert_eq!(a, b, "{n}: {view}, station vs central");
             }
             // fit_results: one row per finished fit, parameters as the station's JSON says.
-            let local_fits: Vec<(i64, String, u64, u64, u64)> = sqlx::query(
-                "SELECT id, cost_function, json_extract(params_json, '$.ks'),
-                        json_extract(params_json, '$.alpha'), json_extract(params_json, '$.ior')
-                 FROM fit_runs WHERE status = 'done' ORDER BY id",
-            )
-            .fetch_all(&local)
-            .await
-            .unwrap()
-            .iter()
-            .map(|r| {
-                (
-                    r.get(0),
-                    r.get(1),
-                    r.get::<f64, _>(2).to_bits(),
-                    r.get::<f64, _>(3).to_bits(),
-                    r.get::<f64, _>(4).to_bits(),
-                )
-            })
-            .collect();
-            let central_fits: Vec<(i64, String, u64, u64, u64)> = sqlx::query(
-                "SELECT fit_run_id, cost_function, ks, alpha, mu FROM fit_results
-                 WHERE station = $1 AND simulated AND measured_at > now() - interval '1 hour'
-                   AND de00_mean IS NOT NULL
-                 ORDER BY fit_run_id",
-            )
-            .bind(n)
-            .fetch_all(&pg)
-            .await
-            .unwrap()
-            .iter()
-            .map(|r| {
-                (
-                    r.get(0),
-                    r.get(1),
-                    r.get::<f64, _>(2).to_bits(),
-                    r.get::<f64, _>(3).to_bits(),
-                    r.get::<f64, _>(4).to_bits(),
-                )
-            })
-            .collect();
+            let local_fits = fit_rows(sqlx::query_as(LOCAL_FITS).fetch_all(&local).await);
+            let central_fits = fit_rows(sqlx::query_as(CENTRAL_FITS).bind(n).fetch_all(&pg).await);
             assert!(!local_fits.is_empty());
             assert_eq!(local_fits, central_fits, "{n}: fit_results");
             let kd: i64 = sqlx::query_scalar(

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use brdfd::api::{Access, ApiOptions, ApiServer, Token};
 use brdfd::service::{Devices, ReadingShown, Service, ServiceOptions, devices::Simulators};
-use brdfd::store::{ReadingValues, ScanState, Store};
+use brdfd::store::{ReadingValues, ReferenceId, ScanState, ScanSummary, Store};
 use drivers::protocol::ReadingValue;
 use drivers::{DriverConfig, Instrument};
 use fantoccini::{Client, ClientBuilder, Locator};
@@ -191,21 +191,42 @@ impl Daemon {
         self.api.stop(Duration::from_secs(1)).await;
         self.service.shutdown().await;
     }
+
+    /// Every scan in the daemon's store.
+    async fn scans(&self) -> Vec<ScanSummary> {
+        self.service
+            .store()
+            .list_scans(&Default::default())
+            .await
+            .unwrap()
+    }
+
+    /// The store's reference in force, if any.
+    async fn latest_reference(&self) -> Option<ReferenceId> {
+        let latest = self.service.store().latest_reference().await.unwrap();
+        latest.map(|r| r.id)
+    }
+}
+
+/// What `script` returns on the page.
+async fn eval(c: &Client, script: &str) -> Value {
+    c.execute(script, vec![]).await.unwrap()
+}
+
+/// The text of the element `locator` finds.
+async fn text_of(c: &Client, locator: Locator<'_>) -> String {
+    c.find(locator).await.unwrap().text().await.unwrap()
 }
 
 /// Polls a script until it returns true.
 async fn wait_js(c: &Client, what: &str, script: &str) {
     let deadline = Instant::now() + WAIT;
     loop {
-        let v = c.execute(script, vec![]).await.unwrap();
-        if v == Value::Bool(true) {
+        if eval(c, script).await == Value::Bool(true) {
             return;
         }
         if Instant::now() > deadline {
-            let body = c
-                .execute("return document.body.innerText", vec![])
-                .await
-                .unwrap();
+            let body = eval(c, "return document.body.innerText").await;
             panic!(
                 "timed out waiting for {what}; the page says:\n{}",
                 body.as_str().unwrap_or("")
@@ -240,6 +261,189 @@ async fn type_into(c: &Client, css: &str, text: &str) {
         .send_keys(text)
         .await
         .unwrap_or_else(|e| panic!("typing into {css}: {e}"));
+}
+
+/// The states of the page the walk waits for, by name (what a timeout reports): each a
+/// script that returns true once the page shows it.
+const PAGE_STATES: &[(&str, &str)] = &[
+    (
+        "the sign-in prompt",
+        "return document.body.innerText.includes('brdfd open')",
+    ),
+    (
+        "the bench",
+        "return !!document.getElementById('measure-reference') && document.querySelectorAll('[data-device]').length === 2",
+    ),
+    (
+        "the reference",
+        "const op = document.getElementById('op'); return op.dataset.state === 'complete' && op.dataset.readings === '14'",
+    ),
+    (
+        "the reference in force",
+        "return !!document.getElementById('reference-age')",
+    ),
+    (
+        "the scan's readings",
+        "const op = document.getElementById('op'); return op.dataset.readings === '14' && op.dataset.state === 'complete'",
+    ),
+    (
+        "three finished fits",
+        "return document.querySelectorAll('#fits tr[data-status=done]').length === 3",
+    ),
+    (
+        "the result view",
+        "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')",
+    ),
+    (
+        "measured and fitted swatches",
+        "return document.querySelectorAll('#swatches tbody tr').length === 4 && [...document.querySelectorAll('#swatches .sw')].every((s) => s.style.background !== '')",
+    ),
+    (
+        "the residuals",
+        "const rows = document.querySelectorAll('#residuals tbody tr');
+         return rows.length === 3 && [...rows].every((r) => r.querySelectorAll('td').length === 14
+           && [...r.querySelectorAll('td')].every((td) => /^[+-]\\d+\\.\\d\\d$/.test(td.textContent)))",
+    ),
+    (
+        "the previews",
+        "const imgs = [...document.querySelectorAll('.previews button.enlarge img')]; return imgs.length === 3 && imgs.every((i) => i.complete && i.naturalWidth > 0)",
+    ),
+    (
+        "the enlarged preview",
+        "const d = document.getElementById('preview-dialog'); const i = d && d.querySelector('img'); return !!d && d.open && !!i && i.complete && i.clientWidth > document.querySelector('.previews button.enlarge img').clientWidth",
+    ),
+    (
+        "the refit's answer",
+        "const b = document.getElementById('banner'); return !b.hidden && /^Fits \\d+ queued/.test(b.textContent)",
+    ),
+    (
+        "the scan list",
+        "return document.querySelectorAll('#scan-list tbody tr').length >= 1",
+    ),
+    (
+        "the search for \"sky B\"",
+        "const rows = document.querySelectorAll('#scan-list tbody tr'); return document.getElementById('f-sample').value === 'sky B' && rows.length === 1 && rows[0].textContent.includes('T.Sky blue')",
+    ),
+    (
+        "the search for \"lavender\"",
+        "return document.getElementById('f-sample').value === 'lavender' && document.body.innerText.includes('No scans match.')",
+    ),
+    (
+        "the whole list again",
+        "return document.getElementById('f-sample').value === '' && document.querySelectorAll('#scan-list tbody tr').length >= 1",
+    ),
+    (
+        "the bench, ready to scan",
+        "return !!document.querySelector('#scan:not([disabled])')",
+    ),
+    (
+        "the abort",
+        "return document.getElementById('op').dataset.state === 'aborted'",
+    ),
+    (
+        "both instruments connected after the abort",
+        "return [...document.querySelectorAll('[data-device] .badge[data-state]')].every((b) => b.dataset.state === 'connected') && !!document.querySelector('#scan:not([disabled])')",
+    ),
+    (
+        "the aborted scan's view",
+        "return !!document.getElementById('kept-cells') && !!document.getElementById('not-fitted')",
+    ),
+    (
+        "the SRA's state on the page",
+        "const d = document.querySelector('[data-device=sra] .badge'); return !!d && d.dataset.state !== 'connected' && d.dataset.state !== 'unknown'",
+    ),
+    (
+        "the banner",
+        "const b = document.getElementById('banner'); return !b.hidden && b.textContent.includes('RA-532H')",
+    ),
+    (
+        "the failed scan",
+        "return document.getElementById('op').dataset.state === 'failed'",
+    ),
+    (
+        "the lost connection",
+        "return document.getElementById('stream').classList.contains('down')",
+    ),
+    (
+        "the reconnection",
+        "return document.getElementById('stream').textContent === 'live' && document.getElementById('banner').textContent.includes('Reconnected')",
+    ),
+    (
+        "both instruments connected again",
+        "return [...document.querySelectorAll('[data-device] .badge[data-state]')].every((b) => b.dataset.state === 'connected')",
+    ),
+    (
+        "the bench rebuilt from the daemon",
+        "return (window.brdfdMetrics || {syncs: []}).syncs.length >= 1",
+    ),
+    (
+        "14 of 14 readings after the reload",
+        "const op = document.getElementById('op'); return !!op && op.dataset.readings === '14' && op.dataset.state === 'complete' && document.querySelectorAll('#cells .cell.done').length === 14 && op.textContent.includes('14 of 14 readings') && op.textContent.includes('T.Saffron yellow')",
+    ),
+    (
+        "the scan's fits in the second tab",
+        "return document.querySelectorAll('#fits tr[data-status]').length === 3",
+    ),
+    (
+        "the hostile page's attempts",
+        "return document.getElementById('result').textContent !== 'running'",
+    ),
+    (
+        "the camera's images, loaded",
+        "const i = document.querySelectorAll('#textures img');
+         return i.length > 0 && [...i].every((e) => e.complete && e.naturalWidth > 0)",
+    ),
+    (
+        "the bench before logging out",
+        "return !!document.getElementById('measure-reference')",
+    ),
+    (
+        "the sign-in prompt after logging out",
+        "return document.body.innerText.includes('You logged out')",
+    ),
+    (
+        "the sign-in prompt after reload",
+        "return document.body.innerText.includes('brdfd open')",
+    ),
+];
+
+/// Waits until the page shows each of `states` in turn (names of [`PAGE_STATES`]).
+async fn see(c: &Client, states: &[&str]) {
+    for what in states {
+        let (_, script) = PAGE_STATES
+            .iter()
+            .find(|(name, _)| name == what)
+            .unwrap_or_else(|| panic!("no page state is named {what:?}"));
+        wait_js(c, what, script).await;
+    }
+}
+
+/// Opens `path` of the page served at `addr` and waits until it shows each of `states`.
+async fn open(c: &Client, addr: SocketAddr, path: &str, states: &[&str]) {
+    c.goto(&format!("http://{addr}{path}")).await.unwrap();
+    see(c, states).await;
+}
+
+/// Scans `sample` from the bench with the mouse and waits until the page shows each of
+/// `states`.
+async fn scan(c: &Client, sample: &str, states: &[&str]) {
+    type_into(c, "#sample", sample).await;
+    click(c, "#scan:not([disabled])").await;
+    see(c, states).await;
+}
+
+/// Scans `sample` from the bench with the keyboard alone (Enter in the sample field submits
+/// it) and waits for its first reading on the page.
+async fn scan_by_keyboard(c: &Client, sample: &str) {
+    type_into(c, "#sample", &format!("{sample}\u{E007}")).await;
+    wait_js(
+        c,
+        &format!("a first reading of {sample}"),
+        &format!(
+            "const op = document.getElementById('op'); return !!op && op.textContent.includes('{sample}') && Number(op.dataset.readings || 0) >= 1"
+        ),
+    )
+    .await;
 }
 
 /// The page's swatch colour of a cell, as `#rrggbb`.
@@ -353,13 +557,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     let session_id = c.session_id().await.unwrap().unwrap();
 
     // Not signed in: the page says how to sign in.
-    c.goto(&format!("http://{addr}/")).await.unwrap();
-    wait_js(
-        &c,
-        "the sign-in prompt",
-        "return document.body.innerText.includes('brdfd open')",
-    )
-    .await;
+    open(&c, addr, "/", &["the sign-in prompt"]).await;
 
     // Log in through `brdfd open`'s link.
     let token = std::fs::read_to_string(dir.path().join("brdfd.token")).unwrap();
@@ -379,7 +577,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         "{url}"
     );
     c.goto(&url).await.unwrap();
-    wait_js(&c, "the bench", "return !!document.getElementById('measure-reference') && document.querySelectorAll('[data-device]').length === 2").await;
+    see(&c, &["the bench"]).await;
     assert_eq!(c.current_url().await.unwrap().path(), "/");
     // The link was spent: a second use is refused.
     let again = ureq::get(&url).call();
@@ -388,17 +586,13 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         "{again:?}"
     );
     // The cookie is HttpOnly: the page's script cannot see it.
-    let cookie = c.execute("return document.cookie", vec![]).await.unwrap();
-    assert_eq!(cookie, json!(""));
-    let simulated = c
-        .execute(
-            "return [...document.querySelectorAll('.badge.sim')].length",
-            vec![],
-        )
-        .await
-        .unwrap();
+    assert_eq!(eval(&c, "return document.cookie").await, json!(""));
     assert_eq!(
-        simulated,
+        eval(
+            &c,
+            "return [...document.querySelectorAll('.badge.sim')].length"
+        )
+        .await,
         json!(2),
         "both instruments carry the SIMULATED badge"
     );
@@ -406,23 +600,14 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
 
     // Measure the reference: 14 cells fill in, then the reference is in force.
     click(&c, "#measure-reference:not([disabled])").await;
-    wait_js(&c, "the reference", "const op = document.getElementById('op'); return op.dataset.state === 'complete' && op.dataset.readings === '14'").await;
-    wait_js(
-        &c,
-        "the reference in force",
-        "return !!document.getElementById('reference-age')",
-    )
-    .await;
+    see(&c, &["the reference", "the reference in force"]).await;
 
     // Scan T.Sky blue: it is answered from T.Sky blue's recording (not the playlist's next,
     // Freesia pink), 14 cells and 3 fits appear without a reload.
-    type_into(&c, "#sample", "T.Sky blue").await;
-    click(&c, "#scan:not([disabled])").await;
-    wait_js(&c, "the scan's readings", "const op = document.getElementById('op'); return op.dataset.readings === '14' && op.dataset.state === 'complete'").await;
-    wait_js(
+    scan(
         &c,
-        "three finished fits",
-        "return document.querySelectorAll('#fits tr[data-status=done]').length === 3",
+        "T.Sky blue",
+        &["the scan's readings", "three finished fits"],
     )
     .await;
     for g in ["15as15", "45as45", "15as-45"] {
@@ -432,19 +617,10 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
             "{g}: the cell shows T.Sky blue's own recording"
         );
     }
-    let sra_text = c
-        .find(Locator::Css("#cell-sra-20 .num"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let sra_text = text_of(&c, Locator::Css("#cell-sra-20 .num")).await;
     assert!(sra_text.contains("intensity"), "{sra_text}");
     shot(&c, "2-bench-scan-done").await;
-    let metrics = c
-        .execute("return window.brdfdMetrics", vec![])
-        .await
-        .unwrap();
+    let metrics = eval(&c, "return window.brdfdMetrics").await;
     let mut latency: Vec<f64> = metrics["readingLatencyMs"]
         .as_array()
         .unwrap()
@@ -473,37 +649,25 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     );
 
     // The result view: swatches per geometry and cost function, ΔE00 with the best marked.
-    let scan_id = c
-        .execute(
-            "return document.querySelector('#op a').getAttribute('href')",
-            vec![],
-        )
-        .await
-        .unwrap();
+    let scan_id = eval(
+        &c,
+        "return document.querySelector('#op a').getAttribute('href')",
+    )
+    .await;
     let href = scan_id.as_str().unwrap().to_string();
     click(&c, "#op a").await;
-    wait_js(&c, "the result view", "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')").await;
-    wait_js(&c, "measured and fitted swatches", "return document.querySelectorAll('#swatches tbody tr').length === 4 && [...document.querySelectorAll('#swatches .sw')].every((s) => s.style.background !== '')").await;
+    see(&c, &["the result view", "measured and fitted swatches"]).await;
     shot(&c, "3-result-1280").await;
     // Where the model misses: one row of signed ΔL* per finished fit, one cell per geometry,
     // each value the measured minus the fitted L* the daemon computed.
-    wait_js(
+    see(&c, &["the residuals"]).await;
+    // Previews keep the aspect ratio of the picture the daemon draws; a click enlarges one.
+    see(&c, &["the previews"]).await;
+    let ratios = eval(
         &c,
-        "the residuals",
-        "const rows = document.querySelectorAll('#residuals tbody tr');
-         return rows.length === 3 && [...rows].every((r) => r.querySelectorAll('td').length === 14
-           && [...r.querySelectorAll('td')].every((td) => /^[+-]\\d+\\.\\d\\d$/.test(td.textContent)))",
+        "return [...document.querySelectorAll('.previews button.enlarge img')].map((i) => [i.naturalWidth / i.naturalHeight, i.clientWidth / i.clientHeight])",
     )
     .await;
-    // Previews keep the aspect ratio of the picture the daemon draws; a click enlarges one.
-    wait_js(&c, "the previews", "const imgs = [...document.querySelectorAll('.previews button.enlarge img')]; return imgs.length === 3 && imgs.every((i) => i.complete && i.naturalWidth > 0)").await;
-    let ratios = c
-        .execute(
-            "return [...document.querySelectorAll('.previews button.enlarge img')].map((i) => [i.naturalWidth / i.naturalHeight, i.clientWidth / i.clientHeight])",
-            vec![],
-        )
-        .await
-        .unwrap();
     for r in ratios.as_array().unwrap() {
         let (natural, shown) = (r[0].as_f64().unwrap(), r[1].as_f64().unwrap());
         assert!(
@@ -512,7 +676,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         );
     }
     click(&c, ".previews button.enlarge").await;
-    wait_js(&c, "the enlarged preview", "const d = document.getElementById('preview-dialog'); const i = d && d.querySelector('img'); return !!d && d.open && !!i && i.complete && i.clientWidth > document.querySelector('.previews button.enlarge img').clientWidth").await;
+    see(&c, &["the enlarged preview"]).await;
     shot(&c, "3b-preview-enlarged").await;
     click(&c, "#preview-dialog button[type=submit]").await;
     // Three widths: a phone (390 px), a laptop (1280 px), a wide screen (1920 px). The page
@@ -524,23 +688,21 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         (1280, "4c-result-1280"),
     ] {
         c.set_window_size(w, 1000).await.unwrap();
-        let layout = c
-            .execute(
-                "return new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => {
-                   const de = document.getElementById('de-table');
-                   const box = de.closest('.scroll');
-                   box.scrollLeft = box.scrollWidth;
-                   const last = de.querySelector('thead th:nth-child(5)').getBoundingClientRect();
-                   done({ inner: window.innerWidth, page: document.documentElement.scrollWidth,
-                          boxed: [...document.querySelectorAll('main table')].every((t) => !!t.closest('.scroll') || t.getBoundingClientRect().width <= window.innerWidth),
-                          lastRight: last.right, lastWidth: last.width,
-                          wider: [...document.querySelectorAll('body *')].filter((e) => e.getBoundingClientRect().right > window.innerWidth + 0.5 && !e.closest('.scroll'))
-                            .slice(0, 5).map((e) => `${e.tagName}#${e.id}.${e.className}`) });
-                 })))",
-                vec![],
-            )
-            .await
-            .unwrap();
+        let layout = eval(
+            &c,
+            "return new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => {
+               const de = document.getElementById('de-table');
+               const box = de.closest('.scroll');
+               box.scrollLeft = box.scrollWidth;
+               const last = de.querySelector('thead th:nth-child(5)').getBoundingClientRect();
+               done({ inner: window.innerWidth, page: document.documentElement.scrollWidth,
+                      boxed: [...document.querySelectorAll('main table')].every((t) => !!t.closest('.scroll') || t.getBoundingClientRect().width <= window.innerWidth),
+                      lastRight: last.right, lastWidth: last.width,
+                      wider: [...document.querySelectorAll('body *')].filter((e) => e.getBoundingClientRect().right > window.innerWidth + 0.5 && !e.closest('.scroll'))
+                        .slice(0, 5).map((e) => `${e.tagName}#${e.id}.${e.className}`) });
+             })))",
+        )
+        .await;
         let inner = layout["inner"].as_f64().unwrap();
         assert!(
             (inner - w as f64).abs() < 20.0,
@@ -602,30 +764,13 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     for cf in ["cf2", "m2"] {
         click(&c, &format!("#refit-{cf}")).await;
     }
-    c.find(Locator::Css("#refit-seed"))
-        .await
-        .unwrap()
-        .send_keys("7")
-        .await
-        .unwrap();
+    type_into(&c, "#refit-seed", "7").await;
     click(&c, "#refit-go").await;
-    wait_js(&c, "the refit's answer", "const b = document.getElementById('banner'); return !b.hidden && /^Fits \\d+ queued/.test(b.textContent)").await;
+    see(&c, &["the refit's answer"]).await;
 
     // The scan list.
-    c.goto(&format!("http://{addr}/#/scans")).await.unwrap();
-    wait_js(
-        &c,
-        "the scan list",
-        "return document.querySelectorAll('#scan-list tbody tr').length >= 1",
-    )
-    .await;
-    let row = c
-        .find(Locator::Css("#scan-list tbody tr"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    open(&c, addr, "/#/scans", &["the scan list"]).await;
+    let row = text_of(&c, Locator::Css("#scan-list tbody tr")).await;
     assert!(
         row.contains("T.Sky blue") && row.contains("complete"),
         "{row}"
@@ -635,47 +780,23 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         "the list says which recording answered: {row}"
     );
     // The sample search matches any part of the name, in any case.
-    c.goto(&format!("http://{addr}/#/scans?sample=sky%20B"))
-        .await
-        .unwrap();
-    wait_js(&c, "the search for \"sky B\"", "const rows = document.querySelectorAll('#scan-list tbody tr'); return document.getElementById('f-sample').value === 'sky B' && rows.length === 1 && rows[0].textContent.includes('T.Sky blue')").await;
-    c.goto(&format!("http://{addr}/#/scans?sample=lavender"))
-        .await
-        .unwrap();
-    wait_js(&c, "the search for \"lavender\"", "return document.getElementById('f-sample').value === 'lavender' && document.body.innerText.includes('No scans match.')").await;
-    c.goto(&format!("http://{addr}/#/scans")).await.unwrap();
-    wait_js(&c, "the whole list again", "return document.getElementById('f-sample').value === '' && document.querySelectorAll('#scan-list tbody tr').length >= 1").await;
+    for (query, state) in [
+        ("?sample=sky%20B", "the search for \"sky B\""),
+        ("?sample=lavender", "the search for \"lavender\""),
+        ("", "the whole list again"),
+    ] {
+        open(&c, addr, &format!("/#/scans{query}"), &[state]).await;
+    }
     shot(&c, "5-scan-list").await;
 
     // Abort a scan midway: some cells filled, then the scan is aborted and keeps them.
-    c.goto(&format!("http://{addr}/#/")).await.unwrap();
-    wait_js(
-        &c,
-        "the bench",
-        "return !!document.querySelector('#scan:not([disabled])')",
-    )
-    .await;
-    type_into(&c, "#sample", "T.Lavender blue\u{E007}").await;
-    // Enter in the sample field submits it: no mouse needed.
-    wait_js(
-        &c,
-        "a first reading",
-        "const op = document.getElementById('op'); return !!op && op.textContent.includes('T.Lavender blue') && Number(op.dataset.readings || 0) >= 1",
-    )
-    .await;
+    open(&c, addr, "/#/", &["the bench, ready to scan"]).await;
+    scan_by_keyboard(&c, "T.Lavender blue").await;
     click(&c, "#abort:not([disabled])").await;
-    wait_js(
-        &c,
-        "the abort",
-        "return document.getElementById('op').dataset.state === 'aborted'",
-    )
-    .await;
+    see(&c, &["the abort"]).await;
     let aborted = daemon
-        .service
-        .store()
-        .list_scans(&Default::default())
+        .scans()
         .await
-        .unwrap()
         .into_iter()
         .find(|s| s.sample == "T.Lavender blue")
         .unwrap();
@@ -689,44 +810,33 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     // The simulated instruments answer ABORT as the drivers expect: after the abort both stay
     // connected (no red "error"), nothing is left in the banner, and Scan's tooltip follows.
     tokio::time::sleep(Duration::from_millis(1500)).await;
-    wait_js(&c, "both instruments connected after the abort", "return [...document.querySelectorAll('[data-device] .badge[data-state]')].every((b) => b.dataset.state === 'connected') && !!document.querySelector('#scan:not([disabled])')").await;
+    see(&c, &["both instruments connected after the abort"]).await;
     for d in daemon.service.status().await.unwrap().devices {
         assert_eq!(d.state, "connected", "{}: {}", d.instrument, d.detail);
     }
-    let after_abort = c
-        .execute(
-            "return [document.getElementById('banner').hidden, document.getElementById('scan').getAttribute('title')]",
-            vec![],
-        )
-        .await
-        .unwrap();
+    let after_abort = eval(
+        &c,
+        "return [document.getElementById('banner').hidden, document.getElementById('scan').getAttribute('title')]",
+    )
+    .await;
     assert_eq!(
         after_abort,
         json!([true, null]),
         "no banner, no stale tooltip"
     );
     // The aborted scan's view: the readings it kept, why it stopped, and only what works.
-    c.goto(&format!("http://{addr}/#/scans/{}", aborted.id))
-        .await
-        .unwrap();
-    wait_js(
+    let aborted_path = format!("/#/scans/{}", aborted.id);
+    open(&c, addr, &aborted_path, &["the aborted scan's view"]).await;
+    let view = eval(
         &c,
-        "the aborted scan's view",
-        "return !!document.getElementById('kept-cells') && !!document.getElementById('not-fitted')",
+        "return [document.querySelectorAll('#kept-cells [data-kept=yes]').length,
+                 document.getElementById('result-state').textContent,
+                 document.getElementById('not-fitted').textContent,
+                 !!document.getElementById('refit'), !!document.getElementById('dl-cxf3'),
+                 !!document.getElementById('dl-scan'), !!document.getElementById('no-downloads'),
+                 document.body.innerText.includes('No finished fit yet')]",
     )
     .await;
-    let view = c
-        .execute(
-            "return [document.querySelectorAll('#kept-cells [data-kept=yes]').length,
-                     document.getElementById('result-state').textContent,
-                     document.getElementById('not-fitted').textContent,
-                     !!document.getElementById('refit'), !!document.getElementById('dl-cxf3'),
-                     !!document.getElementById('dl-scan'), !!document.getElementById('no-downloads'),
-                     document.body.innerText.includes('No finished fit yet')]",
-            vec![],
-        )
-        .await
-        .unwrap();
     assert_eq!(
         view[0],
         json!(aborted.reading_count),
@@ -757,39 +867,27 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     shot(&c, "6b-result-aborted").await;
 
     // Pull the SRA's cable: the scan of T.Pebble grey fails and the page says the SRA is gone.
-    c.goto(&format!("http://{addr}/#/")).await.unwrap();
-    wait_js(
-        &c,
-        "the bench",
-        "return !!document.querySelector('#scan:not([disabled])')",
-    )
-    .await;
-    type_into(&c, "#sample", "T.Pebble grey").await;
-    click(&c, "#scan:not([disabled])").await;
-    wait_js(&c, "the SRA's state on the page", "const d = document.querySelector('[data-device=sra] .badge'); return !!d && d.dataset.state !== 'connected' && d.dataset.state !== 'unknown'").await;
-    wait_js(&c, "the banner", "const b = document.getElementById('banner'); return !b.hidden && b.textContent.includes('RA-532H')").await;
-    wait_js(
-        &c,
+    open(&c, addr, "/#/", &["the bench, ready to scan"]).await;
+    let unplugged = [
+        "the SRA's state on the page",
+        "the banner",
         "the failed scan",
-        "return document.getElementById('op').dataset.state === 'failed'",
-    )
-    .await;
+    ];
+    scan(&c, "T.Pebble grey", &unplugged).await;
     shot(&c, "7-bench-sra-unplugged").await;
 
     // Restart the daemon (same store, token and port): the page notices, then reconnects.
     daemon.stop().await;
-    wait_js(
-        &c,
-        "the lost connection",
-        "return document.getElementById('stream').classList.contains('down')",
-    )
-    .await;
+    see(&c, &["the lost connection"]).await;
     shot(&c, "8-bench-daemon-gone").await;
     // The restarted daemon's instruments are four times slower than recorded (a scan takes
     // about ten seconds), so that a reload lands mid-scan on any machine.
     let daemon = start_daemon(dir.path(), addr, instruments(None, 0.25)).await;
-    wait_js(&c, "the reconnection", "return document.getElementById('stream').textContent === 'live' && document.getElementById('banner').textContent.includes('Reconnected')").await;
-    wait_js(&c, "both instruments connected again", "return [...document.querySelectorAll('[data-device] .badge[data-state]')].every((b) => b.dataset.state === 'connected')").await;
+    see(
+        &c,
+        &["the reconnection", "both instruments connected again"],
+    )
+    .await;
     shot(&c, "9-bench-reconnected").await;
     // The console, read once (chromedriver's log command itself can make Chromium drop an
     // open event stream, so it is not read while the page runs): no error but the other
@@ -806,24 +904,10 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
 
     // Reload mid-scan: the page rebuilds the scan from the daemon (sample, every reading
     // stored so far), then follows it to 14 of 14; a second tab shows the same.
-    type_into(&c, "#sample", "T.Saffron yellow\u{E007}").await;
-    wait_js(
-        &c,
-        "a first reading of T.Saffron yellow",
-        "const op = document.getElementById('op'); return !!op && op.textContent.includes('T.Saffron yellow') && Number(op.dataset.readings || 0) >= 1",
-    )
-    .await;
+    scan_by_keyboard(&c, "T.Saffron yellow").await;
     c.refresh().await.unwrap();
-    wait_js(
-        &c,
-        "the bench rebuilt from the daemon",
-        "return (window.brdfdMetrics || {syncs: []}).syncs.length >= 1",
-    )
-    .await;
-    let sync = c
-        .execute("return window.brdfdMetrics.syncs[0]", vec![])
-        .await
-        .unwrap();
+    see(&c, &["the bench rebuilt from the daemon"]).await;
+    let sync = eval(&c, "return window.brdfdMetrics.syncs[0]").await;
     assert_eq!(sync["kind"], json!("scan"), "{sync}");
     assert_eq!(sync["inProgress"], json!(true), "reloaded mid-scan: {sync}");
     let before_reload = sync["readings"].as_u64().unwrap();
@@ -831,24 +915,16 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         (1..14).contains(&before_reload),
         "the daemon had some readings, not all: {sync}"
     );
-    let painted = c
-        .execute(
-            "return document.querySelectorAll('#cells .cell.done').length",
-            vec![],
-        )
-        .await
-        .unwrap();
+    let painted = eval(
+        &c,
+        "return document.querySelectorAll('#cells .cell.done').length",
+    )
+    .await;
     assert!(
         painted.as_u64().unwrap() >= before_reload,
         "every reading stored before the reload is painted after it ({painted} cells, {sync})"
     );
-    let op_text = c
-        .find(Locator::Id("op"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let op_text = text_of(&c, Locator::Id("op")).await;
     assert!(op_text.contains("\"T.Saffron yellow\""), "{op_text}");
     let first_tab = c.window().await.unwrap();
     let second_tab = c.new_window(true).await.unwrap().handle;
@@ -856,7 +932,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     c.goto(&format!("http://{addr}/#/")).await.unwrap();
     for tab in [second_tab.clone(), first_tab.clone()] {
         c.switch_to_window(tab).await.unwrap();
-        wait_js(&c, "14 of 14 readings after the reload", "const op = document.getElementById('op'); return !!op && op.dataset.readings === '14' && op.dataset.state === 'complete' && document.querySelectorAll('#cells .cell.done').length === 14 && op.textContent.includes('14 of 14 readings') && op.textContent.includes('T.Saffron yellow')").await;
+        see(&c, &["14 of 14 readings after the reload"]).await;
         for g in ["15as-45", "45as110"] {
             assert_eq!(
                 cell_colour(&c, g).await,
@@ -864,33 +940,20 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
                 "{g}: the rebuilt cell shows T.Saffron yellow's recording"
             );
         }
-        let waiting = c
-            .execute(
-                "return document.getElementById('cells').innerText.includes('waiting')",
-                vec![],
-            )
-            .await
-            .unwrap();
+        let waiting = eval(
+            &c,
+            "return document.getElementById('cells').innerText.includes('waiting')",
+        )
+        .await;
         assert_eq!(waiting, json!(false), "no cell is left waiting");
     }
     c.switch_to_window(second_tab).await.unwrap();
-    wait_js(
-        &c,
-        "the scan's fits in the second tab",
-        "return document.querySelectorAll('#fits tr[data-status]').length === 3",
-    )
-    .await;
+    see(&c, &["the scan's fits in the second tab"]).await;
     shot(&c, "10-bench-second-tab").await;
     c.close_window().await.unwrap();
     c.switch_to_window(first_tab).await.unwrap();
     shot(&c, "11-bench-after-reload").await;
-    let log = c
-        .find(Locator::Id("log"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let log = text_of(&c, Locator::Id("log")).await;
     assert!(
         log.contains("T.Pebble grey"),
         "the event log survives the reload: {log}"
@@ -898,59 +961,23 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
 
     // A page on another loopback port, in this browser (the session cookie is set), tries
     // to make the daemon measure.
-    let refs_before = daemon
-        .service
-        .store()
-        .latest_reference()
-        .await
-        .unwrap()
-        .map(|r| r.id);
-    let scans_before = daemon
-        .service
-        .store()
-        .list_scans(&Default::default())
-        .await
-        .unwrap()
-        .len();
+    let refs_before = daemon.latest_reference().await;
+    let scans_before = daemon.scans().await.len();
     let (hostile, hostile_task) = serve_hostile_page(addr).await;
-    c.goto(&format!("http://{hostile}/")).await.unwrap();
-    wait_js(
-        &c,
-        "the hostile page's attempts",
-        "return document.getElementById('result').textContent !== 'running'",
-    )
-    .await;
-    let result = c
-        .find(Locator::Id("result"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    open(&c, hostile, "/", &["the hostile page's attempts"]).await;
+    let result = text_of(&c, Locator::Id("result")).await;
     println!("the other page's attempts: {result}");
     assert!(result.contains("cors-csrf:blocked"), "{result}");
     assert!(result.contains("read-status:blocked"), "{result}");
     assert!(result.contains("read-session:blocked"), "{result}");
     tokio::time::sleep(Duration::from_millis(500)).await;
     assert_eq!(
-        daemon
-            .service
-            .store()
-            .latest_reference()
-            .await
-            .unwrap()
-            .map(|r| r.id),
+        daemon.latest_reference().await,
         refs_before,
         "no reference was started from the other page ({result})"
     );
     assert_eq!(
-        daemon
-            .service
-            .store()
-            .list_scans(&Default::default())
-            .await
-            .unwrap()
-            .len(),
+        daemon.scans().await.len(),
         scans_before,
         "no scan was started from the other page"
     );
@@ -973,23 +1000,13 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         .import_scan_as(&x.scan, &provenance, taken, &x.textures)
         .await
         .unwrap();
-    c.goto(&format!("http://{addr}/#/scans/{imported}"))
-        .await
-        .unwrap();
-    wait_js(
+    let imported_path = format!("/#/scans/{imported}");
+    open(&c, addr, &imported_path, &["the camera's images, loaded"]).await;
+    let labels = eval(
         &c,
-        "the camera's images, loaded",
-        "const i = document.querySelectorAll('#textures img');
-         return i.length > 0 && [...i].every((e) => e.complete && e.naturalWidth > 0)",
+        "return [...document.querySelectorAll('#textures figcaption')].map((f) => f.textContent)",
     )
     .await;
-    let labels = c
-        .execute(
-            "return [...document.querySelectorAll('#textures figcaption')].map((f) => f.textContent)",
-            vec![],
-        )
-        .await
-        .unwrap();
     let want: Vec<&str> = x.textures.iter().map(|t| t.geometry.as_str()).collect();
     assert_eq!(
         labels,
@@ -999,27 +1016,11 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     shot(&c, "result-textures").await;
 
     // Log out: the session is over, the page asks for a new link.
-    c.goto(&format!("http://{addr}/#/")).await.unwrap();
-    wait_js(
-        &c,
-        "the bench",
-        "return !!document.getElementById('measure-reference')",
-    )
-    .await;
+    open(&c, addr, "/#/", &["the bench before logging out"]).await;
     click(&c, "#logout").await;
-    wait_js(
-        &c,
-        "the sign-in prompt",
-        "return document.body.innerText.includes('You logged out')",
-    )
-    .await;
+    see(&c, &["the sign-in prompt after logging out"]).await;
     c.refresh().await.unwrap();
-    wait_js(
-        &c,
-        "the sign-in prompt after reload",
-        "return document.body.innerText.includes('brdfd open')",
-    )
-    .await;
+    see(&c, &["the sign-in prompt after reload"]).await;
 
     c.close().await.unwrap();
     daemon.stop().await;
