@@ -15,10 +15,8 @@ use std::time::Instant;
 
 use brdfd::cost::CostFunction;
 use brdfd::optimise::{Settings, fit};
-use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
-use brdfd::scan::Scan;
 
-use common::arg;
+use common::shared::{arg, example_scans};
 
 fn median(xs: &mut [f64]) -> f64 {
     xs.sort_by(f64::total_cmp);
@@ -39,21 +37,7 @@ fn main() {
         .map(|c| c.parse().expect("cost function"))
         .collect();
     let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
-    let mut files: Vec<_> = std::fs::read_dir(&data)
-        .expect("tests/data holds the example scans")
-        .map(|e| e.expect("readable tests/data entry").path())
-        .filter(|p| p.to_string_lossy().ends_with(".scan.json"))
-        .collect();
-    files.sort();
-    let scans: Vec<(bool, MeasuredBrdf)> = files
-        .iter()
-        .map(|path| {
-            let scan = Scan::read_file(path).expect("example scans are valid");
-            let noisy = path.to_string_lossy().ends_with(".noisy.scan.json");
-            let m = process(&scan, &ProcessingOptions::default()).expect("example scans process");
-            (noisy, m)
-        })
-        .collect();
+    let scans = example_scans(&data);
     println!(
         "fit times, default method and settings, one thread, median of {reps} repetitions per scan"
     );
@@ -67,11 +51,11 @@ fn main() {
         for (label, noisy) in [("noise-free", false), ("1 % noise", true)] {
             let mut per_scan = Vec::new();
             let mut evals = 0u64;
-            for (_, m) in scans.iter().filter(|(n, _)| *n == noisy) {
+            for s in scans.iter().filter(|s| s.noisy == noisy) {
                 let mut times = Vec::with_capacity(reps);
                 for _ in 0..reps {
                     let started = Instant::now();
-                    let out = fit(m, &settings).expect("fit");
+                    let out = fit(&s.measured, &settings).expect("fit");
                     times.push(started.elapsed().as_secs_f64() * 1e3);
                     evals += out.evaluations;
                 }

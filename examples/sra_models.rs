@@ -31,7 +31,7 @@ use brdfd::optimise::Settings;
 use brdfd::sra_reading::{SraReading, specular_delta_l};
 use brdfd::synth::{SraResponse, SynthOptions, paper_samples, synth_scan};
 
-use common::arg;
+use common::shared::arg;
 
 /// Sums of the table's columns over the trials.
 #[derive(Default, Clone, Copy)]

@@ -22,7 +22,7 @@ use crate::processing::{self, MeasuredBrdf, ProcessingError, ProcessingOptions, 
 use crate::scan::Scan;
 use crate::spectral::Spectrum;
 use crate::sra_reading::{SpecularDeltaL, SraReading, specular_delta_l};
-use crate::uncertainty::{BootstrapOptions, Uncertainty, UncertaintyError, bootstrap};
+use crate::uncertainty::{BootstrapOptions, PointFit, Uncertainty, UncertaintyError, bootstrap};
 
 /// Everything that decides a fit besides the scan itself.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -163,6 +163,16 @@ impl FitReport {
         Ok(self)
     }
 
+    /// This fit as the point fit a bootstrap starts from.
+    pub fn point_fit(&self) -> PointFit<'_> {
+        PointFit {
+            measured: &self.measured,
+            settings: &self.request.settings,
+            colorimetry: self.request.colorimetry,
+            params: &self.outcome.params,
+        }
+    }
+
     /// L*a*b* of the measured and the fitted BRDF at every geometry the scan measured, under
     /// the colorimetry the fit was evaluated with, and their difference.
     pub fn lab(&self) -> LabPerGeometry {
@@ -211,8 +221,9 @@ impl Serialize for FitReport {
     }
 }
 
-/// The JSON object `brdfd fit --json` prints (ARCHITECTURE.md contract 3). The first eleven
-/// keys are the contract; the rest are additions that make a fit self-describing.
+/// The JSON object `brdfd fit --json` prints (ARCHITECTURE.md contract 3). Its keys
+/// [`FitDocument::CONTRACT_KEYS`] are the contract; the rest are additions that make a fit
+/// self-describing.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitDocument {
     pub sample: String,
@@ -272,6 +283,23 @@ pub struct FitDocument {
     /// The bootstrap intervals (`brdfd fit --bootstrap N`); absent without them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<Uncertainty>,
+}
+
+impl FitDocument {
+    /// The keys ARCHITECTURE.md contract 3 requires of every fit document.
+    pub const CONTRACT_KEYS: [&str; 11] = [
+        "sample",
+        "cost_function",
+        "method",
+        "seed",
+        "params",
+        "cost",
+        "evaluations",
+        "generations",
+        "wall_ms",
+        "delta_e00",
+        "delta_e00_mean",
+    ];
 }
 
 /// `{"sra-20": x, "sra-60": y, "mean": m}`: |ΔL*| at the SRA geometries.
@@ -539,18 +567,8 @@ mod tests {
         let report = fit_scan(&scan, &quick_request(CostFunction::Cf2)).unwrap();
         let v = serde_json::to_value(&report).unwrap();
         let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
-        let mut want = vec![
-            "sample",
-            "cost_function",
-            "method",
-            "seed",
-            "params",
-            "cost",
-            "evaluations",
-            "generations",
-            "wall_ms",
-            "delta_e00",
-            "delta_e00_mean",
+        let mut want = FitDocument::CONTRACT_KEYS.to_vec();
+        want.extend([
             "delta_e00_diffuse_mean",
             "delta_e00_specular_mean",
             "specular_strategy",
@@ -562,7 +580,7 @@ mod tests {
             "reference",
             "specular_readings",
             "lab",
-        ];
+        ]);
         let mut got = keys.clone();
         got.sort();
         want.sort();
@@ -704,13 +722,7 @@ mod tests {
     fn processing_errors_pass_through_naming_the_field() {
         let truth = &paper_samples()[0];
         let mut scan = synth_scan(truth, &SynthOptions::default()).unwrap();
-        scan.reference
-            .as_mut()
-            .unwrap()
-            .readings
-            .sra
-            .as_mut()
-            .unwrap()[0] = 0.0;
+        scan.reference_sra_mut()[0] = 0.0;
         let e = fit_scan(&scan, &FitRequest::default())
             .unwrap_err()
             .to_string();

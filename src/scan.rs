@@ -801,6 +801,20 @@ impl serde_json::ser::Formatter for ScanFormatter {
 }
 
 #[cfg(test)]
+impl Scan {
+    /// The reference tile's SRA readings, for tests that spoil one; panics on a scan without them.
+    pub(crate) fn reference_sra_mut(&mut self) -> &mut [f64; SRA_COUNT] {
+        self.reference
+            .as_mut()
+            .unwrap()
+            .readings
+            .sra
+            .as_mut()
+            .unwrap()
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
@@ -1051,13 +1065,7 @@ mod tests {
             "readings.ma_t12.15as-15[5] (450 nm): NaN is not a finite number"
         );
         let mut scan = example();
-        scan.reference
-            .as_mut()
-            .unwrap()
-            .readings
-            .sra
-            .as_mut()
-            .unwrap()[1] = f64::INFINITY;
+        scan.reference_sra_mut()[1] = f64::INFINITY;
         let e = scan.validate().unwrap_err().to_string();
         assert_eq!(e, "reference.sra.sra-60: inf is not a finite number");
     }

@@ -439,20 +439,27 @@ pub struct Draws {
     pub draws: Vec<Draw>,
 }
 
-/// Draws the resamples of `measured` and refits each from the point fit `point` (made with
-/// `settings`); `cancel` stops it between refits. [`bootstrap`] turns them into intervals.
+/// The point fit a bootstrap starts from: the measured BRDF it was fitted to, the settings it was
+/// made with, the colorimetry of its ΔE00 summaries, and its parameters.
+#[derive(Debug, Clone, Copy)]
+pub struct PointFit<'a> {
+    pub measured: &'a MeasuredBrdf,
+    pub settings: &'a Settings,
+    pub colorimetry: Colorimetry,
+    pub params: &'a Params,
+}
+
+/// Draws the resamples of the point fit's measured BRDF and refits each from the point fit;
+/// `cancel` stops it between refits. [`bootstrap`] turns them into intervals.
 pub fn draw(
-    measured: &MeasuredBrdf,
-    settings: &Settings,
-    colorimetry: Colorimetry,
-    point: &Params,
+    fit: PointFit<'_>,
     opts: &BootstrapOptions,
     cancel: &AtomicBool,
 ) -> Result<Draws, UncertaintyError> {
     if opts.resamples < 2 {
         return Err(UncertaintyError::TooFewResamples(opts.resamples));
     }
-    let sigma = opts.noise.unwrap_or_else(|| estimate_noise(measured));
+    let sigma = opts.noise.unwrap_or_else(|| estimate_noise(fit.measured));
     if !(sigma.is_finite() && (0.0..=0.5).contains(&sigma)) {
         return Err(UncertaintyError::Noise(sigma));
     }
@@ -464,23 +471,23 @@ pub fn draw(
         }
         let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
         rng.set_stream(u64::from(i));
-        let m = resample(measured, sigma, &mut rng);
+        let m = resample(fit.measured, sigma, &mut rng);
         let refit = match opts.refit {
-            Refit::ByCost => Refit::for_cost(settings.cost),
+            Refit::ByCost => Refit::for_cost(fit.settings.cost),
             r => r,
         };
         let out = match refit {
-            Refit::FullSearch => crate::optimise::fit(&m, settings),
-            _ => refit_local(&m, settings, point),
+            Refit::FullSearch => crate::optimise::fit(&m, fit.settings),
+            _ => refit_local(&m, fit.settings, fit.params),
         }
         .map_err(|source| UncertaintyError::Refit { index: i, source })?;
         let est = model::evaluate_model(
             &out.params,
-            settings.model,
-            settings.fresnel,
+            fit.settings.model,
+            fit.settings.fresnel,
             &SpecularGeometry::all(),
         );
-        let e = evaluate_with(&m.values, &est, colorimetry, m.geometries);
+        let e = evaluate_with(&m.values, &est, fit.colorimetry, m.geometries);
         Ok(Draw {
             params: out.params,
             de_mean: e.all.mean,
@@ -525,7 +532,13 @@ pub fn bootstrap(
     opts: &BootstrapOptions,
     cancel: &AtomicBool,
 ) -> Result<Uncertainty, UncertaintyError> {
-    let draws = draw(measured, settings, colorimetry, point, opts, cancel)?;
+    let fit = PointFit {
+        measured,
+        settings,
+        colorimetry,
+        params: point,
+    };
+    let draws = draw(fit, opts, cancel)?;
     Ok(Uncertainty::from_draws(
         &draws,
         settings,

@@ -5,6 +5,8 @@
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
+use brdfd::fit::FitDocument;
+
 fn brdfd(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_brdfd"))
         .args(args)
@@ -49,19 +51,7 @@ fn fit_json_has_every_contract_key() {
         "one JSON object on one line"
     );
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
-    for key in [
-        "sample",
-        "cost_function",
-        "method",
-        "seed",
-        "params",
-        "cost",
-        "evaluations",
-        "generations",
-        "wall_ms",
-        "delta_e00",
-        "delta_e00_mean",
-    ] {
+    for key in FitDocument::CONTRACT_KEYS {
         assert!(v.get(key).is_some(), "missing key {key} in {v}");
     }
     assert_eq!(v["sample"], "T.Freesia pink");

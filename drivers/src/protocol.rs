@@ -120,6 +120,34 @@ pub struct Status {
     pub battery_percent: u8,
 }
 
+impl Status {
+    /// A status read off the wire: a battery charge over 100 % makes the frame malformed.
+    pub(crate) fn parsed(state: DeviceState, battery_percent: u8) -> Result<Status, FrameError> {
+        if battery_percent > 100 {
+            return Err(FrameError::malformed(format!(
+                "STATUS battery {battery_percent}% is over 100%"
+            )));
+        }
+        Ok(Status {
+            state,
+            battery_percent,
+        })
+    }
+
+    /// Refuses a battery charge over 100 % before it goes on the wire to `instrument`.
+    pub(crate) fn check_encodable(&self, instrument: Instrument) -> Result<(), EncodeError> {
+        if self.battery_percent > 100 {
+            return Err(EncodeError::BadField {
+                instrument,
+                field: "battery_percent",
+                value: self.battery_percent.to_string(),
+                why: "a percentage is at most 100",
+            });
+        }
+        Ok(())
+    }
+}
+
 /// The value of one reading, as the instrument reports it (no processing).
 // A spectrum is 248 bytes inline: readings stay `Copy` and allocation-free; they are moved a few
 // dozen times per scan, so boxing would buy nothing.

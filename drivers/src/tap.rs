@@ -294,25 +294,8 @@ impl<T: SerialStream> SerialStream for Tap<T> {
 mod tests {
     use super::*;
     use crate::protocol::{Request, Response, golden};
+    use crate::test_support::Sink;
     use std::collections::VecDeque;
-
-    /// A shared in-memory sink, so the test can read what the recorder wrote.
-    #[derive(Clone, Default)]
-    struct Sink(Arc<Mutex<Vec<u8>>>);
-    impl Write for Sink {
-        fn write(&mut self, b: &[u8]) -> io::Result<usize> {
-            self.0.lock().unwrap().extend_from_slice(b);
-            Ok(b.len())
-        }
-        fn flush(&mut self) -> io::Result<()> {
-            Ok(())
-        }
-    }
-    impl Sink {
-        fn text(&self) -> String {
-            String::from_utf8(self.0.lock().unwrap().clone()).unwrap()
-        }
-    }
 
     /// USB fake that hands out queued bytes in packets of `packet` bytes.
     struct Usb {

@@ -1,6 +1,6 @@
-//! What the examples share: their arguments from the command line, a two-thread runtime, the
-//! service on a fresh store with the simulated instruments of the embedded recordings, and a
-//! percentile.
+//! What the examples share: their arguments from the command line, the example scans of
+//! `tests/data/`, a two-thread runtime, the service on a fresh store with the simulated
+//! instruments of the embedded recordings, and a percentile.
 
 #![allow(dead_code)] // each example uses a different subset
 
@@ -10,24 +10,17 @@ use brdfd::service::{Devices, Service, ServiceOptions, ServiceSettings};
 use brdfd::store::Store;
 use drivers::Instrument;
 
+// The study binaries' helpers, compiled from their one file: an example cannot depend on
+// brdfd-tools, which depends on brdfd.
+#[path = "../../tools/src/shared.rs"]
+pub mod shared;
+
 /// The whole numbers given after the example's name.
 pub fn counts() -> Vec<usize> {
     std::env::args()
         .skip(1)
         .map(|a| a.parse().expect("counts are whole numbers"))
         .collect()
-}
-
-/// The value after the option `name` in `args`, else `default`.
-pub fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .map(|v| {
-            v.parse()
-                .unwrap_or_else(|_| panic!("{name}: cannot read {v:?}"))
-        })
-        .unwrap_or(default)
 }
 
 /// A multi-threaded runtime on two workers.

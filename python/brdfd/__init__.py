@@ -190,8 +190,9 @@ def fit(
     or "two-lobe"; ``fresnel``: "incidence" (the default), "light-half" or "exact").  Runs
     without holding the GIL."""
     report = _native.fit(
-        scan, cost, method, seed, bootstrap, sra, specular, fresnel, observer, weighting,
-        sra_illuminant, sra_observer, model,
+        scan, cost, method, seed, bootstrap, sra, specular=specular, fresnel=fresnel,
+        observer=observer, weighting=weighting, sra_illuminant=sra_illuminant,
+        sra_observer=sra_observer, model=model,
     )
     text = report.to_json()
     doc = json.loads(text)

@@ -19,6 +19,8 @@ def read_scan(path: str) -> Scan: ...
 def import_export(
     path: str, sra: Optional[str] = None, reference: Optional[str] = None
 ) -> List[Tuple[Scan, Optional[str]]]: ...
+# The options after `sra` are brdfd.fit's keyword-only string options (specular … model),
+# passed through by name: brdfd/__init__.py owns their names, defaults and documentation.
 def fit(
     scan: Scan,
     cost: str,
@@ -26,13 +28,7 @@ def fit(
     seed: Optional[int] = None,
     bootstrap: int = 0,
     sra: Optional[str] = None,
-    specular: Optional[str] = None,
-    fresnel: Optional[str] = None,
-    observer: Optional[str] = None,
-    weighting: Optional[str] = None,
-    sra_illuminant: Optional[str] = None,
-    sra_observer: Optional[str] = None,
-    model: Optional[str] = None,
+    **options: Optional[str],
 ) -> FitReport: ...
 def geometries() -> List[Tuple[str, str, float, float, float, float]]: ...
 def wavelengths() -> List[int]: ...

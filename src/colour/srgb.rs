@@ -122,43 +122,21 @@ mod tests {
 
     #[test]
     fn srgb_primaries_round_trip() {
-        // The XYZ of the sRGB primaries at full intensity (IEC 61966-2-1 inverse matrix columns).
-        let red = Xyz {
-            x: 41.24,
-            y: 21.26,
-            z: 1.93,
-        };
-        let green = Xyz {
-            x: 35.76,
-            y: 71.52,
-            z: 11.92,
-        };
-        let blue = Xyz {
-            x: 18.05,
-            y: 7.22,
-            z: 95.05,
-        };
-        assert_eq!(
-            xyz_to_srgb8(red),
-            Srgb8 {
-                rgb: [255, 0, 0],
-                clipped: false
-            }
-        );
-        assert_eq!(
-            xyz_to_srgb8(green),
-            Srgb8 {
-                rgb: [0, 255, 0],
-                clipped: false
-            }
-        );
-        assert_eq!(
-            xyz_to_srgb8(blue),
-            Srgb8 {
-                rgb: [0, 0, 255],
-                clipped: false
-            }
-        );
+        // The XYZ of the sRGB primaries at full intensity (IEC 61966-2-1 inverse matrix columns),
+        // red, green, blue.
+        for ([x, y, z], rgb) in [
+            ([41.24, 21.26, 1.93], [255, 0, 0]),
+            ([35.76, 71.52, 11.92], [0, 255, 0]),
+            ([18.05, 7.22, 95.05], [0, 0, 255]),
+        ] {
+            assert_eq!(
+                xyz_to_srgb8(Xyz { x, y, z }),
+                Srgb8 {
+                    rgb,
+                    clipped: false
+                }
+            );
+        }
     }
 
     #[test]

@@ -1057,18 +1057,7 @@ fn backoff_doubles_up_to_the_cap_and_the_deadline_covers_the_worst_case() {
 async fn a_scan_recorded_through_the_tap_replays_to_the_same_readings() {
     use crate::session::{Direction, Session};
     use crate::tap::{Recorder, Tap};
-
-    #[derive(Clone, Default)]
-    struct Sink(Arc<Mutex<Vec<u8>>>);
-    impl Write for Sink {
-        fn write(&mut self, b: &[u8]) -> io::Result<usize> {
-            self.0.lock().unwrap().extend_from_slice(b);
-            Ok(b.len())
-        }
-        fn flush(&mut self) -> io::Result<()> {
-            Ok(())
-        }
-    }
+    use crate::test_support::Sink;
 
     within(async {
         let device = Device::<Mat12Codec>::new();
@@ -1088,7 +1077,7 @@ async fn a_scan_recorded_through_the_tap_replays_to_the_same_readings() {
         handle.shutdown().await;
         recorder.finish().unwrap();
 
-        let text = String::from_utf8(sink.0.lock().unwrap().clone()).unwrap();
+        let text = sink.text();
         let session = Session::parse(&text).unwrap();
         let requests: Vec<Request> = session
             .frames

@@ -354,16 +354,7 @@ impl Codec for Mat12Codec {
                     2 => DeviceState::NeedsCalibration,
                     s => return Err(FrameError::malformed(format!("STATUS state {s} unknown"))),
                 };
-                if payload[1] > 100 {
-                    return Err(FrameError::malformed(format!(
-                        "STATUS battery {}% is over 100%",
-                        payload[1]
-                    )));
-                }
-                Ok(Response::Status(Status {
-                    state,
-                    battery_percent: payload[1],
-                }))
+                Status::parsed(state, payload[1]).map(Response::Status)
             }
             CALIBRATED => expect_len("CALIBRATED", payload, 0).map(|_| Response::Calibrated),
             MEASURED => {
@@ -416,14 +407,7 @@ impl Codec for Mat12Codec {
                 frame(reply(RequestKind::Identify), &p)
             }
             Response::Status(s) => {
-                if s.battery_percent > 100 {
-                    return Err(EncodeError::BadField {
-                        instrument: Instrument::MaT12,
-                        field: "battery_percent",
-                        value: s.battery_percent.to_string(),
-                        why: "a percentage is at most 100",
-                    });
-                }
+                s.check_encodable(Instrument::MaT12)?;
                 frame(
                     reply(RequestKind::Status),
                     &[state_byte(s.state), s.battery_percent],
@@ -456,6 +440,10 @@ mod tests {
     use proptest::prelude::*;
 
     use crate::protocol::golden;
+    use crate::test_support::{
+        arbitrary_bytes_yield_no_reading, assert_every_bit_flip_is_caught, assert_golden_requests,
+        decodes_once_in_any_chunking, drain,
+    };
     use crate::transport::PACKET_SIZE;
 
     /// The ramp used by PROTOCOL.md's golden READING: 0.25 + i/64, exact in binary64.
@@ -475,7 +463,7 @@ mod tests {
     // bit-by-bit CRC-16/CCITT-FALSE, not with this code).
     #[test]
     fn golden_requests_encode_and_parse() {
-        for (req, label) in [
+        assert_golden_requests::<Mat12Codec>(&[
             (Request::Identify, "mat12 IDENTIFY"),
             (Request::Status, "mat12 STATUS"),
             (Request::Calibrate, "mat12 CALIBRATE"),
@@ -493,17 +481,7 @@ mod tests {
                 "mat12 MEASURE-ONE 45as110",
             ),
             (Request::Abort, "mat12 ABORT"),
-        ] {
-            let bytes = golden(label);
-            assert_eq!(Mat12Codec::encode_request(&req).unwrap(), bytes, "{label}");
-            let mut buf = BytesMut::from(&bytes[..]);
-            assert_eq!(
-                Mat12Codec::decode_request(&mut buf),
-                Ok(Some(req)),
-                "{label}"
-            );
-            assert!(buf.is_empty());
-        }
+        ]);
     }
 
     #[test]
@@ -645,21 +623,7 @@ mod tests {
 
     #[test]
     fn every_single_bit_flip_of_the_golden_reading_is_caught() {
-        let good = golden("mat12 READING 15as-45");
-        for byte in 0..good.len() {
-            for bit in 0..8 {
-                let mut bad = good.clone();
-                bad[byte] ^= 1 << bit;
-                let mut buf = BytesMut::from(&bad[..]);
-                while !buf.is_empty() {
-                    match Mat12Codec::decode_response(&mut buf) {
-                        Ok(None) => break,
-                        Ok(Some(r)) => panic!("flip {byte}:{bit} decoded to {r}"),
-                        Err(_) => {}
-                    }
-                }
-            }
-        }
+        assert_every_bit_flip_is_caught::<Mat12Codec>(&golden("mat12 READING 15as-45"));
     }
 
     #[test]
@@ -694,18 +658,6 @@ mod tests {
         assert_eq!(geometry_name(0), None);
         assert_eq!(geometry_name(13), None);
         assert_eq!(geometry_code("sra-20"), None);
-    }
-
-    fn drain(buf: &mut BytesMut) -> Vec<Response> {
-        let mut out = Vec::new();
-        while !buf.is_empty() {
-            match Mat12Codec::decode_response(buf) {
-                Ok(None) => break,
-                Ok(Some(r)) => out.push(r),
-                Err(_) => {}
-            }
-        }
-        out
     }
 
     /// Builds a frame with the independent bit-by-bit CRC, so the bytes pass the checksum
@@ -915,16 +867,7 @@ mod tests {
         fn arbitrary_bytes_never_panic_nor_yield_a_reading(
             bytes in proptest::collection::vec(any::<u8>(), 0..2048)
         ) {
-            let mut buf = BytesMut::from(&bytes[..]);
-            for r in drain(&mut buf) {
-                prop_assert!(!matches!(r, Response::Fetched(_) | Response::MeasuredOne(_)));
-            }
-            let mut buf = BytesMut::from(&bytes[..]);
-            while !buf.is_empty() {
-                if let Ok(None) = Mat12Codec::decode_request(&mut buf) {
-                    break;
-                }
-            }
+            arbitrary_bytes_yield_no_reading::<Mat12Codec>(&bytes)?;
         }
 
         #[test]
@@ -936,7 +879,7 @@ mod tests {
             let mut bytes = vec![b'M', b'T', op, READING_PAYLOAD as u8, 0];
             bytes.extend_from_slice(&rest);
             let mut buf = BytesMut::from(&bytes[..]);
-            for r in drain(&mut buf) {
+            for r in drain::<Mat12Codec>(&mut buf) {
                 prop_assert!(!matches!(r, Response::Fetched(_) | Response::MeasuredOne(_)));
             }
         }
@@ -956,17 +899,7 @@ mod tests {
                 value: ReadingValue::Reflectance(values),
             };
             let bytes = Mat12Codec::encode_response(&Response::Fetched(r)).unwrap();
-            let mut buf = BytesMut::new();
-            let mut got = Vec::new();
-            for piece in bytes.chunks(chunk) {
-                buf.extend_from_slice(piece);
-                while let Some(resp) = Mat12Codec::decode_response(&mut buf).unwrap() {
-                    got.push(resp);
-                }
-            }
-            prop_assert_eq!(got.len(), 1);
-            let Response::Fetched(back) = &got[0] else { panic!("not a reading") };
-            prop_assert!(back.bit_eq(&r));
+            decodes_once_in_any_chunking::<Mat12Codec>(&bytes, chunk, &r)?;
         }
     }
 }

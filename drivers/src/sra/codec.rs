@@ -379,16 +379,7 @@ impl Codec for SraCodec {
                     "NOCAL" => DeviceState::NeedsCalibration,
                     s => return Err(FrameError::malformed(format!("STATUS state {s:?} unknown"))),
                 };
-                let battery_percent = small_number("battery", f[2])?;
-                if battery_percent > 100 {
-                    return Err(FrameError::malformed(format!(
-                        "STATUS battery {battery_percent}% is over 100%"
-                    )));
-                }
-                Ok(Response::Status(Status {
-                    state,
-                    battery_percent,
-                }))
+                Status::parsed(state, small_number("battery", f[2])?).map(Response::Status)
             }
             "CAL" => arity(&f, 1).map(|_| Response::Calibrated),
             "MA" => {
@@ -441,14 +432,7 @@ impl Codec for SraCodec {
                 format!("ID,{},{},{}", id.model, id.serial, id.firmware)
             }
             Response::Status(s) => {
-                if s.battery_percent > 100 {
-                    return Err(EncodeError::BadField {
-                        instrument: Instrument::Sra,
-                        field: "battery_percent",
-                        value: s.battery_percent.to_string(),
-                        why: "a percentage is at most 100",
-                    });
-                }
+                s.check_encodable(Instrument::Sra)?;
                 format!("ST,{},{}", state_word(s.state), s.battery_percent)
             }
             Response::Calibrated => "CAL".to_owned(),
@@ -487,6 +471,10 @@ impl Codec for SraCodec {
 mod tests {
     use super::*;
     use crate::protocol::golden;
+    use crate::test_support::{
+        arbitrary_bytes_yield_no_reading, assert_every_bit_flip_is_caught, assert_golden_requests,
+        decodes_once_in_any_chunking, drain,
+    };
     use bytes::BytesMut;
     use proptest::prelude::*;
     use proptest::sample::select;
@@ -501,7 +489,7 @@ mod tests {
     // Golden lines come verbatim from PROTOCOL.md (CRCs computed independently of this code).
     #[test]
     fn golden_requests_encode_and_parse() {
-        for (req, label) in [
+        assert_golden_requests::<SraCodec>(&[
             (Request::Identify, "sra IDENTIFY"),
             (Request::Status, "sra STATUS"),
             (Request::Calibrate, "sra CALIBRATE"),
@@ -512,13 +500,7 @@ mod tests {
                 "sra MEASURE-ONE sra-60",
             ),
             (Request::Abort, "sra ABORT"),
-        ] {
-            let bytes = golden(label);
-            assert_eq!(SraCodec::encode_request(&req).unwrap(), bytes, "{label}");
-            let mut buf = BytesMut::from(&bytes[..]);
-            assert_eq!(SraCodec::decode_request(&mut buf), Ok(Some(req)), "{label}");
-            assert!(buf.is_empty());
-        }
+        ]);
     }
 
     #[test]
@@ -696,33 +678,7 @@ mod tests {
 
     #[test]
     fn every_single_bit_flip_of_a_golden_reading_is_caught() {
-        let good = golden("sra READING (measure-one) sra-60");
-        for byte in 0..good.len() {
-            for bit in 0..8 {
-                let mut bad = good.clone();
-                bad[byte] ^= 1 << bit;
-                let mut buf = BytesMut::from(&bad[..]);
-                while !buf.is_empty() {
-                    match SraCodec::decode_response(&mut buf) {
-                        Ok(None) => break,
-                        Ok(Some(r)) => panic!("flip {byte}:{bit} decoded to {r}"),
-                        Err(_) => {}
-                    }
-                }
-            }
-        }
-    }
-
-    fn drain(buf: &mut BytesMut) -> Vec<Response> {
-        let mut out = Vec::new();
-        while !buf.is_empty() {
-            match SraCodec::decode_response(buf) {
-                Ok(None) => break,
-                Ok(Some(r)) => out.push(r),
-                Err(_) => {}
-            }
-        }
-        out
+        assert_every_bit_flip_is_caught::<SraCodec>(&golden("sra READING (measure-one) sra-60"));
     }
 
     /// `<start><body>*XXXX\r\n` with the checksum from the independent bit-by-bit CRC, so the
@@ -956,16 +912,7 @@ mod tests {
         fn arbitrary_bytes_never_panic_nor_yield_a_reading(
             bytes in proptest::collection::vec(any::<u8>(), 0..2048)
         ) {
-            let mut buf = BytesMut::from(&bytes[..]);
-            for r in drain(&mut buf) {
-                prop_assert!(!matches!(r, Response::Fetched(_) | Response::MeasuredOne(_)));
-            }
-            let mut buf = BytesMut::from(&bytes[..]);
-            while !buf.is_empty() {
-                if let Ok(None) = SraCodec::decode_request(&mut buf) {
-                    break;
-                }
-            }
+            arbitrary_bytes_yield_no_reading::<SraCodec>(&bytes)?;
         }
 
         #[test]
@@ -978,7 +925,7 @@ mod tests {
             prop_assume!(crc != CRC16.checksum(body.as_bytes()));
             let bytes = format!("{body}*{crc:04X}\r\n").into_bytes();
             let mut buf = BytesMut::from(&bytes[..]);
-            prop_assert!(drain(&mut buf).is_empty());
+            prop_assert!(drain::<SraCodec>(&mut buf).is_empty());
         }
 
         #[test]
@@ -992,17 +939,7 @@ mod tests {
             let r = intensity(SRA_GEOMETRIES[g], v);
             let bytes = SraCodec::encode_response(&Response::Fetched(r)).unwrap();
             prop_assert!(bytes.len() <= MAX_LINE);
-            let mut buf = BytesMut::new();
-            let mut got = Vec::new();
-            for piece in bytes.chunks(chunk) {
-                buf.extend_from_slice(piece);
-                while let Some(resp) = SraCodec::decode_response(&mut buf).unwrap() {
-                    got.push(resp);
-                }
-            }
-            prop_assert_eq!(got.len(), 1);
-            let Response::Fetched(back) = &got[0] else { panic!("not a reading") };
-            prop_assert!(back.bit_eq(&r));
+            decodes_once_in_any_chunking::<SraCodec>(&bytes, chunk, &r)?;
         }
     }
 }

@@ -37,17 +37,7 @@ use brdfd::spectral::BANDS;
 use brdfd::sra_reading::{SraModel, SraReading};
 use brdfd::synth::{SraResponse, SynthOptions, paper_samples, synth_scan};
 use brdfd::uncertainty::{BootstrapOptions, Refit, Uncertainty, draw};
-
-fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .map(|v| {
-            v.parse()
-                .unwrap_or_else(|_| panic!("{name}: cannot read {v:?}"))
-        })
-        .unwrap_or(default)
-}
+use brdfd_tools::shared::arg;
 
 /// `scan` as an MA-T12-only scan: its 12 processed spectra (the readings' noise included) as
 /// the instrument's own reflectance factors, no reference tile, no SRA readings.
@@ -149,15 +139,7 @@ fn main() {
                 noise: None,
                 refit,
             };
-            let draws = draw(
-                &report.measured,
-                &request.settings,
-                request.colorimetry,
-                &report.outcome.params,
-                &opts,
-                &never,
-            )
-            .expect("bootstrap");
+            let draws = draw(report.point_fit(), &opts, &never).expect("bootstrap");
             let u = Uncertainty::from_draws(
                 &draws,
                 &request.settings,

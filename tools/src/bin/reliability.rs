@@ -33,8 +33,8 @@ use brdfd::cost::CostFunction;
 use brdfd::model::FresnelCosine;
 use brdfd::optimise::{Method, SeparableSettings, Settings, fit, synthetic};
 use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
-use brdfd::scan::Scan;
 use brdfd::sra_reading::{SraModel, SraReading};
+use brdfd_tools::shared::example_scans;
 
 /// Which scans to fit.
 #[derive(Clone, Copy, PartialEq)]
@@ -59,21 +59,9 @@ fn scans(which: Which) -> Vec<(String, f64, MeasuredBrdf)> {
         return luminance(out);
     }
     let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data");
-    let mut files: Vec<_> = std::fs::read_dir(&data)
-        .expect("tests/data holds the example scans")
-        .map(|e| e.expect("readable tests/data entry").path())
-        .filter(|p| p.to_string_lossy().ends_with(".scan.json"))
-        .collect();
-    files.sort();
-    for path in files {
-        let scan = Scan::read_file(&path).expect("example scans are valid");
-        let noise = if path.to_string_lossy().ends_with(".noisy.scan.json") {
-            0.01
-        } else {
-            0.0
-        };
-        let m = process(&scan, &ProcessingOptions::default()).expect("example scans process");
-        out.push((scan.sample.clone(), noise, m));
+    for s in example_scans(&data) {
+        let noise = if s.noisy { 0.01 } else { 0.0 };
+        out.push((s.scan.sample, noise, s.measured));
     }
     if which == Which::Examples {
         return out;
