@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use brdfd::client::Client;
-use brdfd::scan::Scan;
+use brdfd::scan::{DeviceReadings, Scan};
 use serde_json::Value;
 
 use common::*;
@@ -104,6 +104,29 @@ fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
     }
 }
 
+/// Polls `probe` every 20 ms until it gives a value, failing with `failure` after
+/// [`STEP_TIMEOUT`]: [`wait_for`] for the in-process tests.
+async fn poll_until<T>(failure: &str, mut probe: impl AsyncFnMut() -> Option<T>) -> T {
+    let deadline = Instant::now() + STEP_TIMEOUT;
+    loop {
+        if let Some(v) = probe().await {
+            return v;
+        }
+        assert!(Instant::now() < deadline, "{failure}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// A temporary directory for an in-process test, with the path of its store (`brdfd.db`) and
+/// its watch folder (`inbox/`, made).
+fn store_and_inbox() -> (tempfile::TempDir, PathBuf, PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = tmp.path().join("brdfd.db");
+    let inbox = tmp.path().join("inbox");
+    std::fs::create_dir(&inbox).unwrap();
+    (tmp, db, inbox)
+}
+
 fn example(name: &str) -> Scan {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data")
@@ -111,79 +134,25 @@ fn example(name: &str) -> Scan {
     Scan::read_file(path).unwrap()
 }
 
-/// What the MA-T12's software writes for one session: the tile and the sample by name, 12
-/// rows each (the shape `src/formats/cgats.rs` reads by object name).
-fn cgats_export(scan: &Scan) -> String {
-    let mut t = String::from(
-        "CGATS.17\nORIGINATOR \"MA-T12 software\"\nKEYWORD \"GEOMETRY\"\nBEGIN_DATA_FORMAT\nSAMPLE_ID SAMPLE_NAME GEOMETRY",
-    );
-    for nm in brdfd::spectral::wavelengths_nm() {
-        t += &format!(" SPECTRAL_NM{nm}");
-    }
-    t += "\nEND_DATA_FORMAT\nBEGIN_DATA\n";
-    let mut id = 0;
-    for (name, readings) in [
-        (
-            scan.reference.as_ref().unwrap().name.as_str(),
-            &scan.reference.as_ref().unwrap().readings,
-        ),
+/// The objects an MA-T12 session export names: the reference tile, then the sample.
+fn session_objects(scan: &Scan) -> [(&str, &DeviceReadings); 2] {
+    let tile = scan.reference.as_ref().unwrap();
+    [
+        (tile.name.as_str(), &tile.readings),
         (scan.sample.as_str(), &scan.readings),
-    ] {
-        for g in brdfd::geometry::ma_t12() {
-            id += 1;
-            t += &format!("{id} \"{name}\" {}", g.name);
-            for v in readings.ma_t12[g.index] {
-                t += &format!(" {v}");
-            }
-            t += "\n";
-        }
-    }
-    t += "END_DATA\n";
-    t
+    ]
+}
+
+/// The session as CGATS, 12 rows per object (the shape `src/formats/cgats.rs` reads by object
+/// name).
+fn cgats_export(scan: &Scan) -> String {
+    brdfd::formats::cgats::instrument_export(&session_objects(scan))
 }
 
 /// The same as X-Rite CxF3 (the shape `src/formats/cxf3.rs` reads by object name: the grid
 /// in the specification, bands beyond 400–700 nm).
 fn cxf3_export(scan: &Scan) -> String {
-    let mut xml = format!(
-        "<?xml version=\"1.0\"?>\n<CxF xmlns=\"{}\"><Resources><ObjectCollection>\n",
-        brdfd::formats::cxf3::NAMESPACE
-    );
-    for (i, (name, r)) in [
-        (
-            scan.reference.as_ref().unwrap().name.as_str(),
-            &scan.reference.as_ref().unwrap().readings,
-        ),
-        (scan.sample.as_str(), &scan.readings),
-    ]
-    .iter()
-    .enumerate()
-    {
-        xml += &format!(
-            "<Object ObjectType=\"Standard\" Name=\"{name}\" Id=\"x{i}\"><CreationDate>2024-05-01T12:00:00Z</CreationDate><ColorValues>\n"
-        );
-        for g in brdfd::geometry::ma_t12() {
-            let vals: Vec<String> = std::iter::once("0.5".to_string())
-                .chain(r.ma_t12[g.index].iter().map(|v| v.to_string()))
-                .chain(std::iter::once("0.5".to_string()))
-                .collect();
-            xml += &format!(
-                "<ReflectanceSpectrum ColorSpecification=\"m{}\">{}</ReflectanceSpectrum>\n",
-                g.index,
-                vals.join(" ")
-            );
-        }
-        xml += "</ColorValues></Object>\n";
-    }
-    xml += "</ObjectCollection><ColorSpecificationCollection>";
-    for g in brdfd::geometry::ma_t12() {
-        xml += &format!(
-            "<ColorSpecification Id=\"m{}\"><MeasurementSpec><MeasurementType>Spectrum_Reflectance</MeasurementType><GeometryChoice><MultiAngle><BRDFAngle Notation=\"{}\"><IlluminationAngle>{}</IlluminationAngle><Aspecular>{}</Aspecular></BRDFAngle></MultiAngle></GeometryChoice><WavelengthRange StartWL=\"390\" Increment=\"10\"/></MeasurementSpec></ColorSpecification>",
-            g.index, g.name, g.theta_i_deg, g.aspecular_deg
-        );
-    }
-    xml += "</ColorSpecificationCollection></Resources></CxF>\n";
-    xml
+    brdfd::formats::cxf3::instrument_export(&session_objects(scan))
 }
 
 fn sra_csv(scan: &Scan) -> String {
@@ -608,10 +577,7 @@ fn a_daemon_killed_mid_import_finishes_at_the_next_start() {
 async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
     let _serial = serial();
     bounded(async {
-        let tmp = tempfile::tempdir().unwrap();
-        let db = tmp.path().join("brdfd.db");
-        let inbox = tmp.path().join("inbox");
-        std::fs::create_dir(&inbox).unwrap();
+        let (_tmp, db, inbox) = store_and_inbox();
         let scan = example("t-manzana-green");
         let readings = |r: &brdfd::scan::DeviceReadings| {
             brdfd::geometry::GEOMETRIES
@@ -640,6 +606,16 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
             readings(&scan.reference.as_ref().unwrap().readings),
             readings(&scan.readings),
         );
+        // The scan as the watch folder would import it, under `sample_name`.
+        let as_imported = |sample_name| brdfd::store::ImportedScan {
+            sample_name,
+            reference_name: "Munsell N9 (imported)",
+            provenance: &provenance,
+            reference_readings: Some(&r),
+            readings: &m,
+            taken_at_ms: None,
+            textures: &[],
+        };
         let store = brdfd::store::Store::open(&db).await.unwrap();
         let hash = "ab".repeat(32);
         let imported = store
@@ -647,15 +623,7 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
                 &hash,
                 "x.scan.json",
                 None,
-                &[brdfd::store::ImportedScan {
-                    sample_name: &scan.sample,
-                    reference_name: "Munsell N9 (imported)",
-                    provenance: &provenance,
-                    reference_readings: Some(&r),
-                    readings: &m,
-                    taken_at_ms: None,
-                    textures: &[],
-                }],
+                &[as_imported(scan.sample.as_str())],
             )
             .await
             .unwrap();
@@ -667,20 +635,7 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
         assert!(store.fits_for_scan(scan_id).await.unwrap().is_empty());
         // The same hash again is refused inside the transaction, writing nothing.
         let again = store
-            .import_file(
-                &hash,
-                "y.scan.json",
-                None,
-                &[brdfd::store::ImportedScan {
-                    sample_name: "other",
-                    reference_name: "Munsell N9 (imported)",
-                    provenance: &provenance,
-                    reference_readings: Some(&r),
-                    readings: &m,
-                    taken_at_ms: None,
-                    textures: &[],
-                }],
-            )
+            .import_file(&hash, "y.scan.json", None, &[as_imported("other")])
             .await
             .unwrap();
         assert_eq!(
@@ -691,15 +646,12 @@ async fn fits_not_queued_before_a_stop_are_queued_at_the_next_start() {
 
         let store = brdfd::store::Store::open(&db).await.unwrap();
         let service = watching_service(&store, &inbox).await;
-        let deadline = Instant::now() + STEP_TIMEOUT;
-        loop {
-            let files = store.ingested_files().await.unwrap();
-            if files[0].fits_queued {
-                break;
-            }
-            assert!(Instant::now() < deadline, "the fits were never queued");
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+        poll_until("the fits were never queued", async || {
+            store.ingested_files().await.unwrap()[0]
+                .fits_queued
+                .then_some(())
+        })
+        .await;
         let fits = store.fits_for_scan(scan_id).await.unwrap();
         assert_eq!(fits.len(), 1, "{fits:?}");
         assert!(service.wait_settled(scan_id, STEP_TIMEOUT).await.unwrap());
@@ -747,10 +699,7 @@ async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
     use sqlx::Connection;
     let _serial = serial();
     bounded(async {
-        let tmp = tempfile::tempdir().unwrap();
-        let db = tmp.path().join("brdfd.db");
-        let inbox = tmp.path().join("inbox");
-        std::fs::create_dir(&inbox).unwrap();
+        let (_tmp, db, inbox) = store_and_inbox();
         let store = brdfd::store::Store::open(&db).await.unwrap();
         // A second connection to the same file, as another process would have.
         let mut raw = sqlx::SqliteConnection::connect(&format!("sqlite://{}", db.display()))
@@ -766,15 +715,11 @@ async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
         let service = watching_service(&store, &inbox).await;
         let text = example("t-lavender-blue").to_json_pretty().unwrap();
         std::fs::write(inbox.join("l.scan.json"), &text).unwrap();
-        let deadline = Instant::now() + STEP_TIMEOUT;
-        let status = loop {
+        let status = poll_until("no error reported", async || {
             let s = service.status().await.unwrap().ingest.unwrap();
-            if s.last_error.is_some() {
-                break s;
-            }
-            assert!(Instant::now() < deadline, "no error reported");
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        };
+            s.last_error.is_some().then_some(s)
+        })
+        .await;
         let e = status.last_error.unwrap();
         assert!(e.contains("l.scan.json: the store failed"), "{e}");
         assert!(e.contains("disk is full (test)"), "{e}");
@@ -794,14 +739,10 @@ async fn a_store_failure_leaves_the_file_in_flight_until_the_store_works() {
             .await
             .unwrap();
         raw.close().await.unwrap();
-        let deadline = Instant::now() + STEP_TIMEOUT;
-        while !inbox.join("done/l.scan.json").is_file() {
-            assert!(
-                Instant::now() < deadline,
-                "never imported after the store recovered"
-            );
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+        poll_until("never imported after the store recovered", async || {
+            inbox.join("done/l.scan.json").is_file().then_some(())
+        })
+        .await;
         assert!(!inbox.join(".importing/l.scan.json").exists());
         assert_eq!(store.list_scans(&all).await.unwrap().len(), 1);
         assert_eq!(store.ingested_files().await.unwrap().len(), 1);

@@ -8,24 +8,16 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use brdfd::formats::xrite_xlsx::{REAL_EXPORTS, REAL_EXPORTS_DIR};
 use serde_json::Value;
 
 use common::*;
 
 fn real(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data/real-mat12")
+        .join(REAL_EXPORTS_DIR)
         .join(name)
 }
-
-const FILES: [&str; 6] = [
-    "PAR_EW_RL_NG_3.xlsx",
-    "PAR_NB_NP_CC_0.xlsx",
-    "PAR_PW_CB_NG_1.xlsx",
-    "PAR_PW_GE_MC_1.xlsx",
-    "PAR_PW_RO_NG_1.xlsx",
-    "PEN_PW_EB_NG_1.xlsx",
-];
 
 fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
     let start = Instant::now();
@@ -45,7 +37,7 @@ fn import_format_then_fit_every_real_export_under_every_cost_function() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scans");
     let mut args = vec!["import-format".to_string()];
-    args.extend(FILES.iter().map(|f| real(f).display().to_string()));
+    args.extend(REAL_EXPORTS.iter().map(|f| real(f).display().to_string()));
     args.extend(["--out".into(), out.display().to_string(), "--json".into()]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let o = run_brdfd(&args, None);
@@ -101,7 +93,7 @@ fn a_broken_xlsx_is_refused_naming_it() {
     let o = run_brdfd(
         &[
             "import-format",
-            &real(FILES[0]).display().to_string(),
+            &real(REAL_EXPORTS[0]).display().to_string(),
             &bad.display().to_string(),
             "--out",
             &out.display().to_string(),
@@ -134,7 +126,7 @@ fn the_daemon_imports_real_exports_by_watch_folder_and_http_and_fits_them() {
         ),
     );
     let daemon = spawn_serve(&dir.join("brdfd.toml"), &[]);
-    for f in &FILES[..3] {
+    for f in &REAL_EXPORTS[..3] {
         std::fs::copy(real(f), inbox.join(f)).unwrap();
     }
     wait_for("three exports in done/", || {
@@ -142,7 +134,7 @@ fn the_daemon_imports_real_exports_by_watch_folder_and_http_and_fits_them() {
             .map(|d| d.count() == 3)
             .unwrap_or(false)
     });
-    for f in &FILES[3..] {
+    for f in &REAL_EXPORTS[3..] {
         let bytes = std::fs::read(real(f)).unwrap();
         let v = daemon.client.post_bytes("/scans/import", &bytes).unwrap();
         assert_eq!(v["scans"].as_array().unwrap().len(), 1, "{v}");
@@ -153,7 +145,7 @@ fn the_daemon_imports_real_exports_by_watch_folder_and_http_and_fits_them() {
     let list = daemon.client.get("/scans").unwrap();
     let scans = list.as_array().unwrap();
     assert_eq!(scans.len(), 6, "{list}");
-    let expected_textures: Vec<(String, Vec<(String, Vec<u8>)>)> = FILES
+    let expected_textures: Vec<(String, Vec<(String, Vec<u8>)>)> = REAL_EXPORTS
         .iter()
         .flat_map(|f| brdfd::formats::xrite::read_file(&real(f)).unwrap())
         .map(|x| {

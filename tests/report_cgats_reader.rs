@@ -9,14 +9,10 @@
 use std::ffi::{CStr, CString, c_char};
 use std::sync::Mutex;
 
-use brdfd::cost::CostFunction;
 use brdfd::formats::{self, ExportOptions, Format};
 use brdfd::geometry::GEOMETRIES;
-use brdfd::model::FresnelCosine;
-use brdfd::processing::{SpecularStrategy, process};
-use brdfd::report::{DoneFit, FitState, FitStudy, SampleStudy, Study};
+use brdfd::report::Study;
 use brdfd::spectral::wavelengths_nm;
-use brdfd::synth::{SynthOptions, paper_samples, synth_scan};
 use lcms2_sys as ffi;
 
 /// The last message LittleCMS logged.
@@ -96,42 +92,10 @@ impl It8 {
 
 /// Two samples with three finished fits each (parameters near the truth; no optimiser run).
 fn study() -> Study {
-    let samples = paper_samples()
-        .into_iter()
-        .take(2)
-        .map(|truth| {
-            let scan = synth_scan(&truth, &SynthOptions::default()).unwrap();
-            let measured = process(&scan, &Default::default()).unwrap();
-            let fits = CostFunction::ALL
-                .iter()
-                .enumerate()
-                .map(|(k, &cost)| {
-                    let mut p = truth.params;
-                    p.ks *= 1.0 + 0.1 * k as f64;
-                    FitStudy {
-                        cost,
-                        method: "separable".into(),
-                        state: FitState::Done(Box::new(DoneFit::from_params(
-                            &measured,
-                            p,
-                            FresnelCosine::Incidence,
-                        ))),
-                    }
-                })
-                .collect();
-            SampleStudy {
-                name: truth.sample.clone(),
-                scan_id: None,
-                origin: None,
-                scan,
-                specular: SpecularStrategy::Ratio,
-                reference_reflectance: None,
-                measured,
-                fits,
-            }
-        })
-        .collect();
-    Study { samples }
+    Study::from_truth(2, |_, k, mut p| {
+        p.ks *= 1.0 + 0.1 * k as f64;
+        Ok(p)
+    })
 }
 
 #[test]

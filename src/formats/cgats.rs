@@ -18,6 +18,7 @@ use std::fmt::Write as _;
 
 use super::table::Table;
 use super::{ExportOptions, FormatError, rows};
+use crate::scan::DeviceReadings;
 use crate::spectral::wavelengths_nm;
 use crate::study::Study;
 
@@ -289,6 +290,32 @@ pub(crate) fn parse(file: &str, text: &str) -> Result<Table, FormatError> {
     Err(FormatError::invalid(file, last.max(1), field, message))
 }
 
+/// A fixture for tests of the import by object name: what an MA-T12's software writes for one
+/// session, each of `objects` (name, device readings) as 12 rows of MA-T12 spectra, with
+/// neither data kinds nor SRA values.
+pub fn instrument_export(objects: &[(&str, &DeviceReadings)]) -> String {
+    let mut t = String::from(
+        "CGATS.17\nORIGINATOR \"MA-T12 software\"\nKEYWORD \"GEOMETRY\"\nBEGIN_DATA_FORMAT\nSAMPLE_ID SAMPLE_NAME GEOMETRY",
+    );
+    for nm in wavelengths_nm() {
+        let _ = write!(t, " SPECTRAL_NM{nm}");
+    }
+    t += "\nEND_DATA_FORMAT\nBEGIN_DATA\n";
+    let mut id = 0;
+    for (name, readings) in objects {
+        for g in crate::geometry::ma_t12() {
+            id += 1;
+            let _ = write!(t, "{id} \"{name}\" {}", g.name);
+            for v in readings.ma_t12[g.index] {
+                let _ = write!(t, " {v}");
+            }
+            t.push('\n');
+        }
+    }
+    t += "END_DATA\n";
+    t
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::tests::{fixed, study};
@@ -356,28 +383,10 @@ mod tests {
         let study = study();
         let s = &study.samples[1];
         // What the MA-T12's software would write: the tile and the sample by name, 12 rows each.
-        let mut t = String::from(
-            "CGATS.17\nORIGINATOR \"MA-T12 software\"\nKEYWORD \"GEOMETRY\"\nBEGIN_DATA_FORMAT\nSAMPLE_ID SAMPLE_NAME GEOMETRY",
-        );
-        for nm in wavelengths_nm() {
-            t += &format!(" SPECTRAL_NM{nm}");
-        }
-        t += "\nEND_DATA_FORMAT\nBEGIN_DATA\n";
-        let mut id = 0;
-        for (name, readings) in [
+        let t = instrument_export(&[
             ("Munsell N9", &s.scan.reference.as_ref().unwrap().readings),
             (s.name.as_str(), &s.scan.readings),
-        ] {
-            for g in crate::geometry::ma_t12() {
-                id += 1;
-                t += &format!("{id} \"{name}\" {}", g.name);
-                for v in readings.ma_t12[g.index] {
-                    t += &format!(" {v}");
-                }
-                t += "\n";
-            }
-        }
-        t += "END_DATA\n";
+        ]);
         // Without the SRA values the scan is incomplete, and the message says where they go.
         let e = err(&t);
         assert!(
@@ -484,9 +493,7 @@ mod tests {
 #[cfg(test)]
 mod proptests {
     use super::super::Format;
-    use super::super::proptests::{check_import, soup, valid};
-    use crate::scan::proptests::{apply, mutations};
-    use proptest::prelude::*;
+    use super::super::proptests::import_properties;
 
     const PIECES: [&str; 34] = [
         "CGATS.17\n",
@@ -525,22 +532,5 @@ mod proptests {
         "é",
     ];
 
-    proptest! {
-        #![proptest_config(crate::test_support::proptest_config())]
-
-        #[test]
-        fn arbitrary_text_is_rejected_or_valid(text in any::<String>()) {
-            check_import(Format::Cgats, &text, None)?;
-        }
-
-        #[test]
-        fn cgats_pieces_are_rejected_or_valid(text in soup(&PIECES)) {
-            check_import(Format::Cgats, &text, None)?;
-        }
-
-        #[test]
-        fn a_mutated_export_is_rejected_or_valid(ms in mutations()) {
-            check_import(Format::Cgats, &apply(valid(Format::Cgats), &ms), None)?;
-        }
-    }
+    import_properties!(Format::Cgats, cgats_pieces_are_rejected_or_valid, &PIECES);
 }

@@ -189,9 +189,7 @@ mod tests {
 #[cfg(test)]
 mod proptests {
     use super::super::Format;
-    use super::super::proptests::{check_import, soup, valid};
-    use crate::scan::proptests::{apply, mutations};
-    use proptest::prelude::*;
+    use super::super::proptests::import_properties;
 
     const PIECES: [&str; 26] = [
         "sample",
@@ -222,22 +220,5 @@ mod proptests {
         "é",
     ];
 
-    proptest! {
-        #![proptest_config(crate::test_support::proptest_config())]
-
-        #[test]
-        fn arbitrary_text_is_rejected_or_valid(text in any::<String>()) {
-            check_import(Format::Csv, &text, None)?;
-        }
-
-        #[test]
-        fn csv_pieces_are_rejected_or_valid(text in soup(&PIECES)) {
-            check_import(Format::Csv, &text, None)?;
-        }
-
-        #[test]
-        fn a_mutated_export_is_rejected_or_valid(ms in mutations()) {
-            check_import(Format::Csv, &apply(valid(Format::Csv), &ms), None)?;
-        }
-    }
+    import_properties!(Format::Csv, csv_pieces_are_rejected_or_valid, &PIECES);
 }

@@ -132,6 +132,25 @@ pub(crate) fn parse_number(
     }
 }
 
+/// A row's sample name, trimmed; an empty one is an error naming the row's `field`.
+pub(crate) fn sample_name<'a>(
+    file: &str,
+    line: usize,
+    field: &str,
+    text: &'a str,
+) -> Result<&'a str, FormatError> {
+    let name = text.trim();
+    if name.is_empty() {
+        return Err(FormatError::invalid(
+            file,
+            line,
+            field,
+            "sample name must not be empty",
+        ));
+    }
+    Ok(name)
+}
+
 /// Looks a geometry name up (SCIENCE.md §2), or says which names are valid.
 pub(crate) fn geometry_named(
     file: &str,

@@ -64,7 +64,7 @@ pub use export::{
     rows,
 };
 pub use import::{Location, Observation, Owner, Value, assemble};
-pub(crate) use import::{geometry_named, parse_number};
+pub(crate) use import::{geometry_named, parse_number, sample_name};
 
 /// The reference tile's name when an instrument file does not say.
 pub const DEFAULT_REFERENCE: &str = "Munsell N9";
@@ -74,11 +74,6 @@ pub const DEFAULT_REFERENCE: &str = "Munsell N9";
 pub enum FormatError {
     #[error("cannot read {}: {source}", path.display())]
     Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("cannot write {}: {source}", path.display())]
-    Write {
         path: PathBuf,
         source: std::io::Error,
     },
@@ -527,6 +522,41 @@ pub(crate) mod proptests {
     pub(crate) fn soup(pieces: &'static [&'static str]) -> impl Strategy<Value = String> {
         proptest::collection::vec(proptest::sample::select(pieces), 0..64).prop_map(|p| p.concat())
     }
+
+    /// The import properties of a text format: arbitrary text, text made of the format's
+    /// `pieces` (the test `$pieces_test`) and mutations of its valid export are each rejected
+    /// naming a problem or read into scans that validate.
+    macro_rules! import_properties {
+        ($format:expr, $pieces_test:ident, $pieces:expr) => {
+            proptest::proptest! {
+                #![proptest_config(crate::test_support::proptest_config())]
+
+                #[test]
+                fn arbitrary_text_is_rejected_or_valid(
+                    text in proptest::prelude::any::<String>()
+                ) {
+                    $crate::formats::proptests::check_import($format, &text, None)?;
+                }
+
+                #[test]
+                fn $pieces_test(text in $crate::formats::proptests::soup($pieces)) {
+                    $crate::formats::proptests::check_import($format, &text, None)?;
+                }
+
+                #[test]
+                fn a_mutated_export_is_rejected_or_valid(
+                    ms in $crate::scan::proptests::mutations()
+                ) {
+                    let text = $crate::scan::proptests::apply(
+                        $crate::formats::proptests::valid($format),
+                        &ms,
+                    );
+                    $crate::formats::proptests::check_import($format, &text, None)?;
+                }
+            }
+        };
+    }
+    pub(crate) use import_properties;
 
     #[test]
     fn the_valid_exports_import() {

@@ -8,6 +8,7 @@ use std::fmt::Write as _;
 
 use super::{
     FormatError, ImportOptions, Location, Observation, Owner, Value, geometry_named, parse_number,
+    sample_name,
 };
 use crate::geometry::{Device, sra};
 use crate::scan::Scan;
@@ -70,15 +71,7 @@ pub(crate) fn observations(
     let mut out = Vec::new();
     for (line, values) in &table.rows {
         let line = *line;
-        let name = values[sample].trim();
-        if name.is_empty() {
-            return Err(FormatError::invalid(
-                file,
-                line,
-                "sample",
-                "sample name must not be empty",
-            ));
-        }
+        let name = sample_name(file, line, "sample", &values[sample])?;
         let g = geometry_named(file, line, "geometry", &values[geometry])?;
         if g.device != Device::Sra {
             return Err(FormatError::invalid(

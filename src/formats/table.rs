@@ -9,7 +9,7 @@
 
 use super::{
     DataKind, FormatError, ImportOptions, Location, Observation, Owner, Value, geometry_named,
-    parse_number,
+    parse_number, sample_name,
 };
 use crate::spectral::{BANDS, wavelengths_nm};
 
@@ -97,15 +97,7 @@ pub(crate) fn observations(
     let mut out = Vec::new();
     for (line, values) in &table.rows {
         let line = *line;
-        let name = values[sample].trim();
-        if name.is_empty() {
-            return Err(FormatError::invalid(
-                file,
-                line,
-                &table.fields[sample],
-                "sample name must not be empty",
-            ));
-        }
+        let name = sample_name(file, line, &table.fields[sample], &values[sample])?;
         let owner = match kind {
             Some(k) => {
                 let data_kind: DataKind = values[k]

@@ -19,7 +19,7 @@
 
 use super::{FormatError, device_spectrum, provenance_values, reflectance};
 use crate::spectral::wavelengths_nm;
-use crate::study::{FitState, Study};
+use crate::study::{FitState, SampleStudy, Study};
 
 /// The two files: (file name, contents).
 pub fn files(study: &Study) -> Result<Vec<(String, String)>, FormatError> {
@@ -34,6 +34,35 @@ fn csv_error(e: impl std::fmt::Display) -> FormatError {
         format: "tidy",
         message: e.to_string(),
     }
+}
+
+/// The columns both tables open with, saying which scan a row is of.
+const SCAN_COLUMNS: [&str; 4] = ["scan_id", "measured_at", "station", "sample"];
+
+/// A table with its header written, [`SCAN_COLUMNS`] then `columns`, and how many columns it
+/// has.
+fn new_table(
+    columns: impl IntoIterator<Item = String>,
+) -> Result<(::csv::Writer<Vec<u8>>, usize), FormatError> {
+    let head: Vec<String> = SCAN_COLUMNS
+        .map(String::from)
+        .into_iter()
+        .chain(columns)
+        .collect();
+    let mut w = ::csv::Writer::from_writer(Vec::new());
+    w.write_record(&head).map_err(csv_error)?;
+    Ok((w, head.len()))
+}
+
+/// The values of [`SCAN_COLUMNS`] for sample `s`, whose provenance values are `origin`.
+fn scan_values(s: &SampleStudy, origin: &[String]) -> Vec<String> {
+    // PROVENANCE_FIELDS: 0 = scan_id, 1 = station, 2 = measured_at.
+    vec![
+        origin[0].clone(),
+        origin[2].clone(),
+        origin[1].clone(),
+        s.scan.sample.clone(),
+    ]
 }
 
 fn finish(w: ::csv::Writer<Vec<u8>>) -> Result<String, FormatError> {
@@ -54,12 +83,7 @@ fn simulated(origin: &[String]) -> &'static str {
 /// The spectra table.
 pub fn spectra(study: &Study) -> Result<String, FormatError> {
     let costs = study.cost_functions();
-    let mut w = ::csv::Writer::from_writer(Vec::new());
-    let mut head: Vec<String> = [
-        "scan_id",
-        "measured_at",
-        "station",
-        "sample",
+    let head = [
         "reference",
         "ma_t12_serial",
         "sra_serial",
@@ -74,10 +98,11 @@ pub fn spectra(study: &Study) -> Result<String, FormatError> {
         "reference_reading",
         "measured",
     ]
-    .map(String::from)
-    .to_vec();
-    head.extend(costs.iter().map(|c| format!("estimated_{c}")));
-    w.write_record(&head).map_err(csv_error)?;
+    .map(String::from);
+    let (mut w, _) = new_table(
+        head.into_iter()
+            .chain(costs.iter().map(|c| format!("estimated_{c}"))),
+    )?;
     let nms = wavelengths_nm();
     for s in &study.samples {
         let origin = provenance_values(s);
@@ -96,11 +121,8 @@ pub fn spectra(study: &Study) -> Result<String, FormatError> {
                 .as_ref()
                 .and_then(|r| device_spectrum(&r.readings, g));
             for (b, nm) in nms.iter().enumerate() {
-                let mut row: Vec<String> = vec![
-                    origin[0].clone(),
-                    origin[2].clone(),
-                    origin[1].clone(),
-                    s.scan.sample.clone(),
+                let mut row = scan_values(s, &origin);
+                row.extend([
                     s.scan.reference_label().to_string(),
                     origin[5].clone(),
                     origin[9].clone(),
@@ -114,7 +136,7 @@ pub fn spectra(study: &Study) -> Result<String, FormatError> {
                     reading[b].to_string(),
                     reference.map_or(String::new(), |r| r[b].to_string()),
                     measured[g.index][b].to_string(),
-                ];
+                ]);
                 row.extend(
                     estimated
                         .iter()
@@ -129,12 +151,7 @@ pub fn spectra(study: &Study) -> Result<String, FormatError> {
 
 /// The fits table.
 pub fn fits(study: &Study) -> Result<String, FormatError> {
-    let mut w = ::csv::Writer::from_writer(Vec::new());
-    let mut head: Vec<String> = [
-        "scan_id",
-        "measured_at",
-        "station",
-        "sample",
+    let head = [
         "cost_function",
         "method",
         "status",
@@ -159,22 +176,17 @@ pub fn fits(study: &Study) -> Result<String, FormatError> {
         "weighting",
         "resamples",
     ]
-    .map(String::from)
-    .to_vec();
-    head.extend(wavelengths_nm().iter().map(|nm| format!("kd_{nm}")));
-    w.write_record(&head).map_err(csv_error)?;
+    .map(String::from);
+    let (mut w, width) = new_table(
+        head.into_iter()
+            .chain(wavelengths_nm().iter().map(|nm| format!("kd_{nm}"))),
+    )?;
     let n = |v: f64| v.to_string();
     for s in &study.samples {
         let origin = provenance_values(s);
         for f in &s.fits {
-            let mut row = vec![
-                origin[0].clone(),
-                origin[2].clone(),
-                origin[1].clone(),
-                s.scan.sample.clone(),
-                f.cost.to_string(),
-                f.method.clone(),
-            ];
+            let mut row = scan_values(s, &origin);
+            row.extend([f.cost.to_string(), f.method.clone()]);
             match &f.state {
                 FitState::Done(d) => {
                     let u = d.uncertainty.as_ref();
@@ -205,11 +217,11 @@ pub fn fits(study: &Study) -> Result<String, FormatError> {
                 }
                 FitState::Failed { reason } => {
                     row.extend(["failed".into(), reason.clone()]);
-                    row.resize(head.len(), String::new());
+                    row.resize(width, String::new());
                 }
                 FitState::Unfinished { status } => {
                     row.extend([status.clone(), String::new()]);
-                    row.resize(head.len(), String::new());
+                    row.resize(width, String::new());
                 }
             }
             w.write_record(&row).map_err(csv_error)?;

@@ -143,7 +143,7 @@ mod tests {
     fn real(name: &str) -> Vec<u8> {
         std::fs::read(
             Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("tests/data/real-mat12")
+                .join(super::super::xrite_xlsx::REAL_EXPORTS_DIR)
                 .join(name),
         )
         .unwrap()

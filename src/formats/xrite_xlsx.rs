@@ -262,6 +262,19 @@ pub enum XlsxError {
     },
 }
 
+/// A fixture for tests: the real exports kept under [`REAL_EXPORTS_DIR`], by file name.
+pub const REAL_EXPORTS: [&str; 6] = [
+    "PAR_EW_RL_NG_3.xlsx",
+    "PAR_NB_NP_CC_0.xlsx",
+    "PAR_PW_CB_NG_1.xlsx",
+    "PAR_PW_GE_MC_1.xlsx",
+    "PAR_PW_RO_NG_1.xlsx",
+    "PEN_PW_EB_NG_1.xlsx",
+];
+
+/// Where [`REAL_EXPORTS`] are, in the source tree (their source in its README).
+pub const REAL_EXPORTS_DIR: &str = "tests/data/real-mat12";
+
 /// Reads the file at `path` (refused unread when larger than [`MAX_FILE_BYTES`]).
 pub fn read_file(path: &Path) -> Result<XriteExport, XlsxError> {
     let io = |source| XlsxError::Read {
@@ -532,6 +545,14 @@ struct When {
     text: String,
 }
 
+/// The header row and the columns that say which measurement and geometry a data row is of.
+struct KeyColumns {
+    header: u32,
+    name: u32,
+    date: u32,
+    geometry: u32,
+}
+
 struct Sheet {
     file: String,
     name: &'static str,
@@ -785,21 +806,85 @@ impl Sheet {
         }
     }
 
+    /// The header row and its `Name`, `Date/Time` and `Geometry` columns.
+    fn key_columns(&self) -> Result<KeyColumns, XlsxError> {
+        let header = self.metadata()?.header;
+        Ok(KeyColumns {
+            header,
+            name: self.column(header, "Name")?,
+            date: self.column(header, "Date/Time")?,
+            geometry: self.column(header, "Geometry")?,
+        })
+    }
+
+    /// The measurement name, time and geometry (index) data row `row` is of.
+    fn row_key(
+        &self,
+        key: &KeyColumns,
+        row: u32,
+        date1904: bool,
+    ) -> Result<(String, When, usize), XlsxError> {
+        let name = self
+            .text(row, key.name)
+            .ok_or_else(|| self.empty(row, key.name, "the measurement's name"))?;
+        let when = self.when(row, key.date, date1904)?;
+        let g = self.geometry(row, key.geometry)?;
+        Ok((name, when, g))
+    }
+
+    /// Records in `cells` that `row` gives a measurement's geometry `g`; a second row for it is
+    /// an error naming both cells.
+    fn claim_geometry(
+        &self,
+        cells: &mut [Option<String>; MA_T12_COUNT],
+        row: u32,
+        geo_col: u32,
+        g: usize,
+    ) -> Result<(), XlsxError> {
+        if let Some(first) = &cells[g] {
+            return Err(XlsxError::DuplicateGeometry {
+                file: self.file.clone(),
+                sheet: self.name,
+                cell: cell_name(row, geo_col),
+                geometry: ma_t12()[g].name,
+                first: first.clone(),
+            });
+        }
+        cells[g] = Some(cell_name(row, geo_col));
+        Ok(())
+    }
+
+    /// An error naming the geometries measurement `m` has no row at (`has(g)` false), if any.
+    fn every_geometry(
+        &self,
+        m: &SpectralMeasurement,
+        has: impl Fn(usize) -> bool,
+    ) -> Result<(), XlsxError> {
+        let missing: Vec<String> = ma_t12()
+            .iter()
+            .filter(|g| !has(g.index))
+            .map(|g| g.name.to_string())
+            .collect();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        Err(XlsxError::MissingGeometry {
+            file: self.file.clone(),
+            sheet: self.name,
+            measurement: m.name.clone(),
+            date: m.at.to_string(),
+            missing,
+        })
+    }
+
     /// The measurements of `Spectral Data`, each with all 12 geometries.
     fn spectral_rows(&self, date1904: bool) -> Result<Vec<SpectralMeasurement>, XlsxError> {
-        let header = self.metadata()?.header;
-        let name_col = self.column(header, "Name")?;
-        let date_col = self.column(header, "Date/Time")?;
-        let geo_col = self.column(header, "Geometry")?;
-        let band_cols = self.wavelength_columns(header, geo_col)?;
+        let key = self.key_columns()?;
+        let band_cols = self.wavelength_columns(key.header, key.geometry)?;
 
         let mut out: Vec<SpectralMeasurement> = Vec::new();
-        for row in self.data_rows(header) {
-            let name = self
-                .text(row, name_col)
-                .ok_or_else(|| self.empty(row, name_col, "the measurement's name"))?;
-            let when = self.when(row, date_col, date1904)?;
-            let g = self.geometry(row, geo_col)?;
+        for row in self.data_rows(key.header) {
+            let (name, when, g) = self.row_key(&key, row, date1904)?;
             let mut spectrum = [0.0; BANDS];
             for (b, &col) in band_cols.iter().enumerate() {
                 let v = self.number(row, col, "a reflectance factor")?;
@@ -827,39 +912,17 @@ impl Sheet {
                 }
             };
             let m = &mut out[i];
-            if let Some(first) = &m.cells[g] {
-                return Err(XlsxError::DuplicateGeometry {
-                    file: self.file.clone(),
-                    sheet: self.name,
-                    cell: cell_name(row, geo_col),
-                    geometry: ma_t12()[g].name,
-                    first: first.clone(),
-                });
-            }
-            m.cells[g] = Some(cell_name(row, geo_col));
+            self.claim_geometry(&mut m.cells, row, key.geometry, g)?;
             m.spectra[g] = Some(spectrum);
         }
         if out.is_empty() {
             return Err(self.sheet_error(format!(
                 "no measurement rows below the header in row {}",
-                header + 1
+                key.header + 1
             )));
         }
         for m in &out {
-            let missing: Vec<String> = ma_t12()
-                .iter()
-                .filter(|g| m.spectra[g.index].is_none())
-                .map(|g| g.name.to_string())
-                .collect();
-            if !missing.is_empty() {
-                return Err(XlsxError::MissingGeometry {
-                    file: self.file.clone(),
-                    sheet: self.name,
-                    measurement: m.name.clone(),
-                    date: m.at.to_string(),
-                    missing,
-                });
-            }
+            self.every_geometry(m, |g| m.spectra[g].is_some())?;
         }
         Ok(out)
     }
@@ -918,10 +981,8 @@ impl Sheet {
         measurements: &[SpectralMeasurement],
         stated: &str,
     ) -> Result<Vec<([Lab; MA_T12_COUNT], Option<String>)>, XlsxError> {
-        let header = self.metadata()?.header;
-        let name_col = self.column(header, "Name")?;
-        let date_col = self.column(header, "Date/Time")?;
-        let geo_col = self.column(header, "Geometry")?;
+        let key = self.key_columns()?;
+        let header = key.header;
         let mut lab_cols = [0u32; 3];
         for (k, prefix) in ["L*", "a*", "b*"].into_iter().enumerate() {
             let col = self
@@ -954,11 +1015,7 @@ impl Sheet {
             vec![Default::default(); measurements.len()];
         let mut names: Vec<Option<(String, String)>> = vec![None; measurements.len()];
         for row in self.data_rows(header) {
-            let name = self
-                .text(row, name_col)
-                .ok_or_else(|| self.empty(row, name_col, "the measurement's name"))?;
-            let when = self.when(row, date_col, date1904)?;
-            let g = self.geometry(row, geo_col)?;
+            let (name, when, g) = self.row_key(&key, row, date1904)?;
             let same_time: Vec<usize> = (0..measurements.len())
                 .filter(|&i| measurements[i].at == when.at)
                 .collect();
@@ -967,7 +1024,7 @@ impl Sheet {
                 [] => {
                     return Err(XlsxError::UnmatchedColorRow {
                         file: self.file.clone(),
-                        cell: cell_name(row, date_col),
+                        cell: cell_name(row, key.date),
                         name,
                         date: when.at.to_string(),
                         geometry: ma_t12()[g].name.to_string(),
@@ -978,7 +1035,7 @@ impl Sheet {
                     None => {
                         return Err(self.cell_error(
                             row,
-                            name_col,
+                            key.name,
                             format!(
                                 "\"{name}\" at {} could be any of the {} Spectral Data \
                                  measurements of that time, and names none of them",
@@ -990,20 +1047,12 @@ impl Sheet {
                 },
             };
             let m = &measurements[i];
-            if let Some(first) = &cells[i][g] {
-                return Err(XlsxError::DuplicateGeometry {
-                    file: self.file.clone(),
-                    sheet: self.name,
-                    cell: cell_name(row, geo_col),
-                    geometry: ma_t12()[g].name,
-                    first: first.clone(),
-                });
-            }
+            self.claim_geometry(&mut cells[i], row, key.geometry, g)?;
             match &names[i] {
                 Some((n, first)) if *n != name => {
                     return Err(self.cell_error(
                         row,
-                        name_col,
+                        key.name,
                         format!(
                             "\"{name}\" names measurement \"{}\" ({}) differently from cell \
                              {first} (\"{n}\")",
@@ -1012,30 +1061,16 @@ impl Sheet {
                     ));
                 }
                 Some(_) => {}
-                None => names[i] = Some((name, cell_name(row, name_col))),
+                None => names[i] = Some((name, cell_name(row, key.name))),
             }
             let l = self.number(row, lab_cols[0], "L*")?;
             let a = self.number(row, lab_cols[1], "a*")?;
             let b = self.number(row, lab_cols[2], "b*")?;
-            cells[i][g] = Some(cell_name(row, geo_col));
             labs[i][g] = Some(Lab { l, a, b });
         }
         let mut out = Vec::with_capacity(measurements.len());
         for ((m, lab), name) in measurements.iter().zip(labs).zip(names) {
-            let missing: Vec<String> = ma_t12()
-                .iter()
-                .filter(|g| lab[g.index].is_none())
-                .map(|g| g.name.to_string())
-                .collect();
-            if !missing.is_empty() {
-                return Err(XlsxError::MissingGeometry {
-                    file: self.file.clone(),
-                    sheet: self.name,
-                    measurement: m.name.clone(),
-                    date: m.at.to_string(),
-                    missing,
-                });
-            }
+            self.every_geometry(m, |g| lab[g].is_some())?;
             out.push((lab.map(|l| l.expect("checked")), name.map(|n| n.0)));
         }
         Ok(out)
@@ -1325,19 +1360,9 @@ mod tests {
     use super::*;
     use std::io::Write;
 
-    /// The six real exports committed under `tests/data/real-mat12/`.
-    pub(super) const FILES: [&str; 6] = [
-        "PAR_EW_RL_NG_3.xlsx",
-        "PAR_NB_NP_CC_0.xlsx",
-        "PAR_PW_CB_NG_1.xlsx",
-        "PAR_PW_GE_MC_1.xlsx",
-        "PAR_PW_RO_NG_1.xlsx",
-        "PEN_PW_EB_NG_1.xlsx",
-    ];
-
     pub(super) fn path(name: &str) -> std::path::PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/real-mat12")
+            .join(REAL_EXPORTS_DIR)
             .join(name)
     }
 
@@ -1409,7 +1434,7 @@ mod tests {
 
     #[test]
     fn all_six_files_read_with_12_geometries_and_7_images() {
-        for f in FILES {
+        for f in REAL_EXPORTS {
             let x = read_file(&path(f)).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(x.file_name, f);
             assert_eq!(x.sha256_hex.len(), 64);
@@ -1583,7 +1608,7 @@ mod tests {
     #[test]
     fn brdfd_reproduces_xrites_lab_in_every_file_to_1e3() {
         let mut report = Vec::new();
-        for f in FILES {
+        for f in REAL_EXPORTS {
             let x = read_file(&path(f)).unwrap();
             for m in &x.measurements {
                 let c = check_colorimetry(m).unwrap();

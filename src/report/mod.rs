@@ -29,11 +29,6 @@ pub enum ReportError {
     /// Nothing to report: no sample was selected, or none has a processed scan.
     #[error("the study has no samples; scan and fit some first, or check the scan ids given")]
     Empty,
-    #[error("cannot create the report directory {}: {source}", path.display())]
-    Directory {
-        path: PathBuf,
-        source: std::io::Error,
-    },
     #[error("cannot write {}: {source}", path.display())]
     Write {
         path: PathBuf,

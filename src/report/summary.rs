@@ -4,11 +4,12 @@
 
 use std::fmt::Write as _;
 
+use crate::cost::CostFunction;
 use crate::stats::MeanCi;
 
-use super::analysis::{Analysis, SignRow, format_p};
+use super::analysis::{Analysis, CostSummary, SignRow, format_p};
 use super::figures::Figure;
-use crate::study::{DoneFit, FitState, FitStudy, Study, simulated_statement};
+use crate::study::{DoneFit, FitState, FitStudy, SampleStudy, Study, simulated_statement};
 
 /// The columns of the sign-test tables (Table 3 on ΔE00, Table 8 on |ΔL*|).
 const SIGN_TEST_HEAD: [&str; 7] = ["A vs B", "method", "n", "A worse", "B worse", "ties", "p"];
@@ -50,6 +51,66 @@ enum Block {
 /// A paragraph, then the list it introduces.
 fn introduced_list(intro: String, items: impl Iterator<Item = String>) -> [Block; 2] {
     [Block::Para(intro), Block::List(items.collect())]
+}
+
+/// A table of one row per sample: its name, then per cost function of `costs` the cells
+/// `cells(row, sample, cost)` appends, headed "<cost> <part>" for each of `parts`.
+fn per_sample_table(
+    study: &Study,
+    costs: &[CostFunction],
+    parts: &[&str],
+    caption: String,
+    cells: impl Fn(&mut Vec<String>, &SampleStudy, CostFunction),
+) -> Block {
+    let mut head = vec!["sample".to_string()];
+    for c in costs {
+        for part in parts {
+            head.push(format!("{c} {part}"));
+        }
+    }
+    let rows = study
+        .samples
+        .iter()
+        .map(|s| {
+            let mut row = vec![s.name.clone()];
+            for &c in costs {
+                cells(&mut row, s, c);
+            }
+            row
+        })
+        .collect();
+    Block::Table {
+        caption,
+        head,
+        rows,
+    }
+}
+
+/// A table of one row per cost function of the analysis: its name and method, then the cells
+/// `cells(summary)` gives under `head`.
+fn per_cost_table(
+    analysis: &Analysis,
+    caption: String,
+    head: &[&str],
+    cells: impl Fn(&CostSummary) -> Vec<String>,
+) -> Block {
+    Block::Table {
+        caption,
+        head: ["cost function", "method"]
+            .iter()
+            .chain(head)
+            .map(|h| h.to_string())
+            .collect(),
+        rows: analysis
+            .per_cost
+            .iter()
+            .map(|s| {
+                let mut row = vec![s.cost.to_string(), s.method.clone()];
+                row.extend(cells(s));
+                row
+            })
+            .collect(),
+    }
 }
 
 fn ci(c: &Option<MeanCi>) -> String {
@@ -163,78 +224,54 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     b.push(Block::Heading(
         "Mean ΔE00 per sample and cost function".into(),
     ));
-    let mut head = vec!["sample".to_string()];
-    for c in costs {
-        for part in ["all", "diffuse", "specular", "max"] {
-            head.push(format!("{c} {part}"));
-        }
-    }
-    let rows = study
-        .samples
-        .iter()
-        .map(|s| {
-            let mut row = vec![s.name.clone()];
-            for &c in costs {
-                match s.fit(c).map(|f| &f.state) {
-                    Some(FitState::Done(d)) => {
-                        let e = &d.evaluation;
-                        row.extend(
-                            [
-                                Some(e.all.mean),
-                                Some(e.diffuse.mean),
-                                e.specular.map(|s| s.mean),
-                                Some(e.all.max),
-                            ]
-                            .map(|v| {
-                                v.map_or("no specular readings".into(), |v| format!("{v:.3}"))
-                            }),
-                        );
-                    }
-                    Some(FitState::Failed { .. }) => {
-                        row.extend(["failed".into(), "".into(), "".into(), "".into()])
-                    }
-                    Some(FitState::Unfinished { status }) => {
-                        row.extend([status.clone(), "".into(), "".into(), "".into()])
-                    }
-                    None => row.extend(["no fit".into(), "".into(), "".into(), "".into()]),
-                }
-            }
-            row
-        })
-        .collect();
-    b.push(Block::Table {
-        caption: format!(
+    b.push(per_sample_table(
+        study,
+        costs,
+        &["all", "diffuse", "specular", "max"],
+        format!(
             "Table 1. Mean ΔE00 between measured and estimated colour per sample: over all 14 geometries, the 12 diffuse (MA-T12) and the 2 specular (SRA) ones, and the maximum; per cost function ({cost_list}), method {methods}. Specular metric: ΔE00 against the grey spectrum the SRA reading is spread into (the paper's); Table 6 gives the luminance metric."
         ),
-        head,
-        rows,
-    });
+        |row, s, c| match s.fit(c).map(|f| &f.state) {
+            Some(FitState::Done(d)) => {
+                let e = &d.evaluation;
+                row.extend(
+                    [
+                        Some(e.all.mean),
+                        Some(e.diffuse.mean),
+                        e.specular.map(|s| s.mean),
+                        Some(e.all.max),
+                    ]
+                    .map(|v| v.map_or("no specular readings".into(), |v| format!("{v:.3}"))),
+                );
+            }
+            Some(FitState::Failed { .. }) => {
+                row.extend(["failed".into(), "".into(), "".into(), "".into()])
+            }
+            Some(FitState::Unfinished { status }) => {
+                row.extend([status.clone(), "".into(), "".into(), "".into()])
+            }
+            None => row.extend(["no fit".into(), "".into(), "".into(), "".into()]),
+        },
+    ));
     b.push(Block::Heading(
         "Mean ΔE00 per cost function, 95 % confidence interval".into(),
     ));
-    b.push(Block::Table {
-        caption: format!(
+    b.push(per_cost_table(
+        analysis,
+        format!(
             "Table 2. Mean over the {} samples that take part of each sample's mean ΔE00, ± half-width [low, high] of the 95 % confidence interval (Student t, n − 1 degrees of freedom). Specular: the paper's ΔE00 against the grey spectrum; Table 7 gives the luminance metric.",
             analysis.included.len()
         ),
-        head: ["cost function", "method", "n", "all geometries", "diffuse (MA-T12)", "specular (SRA)"]
-            .map(String::from)
-            .to_vec(),
-        rows: analysis
-            .per_cost
-            .iter()
-            .map(|s| {
-                vec![
-                    s.cost.to_string(),
-                    s.method.clone(),
-                    s.all.map_or(analysis.included.len(), |c| c.n).to_string(),
-                    ci(&s.all),
-                    ci(&s.diffuse),
-                    ci(&s.specular),
-                ]
-            })
-            .collect(),
-    });
+        &["n", "all geometries", "diffuse (MA-T12)", "specular (SRA)"],
+        |s| {
+            vec![
+                s.all.map_or(analysis.included.len(), |c| c.n).to_string(),
+                ci(&s.all),
+                ci(&s.diffuse),
+                ci(&s.specular),
+            ]
+        },
+    ));
     b.push(Block::Heading("Sign tests between cost functions".into()));
     b.push(Block::Table {
         caption: "Table 3. Exact two-sided sign test on the paired ΔE00 of two cost functions per (sample, geometry) of the samples that take part (at the SRA geometries the paper's ΔE00 against the grey spectrum; Table 8 tests the luminance metric), ties dropped: n pairs, \"A worse\" where the first has the larger ΔE00, p = min(1, 2·P(X ≤ min(k, n − k))), X ~ Bin(n, ½).".into(),
@@ -384,61 +421,34 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
         "The SRA reads one achromatic number per geometry. The paper's specular metric, the \"specular\" columns of Tables 1 and 2 and the sign tests of Table 3, is ΔE00 against the grey spectrum that number is spread into; Tables 6–8 judge the same fits by |ΔL*| between the model's luminance and the measured one ({instrument}; SCIENCE.md §7.2). SRA reading model of the fits' cost: {} (SCIENCE.md §5.1).",
         if sras.is_empty() { "none".to_string() } else { sras.join(", ") }
     )));
-    let mut head = vec!["sample".to_string()];
-    for c in costs {
-        for part in ["|ΔL*| sra-20", "|ΔL*| sra-60", "ΔE00 (paper)"] {
-            head.push(format!("{c} {part}"));
-        }
-    }
-    let rows = study
-        .samples
-        .iter()
-        .map(|s| {
-            let mut row = vec![s.name.clone()];
-            for &c in costs {
-                match s.done(c) {
-                    Some(d) => match (&d.specular_delta_l, &d.evaluation.specular) {
-                        (Some(l), Some(e)) => {
-                            row.push(format!("{:.3}", l.per_geometry[0]));
-                            row.push(format!("{:.3}", l.per_geometry[1]));
-                            row.push(format!("{:.3}", e.mean));
-                        }
-                        _ => row.extend(["no specular readings".into(), "".into(), "".into()]),
-                    },
-                    None => row.extend(["no result".into(), "".into(), "".into()]),
-                }
-            }
-            row
-        })
-        .collect();
-    b.push(Block::Table {
-        caption: format!(
+    b.push(per_sample_table(
+        study,
+        costs,
+        &["|ΔL*| sra-20", "|ΔL*| sra-60", "ΔE00 (paper)"],
+        format!(
             "Table 6. Specular |ΔL*| between the model's and the measured luminance at sra-20 and sra-60 per sample and cost function ({cost_list}), method {methods}; beside it the paper's specular metric (mean ΔE00 against the grey spectrum, as in Table 1)."
         ),
-        head,
-        rows,
-    });
-    b.push(Block::Table {
-        caption: format!(
+        |row, s, c| match s.done(c) {
+            Some(d) => match (&d.specular_delta_l, &d.evaluation.specular) {
+                (Some(l), Some(e)) => {
+                    row.push(format!("{:.3}", l.per_geometry[0]));
+                    row.push(format!("{:.3}", l.per_geometry[1]));
+                    row.push(format!("{:.3}", e.mean));
+                }
+                _ => row.extend(["no specular readings".into(), "".into(), "".into()]),
+            },
+            None => row.extend(["no result".into(), "".into(), "".into()]),
+        },
+    ));
+    b.push(per_cost_table(
+        analysis,
+        format!(
             "Table 7. Mean over the {} samples that take part of each sample's mean specular |ΔL*| (luminance metric), ± half-width [low, high] of the 95 % confidence interval (Student t), beside the paper's specular ΔE00 of Table 2.",
             analysis.included.len()
         ),
-        head: ["cost function", "method", "specular |ΔL*|", "specular ΔE00 (paper)"]
-            .map(String::from)
-            .to_vec(),
-        rows: analysis
-            .per_cost
-            .iter()
-            .map(|s| {
-                vec![
-                    s.cost.to_string(),
-                    s.method.clone(),
-                    ci(&s.specular_delta_l),
-                    ci(&s.specular),
-                ]
-            })
-            .collect(),
-    });
+        &["specular |ΔL*|", "specular ΔE00 (paper)"],
+        |s| vec![ci(&s.specular_delta_l), ci(&s.specular)],
+    ));
     b.push(Block::Table {
         caption: "Table 8. Exact two-sided sign test on the paired specular |ΔL*| (luminance metric) of two cost functions per (sample, SRA geometry) of the samples that take part, ties dropped: n pairs, \"A worse\" where the first has the larger |ΔL*|; p as in Table 3.".into(),
         head: SIGN_TEST_HEAD.map(String::from).to_vec(),

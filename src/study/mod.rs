@@ -3,10 +3,11 @@
 //! unfinished).
 //!
 //! It is plain data with no I/O, so the figures, the statistics and the exports are tested on
-//! studies built in memory ([`Study::from_fit_reports`]); [`load`] builds one from the store
-//! or the lab's central database. The estimated BRDF of a fit is always the model evaluated at the fit's parameters
-//! (with the Fresnel cosine it was fitted with), and its evaluation is recomputed from measured
-//! and estimated, so the three can never disagree.
+//! studies built in memory ([`Study::from_fit_reports`], [`Study::from_truth`]); [`load`]
+//! builds one from the store or the lab's central database. The estimated BRDF of a fit is
+//! always the model evaluated at the fit's parameters (with the Fresnel cosine it was fitted
+//! with), and its evaluation is recomputed from measured and estimated, so the three can never
+//! disagree.
 
 pub mod load;
 
@@ -354,6 +355,55 @@ impl Study {
         out
     }
 
+    /// A study of the first `n` noise-free synthetic paper samples
+    /// ([`crate::synth::paper_samples`]) fitted without an optimiser, for tests: sample `i`'s fit
+    /// under cost function `k` of [`CostFunction::ALL`] is `fit(i, k, the sample's ground-truth
+    /// parameters)`, finished (method "separable") at the parameters it returns or failed for
+    /// the reason it gives.
+    pub fn from_truth(
+        n: usize,
+        fit: impl Fn(usize, usize, Params) -> Result<Params, String>,
+    ) -> Study {
+        let samples = crate::synth::paper_samples()
+            .iter()
+            .take(n)
+            .enumerate()
+            .map(|(i, truth)| {
+                let scan = crate::synth::synth_scan(truth, &Default::default())
+                    .expect("the paper's samples synthesise");
+                let measured = crate::processing::process(&scan, &Default::default())
+                    .expect("a synthetic scan processes");
+                let fits = CostFunction::ALL
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &cost)| FitStudy {
+                        cost,
+                        method: "separable".into(),
+                        state: match fit(i, k, truth.params) {
+                            Ok(params) => FitState::Done(Box::new(DoneFit::from_params(
+                                &measured,
+                                params,
+                                FresnelCosine::Incidence,
+                            ))),
+                            Err(reason) => FitState::Failed { reason },
+                        },
+                    })
+                    .collect();
+                SampleStudy {
+                    name: scan.sample.clone(),
+                    scan_id: None,
+                    origin: None,
+                    scan,
+                    specular: SpecularStrategy::Ratio,
+                    reference_reflectance: None,
+                    measured,
+                    fits,
+                }
+            })
+            .collect();
+        Study { samples }
+    }
+
     /// A study from fits made in this process (`brdfd demo`, tests): `reports[i]` are the fits
     /// of `scans[i]`, all made from the same processing of the scan. Panics if the lengths
     /// differ or a sample has no report (a programming error, not a data error).
@@ -406,60 +456,21 @@ impl Study {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::synth::{SynthOptions, paper_samples, synth_scan};
 
     /// A small study without running an optimiser: the synthetic samples' ground-truth
     /// parameters, perturbed per cost function so that the fits differ. Sample `failed` (if
     /// any) has its m2 fit failed.
     pub(crate) fn study_from_truth(n: usize, failed: Option<usize>) -> Study {
-        let truths = paper_samples();
-        let samples = truths
-            .iter()
-            .take(n)
-            .enumerate()
-            .map(|(i, truth)| {
-                let scan = synth_scan(truth, &SynthOptions::default()).unwrap();
-                let measured = crate::processing::process(&scan, &Default::default()).unwrap();
-                let fits = CostFunction::ALL
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &cost)| {
-                        let state = if failed == Some(i) && cost == CostFunction::M2 {
-                            FitState::Failed {
-                                reason: "cancelled by the operator".into(),
-                            }
-                        } else {
-                            let mut p = truth.params;
-                            // Different, sample-dependent errors per cost function.
-                            let f = 1.0 + 0.03 * (k as f64 + 1.0) * (1.0 + (i % 3) as f64);
-                            p.kd = p.kd.map(|v| v * f);
-                            p.alpha *= 1.0 + 0.1 * k as f64;
-                            FitState::Done(Box::new(DoneFit::from_params(
-                                &measured,
-                                p,
-                                FresnelCosine::Incidence,
-                            )))
-                        };
-                        FitStudy {
-                            cost,
-                            method: "separable".into(),
-                            state,
-                        }
-                    })
-                    .collect();
-                SampleStudy {
-                    name: scan.sample.clone(),
-                    scan_id: None,
-                    origin: None,
-                    scan,
-                    specular: SpecularStrategy::Ratio,
-                    reference_reflectance: None,
-                    measured,
-                    fits,
-                }
-            })
-            .collect();
-        Study { samples }
+        Study::from_truth(n, |i, k, mut p| {
+            if failed == Some(i) && CostFunction::ALL[k] == CostFunction::M2 {
+                return Err("cancelled by the operator".into());
+            }
+            // Different, sample-dependent errors per cost function.
+            let f = 1.0 + 0.03 * (k as f64 + 1.0) * (1.0 + (i % 3) as f64);
+            p.kd = p.kd.map(|v| v * f);
+            p.alpha *= 1.0 + 0.1 * k as f64;
+            Ok(p)
+        })
     }
 
     /// `study` as if loaded from a store whose scans were measured on simulated instruments:

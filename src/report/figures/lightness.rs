@@ -11,7 +11,7 @@ use crate::fonts::font;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT};
 use crate::study::Study;
 
-use super::style::{cost_colour, cost_radius, cost_width, marker_at, sample_styles};
+use super::style::{cost_colour, cost_radius, cost_width, draw_legend, marker_at, sample_styles};
 use super::{DrawResult, lab_of, methods, padded};
 
 pub(super) fn lightness_lines<DB: DrawingBackend>(
@@ -260,12 +260,5 @@ pub(super) fn luminance_specular<DB: DrawingBackend>(
             .label(format!("{c} ({})", study.method_of(c)))
             .legend(move |(x, y)| Circle::new((x + 8, y), cost_radius(c), col.filled()));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(font(15))
-        .draw()?;
-    Ok(())
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 0.85)
 }

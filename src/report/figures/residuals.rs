@@ -8,7 +8,7 @@ use crate::geometry::{Device, GEOMETRIES};
 use crate::study::Study;
 
 use super::statistics::{draw_box, quartiles};
-use super::style::{cost_colour, sample_styles};
+use super::style::{cost_colour, draw_legend, sample_styles};
 use super::{DrawResult, lab_of, methods, padded};
 
 /// Fig. 13: measured minus estimated L* per diffuse geometry, a box over the samples per cost
@@ -107,12 +107,5 @@ pub(super) fn residual_lightness<DB: DrawingBackend>(
             }
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .label_font(font(15))
-        .draw()?;
-    Ok(())
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 0.9)
 }

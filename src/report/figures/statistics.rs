@@ -6,12 +6,18 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+use plotters::coord::types::RangedCoordf64;
+
+use crate::cost::CostFunction;
 use crate::fonts::font;
 use crate::report::analysis::Analysis;
 use crate::study::Study;
 
-use super::style::cost_colour;
+use super::style::{cost_colour, draw_legend};
 use super::{DrawResult, methods};
+
+/// A chart with a linear x and y axis.
+pub(super) type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// Quartiles by linear interpolation between order statistics (R's type 7).
 pub fn quartiles(xs: &[f64]) -> Option<[f64; 5]> {
@@ -54,11 +60,7 @@ pub(super) fn per_sample_size(names: &[&str]) -> (u32, u32) {
 /// `fill` opacity and outlined, the median line, and, for the first box of a series, its legend
 /// entry `label`. Whiskers and points are the caller's.
 pub(super) fn draw_box<DB: DrawingBackend>(
-    chart: &mut ChartContext<
-        '_,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
+    chart: &mut Chart<'_, DB>,
     x: f64,
     width: f64,
     [q1, med, q3]: [f64; 3],
@@ -96,14 +98,7 @@ fn per_sample_chart<'a, DB: DrawingBackend>(
     caption: String,
     y_desc: &str,
     values: &[f64],
-) -> Result<
-    ChartContext<
-        'a,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
-    DrawingAreaErrorKind<DB::ErrorType>,
-> {
+) -> Result<Chart<'a, DB>, DrawingAreaErrorKind<DB::ErrorType>> {
     let n = study.samples.len();
     let hi = values.iter().copied().fold(0.0f64, f64::max) * 1.3;
     let hi = if hi > 0.0 { hi } else { 1.0 };
@@ -151,63 +146,80 @@ fn per_sample_chart<'a, DB: DrawingBackend>(
     Ok(chart)
 }
 
+/// Fig. 11 and 11b: [`per_sample_chart`] of `values` titled `what` "per sample and cost
+/// function" with the methods, then per cost function `draw(chart, cost, colour, offset,
+/// width)` with its column's offset from each sample's position and the columns' width, then
+/// the legend.
+fn per_sample_figure<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    study: &Study,
+    what: &str,
+    y_desc: &str,
+    values: &[f64],
+    mut draw: impl FnMut(&mut Chart<'a, DB>, CostFunction, RGBColor, f64, f64) -> DrawResult<DB>,
+) -> DrawResult<DB> {
+    let costs = study.cost_functions();
+    let mut chart = per_sample_chart(
+        root,
+        study,
+        format!(
+            "{what} per sample and cost function (method {})",
+            methods(study)
+        ),
+        y_desc,
+        values,
+    )?;
+    let m = costs.len().max(1) as f64;
+    let width = 0.7 / m;
+    for (k, &c) in costs.iter().enumerate() {
+        let offset = (k as f64 - (m - 1.0) / 2.0) * width;
+        draw(&mut chart, c, cost_colour(c), offset, width)?;
+    }
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 0.85)
+}
+
 pub(super) fn box_plots<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     study: &Study,
     _analysis: &Analysis,
 ) -> DrawResult<DB> {
-    let costs = study.cost_functions();
     let values: Vec<f64> = study
         .done_fits()
         .flat_map(|d| d.evaluation.evaluated())
         .collect();
-    let mut chart = per_sample_chart(
+    per_sample_figure(
         root,
         study,
-        format!(
-            "Fig. 11  ΔE00 over the 14 geometries per sample and cost function (method {})",
-            methods(study)
-        ),
+        "Fig. 11  ΔE00 over the 14 geometries",
         "ΔE00 (CIEDE2000)",
         &values,
-    )?;
-    let m = costs.len().max(1) as f64;
-    let width = 0.7 / m;
-    for (k, &c) in costs.iter().enumerate() {
-        let col = cost_colour(c);
-        let offset = (k as f64 - (m - 1.0) / 2.0) * width;
-        let mut first = true;
-        for (i, s) in study.samples.iter().enumerate() {
-            let Some(d) = s.done(c) else { continue };
-            let Some([min, q1, med, q3, max]) = quartiles(&d.evaluation.evaluated()) else {
-                continue;
-            };
-            let x = i as f64 + offset;
-            let label = first.then(|| format!("{c} ({})", study.method_of(c)));
-            first = false;
-            draw_box(&mut chart, x, width, [q1, med, q3], col, 0.35, label)?;
-            for (a, b) in [(min, q1), (q3, max)] {
-                chart.draw_series(std::iter::once(PathElement::new(
-                    vec![(x, a), (x, b)],
-                    col.stroke_width(1),
-                )))?;
+        |chart, c, col, offset, width| {
+            let mut first = true;
+            for (i, s) in study.samples.iter().enumerate() {
+                let Some(d) = s.done(c) else { continue };
+                let Some([min, q1, med, q3, max]) = quartiles(&d.evaluation.evaluated()) else {
+                    continue;
+                };
+                let x = i as f64 + offset;
+                let label = first.then(|| format!("{c} ({})", study.method_of(c)));
+                first = false;
+                draw_box(chart, x, width, [q1, med, q3], col, 0.35, label)?;
+                for (a, b) in [(min, q1), (q3, max)] {
+                    chart.draw_series(std::iter::once(PathElement::new(
+                        vec![(x, a), (x, b)],
+                        col.stroke_width(1),
+                    )))?;
+                }
+                for v in [min, max] {
+                    chart.draw_series(std::iter::once(PathElement::new(
+                        vec![(x - width * 0.2, v), (x + width * 0.2, v)],
+                        col.stroke_width(1),
+                    )))?;
+                }
             }
-            for v in [min, max] {
-                chart.draw_series(std::iter::once(PathElement::new(
-                    vec![(x - width * 0.2, v), (x + width * 0.2, v)],
-                    col.stroke_width(1),
-                )))?;
-            }
-        }
-    }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(font(15))
-        .draw()?;
-    Ok(())
+            Ok(())
+        },
+    )
 }
 
 pub(super) type Pick = fn(&crate::report::analysis::CostSummary) -> Option<crate::stats::MeanCi>;
@@ -303,14 +315,7 @@ pub(super) fn mean_ci_groups<DB: DrawingBackend>(
                 .map(|(x, ci)| Circle::new((*x, ci.mean), 6, col.filled())),
         )?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(font(15))
-        .draw()?;
-    Ok(())
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 0.85)
 }
 
 /// Fig. 11b: specular |ΔL*| at sra-20 (filled) and sra-60 (open) per sample and cost function.
@@ -318,57 +323,42 @@ pub(super) fn specular_delta_l_points<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     study: &Study,
 ) -> DrawResult<DB> {
-    let costs = study.cost_functions();
     let values: Vec<f64> = study
         .done_fits()
         .flat_map(|d| d.specular_delta_l.map(|l| l.per_geometry))
         .flatten()
         .collect();
-    let mut chart = per_sample_chart(
+    per_sample_figure(
         root,
         study,
-        format!(
-            "Fig. 11b  Specular |ΔL*| (luminance) per sample and cost function (method {})",
-            methods(study)
-        ),
+        "Fig. 11b  Specular |ΔL*| (luminance)",
         "|ΔL*| at the SRA geometries",
         &values,
-    )?;
-    let m = costs.len().max(1) as f64;
-    let width = 0.7 / m;
-    for (k, &c) in costs.iter().enumerate() {
-        let col = cost_colour(c);
-        let offset = (k as f64 - (m - 1.0) / 2.0) * width;
-        let done: Vec<(f64, [f64; 2])> = study
-            .samples
-            .iter()
-            .enumerate()
-            .filter_map(|(i, s)| {
-                s.done(c)
-                    .and_then(|d| d.specular_delta_l)
-                    .map(|l| (i as f64 + offset, l.per_geometry))
-            })
-            .collect();
-        chart
-            .draw_series(
-                done.iter()
-                    .map(|(x, v)| Circle::new((*x - width * 0.15, v[0]), 5, col.filled())),
-            )?
-            .label(format!("{c} ({})", study.method_of(c)))
-            .legend(move |(x, y)| Circle::new((x + 8, y), 5, col.filled()));
-        chart.draw_series(
-            done.iter()
-                .map(|(x, v)| Circle::new((*x + width * 0.15, v[1]), 5, col.stroke_width(2))),
-        )?;
-    }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(font(15))
-        .draw()?;
-    Ok(())
+        |chart, c, col, offset, width| {
+            let done: Vec<(f64, [f64; 2])> = study
+                .samples
+                .iter()
+                .enumerate()
+                .filter_map(|(i, s)| {
+                    s.done(c)
+                        .and_then(|d| d.specular_delta_l)
+                        .map(|l| (i as f64 + offset, l.per_geometry))
+                })
+                .collect();
+            chart
+                .draw_series(
+                    done.iter()
+                        .map(|(x, v)| Circle::new((*x - width * 0.15, v[0]), 5, col.filled())),
+                )?
+                .label(format!("{c} ({})", study.method_of(c)))
+                .legend(move |(x, y)| Circle::new((x + 8, y), 5, col.filled()));
+            chart
+                .draw_series(done.iter().map(|(x, v)| {
+                    Circle::new((*x + width * 0.15, v[1]), 5, col.stroke_width(2))
+                }))?;
+            Ok(())
+        },
+    )
 }
 
 #[cfg(test)]

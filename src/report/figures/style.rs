@@ -1,11 +1,12 @@
 //! How figures tell things apart: the cost functions' colours, line widths and marker sizes,
 //! and each sample's own colour and marker shape.
 
-use plotters::coord::Shift;
+use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
 
 use crate::colour::{brdf_to_reflectance, reflectance_to_xyz, xyz_to_srgb8};
 use crate::cost::CostFunction;
+use crate::fonts::font;
 use crate::geometry::{Device, GEOMETRIES};
 use crate::spectral::Spectrum;
 use crate::study::{SampleStudy, Study};
@@ -53,6 +54,22 @@ pub(super) fn cost_radius(c: CostFunction) -> i32 {
         CostFunction::Cf2 => 6,
         CostFunction::M2 => 4,
     }
+}
+
+/// Draws the chart's legend of its labelled series at `position`, on white at `opacity`,
+/// framed in black.
+pub(super) fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+    opacity: f64,
+) -> DrawResult<DB> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(opacity))
+        .border_style(BLACK)
+        .label_font(font(15))
+        .draw()
 }
 
 /// The shapes that tell samples of similar colour apart.
