@@ -1,13 +1,20 @@
 //! The HTTP API's wire contract: the request and answer body of every route, as the daemon
 //! sends them and as [`crate::client::Client`] reads them back. The daemon's handlers
-//! (`src/api/`) build these types from the service's and the store's records (the conversions
-//! are in `src/api/answer.rs`); the command line deserialises the same types, so a renamed or
-//! missing field is an error at the client, not a "?" on the terminal.
+//! (`src/api/`) answer with these types, built from the service's and the store's records (the
+//! conversions are in `src/api/answer.rs`); the command line deserialises the same types, so a
+//! renamed or missing field is an error at the client, not a "?" on the terminal.
 //!
-//! This module holds data only, with no dependency on the server (axum) or on the service: a
-//! client needs nothing else. Where a newer daemon may send a value this one does not know (a
-//! state, a kind of operation, a cost function), the field is an [`Open`], which keeps the
-//! unknown text, or an enum with an `Unknown` variant; unknown fields are ignored.
+//! This module holds data only, with no dependency on the server (axum, the handlers): a client
+//! needs nothing else. Where a newer daemon may send a value this one does not know (a state, a
+//! kind of operation, a cost function), the field is an [`Open`], which keeps the unknown text,
+//! or an enum with an `Unknown` variant; unknown fields are ignored.
+//!
+//! An answer whose JSON is a record's own (a scan's summary, the status, the forwarding's
+//! state) is that record, not a copy of it. The records that hold a value of a closed set take
+//! its type as a parameter: the daemon sends them as the store and the service hold them, and
+//! the aliases here read each such value as an [`Open`] (or as [`Operation`], which has its
+//! `Unknown`). [`ScanView`] and [`ReferenceDetail`] take the summaries they hold as parameters
+//! too, so that the daemon sends its records in them unconverted.
 //!
 //! | route | request | answer |
 //! |---|---|---|
@@ -50,12 +57,17 @@ pub use crate::fit::LabPerGeometry;
 pub use crate::geometry::Device;
 pub use crate::processing::SpecularStrategy;
 pub use crate::scan::Scan as ScanFile;
-pub use crate::service::{ReadingShown, RefitRequest};
+pub use crate::service::{
+    IngestStatus, ReadingShown, ReferenceInForce, RefitRequest, SimulatedStatus as Simulated,
+    TimingSplit as Timings,
+};
 pub use crate::spectral::Spectrum;
 pub use crate::sra_reading::{SpecularDeltaL, SraReading};
 pub use crate::store::{
-    FitRunId, FitStatus, ReferenceId, ReferenceStatus, ScanId, ScanState, Source,
+    DeltaESummary, FitRunId, FitStatus, InstrumentProvenance, ReadingValues, ReferenceId,
+    ReferenceStatus, ScanId, ScanState, Source, TextureSummary,
 };
+pub use crate::sync::{Lag, SyncStatus};
 pub use crate::uncertainty::Uncertainty;
 
 /// A value of a closed set this client knows (`Known`), or the text of one a newer daemon
@@ -139,27 +151,7 @@ pub struct Health {
 // GET /status
 
 /// `GET /status`: the daemon's state.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Status {
-    pub version: String,
-    /// What the instruments are doing, if anything.
-    pub busy: Option<Busy>,
-    /// The reference new scans are normalised by.
-    pub reference: Option<ReferenceInForce>,
-    pub fits_queued: u64,
-    pub fits_running: u64,
-    /// Finished fits whose bootstrap intervals are still being computed (SCIENCE.md §10).
-    pub bootstraps_pending: u64,
-    /// Whether each instrument is simulated.
-    pub simulated: Simulated,
-    /// Each instrument: its connection state and identity (MA-T12 first, then the SRA).
-    pub devices: Vec<DeviceStatus>,
-    pub timings: Timings,
-    /// Forwarding to the central database, when configured.
-    pub sync: Option<SyncStatus>,
-    /// The watch folder, when configured.
-    pub ingest: Option<IngestStatus>,
-}
+pub type Status = crate::service::Status<DeviceStatus, Operation>;
 
 /// What the instruments are doing: a reference or a scan.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -187,28 +179,10 @@ impl fmt::Display for Operation {
 }
 
 /// The operation in progress and for how long.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Busy {
-    pub operation: Operation,
-    pub seconds: f64,
-}
+pub type Busy = crate::service::BusyStatus<Operation>;
 
-/// The reference in force.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ReferenceInForce {
-    pub id: ReferenceId,
-    pub name: String,
-    pub completed_at_ms: Option<i64>,
-    pub age_hours: f64,
-    /// Older than `[scan] reference_max_age_hours`: scans will not be fitted.
-    pub stale: bool,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Simulated {
-    pub ma_t12: bool,
-    pub sra: bool,
-}
+/// One instrument as `status` shows it.
+pub type DeviceStatus = crate::service::DeviceStatus<Open<Device>, Open<DeviceState>>;
 
 /// An instrument's connection state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -242,79 +216,6 @@ impl fmt::Display for DeviceState {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.pad(self.as_str())
     }
-}
-
-/// One instrument as `status` shows it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct DeviceStatus {
-    pub device: Open<Device>,
-    /// The instrument's name for people.
-    pub instrument: String,
-    pub state: Open<DeviceState>,
-    /// What the driver said with the state (identity, reason, attempt).
-    pub detail: String,
-    pub since_ms: i64,
-    pub simulated: bool,
-    /// As the instrument last identified itself; `None` if it never answered.
-    pub model: Option<String>,
-    pub serial: Option<String>,
-    pub firmware: Option<String>,
-}
-
-/// Where the time went since start-up, in seconds.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Timings {
-    pub acquire_s: f64,
-    pub store_s: f64,
-    pub fit_s: f64,
-}
-
-/// Forwarding to the central database.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SyncStatus {
-    pub station: String,
-    /// The central database, password removed.
-    pub central: String,
-    pub connected: bool,
-    /// Outbox entries not yet acknowledged.
-    pub backlog: i64,
-    pub cursor: Option<i64>,
-    /// Rows forwarded since start-up.
-    pub rows_forwarded: u64,
-    pub last_forwarded_ms: Option<i64>,
-    /// The last failure, until the next success.
-    pub last_error: Option<String>,
-    pub last_error_ms: Option<i64>,
-    /// The central database refuses this store for the station.
-    pub refused: bool,
-    /// The last `--verify` comparison, in one line.
-    pub last_verify: Option<String>,
-    pub last_verify_ms: Option<i64>,
-    /// Local commit → central commit over the most recent forwarded entries (none yet:
-    /// `None`).
-    #[serde(default)]
-    pub lag: Option<Lag>,
-}
-
-/// The forwarding lag, ms, over the `entries` most recently forwarded.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Lag {
-    pub entries: usize,
-    pub p50_ms: f64,
-    pub p99_ms: f64,
-    pub max_ms: f64,
-}
-
-/// The watch folder.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct IngestStatus {
-    pub dir: String,
-    /// Files seen and not yet taken.
-    pub waiting: u64,
-    pub imported: u64,
-    pub rejected: u64,
-    pub last_file: Option<String>,
-    pub last_error: Option<String>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -398,59 +299,13 @@ pub struct ColorimetryCheck {
 // Scans
 
 /// Which instruments measured a reference set or scan, and how its readings came in.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Provenance {
-    pub ma_t12: InstrumentProvenance,
-    pub sra: InstrumentProvenance,
-    pub source: Open<Source>,
-    /// The file imported or the sessions replayed.
-    pub source_detail: Option<String>,
-}
-
-impl Provenance {
-    /// Whether any instrument was simulated.
-    pub fn simulated(&self) -> bool {
-        self.ma_t12.simulated == Some(true) || self.sra.simulated == Some(true)
-    }
-}
-
-/// One instrument as it reported itself.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct InstrumentProvenance {
-    pub model: String,
-    pub serial: String,
-    pub firmware: String,
-    /// `None` when not known (older rows).
-    pub simulated: Option<bool>,
-}
+pub type Provenance = crate::store::Provenance<Open<Source>>;
 
 /// One element of `GET /scans`: a scan without its readings.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ScanSummary {
-    pub id: ScanId,
-    pub sample_id: i64,
-    pub sample: String,
-    pub reference_id: ReferenceId,
-    pub state: Open<ScanState>,
-    /// Why it failed or was aborted.
-    pub reason: Option<String>,
-    pub requested_at_ms: i64,
-    pub started_at_ms: Option<i64>,
-    pub finished_at_ms: Option<i64>,
-    pub reading_count: u64,
-    /// Whether the scan has the SRA's two readings.
-    pub specular_readings: bool,
-    pub provenance: Provenance,
-}
+pub type ScanSummary = crate::store::ScanSummary<Open<ScanState>, Open<Source>>;
 
-/// The value(s) of one reading: an MA-T12 spectrum (reflectance factor, 31 bands, 400–700
-/// nm) or an SRA intensity.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(untagged)]
-pub enum ReadingValues {
-    Spectrum(Spectrum),
-    Intensity(f64),
-}
+/// A reference set without its readings.
+pub type ReferenceSummary = crate::store::ReferenceSummary<Open<ReferenceStatus>, Open<Source>>;
 
 /// A stored reading.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -464,48 +319,21 @@ pub struct Reading {
     pub at_ms: i64,
 }
 
-/// A reference set without its readings.
+/// A reference set with its readings; `R` as for [`ScanView`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ReferenceSummary {
-    pub id: ReferenceId,
-    pub name: String,
-    pub status: Open<ReferenceStatus>,
-    pub reason: Option<String>,
-    /// The tile's calibrated reflectance factor; `None` = 1 in every band.
-    pub rho_ref: Option<Spectrum>,
-    pub taken_at_ms: i64,
-    pub completed_at_ms: Option<i64>,
-    /// No tile: the instrument's own white calibration.
-    pub instrument_calibration: bool,
-    pub specular_readings: bool,
-    pub reading_count: u64,
-    pub provenance: Provenance,
-}
-
-/// A reference set with its readings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ReferenceDetail {
-    pub reference: ReferenceSummary,
+pub struct ReferenceDetail<R = ReferenceSummary> {
+    pub reference: R,
     pub readings: Vec<Reading>,
 }
 
-/// A camera image kept with an imported scan.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct TextureSummary {
-    pub position: u32,
-    pub label: String,
-    pub anchor: String,
-    /// The PNG's SHA-256, lower-case hex.
-    pub sha256: String,
-    pub bytes: u64,
-}
-
-/// `GET /scans/{id}`: a scan, its readings, its reference and its fits.
+/// `GET /scans/{id}`: a scan, its readings, its reference and its fits. `S` and `R` are the
+/// scan's and the reference's summaries: the store's records as the daemon sends them, read
+/// here as [`ScanSummary`] and [`ReferenceSummary`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ScanView {
-    pub scan: ScanSummary,
+pub struct ScanView<S = ScanSummary, R = ReferenceSummary> {
+    pub scan: S,
     pub readings: Vec<Reading>,
-    pub reference: ReferenceDetail,
+    pub reference: ReferenceDetail<R>,
     /// Every fit run of the scan, oldest first.
     pub fits: Vec<FitDetail>,
     /// Hours between the reference's completion and the scan's request.
@@ -560,14 +388,6 @@ pub struct FitRun {
     pub queued_at_ms: i64,
     pub started_at_ms: Option<i64>,
     pub finished_at_ms: Option<i64>,
-}
-
-/// Mean, median and maximum of some ΔE00 values.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct DeltaESummary {
-    pub mean: f64,
-    pub median: f64,
-    pub max: f64,
 }
 
 /// The colour evaluation of a fit (SCIENCE.md §7).

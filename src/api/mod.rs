@@ -300,7 +300,7 @@ async fn metrics(State(s): State<Service>) -> ApiResult<Response> {
 }
 
 async fn status(State(s): State<Service>) -> ApiResult<impl IntoResponse> {
-    Ok(Json(wire::Status::from(s.status().await?)))
+    Ok(Json(s.status().await?))
 }
 
 async fn reference(State(s): State<Service>) -> ApiResult<impl IntoResponse> {
@@ -360,10 +360,7 @@ async fn list_scans(
         .map(|t| t.trim().to_lowercase())
         .filter(|t| !t.is_empty())
     else {
-        let page = s.store().list_scans(&filter).await?;
-        return Ok(Json(
-            page.iter().map(wire::ScanSummary::from).collect::<Vec<_>>(),
-        ));
+        return Ok(Json(s.store().list_scans(&filter).await?));
     };
     // A name search pages through the scans, newest first, until `limit` match.
     filter.limit = MAX_LIST_LIMIT;
@@ -381,12 +378,7 @@ async fn list_scans(
         }
     }
     found.truncate(limit as usize);
-    Ok(Json(
-        found
-            .iter()
-            .map(wire::ScanSummary::from)
-            .collect::<Vec<_>>(),
-    ))
+    Ok(Json(found))
 }
 
 fn parse_id<T: std::str::FromStr>(what: &str, text: &str) -> Result<T, ApiError> {
@@ -413,13 +405,13 @@ async fn show_scan(
     let reference_stale = age_ms as u128 > s.settings().reference_max_age.as_millis();
     let textures = s.store().scan_textures(scan).await?;
     Ok(Json(wire::ScanView {
-        scan: (&detail.scan).into(),
+        scan: detail.scan,
         readings: detail.readings.iter().map(Into::into).collect(),
-        reference: (&detail.reference).into(),
+        reference: detail.reference.into(),
         fits,
         reference_age_hours: age_ms as f64 / 3.6e6,
         reference_stale,
-        textures: textures.iter().map(Into::into).collect(),
+        textures,
     }))
 }
 

@@ -413,7 +413,7 @@ async fn bench_of_scan(
         state: super::answer::open(detail.scan.state.as_str()),
         reason: detail.scan.reason.clone(),
         in_progress,
-        provenance: (&detail.scan.provenance).into(),
+        provenance: detail.scan.provenance.clone().map_source(Into::into),
         readings: bench_readings(&detail.readings),
         fits,
     })
@@ -432,7 +432,7 @@ async fn bench_state(s: &Service) -> Result<Bench, ApiError> {
                 state: super::answer::open(detail.reference.status.as_str()),
                 reason: detail.reference.reason.clone(),
                 in_progress: true,
-                provenance: (&detail.reference.provenance).into(),
+                provenance: detail.reference.provenance.clone().map_source(Into::into),
                 readings: bench_readings(&detail.readings),
                 fits: Vec::new(),
             })

@@ -17,7 +17,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 use drivers::Instrument;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use tokio::sync::{Notify, broadcast};
 
 use crate::store::{InstrumentProvenance, Provenance, ReferenceId, ScanId, Source, now_ms};
@@ -58,23 +58,25 @@ impl std::fmt::Display for Operation {
     }
 }
 
-/// `status`'s view of the operation in progress.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct BusyStatus {
-    pub operation: Operation,
+/// `status`'s view of the operation in progress: `Op` is the operation ([`Operation`] here;
+/// the API's client reads it open to operations a newer daemon adds).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BusyStatus<Op = Operation> {
+    pub operation: Op,
     pub seconds: f64,
 }
 
-/// One instrument as `status` shows it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct DeviceStatus {
+/// One instrument as `status` shows it. `Dev` and `State` are how it holds its device and its
+/// state: their text here; the API's client reads them open to values a newer daemon adds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DeviceStatus<Dev = &'static str, State = &'static str> {
     /// `ma_t12` or `sra`.
-    pub device: &'static str,
+    pub device: Dev,
     /// The instrument's name for people.
     pub instrument: String,
     /// `unknown` (not heard from since start), `connected`, `disconnected`, `reconnecting`,
     /// `error`, or `off` (the SRA turned off in the configuration).
-    pub state: &'static str,
+    pub state: State,
     /// What the driver said with the state (identity, reason, attempt).
     pub detail: String,
     /// When the state began (Unix milliseconds).
@@ -86,7 +88,7 @@ pub struct DeviceStatus {
     pub firmware: Option<String>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SimulatedStatus {
     pub ma_t12: bool,
     pub sra: bool,

@@ -51,7 +51,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::formats::xrite_xlsx::TextureImage;
@@ -97,7 +97,7 @@ impl IngestSettings {
 }
 
 /// The watch folder in `GET /status`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct IngestStatus {
     /// The folder watched.
     pub dir: String,

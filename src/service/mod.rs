@@ -59,7 +59,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use tokio::sync::broadcast;
 
 use crate::config::Config;
@@ -194,7 +194,7 @@ pub struct Timings {
 }
 
 /// A snapshot of [`Timings`], in seconds.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TimingSplit {
     pub acquire_s: f64,
     pub store_s: f64,
@@ -216,12 +216,14 @@ impl Timings {
     }
 }
 
-/// `GET /status`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Status {
-    pub version: &'static str,
+/// `GET /status`. `D` is each instrument's status and `Op` the operation in progress: the
+/// service's own here ([`DeviceStatus`], [`Operation`]); the API's client reads them open to
+/// values a newer daemon adds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Status<D = DeviceStatus, Op = Operation> {
+    pub version: String,
     /// What the instruments are doing, if anything.
-    pub busy: Option<BusyStatus>,
+    pub busy: Option<BusyStatus<Op>>,
     /// The reference new scans are normalised by.
     pub reference: Option<ReferenceInForce>,
     pub fits_queued: usize,
@@ -231,7 +233,7 @@ pub struct Status {
     /// Whether each instrument is simulated.
     pub simulated: SimulatedStatus,
     /// Each instrument: its connection state and identity (MA-T12 first, then the SRA).
-    pub devices: Vec<DeviceStatus>,
+    pub devices: Vec<D>,
     pub timings: TimingSplit,
     /// Forwarding to the central database (backlog, last error), when configured.
     pub sync: Option<crate::sync::SyncStatus>,
@@ -239,7 +241,8 @@ pub struct Status {
     pub ingest: Option<IngestStatus>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// The reference in force.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ReferenceInForce {
     pub id: ReferenceId,
     pub name: String,
@@ -250,7 +253,7 @@ pub struct ReferenceInForce {
 }
 
 /// What a refit asks for.
-#[derive(Debug, Clone, PartialEq, Default, serde::Deserialize, Serialize)]
+#[derive(Debug, Clone, PartialEq, Default, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RefitRequest {
     /// Cost functions to fit; empty = the configured ones.
@@ -465,7 +468,7 @@ impl Service {
         let acquisition = &self.inner.acquisition;
         let fits = &self.inner.fits;
         Ok(Status {
-            version: env!("CARGO_PKG_VERSION"),
+            version: env!("CARGO_PKG_VERSION").to_string(),
             busy: acquisition.busy_status(),
             reference: self.reference_in_force().await?,
             fits_queued: fits.queued(),

@@ -82,6 +82,28 @@ fn key(row: &PgRow, column: &str) -> Result<Key, sqlx::Error> {
     Ok((row.try_get("station")?, row.try_get(column)?))
 }
 
+/// The readings `sql` selects from `table`, by station and the id in `key_column` (the scan
+/// or reference set they belong to), each list in geometry-table order.
+async fn readings_by(
+    pool: &PgPool,
+    sql: &str,
+    station: Option<&str>,
+    ids: Option<&[i64]>,
+    key_column: &str,
+    table: &'static str,
+) -> Result<HashMap<Key, Vec<Reading>>, StoreError> {
+    let mut readings: HashMap<Key, Vec<Reading>> = HashMap::new();
+    for row in fetch(pool, sql, station, ids).await? {
+        let k = key(&row, key_column)?;
+        let reading = ReadingRow::from_row(&row)?.into_reading(table)?;
+        readings.entry(k).or_default().push(reading);
+    }
+    for r in readings.values_mut() {
+        codec::sort_readings(r);
+    }
+    Ok(readings)
+}
+
 /// Every selected scan with its readings, reference, processed versions and fit runs.
 pub async fn load_scans(
     pool: &PgPool,
@@ -110,8 +132,7 @@ pub async fn load_scans(
     )
     .await?;
     // Readings of the scans.
-    let mut readings: HashMap<Key, Vec<Reading>> = HashMap::new();
-    for row in fetch(
+    let mut readings = readings_by(
         pool,
         &format!(
             "{SELECTED}
@@ -121,13 +142,10 @@ pub async fn load_scans(
         ),
         station,
         ids,
+        "scan_id",
+        "readings",
     )
-    .await?
-    {
-        let k = key(&row, "scan_id")?;
-        let reading = ReadingRow::from_row(&row)?.into_reading("readings")?;
-        readings.entry(k).or_default().push(reading);
-    }
+    .await?;
     // Their reference sets and the sets' readings.
     let mut references: HashMap<Key, ReferenceDetail> = HashMap::new();
     for row in fetch(
@@ -157,7 +175,7 @@ pub async fn load_scans(
             },
         );
     }
-    for row in fetch(
+    let reference_readings = readings_by(
         pool,
         &format!(
             "{SELECTED}
@@ -168,17 +186,14 @@ pub async fn load_scans(
         ),
         station,
         ids,
+        "reference_id",
+        "reference_readings",
     )
-    .await?
-    {
-        let k = key(&row, "reference_id")?;
-        let reading = ReadingRow::from_row(&row)?.into_reading("reference_readings")?;
+    .await?;
+    for (k, set_readings) in reference_readings {
         if let Some(r) = references.get_mut(&k) {
-            r.readings.push(reading);
+            r.readings = set_readings;
         }
-    }
-    for r in references.values_mut() {
-        codec::sort_readings(&mut r.readings);
     }
     // Processed versions.
     let mut processed: HashMap<Key, Vec<Processed>> = HashMap::new();
@@ -249,13 +264,11 @@ pub async fn load_scans(
                 what: ReferenceId::WHAT,
                 id: summary.reference_id.0,
             })?;
-        let mut scan_readings = readings.remove(&k).unwrap_or_default();
-        codec::sort_readings(&mut scan_readings);
         out.push(CentralScan {
             station: k.0.clone(),
             detail: ScanDetail {
                 scan: summary,
-                readings: scan_readings,
+                readings: readings.remove(&k).unwrap_or_default(),
                 reference,
             },
             processed: processed.remove(&k).unwrap_or_default(),

@@ -17,6 +17,7 @@ use super::guarded::refused;
 use super::ids::{FitRunId, ProcessedId, ScanId};
 use super::records::{
     DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, NewFit,
+    delta_e_summary,
 };
 use super::{Store, StoreError, now_ms};
 
@@ -249,9 +250,9 @@ impl Store {
         let specular = values(Some(Device::Sra));
         let evaluation = EvaluationRecord {
             per_geometry: *delta_e00,
-            all: DeltaESummary::of(&values(None)),
-            diffuse: DeltaESummary::of(&values(Some(Device::MaT12))),
-            specular: (!specular.is_empty()).then(|| DeltaESummary::of(&specular)),
+            all: delta_e_summary(&values(None)),
+            diffuse: delta_e_summary(&values(Some(Device::MaT12))),
+            specular: (!specular.is_empty()).then(|| delta_e_summary(&specular)),
         };
         let params = to_json("fit parameters", &outcome.params)?;
         let best = to_json(

@@ -2,11 +2,16 @@
 //! instruments, references, scans, processed scans, fit runs and evaluations.
 //!
 //! Timestamps are `i64` milliseconds since the Unix epoch, UTC (fields named `*_ms`), as stored.
+//!
+//! The records the HTTP API answers with as they are (provenance, scan and reference summaries)
+//! take the types of their closed sets' values (state, status, source) as parameters: the store
+//! holds each value as it is (the defaults); the API's client reads the same records with each
+//! such value open to the ones a newer daemon adds (`crate::wire::Open`).
 
 use std::fmt;
 use std::str::FromStr;
 
-use serde::{Serialize, Serializer};
+use serde::{Deserialize, Serialize, Serializer};
 
 use crate::cost::CostFunction;
 use crate::geometry::{Device, GEOMETRY_COUNT, Geometry};
@@ -100,7 +105,7 @@ text_enum!(
 // 256 bytes against 16: kept inline (and `Copy`) rather than boxing the spectrum, since most
 // readings are spectra and a box would cost an allocation each.
 #[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum ReadingValues {
     /// MA-T12: reflectance factor (0–1 scale) at the 31 bands, 400–700 nm.
@@ -202,13 +207,14 @@ pub struct Instrument {
     pub last_seen_ms: i64,
 }
 
-/// A reference set without its readings.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ReferenceSummary {
+/// A reference set without its readings; its status is a `Status` and its source a `Src`
+/// (module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceSummary<Status = ReferenceStatus, Src = Source> {
     pub id: ReferenceId,
     /// The tile, e.g. "Munsell N9".
     pub name: String,
-    pub status: ReferenceStatus,
+    pub status: Status,
     /// Why it failed.
     pub reason: Option<String>,
     /// The tile's calibrated reflectance factor; `None` = 1 in every band (the paper's choice).
@@ -225,7 +231,7 @@ pub struct ReferenceSummary {
     pub specular_readings: bool,
     pub reading_count: usize,
     /// Which instruments measured it, and how its readings came in.
-    pub provenance: Provenance,
+    pub provenance: Provenance<Src>,
 }
 
 /// A reference set with its readings in geometry-table order.
@@ -285,14 +291,27 @@ impl InstrumentProvenance {
     }
 }
 
-/// Which instruments measured a reference set or scan, and how its readings came in.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
-pub struct Provenance {
+/// Which instruments measured a reference set or scan, and how its readings came in; its source
+/// is a `Src` (module docs).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Provenance<Src = Source> {
     pub ma_t12: InstrumentProvenance,
     pub sra: InstrumentProvenance,
-    pub source: Source,
+    pub source: Src,
     /// The file imported or the sessions replayed.
     pub source_detail: Option<String>,
+}
+
+impl<Src> Provenance<Src> {
+    /// Whether any instrument was simulated (unknown counts as not known to be real).
+    pub fn simulated(&self) -> bool {
+        self.ma_t12.simulated == Some(true) || self.sra.simulated == Some(true)
+    }
+
+    /// Whether both instruments are known to be real.
+    pub fn real(&self) -> bool {
+        self.ma_t12.simulated == Some(false) && self.sra.simulated == Some(false)
+    }
 }
 
 impl Provenance {
@@ -305,14 +324,14 @@ impl Provenance {
         }
     }
 
-    /// Whether any instrument was simulated (unknown counts as not known to be real).
-    pub fn simulated(&self) -> bool {
-        self.ma_t12.simulated == Some(true) || self.sra.simulated == Some(true)
-    }
-
-    /// Whether both instruments are known to be real.
-    pub fn real(&self) -> bool {
-        self.ma_t12.simulated == Some(false) && self.sra.simulated == Some(false)
+    /// The same provenance with its source mapped by `f`.
+    pub fn map_source<Src>(self, f: impl FnOnce(Source) -> Src) -> Provenance<Src> {
+        Provenance {
+            ma_t12: self.ma_t12,
+            sra: self.sra,
+            source: f(self.source),
+            source_detail: self.source_detail,
+        }
     }
 
     /// One line for people, as exports and the report carry it: whether a simulated
@@ -350,22 +369,17 @@ pub(crate) struct ProvenanceRow {
     pub source_detail: Option<String>,
 }
 
-/// The provenance columns of table alias `a`, for the summaries' SELECTs.
+/// The provenance columns of table alias `a`, for the summaries' SELECTs: each instrument's
+/// (MA-T12, then SRA) model, serial, firmware and simulated flag, then the source.
 pub(crate) fn provenance_columns(a: &str) -> String {
-    [
-        "ma_t12_model",
-        "ma_t12_serial",
-        "ma_t12_firmware",
-        "ma_t12_simulated",
-        "sra_model",
-        "sra_serial",
-        "sra_firmware",
-        "sra_simulated",
-        "source",
-        "source_detail",
-    ]
-    .map(|c| format!("{a}.{c}"))
-    .join(", ")
+    let instrument =
+        |i: &str| ["model", "serial", "firmware", "simulated"].map(|c| format!("{a}.{i}_{c}"));
+    [instrument("ma_t12"), instrument("sra")]
+        .concat()
+        .into_iter()
+        .chain(["source", "source_detail"].map(|c| format!("{a}.{c}")))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 impl ProvenanceRow {
@@ -395,15 +409,15 @@ impl ProvenanceRow {
     }
 }
 
-/// A scan without its readings.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-pub struct ScanSummary {
+/// A scan without its readings; its state is a `State` and its source a `Src` (module docs).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ScanSummary<State = ScanState, Src = Source> {
     pub id: ScanId,
     pub sample_id: SampleId,
     pub sample: String,
     /// The reference set the scan is normalised by.
     pub reference_id: ReferenceId,
-    pub state: ScanState,
+    pub state: State,
     /// Why it failed or was aborted.
     pub reason: Option<String>,
     pub requested_at_ms: i64,
@@ -414,10 +428,10 @@ pub struct ScanSummary {
     /// 12 MA-T12 geometries only.
     pub specular_readings: bool,
     /// Which instruments measured it, and how its readings came in.
-    pub provenance: Provenance,
+    pub provenance: Provenance<Src>,
 }
 
-impl ScanSummary {
+impl<State, Src> ScanSummary<State, Src> {
     /// The geometries the scan measures.
     pub fn geometries(&self) -> crate::geometry::GeometrySet {
         if self.specular_readings {
@@ -631,31 +645,15 @@ pub struct FitRun {
     pub finished_at_ms: Option<i64>,
 }
 
-/// Mean, median and maximum of some ΔE00 values.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct DeltaESummary {
-    pub mean: f64,
-    pub median: f64,
-    pub max: f64,
-}
+/// Mean, median and maximum of some ΔE00 values: the evaluation's own summary.
+pub use crate::evaluation::Summary as DeltaESummary;
 
-impl DeltaESummary {
-    /// Summary of `values` (not empty, all finite).
-    pub(crate) fn of(values: &[f64]) -> DeltaESummary {
-        let mut sorted = values.to_vec();
-        sorted.sort_by(f64::total_cmp);
-        let n = sorted.len();
-        let median = if n % 2 == 1 {
-            sorted[n / 2]
-        } else {
-            (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0
-        };
-        DeltaESummary {
-            mean: sorted.iter().sum::<f64>() / n as f64,
-            median,
-            max: sorted[n - 1],
-        }
-    }
+/// The summary the store records of `values` (not empty, all finite): its mean adds them in
+/// ascending order.
+pub(crate) fn delta_e_summary(values: &[f64]) -> DeltaESummary {
+    let mut ascending = values.to_vec();
+    ascending.sort_by(f64::total_cmp);
+    DeltaESummary::of(&ascending).expect("a summary of at least one value")
 }
 
 /// The colour evaluation of a fit (SCIENCE.md §7).
@@ -737,10 +735,20 @@ mod tests {
     }
 
     #[test]
+    fn provenance_columns_list_both_instruments_then_the_source() {
+        assert_eq!(
+            provenance_columns("s"),
+            "s.ma_t12_model, s.ma_t12_serial, s.ma_t12_firmware, s.ma_t12_simulated, \
+             s.sra_model, s.sra_serial, s.sra_firmware, s.sra_simulated, s.source, \
+             s.source_detail"
+        );
+    }
+
+    #[test]
     fn summary_of_odd_and_even_counts() {
-        let s = DeltaESummary::of(&[3.0, 1.0, 2.0]);
+        let s = delta_e_summary(&[3.0, 1.0, 2.0]);
         assert_eq!((s.mean, s.median, s.max), (2.0, 2.0, 3.0));
-        let s = DeltaESummary::of(&[4.0, 1.0]);
+        let s = delta_e_summary(&[4.0, 1.0]);
         assert_eq!((s.mean, s.median, s.max), (2.5, 2.5, 4.0));
     }
 }

@@ -2,7 +2,7 @@
 //! PNG stored once by its SHA-256, each scan's images in the file's order with the label and
 //! anchor cell the export gives them.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::backend::Db;
@@ -22,7 +22,7 @@ pub struct NewTexture<'a> {
 
 /// A scan's texture image as the API lists it (the PNG itself comes from
 /// [`Store::scan_texture_png`]).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TextureSummary {
     /// Its place among the scan's images, from 0, in the export's order.
     pub position: u32,

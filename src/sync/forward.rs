@@ -17,7 +17,7 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
 use sqlx::{QueryBuilder, Row, SqlitePool};
 
@@ -55,7 +55,7 @@ impl ForwarderOptions {
 }
 
 /// What `brdfd status` shows of forwarding.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SyncStatus {
     pub station: String,
     /// The central database, password removed.
@@ -79,7 +79,9 @@ pub struct SyncStatus {
     pub last_verify: Option<String>,
     pub last_verify_ms: Option<i64>,
     /// How long the last [`LAG_WINDOW`] forwarded outbox entries took from their local commit
-    /// to the central commit (none forwarded yet: `None`).
+    /// to the central commit (none forwarded yet: `None`; also when a daemon's status leaves it
+    /// out).
+    #[serde(default)]
     pub lag: Option<Lag>,
 }
 
@@ -89,7 +91,7 @@ pub const LAG_WINDOW: usize = 1000;
 /// The lag from a row's local commit to its central commit (ms, the station's clock for both
 /// ends), over the most recent forwarded outbox entries. An entry queued during an outage
 /// counts the outage: this is what a scientist querying the central database waits for.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Lag {
     pub entries: usize,
     pub p50_ms: f64,

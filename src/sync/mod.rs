@@ -37,7 +37,7 @@ pub mod tables;
 pub mod verify;
 
 pub use central::{CENTRAL_MIGRATOR, Central};
-pub use forward::{BatchReport, Forwarder, ForwarderOptions, SyncStatus};
+pub use forward::{BatchReport, Forwarder, ForwarderOptions, Lag, SyncStatus};
 pub use verify::VerifyReport;
 
 /// Why forwarding failed. Every message is one line that says what to do.
