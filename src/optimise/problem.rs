@@ -752,6 +752,20 @@ impl Problem {
         // G at either zero: only the other SRA term is left.
         let g_at_zero: [f64; SRA_COUNT] = std::array::from_fn(|j| g_of(zero[j]));
         let g_least = g_at_zero.into_iter().fold(f64::INFINITY, f64::min);
+        // No computed G is below this: G's least value less the most that rounding can take
+        // off it (the residual that vanishes at a zero is computed to within a few ε of its
+        // operands, and |·|^(2/3) magnifies that near 0), with a factor 2 to spare. A
+        // candidate whose F plus this floor cannot win is skipped without evaluating G, which
+        // picks exactly what evaluating every candidate would.
+        let g_floor = g_least
+            - 2.0
+                * (bands
+                    * (0..SRA_COUNT)
+                        .map(|j| {
+                            pow23(4.0 * f64::EPSILON * (a[j].abs() + (lum.w[j] * zero[j]).abs()))
+                        })
+                        .sum::<f64>()
+                    + 1e-12 * g_least);
         // F_b is concave between neighbouring kinks (or a kink and a bound), so at kb it is
         // at least the lesser of its values there.
         let least_between = |b: usize, kb: f64| {
@@ -782,6 +796,19 @@ impl Problem {
                 .abs()
                 .max(f64::MIN_POSITIVE);
         let mut seed = (start, *k, *f);
+        // Each band's candidates for the multiplier starts, geometry by geometry: the kinks
+        // that are candidates, and F = ∞ (never picked) where a kink is not, so that the picks
+        // below run over all bands at once without branches.
+        let mut cand_x = [[0.0; BANDS]; G];
+        let mut cand_f = [[f64::INFINITY; BANDS]; G];
+        for g in 0..G {
+            for b in 0..BANDS {
+                let kink = d[g][b];
+                if self.w[g] != 0.0 && kink >= lo && kink <= hi {
+                    (cand_x[g][b], cand_f[g][b]) = (kink, f_at[g][b]);
+                }
+            }
+        }
         // Neighbouring multipliers often pick the same kinks; a configuration already
         // completed would only repeat its completion.
         let mut tried: [[f64; BANDS]; 2 * LAMBDA_STEPS + 1] = [[0.0; BANDS]; 2 * LAMBDA_STEPS + 1];
@@ -791,20 +818,24 @@ impl Problem {
                 let i = ((m - 1) / 2) as i32 - LAMBDA_STEPS as i32 / 2;
                 let sign = if m % 2 == 1 { 1.0 } else { -1.0 };
                 let lambda = sign * lambda0 * 2f64.powi(i);
+                // Per band the first least of `F + λ c_b x` over the bounds, then the kinks
+                // in geometry order.
+                let cb: [f64; BANDS] = std::array::from_fn(|b| lambda * lum.c[b]);
+                let mut value = [0.0; BANDS];
                 for b in 0..BANDS {
-                    let cb = lambda * lum.c[b];
-                    let mut best = (lo, at_bounds[0][b], at_bounds[0][b] + cb * lo);
-                    if at_bounds[1][b] + cb * hi < best.2 {
-                        best = (hi, at_bounds[1][b], at_bounds[1][b] + cb * hi);
+                    (kk[b], ff[b], value[b]) = (lo, at_bounds[0][b], at_bounds[0][b] + cb[b] * lo);
+                    let at_hi = at_bounds[1][b] + cb[b] * hi;
+                    if at_hi < value[b] {
+                        (kk[b], ff[b], value[b]) = (hi, at_bounds[1][b], at_hi);
                     }
-                    for g in 0..G {
-                        let kink = d[g][b];
-                        let v = f_at[g][b] + cb * kink;
-                        if self.w[g] != 0.0 && kink >= lo && kink <= hi && v < best.2 {
-                            best = (kink, f_at[g][b], v);
+                }
+                for g in 0..G {
+                    for b in 0..BANDS {
+                        let v = cand_f[g][b] + cb[b] * cand_x[g][b];
+                        if v < value[b] {
+                            (kk[b], ff[b], value[b]) = (cand_x[g][b], cand_f[g][b], v);
                         }
                     }
-                    (kk[b], ff[b]) = (best.0, best.1);
                 }
             }
             tried[m] = std::array::from_fn(|b| kk[b]);
@@ -848,18 +879,14 @@ impl Problem {
                 let cb = lum.c[b];
                 let rest = big_k - cb * k[b];
                 let mut best = (k[b], f[b], f[b] + g_here - margin, g_here);
-                // The band's kinks: G at every kink first (a loop without branches), then
-                // the pick.
-                let kinks: [f64; G] = std::array::from_fn(|g| d[g][b]);
-                let mut g_at = [0.0; G];
+                // The band's kinks, in order; G only where F with G's floor could win.
                 for g in 0..G {
-                    g_at[g] = g_of(rest + cb * kinks[g]);
-                }
-                for g in 0..G {
-                    let (kink, fb) = (kinks[g], f_at[g][b]);
-                    let total = fb + g_at[g];
-                    if self.w[g] != 0.0 && kink >= lo && kink <= hi && total < best.2 {
-                        best = (kink, fb, total, g_at[g]);
+                    let (kink, fb) = (d[g][b], f_at[g][b]);
+                    if self.w[g] != 0.0 && kink >= lo && kink <= hi && fb + g_floor < best.2 {
+                        let gk = g_of(rest + cb * kink);
+                        if fb + gk < best.2 {
+                            best = (kink, fb, fb + gk, gk);
+                        }
                     }
                 }
                 // G is least at one of its zeros, so a candidate whose F with that least G
