@@ -1144,7 +1144,11 @@ async fn a_store_that_applied_an_earlier_wording_of_a_reworded_migration_opens()
     store.close().await;
 
     let store = Store::open(&path).await.unwrap();
-    assert_eq!(applied(&store).await, current, "the current checksums are recorded");
+    assert_eq!(
+        applied(&store).await,
+        current,
+        "the current checksums are recorded"
+    );
     assert_eq!(store.scan_detail(scan).await.unwrap().readings.len(), 3);
     store.close().await;
 
