@@ -8,12 +8,9 @@ pub fn rfc3339_utc_now() -> String {
 
 /// Seconds since the Unix epoch → RFC 3339 UTC, whole seconds (e.g. `2024-05-01T12:00:00Z`).
 pub fn rfc3339_utc(secs: i64) -> String {
-    let format =
-        ::time::macros::format_description!("[year]-[month]-[day]T[hour]:[minute]:[second]Z");
-    ::time::OffsetDateTime::from_unix_timestamp(secs)
-        .ok()
-        .and_then(|t| t.format(&format).ok())
-        .unwrap_or_else(|| format!("{secs} s after 1970-01-01T00:00:00Z"))
+    jiff::Timestamp::from_second(secs)
+        .map(|t| t.strftime("%Y-%m-%dT%H:%M:%SZ").to_string())
+        .unwrap_or_else(|_| format!("{secs} s after 1970-01-01T00:00:00Z"))
 }
 
 /// A time as an instrument's export writes it, as RFC 3339 UTC: RFC 3339 itself, or a civil
@@ -38,5 +35,10 @@ mod tests {
         assert_eq!(rfc3339_utc(951_782_400), "2000-02-29T00:00:00Z");
         assert_eq!(rfc3339_utc(1_714_564_800), "2024-05-01T12:00:00Z");
         assert_eq!(rfc3339_utc(4_107_542_399), "2100-02-28T23:59:59Z");
+        assert_eq!(rfc3339_utc(-1), "1969-12-31T23:59:59Z");
+        assert_eq!(
+            rfc3339_utc(i64::MAX),
+            format!("{} s after 1970-01-01T00:00:00Z", i64::MAX)
+        );
     }
 }

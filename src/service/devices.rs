@@ -398,11 +398,9 @@ pub fn rotate_aside(path: &Path) -> std::io::Result<Option<PathBuf>> {
     if std::fs::symlink_metadata(path).is_err() {
         return Ok(None);
     }
-    let stamp = time::OffsetDateTime::now_utc()
-        .format(time::macros::format_description!(
-            "[year][month][day]T[hour][minute][second]Z"
-        ))
-        .map_err(std::io::Error::other)?;
+    let stamp = jiff::Timestamp::now()
+        .strftime("%Y%m%dT%H%M%SZ")
+        .to_string();
     let stem = path
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -459,5 +457,40 @@ where
     match recorder {
         None => drivers::spawn_sra(factory, config),
         Some(r) => drivers::spawn_sra(move || Ok(Tap::new(factory()?, r.clone())), config),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rotate_aside;
+
+    #[test]
+    fn a_recording_is_moved_aside_under_its_utc_timestamp() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("session.jsonl");
+        assert_eq!(rotate_aside(&path).unwrap(), None, "nothing to move");
+        std::fs::write(&path, "first").unwrap();
+        let before = jiff::Timestamp::now().as_second();
+        let aside = rotate_aside(&path).unwrap().expect("moved aside");
+        let after = jiff::Timestamp::now().as_second();
+        assert!(!path.exists());
+        assert_eq!(std::fs::read_to_string(&aside).unwrap(), "first");
+        let name = aside.file_name().unwrap().to_str().unwrap();
+        let stamp = name
+            .strip_prefix("session.")
+            .and_then(|s| s.strip_suffix(".jsonl"))
+            .expect(name);
+        // STEM.YYYYMMDDTHHMMSSZ.EXT, in UTC, between the two readings of the clock.
+        let at: jiff::Timestamp = jiff::fmt::strtime::parse("%Y%m%dT%H%M%SZ", stamp)
+            .and_then(|t| t.to_datetime())
+            .and_then(|t| jiff::tz::TimeZone::UTC.to_timestamp(t))
+            .expect(stamp);
+        assert!((before..=after).contains(&at.as_second()), "{stamp}");
+        // A second one in the same second gets a counter, never overwriting the first.
+        std::fs::write(&path, "second").unwrap();
+        let again = rotate_aside(&path).unwrap().expect("moved aside");
+        assert_ne!(again, aside);
+        assert_eq!(std::fs::read_to_string(&aside).unwrap(), "first");
+        assert_eq!(std::fs::read_to_string(&again).unwrap(), "second");
     }
 }

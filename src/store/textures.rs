@@ -156,7 +156,7 @@ mod tests {
             .map(|g| NewReading {
                 device: g.device,
                 geometry: g,
-                values: spectrum.clone(),
+                values: spectrum,
                 raw_frame: &[],
             })
             .collect();
