@@ -44,12 +44,14 @@ struct Station {
     daemon: Option<ServeChild>,
 }
 
-/// The stations fit under the paper's flat SRA model: cf2's full-search bootstrap under the
-/// luminance default takes minutes per scan in a debug build, longer than a round may take to
-/// converge when a scan is let run to its end.
+/// The stations fit under the paper's flat SRA model with 20 bootstrap resamples: cf2's
+/// full-search bootstrap under the luminance default takes minutes per scan in a debug build,
+/// longer than a round may take to converge when a scan is let run to its end; the soak checks
+/// forwarding, and 20 resamples make as many rows to forward as 200 (the intervals are
+/// forwarded like every other column).
 fn sections(name: &str, url: &str) -> String {
     format!(
-        "[station]\nid = \"{name}\"\n\n[sync]\nurl = \"{url}\"\nbatch = 20\n\n[fit]\nsra = \"flat\"\n\n"
+        "[station]\nid = \"{name}\"\n\n[sync]\nurl = \"{url}\"\nbatch = 20\n\n[fit]\nsra = \"flat\"\nbootstrap = 20\n\n"
     )
 }
 
