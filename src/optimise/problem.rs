@@ -796,9 +796,10 @@ impl Problem {
                 .abs()
                 .max(f64::MIN_POSITIVE);
         let mut seed = (start, *k, *f);
-        // Each band's candidates for the multiplier starts, geometry by geometry: the kinks
-        // that are candidates, and F = ∞ (never picked) where a kink is not, so that the picks
-        // below run over all bands at once without branches.
+        // Each band's candidate kinks, geometry by geometry: the kinks inside the bounds of
+        // geometries that count, and F = ∞ (never picked) where a kink is not one, so that
+        // the multiplier starts' picks run over all bands at once without branches and the
+        // sweeps test one value.
         let mut cand_x = [[0.0; BANDS]; G];
         let mut cand_f = [[f64::INFINITY; BANDS]; G];
         for g in 0..G {
@@ -886,10 +887,11 @@ impl Problem {
                 let cb = lum.c[b];
                 let rest = big_k - cb * k[b];
                 let mut best = (k[b], f[b], f[b] + g_here - margin, g_here);
-                // The band's kinks, in order; G only where F with G's floor could win.
+                // The band's candidate kinks, in order (F = ∞ never passes); G only where F
+                // with G's floor could win.
                 for g in 0..G {
-                    let (kink, fb) = (d[g][b], f_at[g][b]);
-                    if self.w[g] != 0.0 && kink >= lo && kink <= hi && fb + g_floor < best.2 {
+                    let (kink, fb) = (cand_x[g][b], cand_f[g][b]);
+                    if fb + g_floor < best.2 {
                         let gk = g_of(rest + cb * kink);
                         if fb + gk < best.2 {
                             best = (kink, fb, fb + gk, gk);
