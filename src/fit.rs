@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::colour::{Colorimetry, Lab};
 use crate::cost::CostFunction;
+use crate::crossval::HeldOut;
 use crate::evaluation::{Evaluation, evaluate_with, lab_per_geometry_with};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
 use crate::model::{self, FresnelCosine, ModelKind, SpecularGeometry};
@@ -59,6 +60,9 @@ pub struct FitReport {
     pub specular_delta_l: Option<SpecularDeltaL>,
     /// The bootstrap intervals, when asked for ([`FitReport::with_uncertainty`]).
     pub uncertainty: Option<Uncertainty>,
+    /// The predictions of the readings held out of the fit
+    /// ([`crate::crossval::fit_holding_out`]); `None` for a fit to every reading.
+    pub held_out: Option<Vec<HeldOut>>,
 }
 
 /// Why a scan could not be fitted.
@@ -141,6 +145,7 @@ pub fn fit_measured(
         evaluation,
         specular_delta_l,
         uncertainty: None,
+        held_out: None,
     })
 }
 
@@ -211,6 +216,7 @@ impl FitReport {
             sra: self.request.settings.sra,
             specular_delta_l: self.specular_delta_l.map(SpecularDeltaLDocument::from),
             uncertainty: self.uncertainty.clone(),
+            held_out: self.held_out.clone(),
         }
     }
 }
@@ -283,6 +289,11 @@ pub struct FitDocument {
     /// The bootstrap intervals (`brdfd fit --bootstrap N`); absent without them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<Uncertainty>,
+    /// The readings held out of the fit and their prediction (`brdfd fit --hold-out`):
+    /// `[{"geometry", "delta_e00", "measured_lab", "predicted_lab"}, …]`; absent for a fit to
+    /// every reading (`delta_e00` and `lab` then cover the readings fitted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<Vec<HeldOut>>,
 }
 
 impl FitDocument {
