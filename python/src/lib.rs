@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 
-use brdfd::cli::exchange::{ImportArgs, read_one};
 use brdfd::cli::crossval::{CrossvalArgs, crossval_with};
+use brdfd::cli::exchange::{ImportArgs, read_one};
 use brdfd::cli::fit::{FitArgs, fit_with, parse_fresnel};
 use brdfd::fit::FitReport;
 use brdfd::geometry::{Device, GEOMETRIES, Geometry, by_name};
