@@ -13,6 +13,7 @@
 //! luminance pair, SCIENCE.md §5.1), so a fit cannot be made with one of them alone.
 
 use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use serde::{Deserialize, Serialize};
 
@@ -22,6 +23,7 @@ use crate::evaluation::{evaluate_with, lab_per_geometry_with};
 use crate::fit::{FitReport, FitRequest, FitScanError, fit_measured};
 use crate::geometry::{Device, GEOMETRIES, GeometrySet, by_name};
 use crate::model::{FresnelCosine, ModelKind};
+use crate::optimise::Progress;
 use crate::processing::{self, MeasuredBrdf};
 use crate::scan::Scan;
 
@@ -145,6 +147,20 @@ pub fn fit_holding_out(
     request: &FitRequest,
     held: &[usize],
 ) -> Result<FitReport, FitScanError> {
+    fit_holding_out_with(sample, reference, measured, request, held, &mut |_| {
+        ControlFlow::Continue(())
+    })
+}
+
+/// [`fit_holding_out`] with the optimiser's per-generation observer (`Break` cancels the fit).
+pub fn fit_holding_out_with(
+    sample: &str,
+    reference: &str,
+    measured: &MeasuredBrdf,
+    request: &FitRequest,
+    held: &[usize],
+    observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<FitReport, FitScanError> {
     let mut geometries = measured.geometries;
     for &g in held {
         geometries = geometries.without(g);
@@ -153,9 +169,7 @@ pub fn fit_holding_out(
         geometries,
         ..*measured
     };
-    let mut report = fit_measured(sample, reference, reduced, request, &mut |_| {
-        ControlFlow::Continue(())
-    })?;
+    let mut report = fit_measured(sample, reference, reduced, request, observer)?;
     report.held_out = Some(predictions(measured, &report, held));
     Ok(report)
 }
@@ -172,14 +186,42 @@ pub fn crossval_measured(
     let full = fit_measured(sample, reference, *measured, request, &mut |_| {
         ControlFlow::Continue(())
     })?;
+    crossval_of_fit(&full, &AtomicBool::new(false))
+}
+
+/// Leave-one-geometry-out cross-validation of a fit already made to every reading (`full`, as
+/// [`fit_measured`] returns it): its measurement, configuration and colorimetry, with its own
+/// evaluation as [`CrossValidation::fitted_mean`], so only the held-out fits are made (one per
+/// MA-T12 geometry measured). `stop`, read once per optimiser generation, cancels it
+/// (`FitError::Cancelled`); the fit worker runs this after every stored fit.
+pub fn crossval_of_fit(
+    full: &FitReport,
+    stop: &AtomicBool,
+) -> Result<CrossValidation, FitScanError> {
+    let request = &full.request;
+    let measured = &full.measured;
+    let mut observer = |_: &Progress| {
+        if stop.load(Ordering::Relaxed) {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    };
     let mut held_out = Vec::new();
     for g in measured
         .geometries
         .iter()
         .filter(|g| g.device == Device::MaT12)
     {
-        let r = fit_holding_out(sample, reference, measured, request, &[g.index])?;
-        held_out.extend(r.held_out.expect("set by fit_holding_out"));
+        let r = fit_holding_out_with(
+            &full.sample,
+            &full.reference,
+            measured,
+            request,
+            &[g.index],
+            &mut observer,
+        )?;
+        held_out.extend(r.held_out.expect("set by fit_holding_out_with"));
     }
     let held_out_mean = held_out.iter().map(|h| h.delta_e00).sum::<f64>() / held_out.len() as f64;
     Ok(CrossValidation {
@@ -271,6 +313,35 @@ mod tests {
         assert!(h2.measured_lab[0] > h2.predicted_lab[0] + 3.0, "{h2:?}");
         // The reading held out did not steer the fit.
         assert!((h2.predicted_lab[0] - h[0].predicted_lab[0]).abs() < 0.05);
+    }
+
+    #[test]
+    fn crossval_of_a_fit_reuses_it_and_stops_when_asked() {
+        let truth = synthetic::cases()[2].truth;
+        let m = MeasuredBrdf {
+            geometries: GeometrySet::MA_T12,
+            ..synthetic::measured(&truth, FresnelCosine::Incidence)
+        };
+        let req = request(CostFunction::Cf1);
+        let mut full =
+            fit_measured("s", "N9", m, &req, &mut |_| ControlFlow::Continue(())).unwrap();
+        // The fitted mean is the given fit's own, whatever it says.
+        full.evaluation.diffuse.mean = 7.5;
+        let cv = crossval_of_fit(&full, &AtomicBool::new(false)).unwrap();
+        assert_eq!(cv.fitted_mean, 7.5);
+        assert_eq!(cv.held_out.len(), 12);
+        assert!(cv.held_out_mean < 0.1, "{cv:?}");
+        let stopped = crossval_of_fit(&full, &AtomicBool::new(true)).unwrap_err();
+        assert!(
+            matches!(
+                stopped,
+                FitScanError::Fit {
+                    source: crate::optimise::FitError::Cancelled,
+                    ..
+                }
+            ),
+            "{stopped}"
+        );
     }
 
     #[test]

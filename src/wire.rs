@@ -409,6 +409,11 @@ pub struct FitDetail {
     pub colorimetry: Option<Colorimetry>,
     /// The bootstrap intervals, once computed (SCIENCE.md §10).
     pub uncertainty: Option<Uncertainty>,
+    /// Leave-one-geometry-out cross-validation of the fit's configuration, once computed: each
+    /// MA-T12 geometry predicted by a fit without it (SCIENCE.md §12.5). Absent from a daemon
+    /// that does not compute it.
+    #[serde(default)]
+    pub crossval: Option<crate::crossval::CrossValidation>,
     /// The SRA reading model of the fit's cost (SCIENCE.md §5.1).
     pub sra: SraReading,
     /// Specular |ΔL*| between model and measured luminance (SCIENCE.md §7.2), for a done fit.

@@ -207,6 +207,7 @@ async fn watching_service(store: &brdfd::store::Store, inbox: &Path) -> brdfd::s
     let settings = brdfd::service::ServiceSettings {
         cost_functions: vec![brdfd::cost::CostFunction::Cf2],
         bootstrap: 0,
+        crossval: false,
         ingest: Some(brdfd::service::IngestSettings {
             dir: inbox.to_path_buf(),
             settle: Duration::from_millis(50),

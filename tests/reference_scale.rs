@@ -36,6 +36,7 @@ fn a_calibrated_tile_is_recorded_and_scales_the_measured_brdf() {
             assert_eq!(config.reference.reflectance, Some(rho));
             let settings = ServiceSettings {
                 cost_functions: vec![brdfd::cost::CostFunction::Cf1],
+                crossval: false,
                 ..ServiceSettings::from_config(&config)
             };
             let devices = simulated(&strict_fast());

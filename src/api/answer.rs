@@ -88,6 +88,7 @@ impl From<crate::store::FitDetail> for wire::FitDetail {
             }),
             colorimetry: d.colorimetry,
             uncertainty: d.uncertainty,
+            crossval: d.crossval,
             sra: d.sra,
             specular_delta_l: d.specular_delta_l,
             lab: d.lab,

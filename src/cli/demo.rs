@@ -84,6 +84,8 @@ pub async fn run_demo(store: &Store, args: &DemoArgs) -> anyhow::Result<DemoResu
         max_concurrent_fits: jobs,
         // The paper's SRA model: the demo reproduces the paper.
         sra: crate::sra_reading::SraModel::Flat,
+        // The paper's figures are fits to every reading; no held-out fits.
+        crossval: false,
         ..ServiceSettings::default()
     };
     let setup = ReplaySetup {

@@ -195,8 +195,24 @@ pub(super) fn print_fits(detail: &ScanView) {
         print_fit_extras(fit);
     }
 }
-/// Under a fit's row: the colorimetry of its ΔE00 and, once the bootstrap has run, the 95 %
-/// intervals of the lobe parameters (SCIENCE.md §7.1, §10).
+/// A fit's held-out ΔE00 beside its fitted one, over the MA-T12 geometries, and the geometry
+/// predicted worst (SCIENCE.md §12.5).
+pub(super) fn held_out_line(cv: &crate::crossval::CrossValidation) -> String {
+    let worst = cv
+        .held_out
+        .iter()
+        .max_by(|a, b| a.delta_e00.total_cmp(&b.delta_e00))
+        .map(|h| format!(", worst {} {:.2}", h.geometry, h.delta_e00))
+        .unwrap_or_default();
+    format!(
+        "held-out ΔE00 {:.3} (fitted {:.3}; each MA-T12 geometry predicted by a fit without \
+         it{worst}): how far to trust the estimate off the measured angles",
+        cv.held_out_mean, cv.fitted_mean
+    )
+}
+/// Under a fit's row: the colorimetry of its ΔE00, once computed the held-out ΔE00 of its
+/// cross-validation, and once the bootstrap has run the 95 % intervals of the lobe parameters
+/// (SCIENCE.md §7.1, §10, §12.5).
 fn print_fit_extras(fit: &FitDetail) {
     // Where the model misses: measured minus fitted L* at each geometry, in table order.
     if let Some(lab) = fit.lab.as_ref().filter(|l| !l.0.is_empty()) {
@@ -215,6 +231,9 @@ fn print_fit_extras(fit: &FitDetail) {
     }
     if let Some(c) = &fit.colorimetry {
         println!("       ΔE00 under D65/{}° {}", c.observer, c.weighting);
+    }
+    if let Some(cv) = &fit.crossval {
+        println!("       {}", held_out_line(cv));
     }
     let sra = &fit.sra;
     let delta_l = match &fit.specular_delta_l {

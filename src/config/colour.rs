@@ -52,11 +52,13 @@ mod tests {
     #[test]
     fn colour_and_bootstrap_settings() {
         let c =
-            parse("[colour]\nobserver = \"10\"\nweighting = \"astm-e308\"\n[fit]\nbootstrap = 0\n")
+            parse("[colour]\nobserver = \"10\"\nweighting = \"astm-e308\"\n[fit]\nbootstrap = 0\ncrossval = false\n")
                 .unwrap();
         assert_eq!(c.colour.observer, crate::colour::Observer::Cie1964TenDegree);
         assert_eq!(c.colour.weighting, crate::colour::Weighting::AstmE308);
         assert_eq!(c.fit.bootstrap, 0);
+        assert!(!c.fit.crossval);
+        assert!(crate::config::Config::default().fit.crossval);
         let e = parse("[colour]\nobserver = \"5\"\n")
             .unwrap_err()
             .to_string();

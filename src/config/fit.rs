@@ -1,5 +1,5 @@
 //! `[fit]`: which cost functions every complete scan is fitted with, and how (method, seed,
-//! model, SRA model, bootstrap).
+//! model, SRA model, bootstrap, cross-validation).
 
 use std::num::NonZeroUsize;
 
@@ -30,6 +30,8 @@ pub struct FitConfig {
     /// Bootstrap resamples per fit for the parameter intervals (SCIENCE.md §10); 0 turns the
     /// intervals off.
     pub bootstrap: u32,
+    /// Leave-one-geometry-out cross-validation of every stored fit (SCIENCE.md §12.5).
+    pub crossval: bool,
 }
 
 impl Default for FitConfig {
@@ -43,6 +45,7 @@ impl Default for FitConfig {
             sra: defaults::SRA,
             model: crate::model::ModelKind::Paper,
             bootstrap: defaults::BOOTSTRAP,
+            crossval: true,
         }
     }
 }
@@ -70,6 +73,7 @@ pub(super) struct RawFit {
     sra: S<String>,
     model: S<String>,
     bootstrap: S<u32>,
+    crossval: S<bool>,
 }
 
 // ---- Stage 2: its checks ------------------------------------------------------------------
@@ -150,6 +154,7 @@ impl Checker<'_> {
                     ))
                 }
             })?,
+            crossval: self.value("fit.crossval", &raw.crossval, true, Ok)?,
         })
     }
 }

@@ -493,6 +493,52 @@ mod tests {
         assert!(!md.contains("simulated —"), "{md}");
     }
 
+    /// A fit's held-out ΔE00 stands beside its fitted one; a fit without it is marked and
+    /// counted, and a study with none says why.
+    #[test]
+    fn held_out_delta_e_is_tabled_beside_the_fitted_one() {
+        let mut study = study_from_truth(2, None);
+        let md = summary::markdown(&study, &Analysis::of(&study), &[]);
+        assert!(
+            md.contains("No held-out ΔE00: none of the 6 finished fits has a cross-validation"),
+            "{md}"
+        );
+        let FitState::Done(d) = &mut study.samples[0].fits[0].state else {
+            panic!("the first fit is done");
+        };
+        let held = |geometry: &str, de: f64| crate::crossval::HeldOut {
+            geometry: geometry.into(),
+            delta_e00: de,
+            measured_lab: [50.0, 1.0, 2.0],
+            predicted_lab: [51.0, 1.0, 2.0],
+        };
+        d.crossval = Some(crate::crossval::CrossValidation {
+            cost: CostFunction::Cf1,
+            model: crate::model::ModelKind::Paper,
+            fresnel: d.fresnel,
+            fitted_mean: 0.25,
+            held_out_mean: 1.5,
+            held_out: vec![held("15as-45", 1.0), held("45as-15", 2.0)],
+        });
+        let md = summary::markdown(&study, &Analysis::of(&study), &[]);
+        assert!(
+            md.contains("Held-out ΔE00: how far to trust each estimate off the measured angles"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| sample | cf1 fitted (MA-T12) | cf1 held out | cf1 worst held out |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| T.Freesia pink | 0.250 | 1.500 | 45as-15 2.000 | not computed |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("5 of the 6 finished fits have no held-out ΔE00"),
+            "{md}"
+        );
+    }
+
     #[test]
     fn an_empty_study_is_refused() {
         let dir = tempfile::tempdir().unwrap();

@@ -123,6 +123,65 @@ fn ci(c: &Option<MeanCi>) -> String {
     }
 }
 
+/// Each fit's held-out ΔE00 beside its fitted ΔE00 over the MA-T12 geometries (its
+/// leave-one-geometry-out cross-validation, SCIENCE.md §12.5), when any fit has one; else a
+/// sentence saying why there is none.
+fn held_out_blocks(study: &Study, costs: &[CostFunction]) -> Vec<Block> {
+    let with = study
+        .samples
+        .iter()
+        .flat_map(|s| s.fits.iter())
+        .filter(|f| f.done().is_some_and(|d| d.crossval.is_some()))
+        .count();
+    let done = study
+        .samples
+        .iter()
+        .flat_map(|s| s.fits.iter())
+        .filter(|f| f.done().is_some())
+        .count();
+    if done == 0 {
+        return Vec::new();
+    }
+    let mut b = vec![Block::Heading(
+        "Held-out ΔE00: how far to trust each estimate off the measured angles".into(),
+    )];
+    if with == 0 {
+        b.push(Block::Para(format!(
+            "No held-out ΔE00: none of the {done} finished fits has a cross-validation (the daemon computes one after each fit unless `[fit] crossval = false`; `brdfd crossval SCAN.json` computes it for an exported scan)."
+        )));
+        return b;
+    }
+    b.push(per_sample_table(
+        study,
+        costs,
+        &["fitted (MA-T12)", "held out", "worst held out"],
+        "Held-out ΔE00 per sample: each MA-T12 geometry held out in turn, the others fitted under the fit's own configuration, the held-out reading predicted (leave-one-geometry-out, SCIENCE.md §12.5); mean ΔE00 of those predictions beside the mean ΔE00 of the fit to every reading at the same geometries, and the geometry predicted worst. The fitted figure says how well the model reproduces what it was fitted to; the held-out one how far to trust the estimate at angles that were not measured.".into(),
+        |row, s, c| match s.fit(c).and_then(|f| f.done()).map(|d| &d.crossval) {
+            Some(Some(cv)) => {
+                let worst = cv
+                    .held_out
+                    .iter()
+                    .max_by(|a, b| a.delta_e00.total_cmp(&b.delta_e00))
+                    .map_or(String::new(), |h| format!("{} {:.3}", h.geometry, h.delta_e00));
+                row.extend([
+                    format!("{:.3}", cv.fitted_mean),
+                    format!("{:.3}", cv.held_out_mean),
+                    worst,
+                ]);
+            }
+            Some(None) => row.extend(["not computed".into(), "".into(), "".into()]),
+            None => row.extend(["no finished fit".into(), "".into(), "".into()]),
+        },
+    ));
+    if with < done {
+        b.push(Block::Para(format!(
+            "{} of the {done} finished fits have no held-out ΔE00 (\"not computed\" above: `[fit] crossval = false`, computed before the daemon did it, or stopped by a shutdown).",
+            done - with
+        )));
+    }
+    b
+}
+
 fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> {
     let costs = &analysis.cost_functions;
     let cost_list = costs
@@ -253,6 +312,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             None => row.extend(["no fit".into(), "".into(), "".into(), "".into()]),
         },
     ));
+    b.extend(held_out_blocks(study, costs));
     b.push(Block::Heading(
         "Mean ΔE00 per cost function, 95 % confidence interval".into(),
     ));

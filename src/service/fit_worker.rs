@@ -8,7 +8,8 @@
 //! panic becomes a `failed` fit with the panic's message, and the worker takes the next fit.
 //!
 //! [`FitWorker`] owns the worker's state — the queue's sending end, the fits' cancel flags,
-//! the queued/running/bootstrap counters, the bootstrap slot and the fit computation — and
+//! the queued/running/bootstrap/cross-validation counters, the bootstrap and cross-validation
+//! slots and the fit computation — and
 //! nothing outside this module changes it; the rest of the service hands it fit ids
 //! ([`FitWorker::submit`]), asks it to cancel one ([`FitWorker::cancel_fit`]) and reads its
 //! counters.
@@ -24,6 +25,12 @@
 //! `Break` when the fit's flag is set ([`FitWorker::cancel_fit`]) or the daemon is stopping. A
 //! fit stopped by shutdown is left `running`; the next start queues it again (same seed, same
 //! result).
+//!
+//! After a fit is stored, two more computations run on it side by side, each in a slot of its
+//! own (one at a time, no fit permit) and counted for `status`: its bootstrap intervals
+//! (`[fit] bootstrap`, SCIENCE.md §10) and its leave-one-geometry-out cross-validation
+//! (`[fit] crossval`, SCIENCE.md §12.5: the held-out ΔE00 shown beside the fit's). Shutdown stops
+//! both; a fit left without them shows none.
 
 use std::collections::HashMap;
 use std::ops::ControlFlow;
@@ -35,6 +42,7 @@ use std::time::Instant;
 use tokio::sync::{Semaphore, mpsc};
 
 use crate::cost::CostFunction;
+use crate::crossval::crossval_of_fit;
 use crate::fit::{FitReport, FitRequest, FitScanError, fit_measured};
 use crate::optimise::{FitError, Progress, Settings};
 use crate::processing::{MeasuredBrdf, ProcessingOptions};
@@ -101,6 +109,10 @@ pub(crate) struct FitWorker {
     bootstrap_slot: Arc<Semaphore>,
     /// Bootstraps waiting for the slot or running.
     bootstraps_pending: AtomicUsize,
+    /// One cross-validation at a time, apart from the fits' permits and the bootstrap's slot.
+    crossval_slot: Arc<Semaphore>,
+    /// Cross-validations waiting for the slot or running.
+    crossvals_pending: AtomicUsize,
 }
 
 impl FitWorker {
@@ -119,6 +131,8 @@ impl FitWorker {
             running: AtomicUsize::new(0),
             bootstrap_slot: Arc::new(Semaphore::new(1)),
             bootstraps_pending: AtomicUsize::new(0),
+            crossval_slot: Arc::new(Semaphore::new(1)),
+            crossvals_pending: AtomicUsize::new(0),
         });
         (worker, rx)
     }
@@ -149,6 +163,11 @@ impl FitWorker {
     /// Finished fits whose bootstrap is waiting or running.
     pub(crate) fn bootstraps_pending(&self) -> usize {
         self.bootstraps_pending.load(Ordering::Relaxed)
+    }
+
+    /// Finished fits whose cross-validation is waiting or running.
+    pub(crate) fn crossvals_pending(&self) -> usize {
+        self.crossvals_pending.load(Ordering::Relaxed)
     }
 
     fn cancels(&self) -> MutexGuard<'_, HashMap<FitRunId, Arc<AtomicBool>>> {
@@ -340,10 +359,69 @@ impl FitWorker {
         };
         let stored = self.record_fit_end(fit, scan, cost, ended).await;
         self.forget(fit);
-        // The fit's end is recorded; its bootstrap is counted on its own.
+        // The fit's end is recorded; its bootstrap and cross-validation are counted on their own.
         drop(running);
         if let Some(report) = stored {
-            self.bootstrap_fit(fit, *report).await;
+            let report = Arc::new(*report);
+            tokio::join!(
+                self.bootstrap_fit(fit, report.clone()),
+                self.crossval_fit(fit, report)
+            );
+        }
+    }
+
+    /// After a fit is stored: its leave-one-geometry-out cross-validation under the fit's own
+    /// configuration (`[fit] crossval`; SCIENCE.md §12.5), reusing the fit just made and
+    /// fitting once more per MA-T12 geometry without it, on one blocking thread, one at a time
+    /// and without a fit permit, beside the bootstrap; then stored with the fit. Shutdown stops
+    /// it within an optimiser generation; a fit left without one shows none. A scan with fewer
+    /// than four MA-T12 readings has none (a fit needs three left).
+    async fn crossval_fit(&self, fit: FitRunId, report: Arc<FitReport>) {
+        let ma = report
+            .measured
+            .geometries
+            .iter()
+            .filter(|g| g.device == crate::geometry::Device::MaT12)
+            .count();
+        if !self.ctx.settings.crossval || ma < 4 || self.ctx.is_stopping() {
+            return;
+        }
+        self.crossvals_pending.fetch_add(1, Ordering::Relaxed);
+        let _pending = CountedUntilDrop(&self.crossvals_pending);
+        let Ok(permit) = self.crossval_slot.clone().acquire_owned().await else {
+            return;
+        };
+        let stopping = self.ctx.stop_flag();
+        let joined = tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            catch_unwind(AssertUnwindSafe(|| crossval_of_fit(&report, &stopping)))
+        })
+        .await;
+        match joined {
+            Ok(Ok(Ok(cv))) => {
+                if let Err(e) = self
+                    .ctx
+                    .timed_store(self.ctx.store.set_fit_crossval(fit, &cv))
+                    .await
+                {
+                    tracing::warn!(error = %e, %fit, "cannot store the fit's cross-validation");
+                }
+            }
+            Ok(Ok(Err(FitScanError::Fit {
+                source: FitError::Cancelled,
+                ..
+            }))) => {
+                tracing::info!(%fit, "cross-validation interrupted by shutdown; the fit has none");
+            }
+            Ok(Ok(Err(e))) => tracing::warn!(error = %e, %fit, "no cross-validation for the fit"),
+            Ok(Err(payload)) => tracing::error!(
+                %fit,
+                "the cross-validation panicked ({}); this is a bug in brdfd",
+                panic_message(payload.as_ref())
+            ),
+            Err(e) => {
+                tracing::error!(error = %e, %fit, "the cross-validation's thread ended abnormally")
+            }
         }
     }
 
@@ -351,7 +429,7 @@ impl FitWorker {
     /// §10) on one blocking thread, one bootstrap at a time and without a fit permit (so the
     /// next scans' point estimates are not held up), then stored with the fit. Shutdown stops
     /// it between refits; a fit left without intervals shows none.
-    async fn bootstrap_fit(&self, fit: FitRunId, report: FitReport) {
+    async fn bootstrap_fit(&self, fit: FitRunId, report: Arc<FitReport>) {
         let resamples = self.ctx.settings.bootstrap;
         if resamples == 0 || self.ctx.is_stopping() {
             return;

@@ -114,6 +114,8 @@ pub struct ServiceSettings {
     pub colorimetry: crate::colour::Colorimetry,
     /// Bootstrap resamples per fit (0: no intervals).
     pub bootstrap: u32,
+    /// Leave-one-geometry-out cross-validation of every stored fit (`[fit] crossval`).
+    pub crossval: bool,
     /// The watch folder (`[ingest]`); `None`: none.
     pub ingest: Option<IngestSettings>,
 }
@@ -138,6 +140,7 @@ impl ServiceSettings {
             }),
             colorimetry: config.colour,
             bootstrap: config.fit.bootstrap,
+            crossval: config.fit.crossval,
             ingest: IngestSettings::from_config(&config.ingest),
         }
     }
@@ -230,6 +233,9 @@ pub struct Status<D = DeviceStatus, Op = Operation> {
     pub fits_running: usize,
     /// Finished fits whose bootstrap intervals are still being computed (SCIENCE.md §10).
     pub bootstraps_pending: usize,
+    /// Finished fits whose cross-validation is still being computed (`[fit] crossval`).
+    #[serde(default)]
+    pub crossvals_pending: usize,
     /// Whether each instrument is simulated.
     pub simulated: SimulatedStatus,
     /// Each instrument: its connection state and identity (MA-T12 first, then the SRA).
@@ -474,6 +480,7 @@ impl Service {
             fits_queued: fits.queued(),
             fits_running: fits.running(),
             bootstraps_pending: fits.bootstraps_pending(),
+            crossvals_pending: fits.crossvals_pending(),
             simulated: acquisition.simulated(),
             devices: self.device_statuses(),
             timings: self.timings(),

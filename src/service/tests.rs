@@ -17,7 +17,11 @@ fn check_idle(s: &Service) -> Result<(), ServiceError> {
 async fn service() -> Service {
     service_on(
         Store::open_in_memory().await.unwrap(),
-        ServiceSettings::default(),
+        // No cross-validation: 12 more real fits per fit, which these tests do not read.
+        ServiceSettings {
+            crossval: false,
+            ..ServiceSettings::default()
+        },
         ServiceOptions::default(),
     )
     .await
@@ -228,6 +232,7 @@ async fn a_fit_keeps_the_colorimetry_it_was_queued_with() {
     let configured = |colorimetry| ServiceSettings {
         cost_functions: vec![CostFunction::Cf2],
         bootstrap: 0,
+        crossval: false,
         colorimetry,
         ..ServiceSettings::default()
     };

@@ -40,6 +40,8 @@ pub struct CentralScan {
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct FitExtrasText {
     pub uncertainty_json: Option<String>,
+    /// The cross-validation (migration 0030, forwarded by central step 0017).
+    pub crossval_json: Option<String>,
     pub observer: Option<String>,
     pub weighting: Option<String>,
 }
@@ -230,7 +232,7 @@ pub async fn load_scans(
                 f.status, f.error, f.cost,
                 f.params_json, f.best_cost_per_generation_json, f.evaluations, f.generations,
                 f.wall_ms, f.queued_at_ms, f.started_at_ms, f.finished_at_ms,
-                f.uncertainty_json, e.observer, e.weighting
+                f.uncertainty_json, f.crossval_json, e.observer, e.weighting
          FROM sel JOIN fit_runs f ON f.station = sel.station AND f.scan_id = sel.id
          JOIN processed p ON p.station = f.station AND p.id = f.processed_id
          LEFT JOIN evaluation_summaries e ON e.station = f.station AND e.fit_run_id = f.id
@@ -247,6 +249,7 @@ pub async fn load_scans(
             run.id.0,
             FitExtrasText {
                 uncertainty_json: row.try_get("uncertainty_json")?,
+                crossval_json: row.try_get("crossval_json")?,
                 observer: row.try_get("observer")?,
                 weighting: row.try_get("weighting")?,
             },

@@ -5,6 +5,7 @@
 //! transaction, so a fit is never `done` without its evaluation.
 
 use crate::colour::Colorimetry;
+use crate::crossval::CrossValidation;
 use crate::geometry::{Device, GEOMETRIES, GEOMETRY_COUNT, Geometry, GeometrySet, MA_T12_COUNT};
 use crate::model::{self, FresnelCosine, Params, SpecularGeometry};
 use crate::processing::MeasuredBrdf;
@@ -343,6 +344,45 @@ impl Store {
             .await
     }
 
+    /// Stores the leave-one-geometry-out cross-validation of a done fit (computed after it is
+    /// stored): the whole of it and its mean held-out ΔE00 in a column of its own.
+    pub async fn set_fit_crossval(
+        &self,
+        fit: FitRunId,
+        crossval: &CrossValidation,
+    ) -> Result<(), StoreError> {
+        let owner = || format!("fit run {fit}");
+        let mut values = vec![crossval.fitted_mean, crossval.held_out_mean];
+        for h in &crossval.held_out {
+            values.push(h.delta_e00);
+            values.extend_from_slice(&h.measured_lab);
+            values.extend_from_slice(&h.predicted_lab);
+        }
+        codec::check_finite(&owner, &values, |_| "a held-out prediction".into())?;
+        if crossval.held_out.is_empty() {
+            return Err(StoreError::Empty {
+                field: "cross-validation's held-out predictions",
+            });
+        }
+        let json = to_json("fit cross-validation", crossval)?;
+        let done = sqlx::query(
+            "UPDATE fit_runs SET crossval_json = $2, held_out_mean = $3
+             WHERE id = $1 AND status = 'done'",
+        )
+        .bind(fit.0)
+        .bind(json)
+        .bind(crossval.held_out_mean)
+        .execute(&self.writer)
+        .await?;
+        self.changed(
+            fit,
+            done.rows_affected(),
+            "done",
+            "store its cross-validation",
+        )
+        .await
+    }
+
     /// queued | running → failed, with the error.
     pub async fn fail_fit(&self, fit: FitRunId, reason: &str) -> Result<(), StoreError> {
         if reason.trim().is_empty() {
@@ -422,11 +462,20 @@ impl Store {
                 id: fit.0,
             })?
             .into_run()?;
-        let uncertainty: Option<String> =
-            sqlx::query_scalar("SELECT uncertainty_json FROM fit_runs WHERE id = $1")
+        let (uncertainty, crossval): (Option<String>, Option<String>) =
+            sqlx::query_as("SELECT uncertainty_json, crossval_json FROM fit_runs WHERE id = $1")
                 .bind(fit.0)
                 .fetch_one(&self.reader)
                 .await?;
+        let crossval = crossval
+            .map(|text| {
+                serde_json::from_str::<CrossValidation>(&text).map_err(|e| StoreError::Corrupt {
+                    table: "fit_runs",
+                    id: fit.0,
+                    detail: format!("crossval_json: {e}"),
+                })
+            })
+            .transpose()?;
         let uncertainty = uncertainty
             .map(|text| {
                 serde_json::from_str::<Uncertainty>(&text).map_err(|e| StoreError::Corrupt {
@@ -542,6 +591,7 @@ impl Store {
             evaluation,
             colorimetry,
             uncertainty,
+            crossval,
             sra,
             specular_delta_l,
             lab,

@@ -679,6 +679,9 @@ pub struct FitDetail {
     pub colorimetry: Option<crate::colour::Colorimetry>,
     /// The bootstrap intervals, once computed (SCIENCE.md §10).
     pub uncertainty: Option<crate::uncertainty::Uncertainty>,
+    /// The leave-one-geometry-out cross-validation of the fit's configuration, once computed:
+    /// each MA-T12 geometry predicted by a fit without it (SCIENCE.md §12.5).
+    pub crossval: Option<crate::crossval::CrossValidation>,
     /// The SRA reading model of the fit's cost, from its settings (SCIENCE.md §5.1).
     pub sra: crate::sra_reading::SraReading,
     /// Specular |ΔL*| between model and measured luminance (SCIENCE.md §7.2), for a done fit;

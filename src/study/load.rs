@@ -49,6 +49,8 @@ pub enum LoadError {
 pub(crate) struct FitExtras {
     pub colorimetry: Option<crate::colour::Colorimetry>,
     pub uncertainty: Option<crate::uncertainty::Uncertainty>,
+    /// The leave-one-geometry-out cross-validation (migration 0030).
+    pub crossval: Option<crate::crossval::CrossValidation>,
 }
 
 /// A fit run as a study fit, without its stored extras (the paper's colorimetry, no intervals).
@@ -110,7 +112,8 @@ fn fit_state_with(
                         .and_then(|v| serde_json::from_value(v.clone()).ok())
                         .unwrap_or_default(),
                 )
-                .with_sra(measured, sra),
+                .with_sra(measured, sra)
+                .with_crossval(extras.crossval.clone()),
             ))
         }
         FitStatus::Failed => FitState::Failed {
@@ -226,6 +229,7 @@ async fn sample(store: &Store, id: ScanId) -> Result<SampleStudy, LoadError> {
             FitExtras {
                 colorimetry: d.colorimetry,
                 uncertainty: d.uncertainty,
+                crossval: d.crossval,
             },
         );
     }
@@ -285,6 +289,12 @@ pub async fn from_central(
                 .map(serde_json::from_str)
                 .transpose()
                 .map_err(|e| inconsistent(format!("fit run {run}: uncertainty_json: {e}")))?;
+            let crossval = text
+                .crossval_json
+                .as_deref()
+                .map(serde_json::from_str)
+                .transpose()
+                .map_err(|e| inconsistent(format!("fit run {run}: crossval_json: {e}")))?;
             let colorimetry = match (&text.observer, &text.weighting) {
                 (Some(o), Some(w)) => Some(crate::colour::Colorimetry {
                     observer: o
@@ -301,6 +311,7 @@ pub async fn from_central(
                 FitExtras {
                     colorimetry,
                     uncertainty,
+                    crossval,
                 },
             );
         }

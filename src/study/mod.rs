@@ -123,6 +123,9 @@ pub struct DoneFit {
     /// |ΔL*| between model and measured luminance at the SRA geometries, under the
     /// instrument of `sra` (SCIENCE.md §7.2); `None` for a scan without SRA readings.
     pub specular_delta_l: Option<SpecularDeltaL>,
+    /// The fit's leave-one-geometry-out cross-validation, when it was computed (SCIENCE.md
+    /// §12.5): each MA-T12 geometry predicted by a fit without it.
+    pub crossval: Option<crate::crossval::CrossValidation>,
 }
 
 impl DoneFit {
@@ -160,7 +163,14 @@ impl DoneFit {
                 .geometries
                 .has_sra()
                 .then(|| specular_delta_l(&measured.values, &estimated, sra)),
+            crossval: None,
         }
+    }
+
+    /// The same fit with its stored cross-validation.
+    pub fn with_crossval(mut self, crossval: Option<crate::crossval::CrossValidation>) -> DoneFit {
+        self.crossval = crossval;
+        self
     }
 
     /// The same fit made with the SRA reading model `sra` (its |ΔL*| under that instrument).

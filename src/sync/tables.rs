@@ -180,6 +180,9 @@ pub static TABLES: [Table; 10] = [
             // Migration 0020 (central 0009): the colorimetry the fit was queued with.
             ("fit_observer", Text),
             ("fit_weighting", Text),
+            // Migration 0030 (central 0017): the leave-one-geometry-out cross-validation.
+            ("crossval_json", Text),
+            ("held_out_mean", Real),
         ],
     },
     Table {

@@ -57,13 +57,15 @@ pub fn fast_driver_config() -> DriverConfig {
 }
 
 /// Service settings for tests: the defaults (three cost functions, separable, seed 1), two
-/// fits at once, and the paper's flat SRA model: under the luminance default cf2's 200
-/// full-search bootstrap refits take minutes per scan in a debug build. The daemons these
+/// fits at once, the paper's flat SRA model (under the luminance default cf2's 200
+/// full-search bootstrap refits take minutes per scan in a debug build) and no
+/// cross-validation (12 more fits per fit; the tests that check it turn it on). The daemons these
 /// tests start from a configuration file (`serve::write_simulated_config`) run the default.
 pub fn settings() -> ServiceSettings {
     ServiceSettings {
         max_concurrent_fits: 2,
         sra: brdfd::sra_reading::SraModel::Flat,
+        crossval: false,
         ..ServiceSettings::default()
     }
 }

@@ -39,6 +39,15 @@ impl Drop for ServeChild {
 /// (e.g. `[fit]` or `[ingest]`, each ending in a blank line), and both instruments simulated.
 pub fn write_simulated_config(dir: &Path, api_extra: &str, sections: &str) -> PathBuf {
     let path = dir.join("brdfd.toml");
+    // No cross-validation (12 more fits per fit, minutes per scan in a debug build) unless a
+    // test sets `crossval` itself.
+    let sections = if sections.contains("crossval") {
+        sections.to_string()
+    } else if sections.contains("[fit]\n") {
+        sections.replacen("[fit]\n", "[fit]\ncrossval = false\n", 1)
+    } else {
+        format!("[fit]\ncrossval = false\n\n{sections}")
+    };
     let text = format!(
         "[store]\npath = \"{}\"\n\n[api]\nlisten = \"127.0.0.1:0\"\n{api_extra}\n\n[log]\nlevel = \"warn\"\n\n\
          {sections}[devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n",

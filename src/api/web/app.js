@@ -813,13 +813,15 @@ async function renderResult(id) {
     h("section", { "aria-labelledby": "h-de" },
       h("h3", { id: "h-de" }, "ΔE00 (mean)"),
       fitsDone.length ? h("div", { class: "scroll" }, h("table", { class: "data", id: "de-table" },
-        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "specular (2, vs the paper's grey spectrum)", "all (14)", "specular |ΔL*| (SRA model)", ""].map((c) => h("th", { scope: "col" }, c)))),
+        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "held out (each of the 12 predicted without it)", "specular (2, vs the paper's grey spectrum)", "all (14)", "specular |ΔL*| (SRA model)", ""].map((c) => h("th", { scope: "col" }, c)))),
         h("tbody", {}, fitsDone.map((f) => h("tr", { "data-cost": f.cost_function },
           h("td", {}, f.cost_function), h("td", {}, f.method), h("td", {}, fmt(f.delta_e00_diffuse)),
+          heldOutCell(latestDone.get(f.cost_function)),
           h("td", {}, f.delta_e00_specular === null ? "no specular readings" : fmt(f.delta_e00_specular)), h("td", {}, fmt(f.delta_e00_all)),
           h("td", {}, deltaL(latestDone.get(f.cost_function))),
           h("td", { class: f === best ? "best" : "" }, f === best ? "★ best" : ""))))))
-        : h("p", { id: "not-fitted" }, notFitted)),
+        : h("p", { id: "not-fitted" }, notFitted),
+      fitsDone.length ? h("p", { class: "muted" }, "Held out: each MA-T12 geometry predicted by a fit to the others (leave-one-geometry-out), mean ΔE00 — how far to trust the estimate at angles that were not measured. The diffuse figure beside it is the fit to every reading, which says less about other angles.") : null),
     latest.size ? h("section", { "aria-labelledby": "h-params" },
       h("h3", { id: "h-params" }, "Fitted parameters"),
       h("p", { class: "muted" }, "Brackets hold the 95 % interval of each parameter (bootstrap, SCIENCE.md §10), once computed; ks and kd in sr⁻¹, α (roughness) and μ (index of refraction) without unit."),
@@ -887,6 +889,14 @@ function swatchRow(label, swatches, de) {
     h("div", {}, `L* ${fmt(s.lab[0], 1)}`), h("div", {}, `a* ${fmt(s.lab[1], 1)}`), h("div", {}, `b* ${fmt(s.lab[2], 1)}`),
     s.clipped ? h("div", { class: "clip", title: "outside the sRGB gamut" }, "!") : null,
     de ? h("div", {}, `ΔE ${fmt(de[i])}`) : null)));
+}
+
+/** A fit's mean held-out ΔE00 (its cross-validation, once computed), the worst geometry on hover. */
+function heldOutCell(d) {
+  const cv = d && d.crossval;
+  if (!cv) return h("td", { class: "held-out" }, d ? "not computed (yet)" : "—");
+  const worst = cv.held_out.reduce((a, b) => (b.delta_e00 > a.delta_e00 ? b : a));
+  return h("td", { class: "held-out", "data-held-out": fmt(cv.held_out_mean), title: `worst: ${worst.geometry} ${fmt(worst.delta_e00)}` }, fmt(cv.held_out_mean));
 }
 
 function paramRow(f) {
