@@ -20,25 +20,13 @@ use serde::{Deserialize, Serialize};
 use crate::colour::Lab;
 use crate::cost::CostFunction;
 use crate::evaluation::{evaluate_with, lab_per_geometry_with};
+pub use crate::fit::HeldOut;
 use crate::fit::{FitReport, FitRequest, FitScanError, fit_measured};
 use crate::geometry::{Device, GEOMETRIES, GeometrySet, by_name};
 use crate::model::{FresnelCosine, ModelKind};
 use crate::optimise::Progress;
 use crate::processing::{self, MeasuredBrdf};
 use crate::scan::Scan;
-
-/// The prediction of one reading the fit did not see.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct HeldOut {
-    /// The geometry's name (`"45as-15"`).
-    pub geometry: String,
-    /// ΔE00 between the measured and the predicted colour there.
-    pub delta_e00: f64,
-    /// Measured L*a*b* under the fit's colorimetry.
-    pub measured_lab: [f64; 3],
-    /// The fitted model's L*a*b* there.
-    pub predicted_lab: [f64; 3],
-}
 
 /// Leave-one-geometry-out cross-validation of one configuration (cost function, model,
 /// Fresnel factor) on one scan.

@@ -14,7 +14,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::colour::{Colorimetry, Lab};
 use crate::cost::CostFunction;
-use crate::crossval::HeldOut;
 use crate::evaluation::{Evaluation, evaluate_with, lab_per_geometry_with};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, MA_T12_COUNT};
 use crate::model::{self, FresnelCosine, ModelKind, SpecularGeometry};
@@ -311,6 +310,19 @@ impl FitDocument {
         "delta_e00",
         "delta_e00_mean",
     ];
+}
+
+/// The prediction of one reading the fit did not see ([`crate::crossval`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldOut {
+    /// The geometry's name (`"45as-15"`).
+    pub geometry: String,
+    /// ΔE00 between the measured and the predicted colour there.
+    pub delta_e00: f64,
+    /// Measured L*a*b* under the fit's colorimetry.
+    pub measured_lab: [f64; 3],
+    /// The fitted model's L*a*b* there.
+    pub predicted_lab: [f64; 3],
 }
 
 /// `{"sra-20": x, "sra-60": y, "mean": m}`: |ΔL*| at the SRA geometries.
