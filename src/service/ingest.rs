@@ -46,13 +46,14 @@
 //! [`WatchFolder`] owns the folder's status (only its task changes it); the imported scans go
 //! to the pipeline to be fitted, as an import through the API would.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
+use tokio::sync::Semaphore;
 
 use crate::formats::xrite_xlsx::TextureImage;
 use crate::formats::{self, Format, ImportOptions};
@@ -63,12 +64,17 @@ use crate::store::{FileImport, ImportedScan, NewTexture, Provenance, Source, Sto
 use super::context::Context;
 use super::events::Event;
 use super::pipeline::{IMPORTED_SUFFIX, Pipeline, check_name, new_readings, new_textures};
+use super::shutdown::TaskGuard;
 use super::{RefitRequest, ServiceError};
 
 /// Where finished files go, and the folder of files being imported.
 pub const DONE: &str = "done";
 pub const FAILED: &str = "failed";
 pub const IMPORTING: &str = ".importing";
+
+/// Imports the watch folder runs at once, each on a task of its own: a slow file holds one,
+/// and the files behind it go on through the other.
+pub const IMPORTS_AT_ONCE: usize = 2;
 
 /// The watch folder's settings (`[ingest]`).
 #[derive(Debug, Clone, PartialEq)]
@@ -111,6 +117,11 @@ pub struct IngestStatus {
     pub last_file: Option<String>,
     /// The last rejection or error, with its file.
     pub last_error: Option<String>,
+    /// Files found in `.importing/` at start, their import not committed: the daemon stopped
+    /// while importing them (perhaps because of them), so they were moved to `failed/` with a
+    /// note instead of being read again.
+    #[serde(default)]
+    pub interrupted: Vec<String>,
 }
 
 /// What a file in the folder is.
@@ -368,21 +379,44 @@ enum Failure {
 /// (the instrument camera's, from an X-Rite `.xlsx`; none from other files).
 type UnitContent = (String, Vec<Scan>, Vec<Vec<TextureImage>>);
 
-/// The scans in a unit's files (read from `.importing/`), with their content hash and texture
-/// images.
-fn read_unit(dir: &Dir, unit: &Unit, reference: &str, max: u64) -> Result<UnitContent, String> {
-    let read = |name: &str| {
-        dir.read_bounded(name, max).map_err(|e| match e {
-            FsError::TooLarge { size, .. } => format!(
-                "{name} is {size} bytes, over the watch folder's limit of {} MiB ([ingest] \
-                 max_file_mib); nothing was read",
-                max >> 20
-            ),
-            e => format!("{name}: {e}"),
-        })
+/// How much of a file in `.importing/` is read: the bytes held for it in the import budget
+/// (its size when they were held), within `[ingest] max_file_mib`.
+#[derive(Debug, Clone, Copy)]
+struct ReadLimit {
+    bytes: u64,
+    max_file: u64,
+}
+
+/// Reads `name` from `dir`, no further than `limit`.
+fn read_held(dir: &Dir, name: &str, limit: ReadLimit) -> Result<Vec<u8>, String> {
+    dir.read_bounded(name, limit.bytes).map_err(|e| match e {
+        FsError::TooLarge { size, .. } if size > limit.max_file => format!(
+            "{name} is {size} bytes, over the watch folder's limit of {} MiB ([ingest] \
+             max_file_mib); nothing was read",
+            limit.max_file >> 20
+        ),
+        FsError::TooLarge { size, .. } => format!(
+            "{name} grew to {size} bytes while it was being imported (it was {} bytes when \
+             taken): something still writes to it; drop it again once it is written",
+            limit.bytes
+        ),
+        e => format!("{name}: {e}"),
+    })
+}
+
+/// The scans in a unit's files (read from `.importing/`, each within its limit), with their
+/// content hash and texture images.
+fn read_unit(
+    dir: &Dir,
+    unit: &Unit,
+    reference: &str,
+    limits: &[ReadLimit],
+) -> Result<UnitContent, String> {
+    let main = read_held(dir, &unit.main, limits[0])?;
+    let partner = match &unit.partner {
+        Some(p) => Some(read_held(dir, p, limits[1])?),
+        None => None,
     };
-    let main = read(&unit.main)?;
-    let partner = unit.partner.as_deref().map(read).transpose()?;
     let hash = content_hash(&main, partner.as_deref());
     let (kind, stem) = kind_of(&unit.main).ok_or("not a file the watch folder reads")?;
     let text = |name: &str, bytes: Vec<u8>| {
@@ -451,6 +485,10 @@ pub(super) struct WatchFolder {
     pipeline: Pipeline,
     /// Changed by the folder's task alone; read by `status`.
     status: Arc<Mutex<IngestStatus>>,
+    /// The names in `.importing/` whose import runs now (not to be taken again).
+    in_flight: Arc<Mutex<HashSet<String>>>,
+    /// One permit per import running at once ([`IMPORTS_AT_ONCE`]).
+    slots: Arc<Semaphore>,
 }
 
 impl WatchFolder {
@@ -483,22 +521,30 @@ impl WatchFolder {
             rejected: 0,
             last_file: None,
             last_error: None,
+            interrupted: Vec::new(),
         }));
         let watch_folder = WatchFolder {
             ctx,
             pipeline,
             status,
+            in_flight: Arc::default(),
+            slots: Arc::new(Semaphore::new(IMPORTS_AT_ONCE)),
         };
         let (guard, mut stop) = watch_folder.ctx.task_slot().await?;
         tracing::info!(dir = %dir.display(), "watching the folder for exports and scan files");
         let folder = watch_folder.clone();
+        let (settings, folders) = (Arc::new(settings), Arc::new(folders));
         tokio::spawn(async move {
-            let _guard = guard;
+            folder.settle_interrupted(&settings, &folders).await;
             folder.queue_pending_ingest_fits().await;
             let mut watch = Watch::default();
             loop {
                 match folders.check(&settings.dir) {
-                    Ok(()) => folder.ingest_pass(&settings, &folders, &mut watch).await,
+                    Ok(()) => {
+                        folder
+                            .ingest_pass(&settings, &folders, &mut watch, &guard)
+                            .await
+                    }
                     Err(e) => folder.note_error(e),
                 }
                 tokio::select! {
@@ -567,21 +613,192 @@ impl WatchFolder {
         }
     }
 
-    /// One pass: finish what is in `.importing/`, then take the files that have settled.
-    async fn ingest_pass(&self, settings: &IngestSettings, f: &Folders, watch: &mut Watch) {
-        // 1. In flight (left by a stopped daemon, or a store failure at the last pass).
+    /// At start, before any pass: what a stopped daemon left in `.importing/`. A unit whose
+    /// hash is recorded committed before the stop and goes to `done/` (only hashed, not
+    /// parsed). Any other was being imported when the daemon stopped, and perhaps stopped it
+    /// (a reader that aborts the process): it goes to `failed/` with a note saying so, is
+    /// named in the log and in `status`, and is never read again automatically, so that one
+    /// file cannot keep the daemon down through its restarts.
+    async fn settle_interrupted(&self, settings: &IngestSettings, f: &Folders) {
+        let (files, refused) = match list(&f.importing) {
+            Ok(l) => l,
+            Err(e) => return self.note_error(e.to_string()),
+        };
+        for (name, why) in refused {
+            self.refuse_unread(f, &f.importing, &name, &why);
+        }
+        let files: Vec<_> = files.into_iter().map(|(n, k, s, _, _)| (n, k, s)).collect();
+        let (units, _) = units(&files, |_| true, |_| true);
+        for unit in units {
+            let committed = match self.unit_hash(settings, f, &unit).await {
+                Ok(hash) => match self.ctx.store.ingested_file(&hash).await {
+                    Ok(found) => found.is_some(),
+                    Err(e) => {
+                        // Unknown: left where it is; the passes' recovery decides later.
+                        self.note_error(format!("{}: the store failed: {e}", unit.shown()));
+                        continue;
+                    }
+                },
+                Err(_) => false,
+            };
+            if committed {
+                // Its fits, if not queued yet, are queued by `queue_pending_ingest_fits`.
+                for name in unit.names() {
+                    if let Err(e) = self.file_to_done(f, name) {
+                        self.note_error(format!("cannot move {name} into {DONE}/: {e}"));
+                    }
+                }
+                continue;
+            }
+            let file = unit.shown();
+            let reason = format!(
+                "brdfd stopped while importing this file (it was found in {IMPORTING}/ at the \
+                 next start, its import not committed). It is not read again automatically, in \
+                 case reading it is what stopped the daemon; nothing of it is in the store. If \
+                 the daemon stopped for another reason (a restart, a power cut), move it back \
+                 into the watch folder to import it."
+            );
+            tracing::error!(
+                file = %file,
+                "the daemon stopped while importing this file; moved to {FAILED}/ unread, with a note"
+            );
+            for name in unit.names() {
+                if let Err(e) = self.file_to_failed(f, &f.importing, name, &reason) {
+                    self.note_error(format!("cannot move {name} into {FAILED}/: {e}"));
+                }
+            }
+            self.with_ingest_status(|s| {
+                s.rejected += 1;
+                s.interrupted.push(file.clone());
+                s.last_file = Some(file.clone());
+                s.last_error = Some(format!(
+                    "{file}: the daemon stopped while importing it; moved to {FAILED}/, not read \
+                     again"
+                ));
+            });
+            self.ctx.events.send(Event::FileRejected { file, reason });
+        }
+    }
+
+    /// The content hash of a unit in `.importing/`, read within the import budget.
+    async fn unit_hash(
+        &self,
+        settings: &IngestSettings,
+        f: &Folders,
+        unit: &Unit,
+    ) -> Result<String, String> {
+        let (_held, limits) = self.hold_unit(settings, f, unit).await?;
+        let dir = f.importing.try_clone().map_err(|e| e.to_string())?;
+        let unit = unit.clone();
+        tokio::task::spawn_blocking(move || {
+            let main = read_held(&dir, &unit.main, limits[0])?;
+            let partner = match &unit.partner {
+                Some(p) => Some(read_held(&dir, p, limits[1])?),
+                None => None,
+            };
+            Ok(content_hash(&main, partner.as_deref()))
+        })
+        .await
+        .map_err(|e| e.to_string())?
+    }
+
+    /// Holds the bytes of a unit's files (in `.importing/`) in the import budget, waiting for
+    /// them; with each file's read limit: its size now, at most `max_file_mib`.
+    async fn hold_unit(
+        &self,
+        settings: &IngestSettings,
+        f: &Folders,
+        unit: &Unit,
+    ) -> Result<(super::import_budget::HeldBytes, Vec<ReadLimit>), String> {
+        let mut limits = Vec::new();
+        for name in unit.names() {
+            let size = match f.importing.entry(name) {
+                Ok(Some(e)) => e.size,
+                Ok(None) => return Err(format!("{name} is no longer in {IMPORTING}/")),
+                Err(e) => return Err(format!("{name}: {e}")),
+            };
+            limits.push(ReadLimit {
+                bytes: size.min(settings.max_file_bytes),
+                max_file: settings.max_file_bytes,
+            });
+        }
+        let total = limits.iter().map(|l| l.bytes).sum();
+        let held = self
+            .ctx
+            .import_budget
+            .hold(total)
+            .await
+            .map_err(|e| format!("{}: {e}", unit.shown()))?;
+        Ok((held, limits))
+    }
+
+    /// Runs a unit's import on a task of its own, holding an import slot, a guard (shutdown
+    /// waits for it) and its names in `in_flight`; `false` (nothing started) when every slot
+    /// is taken or a name is in flight already.
+    fn spawn_import(
+        &self,
+        settings: &Arc<IngestSettings>,
+        f: &Arc<Folders>,
+        unit: Unit,
+        recovering: bool,
+        guard: &TaskGuard,
+    ) -> bool {
+        let Ok(slot) = self.slots.clone().try_acquire_owned() else {
+            return false;
+        };
+        {
+            let mut in_flight = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
+            if unit.names().iter().any(|n| in_flight.contains(*n)) {
+                return false;
+            }
+            in_flight.extend(unit.names().into_iter().map(str::to_string));
+        }
+        let (folder, settings, f, guard) =
+            (self.clone(), settings.clone(), f.clone(), guard.clone());
+        tokio::spawn(async move {
+            let (_slot, _guard) = (slot, guard);
+            folder.finish(&settings, &f, &unit, recovering).await;
+            let mut in_flight = folder.in_flight.lock().unwrap_or_else(|p| p.into_inner());
+            for name in unit.names() {
+                in_flight.remove(name);
+            }
+        });
+        true
+    }
+
+    /// Whether any of `names` is being imported now.
+    fn in_flight(&self, names: &[&str]) -> bool {
+        let in_flight = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
+        names.iter().any(|n| in_flight.contains(*n))
+    }
+
+    /// One pass: go on with what is in `.importing/` and not being imported (a store failure
+    /// at an earlier pass), then take the files that have settled. Each import runs on a task
+    /// of its own ([`IMPORTS_AT_ONCE`] at most); a file with no free slot waits in the folder.
+    async fn ingest_pass(
+        &self,
+        settings: &Arc<IngestSettings>,
+        f: &Arc<Folders>,
+        watch: &mut Watch,
+        guard: &TaskGuard,
+    ) {
+        // 1. In flight and not running: a store failure at an earlier pass.
         match list(&f.importing) {
             Ok((files, refused)) if !files.is_empty() || !refused.is_empty() => {
                 for (name, why) in refused {
                     self.refuse_unread(f, &f.importing, &name, &why);
                 }
-                let files: Vec<_> = files.into_iter().map(|(n, k, s, _, _)| (n, k, s)).collect();
+                let files: Vec<_> = files
+                    .into_iter()
+                    .map(|(n, k, s, _, _)| (n, k, s))
+                    .filter(|(n, _, _)| !self.in_flight(&[n]))
+                    .collect();
                 let (units, _) = units(&files, |_| true, |_| true);
                 for unit in units {
                     if self.ingest_stopping() {
                         return;
                     }
-                    self.finish(settings, f, &unit, true).await;
+                    self.spawn_import(settings, f, unit, true, guard);
                 }
             }
             Ok(_) => {}
@@ -625,7 +842,7 @@ impl WatchFolder {
             .into_iter()
             .map(|(n, k, s, _, _)| (n, k, s))
             .collect();
-        let (units, waiting) = units(
+        let (units, mut waiting) = units(
             &files,
             |n| {
                 watch
@@ -640,18 +857,20 @@ impl WatchFolder {
                     .is_some_and(|s| now.duration_since(s.first_seen) >= settings.pair_wait)
             },
         );
-        self.with_ingest_status(|s| s.waiting = waiting);
         for unit in units {
             if self.ingest_stopping() {
                 return;
             }
             // A file of the same name still in flight (a store failure being retried) is not
-            // replaced: this one waits until that one is done.
-            if unit
-                .names()
-                .iter()
-                .any(|n| !matches!(f.importing.entry(n), Ok(None)))
+            // replaced: this one waits until that one is done. So does a file with no free
+            // import slot.
+            if self.slots.available_permits() == 0
+                || unit
+                    .names()
+                    .iter()
+                    .any(|n| !matches!(f.importing.entry(n), Ok(None)))
             {
+                waiting += unit.names().len();
                 continue;
             }
             // Into .importing/ first: from here on the file is the daemon's.
@@ -680,8 +899,10 @@ impl WatchFolder {
                 self.note_error(e);
                 continue;
             }
-            self.finish(settings, f, &unit, false).await;
+            // A slot is free (checked above; only this task takes them).
+            self.spawn_import(settings, f, unit, false, guard);
         }
+        self.with_ingest_status(|s| s.waiting = waiting);
     }
 
     /// Moves an entry that is not a plain regular file (a link, a hard link, a pipe) from
@@ -825,15 +1046,19 @@ impl WatchFolder {
         unit: &Unit,
         recovering: bool,
     ) -> Result<Option<(String, Vec<crate::store::ScanId>, String)>, Failure> {
+        // The files' bytes are held in the import budget until the import is over.
+        let (_held, limits) = self
+            .hold_unit(settings, f, unit)
+            .await
+            .map_err(Failure::Rejected)?;
         let (hash, scans, textures) = {
             let unit = unit.clone();
             let reference = settings.reference.clone();
-            let max = settings.max_file_bytes;
             let dir = f
                 .importing
                 .try_clone()
                 .map_err(|e| Failure::Retry(e.to_string()))?;
-            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference, max))
+            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference, &limits))
                 .await
                 .map_err(|e| Failure::Retry(format!("reading the file failed: {e}")))?
                 .map_err(Failure::Rejected)?
