@@ -63,6 +63,7 @@ use crate::store::{FileImport, ImportedScan, NewTexture, Provenance, Source, Sto
 
 use super::context::Context;
 use super::events::Event;
+use super::import_budget::{BudgetError, HeldBytes};
 use super::pipeline::{IMPORTED_SUFFIX, Pipeline, check_name, new_readings, new_textures};
 use super::shutdown::TaskGuard;
 use super::{RefitRequest, ServiceError};
@@ -387,6 +388,34 @@ struct ReadLimit {
     max_file: u64,
 }
 
+/// Each file of `unit` (in `dir`, where it is now): how much of it is read, its size now at
+/// most `max_file_mib`.
+fn read_limits(
+    settings: &IngestSettings,
+    dir: &Dir,
+    unit: &Unit,
+) -> Result<Vec<ReadLimit>, String> {
+    unit.names()
+        .into_iter()
+        .map(|name| match dir.entry(name) {
+            Ok(Some(e)) => Ok(ReadLimit {
+                bytes: e.size.min(settings.max_file_bytes),
+                max_file: settings.max_file_bytes,
+            }),
+            Ok(None) => Err(format!("{name} is gone from the watch folder")),
+            Err(e) => Err(format!("{name}: {e}")),
+        })
+        .collect()
+}
+
+/// What an import holds while it runs: an import slot, its files' bytes in the import budget
+/// (given back when dropped), and how much of each file is read.
+struct Held {
+    _slot: tokio::sync::OwnedSemaphorePermit,
+    _bytes: HeldBytes,
+    limits: Vec<ReadLimit>,
+}
+
 /// Reads `name` from `dir`, no further than `limit`.
 fn read_held(dir: &Dir, name: &str, limit: ReadLimit) -> Result<Vec<u8>, String> {
     dir.read_bounded(name, limit.bytes).map_err(|e| match e {
@@ -687,7 +716,13 @@ impl WatchFolder {
         f: &Folders,
         unit: &Unit,
     ) -> Result<String, String> {
-        let (_held, limits) = self.hold_unit(settings, f, unit).await?;
+        let limits = read_limits(settings, &f.importing, unit)?;
+        let _held = self
+            .ctx
+            .import_budget
+            .hold(limits.iter().map(|l| l.bytes).sum())
+            .await
+            .map_err(|e| format!("{}: {e}", unit.shown()))?;
         let dir = f.importing.try_clone().map_err(|e| e.to_string())?;
         let unit = unit.clone();
         tokio::task::spawn_blocking(move || {
@@ -702,68 +737,62 @@ impl WatchFolder {
         .map_err(|e| e.to_string())?
     }
 
-    /// Holds the bytes of a unit's files (in `.importing/`) in the import budget, waiting for
-    /// them; with each file's read limit: its size now, at most `max_file_mib`.
-    async fn hold_unit(
+    /// Holds an import slot and the bytes of a unit's files (in `dir`, where they are now) in
+    /// the import budget, without waiting: `None` when either is not free now (the unit waits
+    /// for a later pass, and the files behind it go on).
+    fn try_hold_unit(
         &self,
         settings: &IngestSettings,
-        f: &Folders,
+        dir: &Dir,
         unit: &Unit,
-    ) -> Result<(super::import_budget::HeldBytes, Vec<ReadLimit>), String> {
-        let mut limits = Vec::new();
-        for name in unit.names() {
-            let size = match f.importing.entry(name) {
-                Ok(Some(e)) => e.size,
-                Ok(None) => return Err(format!("{name} is no longer in {IMPORTING}/")),
-                Err(e) => return Err(format!("{name}: {e}")),
-            };
-            limits.push(ReadLimit {
-                bytes: size.min(settings.max_file_bytes),
-                max_file: settings.max_file_bytes,
-            });
-        }
-        let total = limits.iter().map(|l| l.bytes).sum();
-        let held = self
+    ) -> Result<Option<Held>, String> {
+        let limits = read_limits(settings, dir, unit)?;
+        let Ok(slot) = self.slots.clone().try_acquire_owned() else {
+            return Ok(None);
+        };
+        match self
             .ctx
             .import_budget
-            .hold(total)
-            .await
-            .map_err(|e| format!("{}: {e}", unit.shown()))?;
-        Ok((held, limits))
+            .try_hold(limits.iter().map(|l| l.bytes).sum())
+        {
+            Ok(bytes) => Ok(Some(Held {
+                _slot: slot,
+                _bytes: bytes,
+                limits,
+            })),
+            Err(BudgetError::Full { .. }) => Ok(None),
+            Err(e) => Err(format!("{}: {e}", unit.shown())),
+        }
     }
 
-    /// Runs a unit's import on a task of its own, holding an import slot, a guard (shutdown
-    /// waits for it) and its names in `in_flight`; `false` (nothing started) when every slot
-    /// is taken or a name is in flight already.
+    /// Runs a unit's import on a task of its own, with what it holds, a guard (shutdown waits
+    /// for it) and its names in `in_flight`; nothing when a name is in flight already.
     fn spawn_import(
         &self,
         settings: &Arc<IngestSettings>,
         f: &Arc<Folders>,
         unit: Unit,
         recovering: bool,
+        held: Held,
         guard: &TaskGuard,
-    ) -> bool {
-        let Ok(slot) = self.slots.clone().try_acquire_owned() else {
-            return false;
-        };
+    ) {
         {
             let mut in_flight = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
             if unit.names().iter().any(|n| in_flight.contains(*n)) {
-                return false;
+                return;
             }
             in_flight.extend(unit.names().into_iter().map(str::to_string));
         }
         let (folder, settings, f, guard) =
             (self.clone(), settings.clone(), f.clone(), guard.clone());
         tokio::spawn(async move {
-            let (_slot, _guard) = (slot, guard);
-            folder.finish(&settings, &f, &unit, recovering).await;
+            let _guard = guard;
+            folder.finish(&settings, &f, &unit, recovering, held).await;
             let mut in_flight = folder.in_flight.lock().unwrap_or_else(|p| p.into_inner());
             for name in unit.names() {
                 in_flight.remove(name);
             }
         });
-        true
     }
 
     /// Whether any of `names` is being imported now.
@@ -798,7 +827,11 @@ impl WatchFolder {
                     if self.ingest_stopping() {
                         return;
                     }
-                    self.spawn_import(settings, f, unit, true, guard);
+                    match self.try_hold_unit(settings, &f.importing, &unit) {
+                        Ok(Some(held)) => self.spawn_import(settings, f, unit, true, held, guard),
+                        Ok(None) => {}
+                        Err(e) => self.note_error(e),
+                    }
                 }
             }
             Ok(_) => {}
@@ -862,17 +895,28 @@ impl WatchFolder {
                 return;
             }
             // A file of the same name still in flight (a store failure being retried) is not
-            // replaced: this one waits until that one is done. So does a file with no free
-            // import slot.
-            if self.slots.available_permits() == 0
-                || unit
-                    .names()
-                    .iter()
-                    .any(|n| !matches!(f.importing.entry(n), Ok(None)))
+            // replaced: this one waits until that one is done.
+            if unit
+                .names()
+                .iter()
+                .any(|n| !matches!(f.importing.entry(n), Ok(None)))
             {
                 waiting += unit.names().len();
                 continue;
             }
+            // So does a file with no free import slot, or whose bytes are not free in the
+            // import budget now: it stays in the folder, and the files behind it go on.
+            let held = match self.try_hold_unit(settings, &f.root, &unit) {
+                Ok(Some(held)) => held,
+                Ok(None) => {
+                    waiting += unit.names().len();
+                    continue;
+                }
+                Err(e) => {
+                    self.note_error(e);
+                    continue;
+                }
+            };
             // Into .importing/ first: from here on the file is the daemon's.
             let mut moved = Vec::new();
             let mut failed = None;
@@ -899,8 +943,7 @@ impl WatchFolder {
                 self.note_error(e);
                 continue;
             }
-            // A slot is free (checked above; only this task takes them).
-            self.spawn_import(settings, f, unit, false, guard);
+            self.spawn_import(settings, f, unit, false, held, guard);
         }
         self.with_ingest_status(|s| s.waiting = waiting);
     }
@@ -983,7 +1026,14 @@ impl WatchFolder {
     /// Imports a unit whose files are in `.importing/`, and moves them to `done/` or
     /// `failed/`. `recovering`: the files were found in `.importing/` (a previous pass or run
     /// took them), so a recorded hash means that import committed.
-    async fn finish(&self, settings: &IngestSettings, f: &Folders, unit: &Unit, recovering: bool) {
+    async fn finish(
+        &self,
+        settings: &IngestSettings,
+        f: &Folders,
+        unit: &Unit,
+        recovering: bool,
+        held: Held,
+    ) {
         let outcome = if unit.orphan {
             Err(Failure::Rejected(format!(
                 "{}: an SRA CSV with no MA-T12 export beside it within {} s; drop it together \
@@ -992,7 +1042,8 @@ impl WatchFolder {
                 settings.pair_wait.as_secs()
             )))
         } else {
-            self.import_unit(settings, f, unit, recovering).await
+            self.import_unit(settings, f, unit, recovering, &held.limits)
+                .await
         };
         match outcome {
             Ok(done) => {
@@ -1045,13 +1096,10 @@ impl WatchFolder {
         f: &Folders,
         unit: &Unit,
         recovering: bool,
+        limits: &[ReadLimit],
     ) -> Result<Option<(String, Vec<crate::store::ScanId>, String)>, Failure> {
-        // The files' bytes are held in the import budget until the import is over.
-        let (_held, limits) = self
-            .hold_unit(settings, f, unit)
-            .await
-            .map_err(Failure::Rejected)?;
         let (hash, scans, textures) = {
+            let limits = limits.to_vec();
             let unit = unit.clone();
             let reference = settings.reference.clone();
             let dir = f
