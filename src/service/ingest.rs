@@ -21,13 +21,25 @@
 //! **Crash safety.** A file taken is first renamed into `DIR/.importing/` (atomic on one file
 //! system), read from there, hashed (SHA-256) and parsed; its scans and its hash are written in
 //! one store transaction (`ingested_files`, `migrations/0012_ingest.sql`); then its fits are
-//! queued and the hash row marked so; only then is the file renamed into `DIR/done/`. Whatever
-//! is in `.importing/` at any pass (at start: what a stopped daemon left there) is finished
-//! first: a hash already recorded means the import committed, and the file goes to `done/`;
-//! otherwise the import runs again (it left nothing behind). Scans imported but whose fits were
-//! not queued yet are queued at start. A file is never imported twice: the same content dropped
-//! again, under any name, is moved to `failed/` naming the earlier import. A store failure (a
-//! full disk) leaves the file in `.importing/` to be tried again at the next pass.
+//! queued and the hash row marked so; only then is the file renamed into `DIR/done/`. What a
+//! stopped daemon left in `.importing/` is settled at start, before any pass, and never parsed:
+//! a hash already recorded means the import committed, and the file goes to `done/`; any
+//! other file was being imported when the daemon stopped, perhaps because of it (a reader
+//! that aborts the process), so it goes to `failed/` with a note saying so, is named in the
+//! log and in `status` (`interrupted`), and is not read again unless someone drops it again:
+//! one file cannot keep the daemon down through its restarts. Scans imported but whose fits
+//! were not queued yet are queued at start. A file is never imported twice: the same content
+//! dropped again, under any name, is moved to `failed/` naming the earlier import. A store
+//! failure (a full disk) leaves the file in `.importing/` to be tried again at a later pass of
+//! the same run.
+//!
+//! **Bounded.** Imports run off the folder's pass, each on a task of its own,
+//! [`IMPORTS_AT_ONCE`] at a time; a file's bytes are held in the service's import budget
+//! (`[ingest] max_held_mib`, shared with `POST /scans/import`,
+//! [`super::import_budget`]) from before it is read until its import is over. A file is
+//! taken only when a slot and its bytes are free; until then it waits in the folder
+//! (`waiting` in `status`) and the files behind it go on, so one slow file does not hold up
+//! the rest. A reader's own time and memory are bounded in the reader (`src/formats/`).
 //!
 //! **What the folder can do to the daemon.** Whoever can write into DIR can drop files, not
 //! redirect brdfd's writes: DIR and its three subfolders are opened once at start and held
