@@ -394,6 +394,7 @@ mod tests {
             "pair_wait_ms",
             "reference",
             "max_file_mib",
+            "max_held_mib",
         ];
         let lines: Vec<&str> = SHIPPED.lines().collect();
         for key in KEYS {
