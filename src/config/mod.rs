@@ -359,7 +359,7 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 34] = [
+        const KEYS: [&str; 35] = [
             "path",
             "listen",
             "allow_remote",
