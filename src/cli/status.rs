@@ -42,8 +42,15 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
         None => println!("no reference measured yet: run `brdfd reference`"),
     }
     println!(
-        "fits: {} queued, {} running; instruments simulated: MA-T12 {}, SRA {}",
-        v.fits_queued, v.fits_running, v.simulated.ma_t12, v.simulated.sra
+        "fits: {} queued, {} running{}; instruments simulated: MA-T12 {}, SRA {}",
+        v.fits_queued,
+        v.fits_running,
+        match v.crossvals_pending {
+            0 => String::new(),
+            n => format!(", {n} being cross-validated"),
+        },
+        v.simulated.ma_t12,
+        v.simulated.sra
     );
     if let Some(sync) = &v.sync {
         println!(
