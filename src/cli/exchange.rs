@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::formats::budget::Budget;
 use crate::formats::{self, ExportOptions, Format, ImportOptions};
 use crate::scan::ScanError;
 
@@ -254,7 +255,7 @@ pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>>
                     file.display()
                 );
             }
-            let scans = formats::xrite::read_file(file)?;
+            let scans = formats::xrite::read_file(file, &Budget::default())?;
             Ok(scans
                 .into_iter()
                 .map(|s| Imported {
@@ -264,9 +265,13 @@ pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>>
                 .collect())
         }
         ImportFormat::Exchange(format) => {
-            let text = formats::read_text(file)?;
+            let budget = Budget::default();
+            let text = formats::read_text_within(file, &budget)?;
             let sra = match &args.sra {
-                Some(p) => Some((p.display().to_string(), formats::read_text(p)?)),
+                Some(p) => Some((
+                    p.display().to_string(),
+                    formats::read_text_within(p, &budget)?,
+                )),
                 None => None,
             };
             let scans = formats::import(
@@ -276,6 +281,7 @@ pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>>
                 sra.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
                 &ImportOptions {
                     reference: args.reference.clone(),
+                    budget,
                 },
             )?;
             Ok(scans

@@ -7,6 +7,7 @@ use std::time::Duration;
 use serde::Deserialize;
 
 use super::check::{Checker, ConfigError, S, bounded_count};
+use crate::formats::budget::Budget;
 
 /// `[ingest]`: the watch folder (src/service/ingest.rs).
 #[derive(Debug, Clone, PartialEq)]
@@ -22,9 +23,10 @@ pub struct IngestConfig {
     pub pair_wait: Duration,
     /// In an instrument's export, the object with this name is the white reference tile.
     pub reference: String,
-    /// The largest file read, in bytes (`max_file_mib`); a larger one goes to `failed/`
-    /// unread.
-    pub max_file_bytes: u64,
+    /// The limits every imported file is read within, by every door (`max_file_mib`: the
+    /// largest file read, a larger one goes to `failed/` unread; `max_sheet_cells`,
+    /// `max_images`, `max_image_mib`, `max_image_megapixels`, `max_records`).
+    pub budget: Budget,
 }
 
 impl Default for IngestConfig {
@@ -35,7 +37,7 @@ impl Default for IngestConfig {
             poll: Duration::from_millis(defaults::INGEST_POLL_MS),
             pair_wait: Duration::from_millis(defaults::INGEST_PAIR_WAIT_MS),
             reference: crate::formats::DEFAULT_REFERENCE.to_string(),
-            max_file_bytes: defaults::INGEST_MAX_FILE_MIB << 20,
+            budget: Budget::default(),
         }
     }
 }
@@ -46,8 +48,6 @@ mod defaults {
     pub const INGEST_SETTLE_MS: u64 = 2_000;
     pub const INGEST_POLL_MS: u64 = 1_000;
     pub const INGEST_PAIR_WAIT_MS: u64 = 60_000;
-    /// An export of a whole session is a few MiB at most.
-    pub const INGEST_MAX_FILE_MIB: u64 = 32;
 }
 
 // ---- Stage 1: the section's shape ----------------------------------------------------------
@@ -61,6 +61,11 @@ pub(super) struct RawIngest {
     pair_wait_ms: S<u64>,
     reference: S<String>,
     max_file_mib: S<u64>,
+    max_sheet_cells: S<u64>,
+    max_images: S<u64>,
+    max_image_mib: S<u64>,
+    max_image_megapixels: S<u64>,
+    max_records: S<u64>,
 }
 
 // ---- Stage 2: its checks ------------------------------------------------------------------
@@ -109,12 +114,54 @@ impl Checker<'_> {
                     }
                 },
             )?,
+            budget: self.budget(raw)?,
+        })
+    }
+
+    /// The `[ingest]` keys of the import budget (src/formats/budget.rs), each within a range
+    /// that keeps an import inside the memory the daemon is given.
+    fn budget(&self, raw: &RawIngest) -> Result<Budget, ConfigError> {
+        use crate::formats::budget::defaults as d;
+        let d0 = Budget::default();
+        let count = |lo: u64, hi: u64| move |n: u64| bounded_count(n, lo, hi).map(|n| n as u64);
+        Ok(Budget {
             max_file_bytes: self.value(
                 "ingest.max_file_mib",
                 &raw.max_file_mib,
-                defaults::INGEST_MAX_FILE_MIB,
+                d::MAX_FILE_MIB,
                 |n| bounded_count(n, 1, 1024).map(|n| (n as u64) << 20),
             )?,
+            max_sheet_cells: self.value(
+                "ingest.max_sheet_cells",
+                &raw.max_sheet_cells,
+                d::MAX_SHEET_CELLS,
+                count(1_000, 1_000_000),
+            )?,
+            max_images: self.value(
+                "ingest.max_images",
+                &raw.max_images,
+                d::MAX_IMAGES,
+                count(0, 1_000),
+            )?,
+            max_image_bytes: self.value(
+                "ingest.max_image_mib",
+                &raw.max_image_mib,
+                d::MAX_IMAGE_MIB,
+                |n| bounded_count(n, 1, 16).map(|n| (n as u64) << 20),
+            )?,
+            max_image_pixels: self.value(
+                "ingest.max_image_megapixels",
+                &raw.max_image_megapixels,
+                d::MAX_IMAGE_MEGAPIXELS,
+                |n| bounded_count(n, 1, 100).map(|n| n as u64 * 1_000_000),
+            )?,
+            max_records: self.value(
+                "ingest.max_records",
+                &raw.max_records,
+                d::MAX_RECORDS,
+                count(1, 200_000),
+            )?,
+            ..d0
         })
     }
 }

@@ -393,6 +393,11 @@ mod tests {
             "pair_wait_ms",
             "reference",
             "max_file_mib",
+            "max_sheet_cells",
+            "max_images",
+            "max_image_mib",
+            "max_image_megapixels",
+            "max_records",
         ];
         let lines: Vec<&str> = SHIPPED.lines().collect();
         for key in KEYS {

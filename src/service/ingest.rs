@@ -79,8 +79,8 @@ pub struct IngestSettings {
     pub pair_wait: Duration,
     /// In an instrument's export, the object with this name is the reference tile.
     pub reference: String,
-    /// The largest file read.
-    pub max_file_bytes: u64,
+    /// The limits every file is read within (its file size: the largest file read).
+    pub budget: crate::formats::budget::Budget,
 }
 
 impl IngestSettings {
@@ -91,7 +91,7 @@ impl IngestSettings {
             poll: c.poll,
             pair_wait: c.pair_wait,
             reference: c.reference.clone(),
-            max_file_bytes: c.max_file_bytes,
+            budget: c.budget,
         })
     }
 }
@@ -370,7 +370,13 @@ type UnitContent = (String, Vec<Scan>, Vec<Vec<TextureImage>>);
 
 /// The scans in a unit's files (read from `.importing/`), with their content hash and texture
 /// images.
-fn read_unit(dir: &Dir, unit: &Unit, reference: &str, max: u64) -> Result<UnitContent, String> {
+fn read_unit(
+    dir: &Dir,
+    unit: &Unit,
+    reference: &str,
+    budget: &crate::formats::budget::Budget,
+) -> Result<UnitContent, String> {
+    let max = budget.max_file_bytes;
     let read = |name: &str| {
         dir.read_bounded(name, max).map_err(|e| match e {
             FsError::TooLarge { size, .. } => format!(
@@ -396,7 +402,8 @@ fn read_unit(dir: &Dir, unit: &Unit, reference: &str, max: u64) -> Result<UnitCo
     let scans = match kind {
         Kind::ScanFile => vec![Scan::from_json(&main).map_err(|e| format!("{}: {e}", unit.main))?],
         Kind::XriteXlsx => {
-            let scans = formats::xrite::read(&main, &unit.main).map_err(|e| e.to_string())?;
+            let scans =
+                formats::xrite::read(&main, &unit.main, budget).map_err(|e| e.to_string())?;
             for s in &scans {
                 if let Some(w) = s.warning() {
                     tracing::warn!(file = %unit.main, "{w}");
@@ -425,6 +432,7 @@ fn read_unit(dir: &Dir, unit: &Unit, reference: &str, max: u64) -> Result<UnitCo
                 sra.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
                 &ImportOptions {
                     reference: reference.to_string(),
+                    budget: *budget,
                 },
             )
             .map_err(|e| {
@@ -828,12 +836,12 @@ impl WatchFolder {
         let (hash, scans, textures) = {
             let unit = unit.clone();
             let reference = settings.reference.clone();
-            let max = settings.max_file_bytes;
+            let budget = settings.budget;
             let dir = f
                 .importing
                 .try_clone()
                 .map_err(|e| Failure::Retry(e.to_string()))?;
-            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference, max))
+            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference, &budget))
                 .await
                 .map_err(|e| Failure::Retry(format!("reading the file failed: {e}")))?
                 .map_err(Failure::Rejected)?

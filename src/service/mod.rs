@@ -116,6 +116,8 @@ pub struct ServiceSettings {
     pub bootstrap: u32,
     /// The watch folder (`[ingest]`); `None`: none.
     pub ingest: Option<IngestSettings>,
+    /// The limits every imported file is read within (`[ingest]`), whatever its door.
+    pub budget: crate::formats::budget::Budget,
 }
 
 impl ServiceSettings {
@@ -139,6 +141,7 @@ impl ServiceSettings {
             colorimetry: config.colour,
             bootstrap: config.fit.bootstrap,
             ingest: IngestSettings::from_config(&config.ingest),
+            budget: config.ingest.budget,
         }
     }
 
