@@ -246,6 +246,18 @@ pub struct Imported {
 /// The scans `brdfd import-format` reads from `file` with these options (its `files`, `out`,
 /// `force` and `json` are not read); the Python package's `brdfd.import_export` calls it too.
 pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>> {
+    let imported = read_unchecked(args, file)?;
+    // The names the daemon would refuse (control characters, length) are refused here too.
+    for i in &imported {
+        let s = &i.scan;
+        crate::service::check_name("sample name", &s.sample)
+            .and_then(|()| crate::service::check_name("reference name", s.reference_label()))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
+    }
+    Ok(imported)
+}
+
+fn read_unchecked(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>> {
     let format = args.format.unwrap_or_else(|| format_of(file));
     match format {
         ImportFormat::XriteXlsx => {

@@ -76,7 +76,7 @@ pub use error::ServiceError;
 pub use events::{Event, EventBus, ReadingShown};
 pub use fit_worker::{FitFn, FitJob, default_fit_fn};
 pub use ingest::{IngestSettings, IngestStatus};
-pub use pipeline::{IMPORTED_SUFFIX, imported_provenance, scan_from_detail};
+pub use pipeline::{IMPORTED_SUFFIX, check_name, imported_provenance, scan_from_detail};
 
 use acquisition::Acquisition;
 use context::Context;
