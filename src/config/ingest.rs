@@ -27,6 +27,9 @@ pub struct IngestConfig {
     /// largest file read, a larger one goes to `failed/` unread; `max_sheet_cells`,
     /// `max_images`, `max_image_mib`, `max_image_megapixels`, `max_records`).
     pub budget: Budget,
+    /// The import bodies held in memory at once, in bytes (`max_held_mib`), across the watch
+    /// folder and `POST /scans/import` (src/service/import_budget.rs).
+    pub max_held_bytes: u64,
 }
 
 impl Default for IngestConfig {
@@ -38,6 +41,7 @@ impl Default for IngestConfig {
             pair_wait: Duration::from_millis(defaults::INGEST_PAIR_WAIT_MS),
             reference: crate::formats::DEFAULT_REFERENCE.to_string(),
             budget: Budget::default(),
+            max_held_bytes: defaults::INGEST_MAX_HELD_MIB << 20,
         }
     }
 }
@@ -48,6 +52,11 @@ mod defaults {
     pub const INGEST_SETTLE_MS: u64 = 2_000;
     pub const INGEST_POLL_MS: u64 = 1_000;
     pub const INGEST_PAIR_WAIT_MS: u64 = 60_000;
+    /// Two of the largest uploads `POST /scans/import` takes (64 MiB each), or dozens of real
+    /// exports; well inside the shipped unit's `MemoryMax=1G` with the readers' own budgets.
+    pub const INGEST_MAX_HELD_MIB: u64 = 128;
+    /// The smallest bound: one upload of the largest size the API takes always fits.
+    pub const INGEST_MAX_HELD_MIB_MIN: u64 = 64;
 }
 
 // ---- Stage 1: the section's shape ----------------------------------------------------------
@@ -66,6 +75,7 @@ pub(super) struct RawIngest {
     max_image_mib: S<u64>,
     max_image_megapixels: S<u64>,
     max_records: S<u64>,
+    max_held_mib: S<u64>,
 }
 
 // ---- Stage 2: its checks ------------------------------------------------------------------
@@ -82,7 +92,7 @@ impl Checker<'_> {
                 }
             }
         };
-        Ok(IngestConfig {
+        let config = IngestConfig {
             watch: self.path("ingest.watch", &raw.watch)?,
             settle: self.value(
                 "ingest.settle_ms",
@@ -115,7 +125,35 @@ impl Checker<'_> {
                 },
             )?,
             budget: self.budget(raw)?,
-        })
+            max_held_bytes: self.value(
+                "ingest.max_held_mib",
+                &raw.max_held_mib,
+                defaults::INGEST_MAX_HELD_MIB,
+                |n| {
+                    bounded_count(n, defaults::INGEST_MAX_HELD_MIB_MIN, 65_536)
+                        .map(|n| (n as u64) << 20)
+                },
+            )?,
+        };
+        if config.max_held_bytes < config.budget.max_file_bytes {
+            let message = format!(
+                "max_held_mib ({} MiB) is less than max_file_mib ({} MiB): a file the watch \
+                 folder takes could never be held; raise max_held_mib or lower max_file_mib",
+                config.max_held_bytes >> 20,
+                config.budget.max_file_bytes >> 20
+            );
+            return Err(match &raw.max_held_mib {
+                Some(v) => self.invalid("ingest.max_held_mib", v, message),
+                None => self.invalid(
+                    "ingest.max_file_mib",
+                    raw.max_file_mib
+                        .as_ref()
+                        .expect("the default max_held_mib holds the default max_file_mib"),
+                    message,
+                ),
+            });
+        }
+        Ok(config)
     }
 
     /// The `[ingest]` keys of the import budget (src/formats/budget.rs), each within a range
@@ -194,5 +232,25 @@ mod tests {
         );
         let e = parse("[ingest]\nwatch = \"\"\n").unwrap_err().to_string();
         assert!(e.contains("ingest.watch: must not be empty"), "{e}");
+        assert_eq!(d.max_held_bytes, 128 << 20);
+        let c = parse("[ingest]\nmax_held_mib = 512\n").unwrap();
+        assert_eq!(c.ingest.max_held_bytes, 512 << 20);
+        let e = parse("[ingest]\nmax_held_mib = 32\n")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "test.toml:2: ingest.max_held_mib: 32 is out of range: 64 to 65536"
+        );
+        // A file the folder takes must fit the bound on what is held at once.
+        let e = parse("[ingest]\nmax_file_mib = 200\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "ingest.max_file_mib: max_held_mib (128 MiB) is less than max_file_mib (200 MiB)"
+            ),
+            "{e}"
+        );
     }
 }

@@ -359,7 +359,7 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 33] = [
+        const KEYS: [&str; 39] = [
             "path",
             "listen",
             "allow_remote",
@@ -398,6 +398,7 @@ mod tests {
             "max_image_mib",
             "max_image_megapixels",
             "max_records",
+            "max_held_mib",
         ];
         let lines: Vec<&str> = SHIPPED.lines().collect();
         for key in KEYS {
