@@ -113,15 +113,6 @@ pub enum SyncError {
     )]
     Forked { station: String, detail: String },
 
-    /// Another incarnation of this store forwarded for the station moments ago: two live
-    /// copies. Retried: a restarted daemon is accepted once its previous life is silent.
-    #[error(
-        "station \"{station}\" is being forwarded by another copy of this store (seen {seconds:.0} s \
-         ago); if that copy was stopped this one is accepted within seconds, else stop one of \
-         them (a copy to keep: `brdfd sync --db FILE --adopt NEW_ID`)"
-    )]
-    SecondLive { station: String, seconds: f64 },
-
     /// The station's cursor is not where this forwarder left it: another forwarder of the
     /// same store moved it, or the central database was restored from a backup. The cursor is
     /// read back and forwarding goes on (after a comparison, when the central database is
@@ -171,7 +162,6 @@ impl SyncError {
                 | SyncError::Central { .. }
                 | SyncError::Local(_)
                 | SyncError::CursorMoved { .. }
-                | SyncError::SecondLive { .. }
         )
     }
 }
