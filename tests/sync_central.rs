@@ -1322,3 +1322,33 @@ async fn a_central_database_restored_steps_back_is_caught_up_by_sync_once_and_by
     })
     .await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_copy_of_a_running_station_is_refused_even_when_it_forwards_first() {
+    let _serial = serial();
+    let db = TestDb::create("livecopy");
+    bounded(async {
+        let dir = tempfile::tempdir().unwrap();
+        let orig = dir.path().join("orig.db");
+        let copy = dir.path().join("copy.db");
+        let (store, service) = station_on_scanned(&orig, "bench-l", &db.url, samples(1)[0]).await;
+        drained_service(&service, &orig).await;
+        // A backup tool copies the running station's store while the central database holds
+        // all of it; the copy starts and measures before the original writes anything more:
+        // refused all the same, with both ways out.
+        vacuum_into(&orig, &copy).await;
+        let (cs, csvc) = station_on_scanned(&copy, "bench-l", &db.url, samples(2)[1]).await;
+        let e = refused(&csvc).await;
+        assert!(e.contains("taken at outbox entry"), "{e}");
+        assert!(
+            e.contains("--adopt NEW_ID") && e.contains("--retire-old"),
+            "{e}"
+        );
+        stop_station(&cs, &csvc).await;
+        // The original goes on, accepted, and the central database holds it exactly.
+        scan_and_drain(&service, &orig, samples(2)[1]).await;
+        stop_station(&store, &service).await;
+        assert_same(&orig, &db.url, "bench-l").await;
+    })
+    .await;
+}

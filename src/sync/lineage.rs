@@ -54,6 +54,9 @@ pub struct Incarnation {
     pub id: String,
     /// The highest outbox entry the store held when this incarnation began.
     pub born_after: i64,
+    /// It began in a copy of the store taken while the incarnation before it was open
+    /// (station migration 0021): the original may be going on.
+    pub copied: bool,
 }
 
 /// What the central database holds of a station.
@@ -88,16 +91,20 @@ pub async fn read<'e, E>(executor: E) -> Result<Vec<Incarnation>, sqlx::Error>
 where
     E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
 {
-    let rows = sqlx::query("SELECT incarnation, born_after FROM sync_lineage ORDER BY seq")
+    // A store not yet opened by a brdfd with step 21 (forwarded read-only by `brdfd sync`)
+    // has no `copied` column: none of its incarnations is known as a copy.
+    let rows = sqlx::query("SELECT * FROM sync_lineage ORDER BY seq")
         .fetch_all(executor)
         .await?;
-    Ok(rows
-        .iter()
-        .map(|r| Incarnation {
-            id: r.get(0),
-            born_after: r.get(1),
+    rows.iter()
+        .map(|r| {
+            Ok(Incarnation {
+                id: r.try_get("incarnation")?,
+                born_after: r.try_get("born_after")?,
+                copied: r.try_get::<Option<i64>, _>("copied").ok().flatten() == Some(1),
+            })
         })
-        .collect())
+        .collect()
 }
 
 /// The chain head (hex SHA-256) of the store `uid` with `lineage` at outbox entry `at`: the
@@ -155,6 +162,25 @@ pub fn decide(
             }
         }
         None => check_incarnation(station, standing, lineage, high)?,
+    }
+    // A copy taken of the store while it was open does not take the station over by itself:
+    // its original may be going on. Covered already: an incarnation the station's history
+    // holds (born before the horizon), or one at or before the incarnation central recorded
+    // (after `--retire-old`).
+    let recorded = standing
+        .incarnation
+        .as_deref()
+        .and_then(|id| lineage.iter().position(|i| i.id == id));
+    for (at, i) in lineage.iter().enumerate() {
+        let covered = i.born_after < horizon || recorded.is_some_and(|r| at <= r);
+        if i.copied && !covered && high > i.born_after && standing.cursor > 0 {
+            return Err(forked(format!(
+                "this store is a copy of the station's store taken at outbox entry {} while \
+                 that store was open (it was never closed before the copy), and it wrote on \
+                 its own since: the original may be going on",
+                i.born_after
+            )));
+        }
     }
     Ok(if standing.cursor < deleted_up_to {
         Verdict::CentralBehind
@@ -254,7 +280,46 @@ mod tests {
         Incarnation {
             id: id.into(),
             born_after,
+            copied: false,
         }
+    }
+
+    fn copy_of(id: &str, born_after: i64) -> Incarnation {
+        Incarnation {
+            copied: true,
+            ..inc(id, born_after)
+        }
+    }
+
+    #[test]
+    fn a_copy_of_an_open_store_does_not_take_the_station_over_even_first() {
+        // The original (b, still open) forwarded up to 25; a live copy taken at 25 began d
+        // there and wrote, and forwards before the original does: refused.
+        let orig = [inc("a", 0), inc("b", 10)];
+        let copy = [inc("a", 0), inc("b", 10), copy_of("d", 25)];
+        let s = sent(&orig, 25);
+        let e = decide("s", &s, "u", &copy, 30, 0).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("copy of the station's store taken at outbox entry 25"),
+            "{e}"
+        );
+        // Not written since the copy: the same history, nothing to send, accepted.
+        decide("s", &s, "u", &copy, 25, 0).unwrap();
+        // The original goes on.
+        decide("s", &s, "u", &orig, 40, 0).unwrap();
+        // After `--retire-old` (no head, the copy's later incarnation recorded) it is the station.
+        let retired = Standing {
+            cursor: 0,
+            horizon: 0,
+            head: None,
+            incarnation: Some("e".into()),
+        };
+        let mut copy_on = copy.to_vec();
+        copy_on.push(inc("e", 30));
+        decide("s", &retired, "u", &copy_on, 30, 0).unwrap();
+        // First contact: nothing to take over.
+        decide("s", &standing(None, 0), "u", &copy, 30, 0).unwrap();
     }
 
     fn standing(head: Option<&str>, horizon: i64) -> Standing {
