@@ -382,11 +382,7 @@ async fn a_station_restarted_mid_forward_loses_and_doubles_nothing() {
         d.store.close().await;
 
         // The second life, on the same store: forwarding resumes from the central cursor.
-        let settings = ServiceSettings {
-            sync: Some(forwarding("bench-r", &db.url, 50)),
-            ..settings()
-        };
-        let (store, service) = service_on(&d.db, settings).await;
+        let (store, service) = service_on(&d.db, station_settings("bench-r", &db.url, 50)).await;
         measure_reference(&service).await;
         scan_and_drain(&service, &d.db, samples(1)[0]).await;
         service.stop_keeping_store().await;
