@@ -428,9 +428,8 @@ impl Forwarder {
             Err(e) => {
                 // The COMMIT may or may not have happened: read the cursor back next time.
                 self.cursor = None;
-                let refused = matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. });
-                let recorded =
-                    matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. });
+                let refused = matches!(e, SyncError::Forked { .. });
+                let recorded = matches!(e, SyncError::Forked { .. });
                 if recorded && self.last_refusal.as_deref() != Some(&e.to_string()) {
                     if let Some(c) = &self.central {
                         let incarnation = lineage::read(&self.source)
@@ -663,7 +662,7 @@ impl Forwarder {
                 Err(e) => {
                     let message = e.to_string();
                     if last_logged.as_deref() != Some(message.as_str()) {
-                        if matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. }) {
+                        if matches!(e, SyncError::Forked { .. }) {
                             tracing::error!("forwarding to the central database: {message}");
                         } else {
                             tracing::warn!("forwarding to the central database: {message}");

@@ -88,20 +88,6 @@ pub enum SyncError {
     )]
     StoreHasOtherId { station: String, existing: String },
 
-    /// The central cursor is past everything this store ever queued: the file is an older
-    /// copy (a backup restored) of the store that forwarded under this station id.
-    #[error(
-        "the central database has station \"{station}\" up to outbox entry {cursor}, but this \
-         store has only {local} entries: it is an older copy of that station's store; restore the \
-         newest copy, or make this one a station of its own with `brdfd sync --db FILE --adopt \
-         NEW_ID`"
-    )]
-    StoreBehind {
-        station: String,
-        cursor: i64,
-        local: i64,
-    },
-
     /// This store is a copy of the station's store that went its own way after the copy, or
     /// the station went on without it (src/sync/lineage.rs): nothing of it is written.
     #[error(
