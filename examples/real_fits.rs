@@ -4,7 +4,8 @@
 //! instrument's own calibration (SCIENCE.md §3).
 //!
 //! Prints, per cost function and geometry, the mean and largest ΔE00 over the samples and the
-//! mean signed ΔL* (fitted − measured: positive where the model is too bright), then the same
+//! mean signed ΔL* (measured − fitted, as everywhere in brdfd: positive where the model is too
+//! dark), then the same
 //! by leave-one-geometry-out prediction: fit 11 of the 12 geometries, predict the 12th, so that
 //! a model cannot win by reproducing readings it was fitted to.
 //!
@@ -117,7 +118,7 @@ fn main() {
                 let lab_e = lab_per_geometry_with(&est, colorimetry);
                 for g in 0..MA_T12_COUNT {
                     de[g].push(e.per_geometry[g]);
-                    dl[g].push(lab_e[g].l - lab_m[g].l);
+                    dl[g].push(lab_m[g].l - lab_e[g].l);
                 }
                 for g in 0..MA_T12_COUNT {
                     let held = MeasuredBrdf {
@@ -129,7 +130,7 @@ fn main() {
                     let e = evaluate_with(&m.values, &est, colorimetry, m.geometries);
                     let lab_e = lab_per_geometry_with(&est, colorimetry);
                     de_out[g].push(e.per_geometry[g]);
-                    dl_out[g].push(lab_e[g].l - lab_m[g].l);
+                    dl_out[g].push(lab_m[g].l - lab_e[g].l);
                 }
             }
             let mean = |xs: &[f64]| xs.iter().sum::<f64>() / xs.len() as f64;
@@ -171,7 +172,7 @@ fn main() {
                 "geometry",
                 "ΔE00 mean",
                 "ΔE00 max",
-                "ΔL* fit−m",
+                "ΔL* m−fit",
                 "held mean",
                 "held max",
                 "held ΔL*"

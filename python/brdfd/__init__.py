@@ -115,6 +115,11 @@ class FitResult:
         return self.document["delta_e00_mean"]
 
     @property
+    def cost(self) -> float:
+        """The cost function's value at the fitted parameters (``document["cost"]``)."""
+        return self.document["cost"]
+
+    @property
     def geometries(self) -> List[str]:
         """The geometries measured, in table order (14, or 12 without SRA readings)."""
         return list(self.delta_e00)

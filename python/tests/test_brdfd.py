@@ -144,6 +144,7 @@ def test_result_values_are_plain_python_and_numpy():
     assert list(r.delta_e00) == brdfd.geometries()
     assert all(isinstance(v, float) for v in r.delta_e00.values())
     assert r.delta_e00_mean == pytest.approx(np.mean(list(r.delta_e00.values())))
+    assert r.cost == r.document["cost"] and r.cost > 0
     lab = r.lab["45as15"]
     assert lab["measured"].shape == (3,) and lab["fitted"].shape == (3,)
     assert r.intervals is None
