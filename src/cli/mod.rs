@@ -31,6 +31,7 @@ pub mod show;
 pub mod status;
 pub mod sync;
 pub mod synth;
+pub mod validate;
 
 /// brdfd: spectral BRDF from two handheld instruments (X-Rite MA-T12 + Canon RA-532H).
 #[derive(Debug, Parser)]
@@ -45,6 +46,9 @@ pub struct Cli {
 pub enum Command {
     /// Fit the spectral Cook–Torrance model to one scan file, without a daemon or database.
     Fit(fit::FitArgs),
+    /// Validate the handheld estimate against a measured goniometric BRDF (ASTM E1392 or
+    /// RGL .bsdf): the 14 readings it would give, fitted, predicting every measured direction.
+    Validate(validate::ValidateArgs),
     /// Write the eight synthetic example scans and their ground truth to a directory.
     Synth(synth::SynthArgs),
     /// The main job on the embedded default: replay the committed recordings (N9 reference and
@@ -177,6 +181,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Fit(args) => fit::run(&args),
         Command::Synth(args) => synth::run(&args),
+        Command::Validate(args) => validate::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Report(args) => report::run(&args),
         Command::Render(args) => render::run(&args),
