@@ -46,8 +46,8 @@ pub struct ValidateArgs {
 
 pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     for path in &args.files {
-        let file = std::fs::File::open(path)
-            .with_context(|| format!("opening {}", path.display()))?;
+        let file =
+            std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
         let m = Measurement::read(file).with_context(|| format!("reading {}", path.display()))?;
         let mut report = validate(&m, &Options::default())
             .with_context(|| format!("validating {}", path.display()))?;

@@ -86,7 +86,10 @@ impl AstmFile {
         let text = std::str::from_utf8(bytes).map_err(|e| {
             err(
                 "text",
-                format!("not UTF-8 at byte {}: ASTM E1392 files are text", e.valid_up_to()),
+                format!(
+                    "not UTF-8 at byte {}: ASTM E1392 files are text",
+                    e.valid_up_to()
+                ),
             )
         })?;
         let mut keys: Vec<(String, String)> = Vec::new();
@@ -107,7 +110,10 @@ impl AstmFile {
                     vars = Some(value.split(',').map(|v| v.trim().to_string()).collect());
                 } else if key.eq_ignore_ascii_case("NUM_POINTS") {
                     expected = Some(value.parse().map_err(|_| {
-                        err(format!("line {n}: NUM_POINTS"), format!("\"{value}\" is not a count"))
+                        err(
+                            format!("line {n}: NUM_POINTS"),
+                            format!("\"{value}\" is not a count"),
+                        )
                     })?);
                 }
                 keys.push((key.to_ascii_uppercase(), value));
@@ -120,7 +126,10 @@ impl AstmFile {
                 ));
             };
             if points.len() >= MAX_POINTS {
-                return Err(err(format!("line {n}"), format!("more than {MAX_POINTS} directions")));
+                return Err(err(
+                    format!("line {n}"),
+                    format!("more than {MAX_POINTS} directions"),
+                ));
             }
             let cols: Vec<&str> = line.split(',').map(str::trim).collect();
             if cols.len() != v.len() {
@@ -131,16 +140,26 @@ impl AstmFile {
             }
             let mut nums = Vec::with_capacity(cols.len());
             for (c, s) in cols.iter().enumerate() {
-                let x: f64 = s.parse().ok().filter(|x: &f64| x.is_finite()).ok_or_else(|| {
-                    err(format!("line {n}, column {} ({})", c + 1, v[c]), format!("\"{s}\" is not a finite number"))
-                })?;
+                let x: f64 = s
+                    .parse()
+                    .ok()
+                    .filter(|x: &f64| x.is_finite())
+                    .ok_or_else(|| {
+                        err(
+                            format!("line {n}, column {} ({})", c + 1, v[c]),
+                            format!("\"{s}\" is not a finite number"),
+                        )
+                    })?;
                 nums.push(x);
             }
             for (c, name) in [(0, "theta_i"), (2, "theta_s")] {
                 if !(0.0..=std::f64::consts::FRAC_PI_2 + 1e-6).contains(&nums[c]) {
                     return Err(err(
                         format!("line {n}, {name}"),
-                        format!("{} rad is not a zenith angle in [0, π/2] (angles are in radians)", nums[c]),
+                        format!(
+                            "{} rad is not a zenith angle in [0, π/2] (angles are in radians)",
+                            nums[c]
+                        ),
                     ));
                 }
             }
@@ -155,7 +174,10 @@ impl AstmFile {
         let vars = vars.ok_or_else(|| err("VARS", "missing: the header must name the columns"))?;
         let angle_names = ["theta_i", "phi_i", "theta_s", "phi_s"];
         if vars.len() < 5
-            || !vars.iter().zip(angle_names).all(|(v, a)| v.eq_ignore_ascii_case(a))
+            || !vars
+                .iter()
+                .zip(angle_names)
+                .all(|(v, a)| v.eq_ignore_ascii_case(a))
         {
             return Err(err(
                 "VARS",
@@ -177,9 +199,18 @@ impl AstmFile {
             let mut w = Vec::new();
             for c in chans {
                 let t = c.trim_end_matches("nm").trim();
-                let x: f64 = t.parse().ok().filter(|x: &f64| x.is_finite() && *x > 0.0).ok_or_else(|| {
-                    err("VARS", format!("channel \"{c}\" is neither a wavelength (e.g. 400nm) nor R, G, B"))
-                })?;
+                let x: f64 = t
+                    .parse()
+                    .ok()
+                    .filter(|x: &f64| x.is_finite() && *x > 0.0)
+                    .ok_or_else(|| {
+                        err(
+                            "VARS",
+                            format!(
+                                "channel \"{c}\" is neither a wavelength (e.g. 400nm) nor R, G, B"
+                            ),
+                        )
+                    })?;
                 w.push(x);
             }
             if !w.windows(2).all(|p| p[0] < p[1]) {
@@ -195,7 +226,10 @@ impl AstmFile {
         {
             return Err(err(
                 "NUM_POINTS",
-                format!("says {e}, the file has {} direction lines (truncated?)", points.len()),
+                format!(
+                    "says {e}, the file has {} direction lines (truncated?)",
+                    points.len()
+                ),
             ));
         }
         let get = |k: &str| {
@@ -204,7 +238,12 @@ impl AstmFile {
                 .map(|(_, v)| v.clone())
                 .unwrap_or_default()
         };
-        Ok(AstmFile::new(get("SAMPLE_NAME"), get("SAMPLE_TYPE"), channels, points))
+        Ok(AstmFile::new(
+            get("SAMPLE_NAME"),
+            get("SAMPLE_TYPE"),
+            channels,
+            points,
+        ))
     }
 
     /// A file from its parts (what the parser builds, and what tests write).
@@ -323,7 +362,12 @@ mod tests {
                 }
             }
         }
-        AstmFile::new("grey".into(), "test".into(), Channels::Spectral(vec![450.0, 650.0]), points)
+        AstmFile::new(
+            "grey".into(),
+            "test".into(),
+            Channels::Spectral(vec![450.0, 650.0]),
+            points,
+        )
     }
 
     #[test]
@@ -358,21 +402,27 @@ mod tests {
 
     #[test]
     fn errors_name_the_line_and_field() {
-        let e = AstmFile::parse(b"SAMPLE_NAME x\n0.1,0,0.2,0,0.5\n").unwrap_err().to_string();
+        let e = AstmFile::parse(b"SAMPLE_NAME x\n0.1,0,0.2,0,0.5\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("line 2") && e.contains("VARS"), "{e}");
         let e = AstmFile::parse(b"VARS theta_i,phi_i,theta_s,phi_s,400nm\n0.1,0,0.2,0,abc\n")
             .unwrap_err()
             .to_string();
         assert!(e.contains("column 5 (400nm)"), "{e}");
-        let e = AstmFile::parse(b"NUM_POINTS 3\nVARS theta_i,phi_i,theta_s,phi_s,400nm\n0.1,0,0.2,0,0.5\n")
-            .unwrap_err()
-            .to_string();
+        let e = AstmFile::parse(
+            b"NUM_POINTS 3\nVARS theta_i,phi_i,theta_s,phi_s,400nm\n0.1,0,0.2,0,0.5\n",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("NUM_POINTS") && e.contains("truncated"), "{e}");
         let e = AstmFile::parse(b"VARS theta_i,phi_i,theta_s,phi_s,400nm\n20,0,0.2,0,0.5\n")
             .unwrap_err()
             .to_string();
         assert!(e.contains("radians"), "{e}");
-        let rgb = AstmFile::parse(b"VARS theta_i,phi_i,theta_s,phi_s,R,G,B\n0.1,0,0.2,0,0.5,0.4,0.3\n").unwrap();
+        let rgb =
+            AstmFile::parse(b"VARS theta_i,phi_i,theta_s,phi_s,R,G,B\n0.1,0,0.2,0,0.5,0.4,0.3\n")
+                .unwrap();
         assert_eq!(rgb.channels, Channels::Rgb);
     }
 }

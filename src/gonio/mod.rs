@@ -41,7 +41,9 @@ pub enum GonioError {
     )]
     UnknownFormat,
     /// The file is larger than [`MAX_FILE_BYTES`].
-    #[error("the file has more than {MAX_FILE_BYTES} bytes; goniometric files are far smaller: check the path")]
+    #[error(
+        "the file has more than {MAX_FILE_BYTES} bytes; goniometric files are far smaller: check the path"
+    )]
     TooLarge,
     /// The file could not be read.
     #[error("reading the file: {0}")]
@@ -143,8 +145,7 @@ impl Measurement {
     pub fn read(r: impl std::io::Read) -> Result<Measurement, GonioError> {
         use std::io::Read as _;
         let mut bytes = Vec::new();
-        r.take(MAX_FILE_BYTES as u64 + 1)
-            .read_to_end(&mut bytes)?;
+        r.take(MAX_FILE_BYTES as u64 + 1).read_to_end(&mut bytes)?;
         Measurement::parse(&bytes)
     }
 
@@ -190,7 +191,11 @@ impl Measurement {
 
 /// The unit vector at zenith `theta` and azimuth `phi` (radians).
 pub fn direction(theta: f64, phi: f64) -> Vec3 {
-    [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]
+    [
+        theta.sin() * phi.cos(),
+        theta.sin() * phi.sin(),
+        theta.cos(),
+    ]
 }
 
 pub(crate) fn normalize(v: Vec3) -> Vec3 {
@@ -201,7 +206,6 @@ pub(crate) fn normalize(v: Vec3) -> Vec3 {
 pub(crate) fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
-
 
 #[cfg(test)]
 mod tests {

@@ -18,6 +18,8 @@
 //! `u = (√(2θ/π), (φ + π)/2π)`, φ relative to the incidence azimuth; the VNDF warp inverted at
 //! u_m gives the sample position, where the channels are interpolated bilinearly (and
 //! linearly between incidence angles); times `D(u_m) / (4 σ(u_i))` when `jacobian` is set.
+//! That is `f · cos θo`, a renderer's BSDF value (what Mitsuba's `eval` returns); brdfd divides
+//! the cosine out and reports the BRDF f, sr⁻¹.
 //! The warps are the format's continuous "marginal 2-D" distributions: the bilinear
 //! interpolant of a grid, its marginal CDF over rows and conditional CDF along each row.
 //! Mitsuba 3's `measured` plugin evaluates the same files (`tests/gonio_mitsuba.rs` holds
@@ -100,7 +102,10 @@ pub fn read_tensors(bytes: &[u8]) -> Result<BTreeMap<String, Tensor>, GonioError
     if version[0] != 1 {
         return Err(err(
             "version",
-            format!("{}.{} is not a version brdfd reads (1.x)", version[0], version[1]),
+            format!(
+                "{}.{} is not a version brdfd reads (1.x)",
+                version[0], version[1]
+            ),
         ));
     }
     let count = c.u32("field count")? as usize;
@@ -120,8 +125,12 @@ pub fn read_tensors(bytes: &[u8]) -> Result<BTreeMap<String, Tensor>, GonioError
             return Err(err(&name, format!("rank {rank} (at most {MAX_RANK})")));
         }
         let dtype = c.take(1, &format!("{name}: type"))?[0];
-        let size = dtype_size(dtype)
-            .ok_or_else(|| err(&name, format!("element type {dtype} is not one brdfd reads")))?;
+        let size = dtype_size(dtype).ok_or_else(|| {
+            err(
+                &name,
+                format!("element type {dtype} is not one brdfd reads"),
+            )
+        })?;
         let offset = c.u64(&format!("{name}: offset"))? as usize;
         let mut shape = Vec::with_capacity(rank);
         for _ in 0..rank {
@@ -340,7 +349,8 @@ impl Warp2D {
         let v10 = self.lookup(&self.data, i + 1, size, &ws);
         let v01 = self.lookup(&self.data, i + self.nx, size, &ws);
         let v11 = self.lookup(&self.data, i + self.nx + 1, size, &ws);
-        let v = (1.0 - w1y) * ((1.0 - w1x) * v00 + w1x * v10) + w1y * ((1.0 - w1x) * v01 + w1x * v11);
+        let v =
+            (1.0 - w1y) * ((1.0 - w1x) * v00 + w1x * v10) + w1y * ((1.0 - w1x) * v01 + w1x * v11);
         if self.marginal_cdf.is_empty() {
             v
         } else {
@@ -387,7 +397,10 @@ impl Warp2D {
     pub fn sample(&self, sample: [f64; 2], param: &[f64]) -> ([f64; 2], f64) {
         let (slice, ws) = self.weights(param);
         let eps = f64::from(f32::EPSILON) / 2.0;
-        let (mut sx, mut sy) = (sample[0].clamp(eps, 1.0 - eps), sample[1].clamp(eps, 1.0 - eps));
+        let (mut sx, mut sy) = (
+            sample[0].clamp(eps, 1.0 - eps),
+            sample[1].clamp(eps, 1.0 - eps),
+        );
         let size = self.nx * self.ny;
         let mrow = slice * self.ny;
         let fetch_m = |k: usize| self.lookup(&self.marginal_cdf, mrow + k, self.ny, &ws);
@@ -499,7 +512,10 @@ fn rank(t: &Tensor, name: &str, want: usize) -> Result<(), GonioError> {
         ));
     }
     if t.shape.iter().any(|&d| d == 0) {
-        return Err(err(name, format!("has an empty axis (shape {:?})", t.shape)));
+        return Err(err(
+            name,
+            format!("has an empty axis (shape {:?})", t.shape),
+        ));
     }
     Ok(())
 }
@@ -510,7 +526,10 @@ impl RglBsdf {
         let t = read_tensors(bytes)?;
         let description = t
             .get("description")
-            .map(|d| String::from_utf8_lossy(&d.values.iter().map(|&v| v as u8).collect::<Vec<_>>()).into_owned())
+            .map(|d| {
+                String::from_utf8_lossy(&d.values.iter().map(|&v| v as u8).collect::<Vec<_>>())
+                    .into_owned()
+            })
             .unwrap_or_default();
         let theta_i = field(&t, "theta_i")?;
         let phi_i = field(&t, "phi_i")?;
@@ -533,18 +552,34 @@ impl RglBsdf {
             let a = field(&t, name)?;
             rank(a, name, 2)?;
             if a.shape[0] < 2 || a.shape[1] < 2 {
-                return Err(err(name, format!("shape {:?}: each axis needs ≥ 2", a.shape)));
+                return Err(err(
+                    name,
+                    format!("shape {:?}: each axis needs ≥ 2", a.shape),
+                ));
             }
-            Ok(Warp2D::new(&a.values, a.shape[1], a.shape[0], vec![], false))
+            Ok(Warp2D::new(
+                &a.values,
+                a.shape[1],
+                a.shape[0],
+                vec![],
+                false,
+            ))
         };
         let ndf = grid2("ndf")?;
         let sigma = grid2("sigma")?;
         let vndf_t = field(&t, "vndf")?;
         rank(vndf_t, "vndf", 4)?;
-        if vndf_t.shape[0] != np || vndf_t.shape[1] != nt || vndf_t.shape[2] < 2 || vndf_t.shape[3] < 2 {
+        if vndf_t.shape[0] != np
+            || vndf_t.shape[1] != nt
+            || vndf_t.shape[2] < 2
+            || vndf_t.shape[3] < 2
+        {
             return Err(err(
                 "vndf",
-                format!("shape {:?} does not match phi_i × theta_i × n × n", vndf_t.shape),
+                format!(
+                    "shape {:?} does not match phi_i × theta_i × n × n",
+                    vndf_t.shape
+                ),
             ));
         }
         let params = vec![phi_i.values.clone(), theta_i.values.clone()];
@@ -561,11 +596,19 @@ impl RglBsdf {
             if !w.values.windows(2).all(|p| p[0] < p[1]) {
                 return Err(err("wavelengths", "must increase"));
             }
-            (s, Channels::Spectral(w.values.clone()), w.values.clone(), "spectra")
+            (
+                s,
+                Channels::Spectral(w.values.clone()),
+                w.values.clone(),
+                "spectra",
+            )
         } else if let Some(s) = t.get("rgb") {
             (s, Channels::Rgb, vec![0.0, 1.0, 2.0], "rgb")
         } else {
-            return Err(err("spectra", "missing, and no rgb either: the file holds no BRDF values"));
+            return Err(err(
+                "spectra",
+                "missing, and no rgb either: the file holds no BRDF values",
+            ));
         };
         rank(values_t, name, 5)?;
         let s = &values_t.shape;
@@ -617,6 +660,8 @@ impl RglBsdf {
         } else {
             1.0
         };
+        // The format's evaluation is f · cos θo (a renderer's BSDF value): the cosine out.
+        let scale = scale / wo[2];
         self.channel_params
             .iter()
             .map(|&c| self.values.eval(sample, &[phi_i, theta_i, c]) * scale)
@@ -726,7 +771,7 @@ pub fn write(
                 wo[2] = wo[2].max(1e-3);
                 let wo = normalize(wo);
                 let fv = f(wi, wo);
-                let scale = 4.0 * s / ndf_w.eval(u_m, &[]);
+                let scale = 4.0 * s / ndf_w.eval(u_m, &[]) * wo[2];
                 let mut lum = 0.0;
                 for ch in 0..nc {
                     let v = fv[ch] * scale;
@@ -790,7 +835,10 @@ mod tests {
         for (sx, sy, p) in [(0.3, 0.7, 0.25), (0.9, 0.1, 0.0), (0.51, 0.49, 1.0)] {
             let (pos, pdf) = w.sample([sx, sy], &[p]);
             let (back, pdf2) = w.invert(pos, &[p]);
-            assert!((back[0] - sx).abs() < 1e-9 && (back[1] - sy).abs() < 1e-9, "{back:?}");
+            assert!(
+                (back[0] - sx).abs() < 1e-9 && (back[1] - sy).abs() < 1e-9,
+                "{back:?}"
+            );
             assert!((pdf - pdf2).abs() < 1e-9 * pdf);
             assert!((w.eval(pos, &[p]) - pdf).abs() < 1e-9 * pdf);
         }
@@ -809,7 +857,13 @@ mod tests {
         assert_eq!(b.description, "test");
         assert_eq!(b.channels, Channels::Rgb);
         let mut worst: f64 = 0.0;
-        for (ti, to, p) in [(0.0, 30.0, 0.0), (30.0, 30.0, 180.0), (45.0, 45.0, 180.0), (60.0, 20.0, 90.0), (20.0, 70.0, 150.0)] {
+        for (ti, to, p) in [
+            (0.0, 30.0, 0.0),
+            (30.0, 30.0, 180.0),
+            (45.0, 45.0, 180.0),
+            (60.0, 20.0, 90.0),
+            (20.0, 70.0, 150.0),
+        ] {
             let wi = direction(f64::to_radians(ti), 0.0);
             let wo = direction(f64::to_radians(to), f64::to_radians(p));
             let got = b.eval(wi, wo);
@@ -832,13 +886,20 @@ mod tests {
             ..WriteOptions::default()
         };
         let bytes = write("x", &Channels::Rgb, &f, &opts);
-        let e = RglBsdf::parse(&bytes[..bytes.len() - 40]).unwrap_err().to_string();
+        let e = RglBsdf::parse(&bytes[..bytes.len() - 40])
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("jacobian") || e.contains("rgb"), "{e}");
         assert!(e.contains("past the end"), "{e}");
         let e = RglBsdf::parse(&bytes[..30]).unwrap_err().to_string();
         assert!(e.contains("truncated"), "{e}");
         let mut bad = bytes.clone();
         bad[12] = 7;
-        assert!(RglBsdf::parse(&bad).unwrap_err().to_string().contains("version"));
+        assert!(
+            RglBsdf::parse(&bad)
+                .unwrap_err()
+                .to_string()
+                .contains("version")
+        );
     }
 }

@@ -97,8 +97,16 @@ pub fn variants() -> Vec<Variant> {
         for (model, fresnel, geometries) in [
             (ModelKind::Paper, FresnelCosine::Incidence, GeometrySet::ALL),
             (ModelKind::Paper, FresnelCosine::Exact, GeometrySet::ALL),
-            (ModelKind::OrenNayar, FresnelCosine::Incidence, GeometrySet::ALL),
-            (ModelKind::Paper, FresnelCosine::Incidence, GeometrySet::MA_T12),
+            (
+                ModelKind::OrenNayar,
+                FresnelCosine::Incidence,
+                GeometrySet::ALL,
+            ),
+            (
+                ModelKind::Paper,
+                FresnelCosine::Incidence,
+                GeometrySet::MA_T12,
+            ),
         ] {
             out.push(Variant {
                 cost,
@@ -144,9 +152,14 @@ impl Prediction {
             } else {
                 0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2])
             },
-            p95: s.get((0.95 * n as f64).ceil() as usize - 1).copied().unwrap_or(f64::NAN),
+            p95: s
+                .get((0.95 * n as f64).ceil() as usize - 1)
+                .copied()
+                .unwrap_or(f64::NAN),
             max: s.last().copied().unwrap_or(f64::NAN),
-            near_specular_mean: mean_of(&mut de.iter().zip(near).filter(|(_, n)| **n).map(|(d, _)| *d)),
+            near_specular_mean: mean_of(
+                &mut de.iter().zip(near).filter(|(_, n)| **n).map(|(d, _)| *d),
+            ),
             rest_mean: mean_of(&mut de.iter().zip(near).filter(|(_, n)| !**n).map(|(d, _)| *d)),
         }
     }
@@ -312,7 +325,10 @@ pub fn predict(
 }
 
 /// The measured BRDF the instruments' readings make (module text), and the readings.
-pub fn readings(m: &Measurement, sra: SraReading) -> (MeasuredBrdf, BTreeMap<&'static str, Reading>) {
+pub fn readings(
+    m: &Measurement,
+    sra: SraReading,
+) -> (MeasuredBrdf, BTreeMap<&'static str, Reading>) {
     let weights = sra.weights();
     let mut values = [[0.0; BANDS]; GEOMETRY_COUNT];
     let mut docs = BTreeMap::new();
@@ -438,14 +454,23 @@ pub fn oracle(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) -> Pa
     best.1.expect("the grid is not empty")
 }
 
-/// Validates the handheld estimate against one measurement.
+/// Validates the handheld estimate against one measurement, with every fit of [`variants`].
 pub fn validate(m: &Measurement, opts: &Options) -> Result<Report, crate::fit::FitScanError> {
+    validate_with(m, opts, &variants())
+}
+
+/// [`validate`] with the fits of `variants` only.
+pub fn validate_with(
+    m: &Measurement,
+    opts: &Options,
+    variants: &[Variant],
+) -> Result<Report, crate::fit::FitScanError> {
     let start = Instant::now();
     let colorimetry = opts.colorimetry;
     let (targets, prediction_set) = targets(m, colorimetry);
     let (measured, reading_docs) = readings(m, opts.sra);
     let mut fits = Vec::new();
-    for v in variants() {
+    for &v in variants {
         let request = FitRequest {
             settings: Settings {
                 cost: v.cost,
@@ -462,9 +487,13 @@ pub fn validate(m: &Measurement, opts: &Options) -> Result<Report, crate::fit::F
             geometries: v.geometries,
             ..measured
         };
-        let report = fit_measured(m.material(), "goniometric measurement", mb, &request, &mut |_| {
-            ControlFlow::Continue(())
-        })?;
+        let report = fit_measured(
+            m.material(),
+            "goniometric measurement",
+            mb,
+            &request,
+            &mut |_| ControlFlow::Continue(()),
+        )?;
         let p = report.outcome.params;
         let prediction = predict(&targets, colorimetry, &|t| {
             evaluate_at(&p, v.model, v.fresnel, t.wi, t.wo)

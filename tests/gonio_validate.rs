@@ -1,0 +1,259 @@
+//! `brdfd validate` on goniometric files the test writes itself from known BRDFs: brdfd's own
+//! model (the validation recovers it: prediction ΔE00 ≈ 0) and a form it cannot represent (a
+//! second, narrow lobe and a retro-reflective term: prediction and oracle clearly above 0), in
+//! both formats; the readers, the interpolation, the prediction figures and the JSON contract.
+
+use brdfd::cost::CostFunction;
+use brdfd::geometry::{GEOMETRIES, GeometrySet, Vec3};
+use brdfd::gonio::astm::{AstmFile, Point};
+use brdfd::gonio::rgl::{self, WriteOptions};
+use brdfd::gonio::validate::{Options, Report, Variant, validate_with};
+use brdfd::gonio::{Channels, Measurement};
+use brdfd::model::{EXTRA, FresnelCosine, ModelKind, Params, evaluate_at};
+use brdfd::spectral::{BANDS, wavelengths_nm};
+
+mod common;
+
+fn truth() -> Params {
+    Params {
+        kd: std::array::from_fn(|b| 0.02 + 0.1 * (-((b as f64 - 8.0) / 6.0).powi(2)).exp()),
+        ks: 0.3,
+        alpha: 0.15,
+        ior: 1.5,
+        extra: [0.0; EXTRA],
+    }
+}
+
+fn own_model(wi: Vec3, wo: Vec3) -> Vec<f64> {
+    evaluate_at(&truth(), ModelKind::Paper, FresnelCosine::Incidence, wi, wo).to_vec()
+}
+
+/// The model plus what it cannot represent: a second lobe of width 0.04 and a retro-reflective
+/// term peaking where the view is the light.
+fn out_of_reach(wi: Vec3, wo: Vec3) -> Vec<f64> {
+    let second = Params {
+        ks: 0.4,
+        alpha: 0.04,
+        kd: [0.0; BANDS],
+        ..truth()
+    };
+    let lobe = evaluate_at(&second, ModelKind::Paper, FresnelCosine::Incidence, wi, wo)[0];
+    let retro = 0.08
+        * (wi[0] * wo[0] + wi[1] * wo[1] + wi[2] * wo[2])
+            .max(0.0)
+            .powi(16);
+    own_model(wi, wo).iter().map(|v| v + lobe + retro).collect()
+}
+
+fn deg(d: f64) -> f64 {
+    d.to_radians()
+}
+
+/// An ASTM file of `f` over θi 10–70°, θs 0–80°, φs 0–180°, plus the 14 instrument geometries.
+fn astm(name: &str, f: &dyn Fn(Vec3, Vec3) -> Vec<f64>) -> AstmFile {
+    let mut points = Vec::new();
+    let mut push = |angles: [f64; 4]| {
+        let p = Point {
+            angles,
+            values: vec![],
+        };
+        let (wi, wo) = p.directions();
+        points.push(Point {
+            values: f(wi, wo),
+            ..p
+        });
+    };
+    for ti in [10.0, 30.0, 50.0, 70.0] {
+        for ts in (0..=8).map(|k| 10.0 * k as f64) {
+            for ps in [0.0, 45.0, 90.0, 135.0, 180.0] {
+                push([deg(ti), 0.0, deg(ts), deg(ps)]);
+            }
+        }
+    }
+    for g in &GEOMETRIES {
+        push([
+            deg(g.theta_i_deg),
+            0.0,
+            deg(g.theta_r_deg),
+            deg(g.phi_r_deg),
+        ]);
+    }
+    let w = wavelengths_nm().iter().map(|&n| f64::from(n)).collect();
+    AstmFile::new(name.into(), "test".into(), Channels::Spectral(w), points)
+}
+
+fn cf2(model: ModelKind, fresnel: FresnelCosine) -> Variant {
+    Variant {
+        cost: CostFunction::Cf2,
+        model,
+        fresnel,
+        geometries: GeometrySet::ALL,
+    }
+}
+
+fn run(m: &Measurement) -> Report {
+    validate_with(
+        m,
+        &Options::default(),
+        &[cf2(ModelKind::Paper, FresnelCosine::Incidence)],
+    )
+    .unwrap()
+}
+
+#[test]
+fn astm_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
+    let file = astm("own model", &own_model);
+    let m = Measurement::parse(file.write().as_bytes()).unwrap();
+    assert_eq!(m.format(), "astm-e1392");
+    let r = run(&m);
+    // The readings are the file's values at the instrument geometries.
+    let g = brdfd::geometry::by_name("45as45").unwrap();
+    let want = own_model(g.light(), g.view());
+    for (a, b) in r.readings["45as45"].raw.iter().zip(&want) {
+        assert!((a - b).abs() < 1e-8, "{a} vs {b}");
+    }
+    let fit = &r.fits[0];
+    assert!(fit.default);
+    assert!(
+        fit.fit_delta_e00_mean < 0.05,
+        "fit {}",
+        fit.fit_delta_e00_mean
+    );
+    assert!(
+        fit.prediction.mean < 0.05,
+        "prediction {:?}",
+        fit.prediction
+    );
+    assert!(
+        r.oracle.prediction.mean < 0.3,
+        "oracle {:?}",
+        r.oracle.prediction
+    );
+    assert!(
+        r.lambert.prediction.mean > 1.0,
+        "lambert {:?}",
+        r.lambert.prediction
+    );
+    assert_eq!(r.directions, file.points.len());
+    let loo = &r.interpolation.as_ref().unwrap().leave_one_out;
+    assert!(loo.mean > 0.0 && loo.mean.is_finite());
+
+    let hard = astm("two lobes", &out_of_reach);
+    let h = run(&Measurement::parse(hard.write().as_bytes()).unwrap());
+    let p = &h.fits[0].prediction;
+    assert!(p.mean > 1.0, "out of reach predicted {p:?}");
+    assert!(
+        h.oracle.prediction.mean > 0.5,
+        "oracle {:?}",
+        h.oracle.prediction
+    );
+    // Near the mirror direction is where the second lobe lives.
+    assert!(p.near_specular_mean.unwrap() > p.rest_mean.unwrap());
+}
+
+#[test]
+fn rgl_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
+    let w: Vec<f64> = wavelengths_nm().iter().map(|&n| f64::from(n)).collect();
+    let channels = Channels::Spectral(w);
+    let opts = WriteOptions::default();
+    let bytes = rgl::write("own model", &channels, &own_model, &opts);
+    let m = Measurement::parse(&bytes).unwrap();
+    assert_eq!((m.format(), m.material()), ("rgl-bsdf", "own model"));
+    let r = run(&m);
+    assert!(r.interpolation.is_none());
+    assert_eq!(r.directions, 16 * 16 * 13);
+    assert!(
+        r.fits[0].prediction.mean < 0.3,
+        "{:?}",
+        r.fits[0].prediction
+    );
+    let hard = rgl::write("two lobes", &channels, &out_of_reach, &opts);
+    let h = run(&Measurement::parse(&hard).unwrap());
+    assert!(
+        h.fits[0].prediction.mean > 1.0,
+        "{:?}",
+        h.fits[0].prediction
+    );
+    assert!(h.oracle.prediction.mean > 0.5, "{:?}", h.oracle.prediction);
+}
+
+#[test]
+fn validate_json_carries_the_contract() {
+    let dir = tempfile::tempdir().unwrap();
+    let astm_path = dir.path().join("own.astm");
+    std::fs::write(&astm_path, astm("own model", &own_model).write()).unwrap();
+    let rgb = |wi: Vec3, wo: Vec3| {
+        let v = own_model(wi, wo);
+        vec![v[25], v[15], v[5]]
+    };
+    let bsdf_path = dir.path().join("own.bsdf");
+    let opts = WriteOptions {
+        theta_i_count: 6,
+        warp_resolution: 24,
+        value_resolution: 16,
+        ..WriteOptions::default()
+    };
+    std::fs::write(
+        &bsdf_path,
+        rgl::write("rgb model", &Channels::Rgb, &rgb, &opts),
+    )
+    .unwrap();
+    let out = common::run_brdfd(
+        &[
+            "validate",
+            "--json",
+            astm_path.to_str().unwrap(),
+            bsdf_path.to_str().unwrap(),
+        ],
+        None,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let docs: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(docs.len(), 2);
+    for (doc, format, channels) in [(&docs[0], "astm-e1392", BANDS), (&docs[1], "rgl-bsdf", 3)] {
+        assert_eq!(doc["format"], format);
+        assert!(doc["material"].is_string());
+        let readings = doc["readings"].as_object().unwrap();
+        assert_eq!(readings.len(), 14);
+        for g in &GEOMETRIES {
+            assert_eq!(
+                readings[g.name]["raw"].as_array().unwrap().len(),
+                channels,
+                "{}",
+                g.name
+            );
+        }
+        let fits = doc["fits"].as_array().unwrap();
+        assert_eq!(fits.len(), 12);
+        assert_eq!(fits.iter().filter(|f| f["default"] == true).count(), 3);
+        for f in fits {
+            for key in ["cost", "model", "fresnel", "fit_delta_e00_mean"] {
+                assert!(!f[key].is_null(), "{key}");
+            }
+            for key in ["mean", "median", "p95", "near_specular_mean"] {
+                assert!(f["prediction"][key].is_number(), "{key}");
+            }
+        }
+        assert!(doc["oracle"]["mean"].is_number());
+        assert!(doc["lambert"]["mean"].is_number());
+    }
+    assert_eq!(docs[1]["rgb_upsampling"].is_string(), true);
+    // The raw values are the file's, before any conversion: RGB here.
+    let g = brdfd::geometry::by_name("sra-60").unwrap();
+    let raw: Vec<f64> = docs[1]["readings"]["sra-60"]["raw"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let want = rgb(g.light(), g.view());
+    assert!((raw[0] / want[0] - 1.0).abs() < 0.05, "{raw:?} vs {want:?}");
+}
