@@ -6,8 +6,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
+use crate::cost::CostFunction;
 use crate::gonio::Measurement;
-use crate::gonio::validate::{Options, Prediction, Report, validate};
+use crate::gonio::validate::{Options, Prediction, Report, validate_with, variants_of};
 
 #[derive(Debug, clap::Args)]
 #[command(after_help = "\
@@ -38,6 +39,10 @@ pub struct ValidateArgs {
     #[arg(value_name = "FILE", required = true)]
     pub files: Vec<PathBuf>,
 
+    /// The cost functions to fit with (repeat the option for several); all three by default.
+    #[arg(long, value_name = "cf1|cf2|m2")]
+    pub cost: Vec<crate::cost::CostFunction>,
+
     /// Print one JSON object per file, one per line (material, format, readings with the
     /// file's raw values, fits with their predictions, oracle, lambert, …) instead of tables.
     #[arg(long)]
@@ -49,7 +54,12 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
         let file =
             std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
         let m = Measurement::read(file).with_context(|| format!("reading {}", path.display()))?;
-        let mut report = validate(&m, &Options::default())
+        let costs = if args.cost.is_empty() {
+            CostFunction::ALL.to_vec()
+        } else {
+            args.cost.clone()
+        };
+        let mut report = validate_with(&m, &Options::default(), &variants_of(&costs))
             .with_context(|| format!("validating {}", path.display()))?;
         report.file = Some(path.display().to_string());
         if args.json {

@@ -55,7 +55,16 @@ pub struct Options {
     pub sra: SraReading,
     /// The optimiser's seed.
     pub seed: u64,
+    /// The model forms an oracle is fitted for (the first is the report's `oracle`).
+    pub oracle_forms: &'static [(ModelKind, FresnelCosine)],
 }
+
+/// Every model form the fits use: the paper's, exact Fresnel, Oren–Nayar.
+pub const ORACLE_FORMS: &[(ModelKind, FresnelCosine)] = &[
+    (ModelKind::Paper, FresnelCosine::Incidence),
+    (ModelKind::Paper, FresnelCosine::Exact),
+    (ModelKind::OrenNayar, FresnelCosine::Incidence),
+];
 
 impl Default for Options {
     fn default() -> Self {
@@ -66,6 +75,7 @@ impl Default for Options {
             },
             sra: SraReading::LUMINANCE,
             seed: Settings::default().seed,
+            oracle_forms: ORACLE_FORMS,
         }
     }
 }
@@ -92,8 +102,13 @@ impl Variant {
 /// Every fit `brdfd validate` makes: per cost function the paper's default, exact Fresnel,
 /// Oren–Nayar, and the default from the 12 MA-T12 readings alone.
 pub fn variants() -> Vec<Variant> {
+    variants_of(&CostFunction::ALL)
+}
+
+/// [`variants`] for the cost functions `costs` only.
+pub fn variants_of(costs: &[CostFunction]) -> Vec<Variant> {
     let mut out = Vec::new();
-    for cost in CostFunction::ALL {
+    for &cost in costs {
         for (model, fresnel, geometries) in [
             (ModelKind::Paper, FresnelCosine::Incidence, GeometrySet::ALL),
             (ModelKind::Paper, FresnelCosine::Exact, GeometrySet::ALL),
@@ -186,7 +201,8 @@ pub struct FitResult {
     pub readings: &'static str,
     /// The paper's model and Fresnel factor on all 14 readings.
     pub default: bool,
-    /// Mean ΔE00 at the geometries fitted (what `brdfd fit` reports).
+    /// Mean ΔE00 at the MA-T12 geometries fitted (the spectral readings; the SRA's are
+    /// achromatic and have no colour to compare).
     pub fit_delta_e00_mean: f64,
     pub params: ParamsDocument,
     pub prediction: Prediction,
@@ -508,17 +524,13 @@ pub fn validate_with(
                 "ma-t12"
             },
             default: v.is_default(),
-            fit_delta_e00_mean: report.evaluation.all.mean,
+            fit_delta_e00_mean: report.evaluation.diffuse.mean,
             params: ParamsDocument::new(&p, v.model),
             prediction,
         });
     }
     let mut oracles = Vec::new();
-    for (model, fresnel) in [
-        (ModelKind::Paper, FresnelCosine::Incidence),
-        (ModelKind::Paper, FresnelCosine::Exact),
-        (ModelKind::OrenNayar, FresnelCosine::Incidence),
-    ] {
+    for &(model, fresnel) in opts.oracle_forms {
         let p = oracle(&targets, model, fresnel);
         let prediction = predict(&targets, colorimetry, &|t| {
             evaluate_at(&p, model, fresnel, t.wi, t.wo)
@@ -583,7 +595,10 @@ pub fn validate_with(
         readings: reading_docs,
         interpolation,
         fits,
-        oracle: oracles[0].clone(),
+        oracle: oracles
+            .first()
+            .cloned()
+            .expect("at least one oracle form (Options::oracle_forms)"),
         oracles,
         lambert,
         wall_ms: start.elapsed().as_secs_f64() * 1e3,
