@@ -1,5 +1,5 @@
 //! `brdfd validate`: the handheld estimate against measured goniometric BRDFs
-//! ([`crate::gonio::validate`], SCIENCE.md §12).
+//! ([`crate::gonio::validate`], SCIENCE.md §12.6).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;

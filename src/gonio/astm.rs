@@ -1,5 +1,5 @@
 //! ASTM E1392 goniometric BRDF text files: reader, writer, and the interpolation between
-//! measured directions (SCIENCE.md §12.1).
+//! measured directions (SCIENCE.md §12.6).
 //!
 //! A header of `KEY value` lines (`SAMPLE_NAME`, `SAMPLE_TYPE`, `NUM_POINTS`, and `VARS`
 //! naming the comma-separated columns), then one line per direction: `theta_i, phi_i,

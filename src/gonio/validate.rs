@@ -1,4 +1,4 @@
-//! The handheld estimate against a measured BRDF (`brdfd validate`, SCIENCE.md §12): derive
+//! The handheld estimate against a measured BRDF (`brdfd validate`, SCIENCE.md §12.6): derive
 //! the 14 readings the two instruments would give on the measured material, fit them under
 //! every cost function and model option, predict every measured direction (ASTM) or a dense
 //! grid (RGL), and report ΔE00 beside two references: the oracle (the same model form fitted
