@@ -10,6 +10,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod crossval;
 pub mod demo;
 pub mod doctor;
 pub mod exchange;
@@ -49,6 +50,9 @@ pub enum Command {
     /// Validate the handheld estimate against a measured goniometric BRDF (ASTM E1392 or
     /// RGL .bsdf): the 14 readings it would give, fitted, predicting every measured direction.
     Validate(validate::ValidateArgs),
+    /// Leave one geometry out of a scan file's fit, predict it, for each geometry and cost
+    /// function: how well the fit predicts readings it has not seen.
+    Crossval(crossval::CrossvalArgs),
     /// Write the eight synthetic example scans and their ground truth to a directory.
     Synth(synth::SynthArgs),
     /// The main job on the embedded default: replay the committed recordings (N9 reference and
@@ -184,6 +188,7 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Fit(args) => fit::run(&args),
+        Command::Crossval(args) => crossval::run(&args),
         Command::Synth(args) => synth::run(&args),
         Command::Validate(args) => validate::run(&args),
         Command::Demo(args) => demo::run(&args),

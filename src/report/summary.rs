@@ -165,8 +165,22 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     let samples = if analysis.repeats.is_empty() {
         format!("{} samples", study.samples.len())
     } else {
+        // A repeat shares a replayed recording, or the readings themselves (the same file
+        // imported again): each called what it is.
+        let replayed = analysis
+            .repeats
+            .iter()
+            .filter(|r| r.shared.starts_with("the recording"))
+            .count();
+        let what = if replayed == analysis.repeats.len() {
+            "a recording replayed again"
+        } else if replayed == 0 {
+            "the same readings again (a file imported again)"
+        } else {
+            "a recording replayed again or the same readings again"
+        };
         format!(
-            "{} samples ({} scans, {} of them a recording replayed again and counted once)",
+            "{} samples ({} scans, {} of them {what} and counted once)",
             study.samples.len(),
             study.samples.len() + analysis.repeats.len(),
             analysis.repeats.len()
@@ -200,10 +214,13 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             )
         }));
     }
+    if let Some(pooled) = real_statement(&study.samples) {
+        b.push(Block::Para(pooled));
+    }
     if !analysis.repeats.is_empty() {
         b.extend(introduced_list(
             format!(
-                "Counted once: {} scans repeat a measurement another scan of the study already holds (the same recording replayed again, or the same readings). One measurement is one sample: each counts once, as the last of its scans whose fits all finished, in every table, figure and statistic below; the repeats are left out:",
+                "Counted once: {} scans repeat a measurement another scan of the study already holds (the same recording replayed again, or the same readings, as a file imported again holds). One measurement is one sample: each counts once, as the last of its scans whose fits all finished, in every table, figure and statistic below; the repeats are left out:",
                 analysis.repeats.len()
             ),
             analysis
@@ -391,7 +408,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             .collect();
         b.push(Block::Heading("Where the scans were measured".into()));
         b.push(Block::Table {
-            caption: "Table 5. Provenance of each scan: the store's scan id, when it was measured, how its readings came in (measured by the daemon, imported from a file, replayed), and each instrument as it reported itself — model, serial, firmware, and whether it was a simulated instrument. A report mixes simulated and real scans only with --include-simulated.".into(),
+            caption: "Table 5. Provenance of each scan: the store's scan id, when it was measured, how its readings came in (measured by the daemon, imported from a file, replayed), and each instrument as it reported itself — model, serial, firmware — with its origin: measured on this bench, imported from a file, simulated, or absent (the scan has no readings of it). A report pools simulated with real scans only with --include-simulated.".into(),
             head,
             rows,
         });
@@ -612,4 +629,70 @@ pub fn html(study: &Study, analysis: &Analysis, figures: &[Figure]) -> String {
     }
     t.push_str("</body>\n</html>\n");
     t
+}
+
+/// "Pooled: the 3 scans of this study are real — 2 measured on this bench, 1 imported from a
+/// file (…)", when every scan loaded from a store is real (no simulated instrument); `None`
+/// for a study with simulated scans (said by [`simulated_statement`]) or made in memory.
+fn real_statement(samples: &[SampleStudy]) -> Option<String> {
+    use crate::store::InstrumentOrigin;
+    let origins: Vec<_> = samples
+        .iter()
+        .map(|s| s.origin.as_ref().map(|o| &o.provenance))
+        .collect::<Option<_>>()?;
+    if origins.is_empty() || origins.iter().any(|p| p.simulated()) {
+        return None;
+    }
+    let named = |origin: InstrumentOrigin| -> Vec<&str> {
+        samples
+            .iter()
+            .zip(&origins)
+            .filter(|(_, p)| p.ma_t12.origin == origin)
+            .map(|(s, _)| s.name.as_str())
+            .collect()
+    };
+    let parts: Vec<String> = [
+        (InstrumentOrigin::Measured, "measured on this bench"),
+        (
+            InstrumentOrigin::Imported,
+            "imported from instrument exports or scan files",
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(o, said)| {
+        let n = named(o);
+        (!n.is_empty()).then(|| format!("{} {said} ({})", n.len(), n.join(", ")))
+    })
+    .collect();
+    Some(format!(
+        "Pooled: the {} scans of this study are real — {}. Scans from simulated instruments are left out unless the report is asked for them (--include-simulated).",
+        samples.len(),
+        parts.join("; ")
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The same file imported twice holds the same readings, not a replayed recording: the
+    /// summary calls the repeat what it is.
+    #[test]
+    fn a_repeated_import_is_not_called_a_replayed_recording() {
+        let mut study = crate::study::tests::study_from_truth(2, None);
+        let mut again = study.samples[0].clone();
+        again.name = format!("{} (again)", again.name);
+        study.samples.push(again);
+        let analysis = Analysis::of(&study);
+        assert_eq!(analysis.repeats.len(), 1);
+        let md = markdown(&study, &analysis, &[]);
+        assert!(
+            md.contains(
+                "scans, 1 of them the same readings again (a file imported again) and counted \
+                 once)"
+            ),
+            "{md}"
+        );
+        assert!(!md.contains("recording replayed again and"), "{md}");
+    }
 }
