@@ -17,6 +17,8 @@
 //! Scans and fits (pure, synchronous; file I/O only at the edges):
 //! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
 //! - [`synth`]: synthetic scans from a known ground truth (ColorChecker spectra, matt lobes).
+//! - [`gonio`]: measured goniometric BRDFs (ASTM E1392, RGL `.bsdf`) and `brdfd validate`:
+//!   the handheld estimate against them.
 //! - [`fit`]: one scan → processing → optimiser → ΔE00 evaluation, and the fit report (JSON).
 //! - [`study`]: the study model (per sample: scan, measured BRDF, one fit per cost function) and
 //!   its loader from a store; what reports, exports and previews are built from.
@@ -51,6 +53,7 @@ pub mod fit;
 pub mod fonts;
 pub mod formats;
 pub mod geometry;
+pub mod gonio;
 pub mod model;
 pub mod names;
 pub mod optimise;

@@ -182,6 +182,43 @@ pub fn oren_nayar_factor(sigma: f64, g: &SpecularGeometry) -> f64 {
     }
 }
 
+/// Oren & Nayar's factor for any pair of directions (not only in the plane of incidence):
+/// `A + B · max(0, cos(φr − φi)) · sin a · tan b`; equal to [`oren_nayar_factor`] in the plane.
+pub fn oren_nayar_factor_at(sigma: f64, l: Vec3, v: Vec3) -> f64 {
+    let s2 = sigma * sigma;
+    let a = 1.0 - 0.5 * s2 / (s2 + 0.33);
+    let b = 0.45 * s2 / (s2 + 0.09);
+    let (pl, pv) = (l[0].hypot(l[1]), v[0].hypot(v[1]));
+    if pl == 0.0 || pv == 0.0 || b == 0.0 {
+        return a;
+    }
+    let cos_dphi = ((l[0] * v[0] + l[1] * v[1]) / (pl * pv)).max(0.0);
+    let (ti, tr) = (l[2].clamp(-1.0, 1.0).acos(), v[2].clamp(-1.0, 1.0).acos());
+    let (alpha, beta) = (ti.max(tr), ti.min(tr));
+    a + b * cos_dphi * alpha.sin() * beta.tan()
+}
+
+/// The model of form `kind` for light from `l` seen from `v`, sr⁻¹ per band: what a fit
+/// predicts at a direction pair outside the 14 geometries (`brdfd validate`).
+pub fn evaluate_at(
+    params: &Params,
+    kind: ModelKind,
+    fresnel: FresnelCosine,
+    l: Vec3,
+    v: Vec3,
+) -> Spectrum {
+    let g = SpecularGeometry::from_directions(l, v);
+    if g.cos_i <= 0.0 || g.cos_r <= 0.0 {
+        return [0.0; BANDS];
+    }
+    let s = specular_term(params.ks, params.alpha, params.ior, fresnel, &g);
+    let (a, t) = match kind {
+        ModelKind::OrenNayar => (oren_nayar_factor_at(params.extra[0], l, v), 0.0),
+        _ => kind.shape(&params.extra, params.ior, fresnel, &g),
+    };
+    params.kd.map(|kd| kd * a + (s + t))
+}
+
 /// The model parameters: the paper's 34, and the extra ones of a [`ModelKind`] option.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Params {
@@ -327,6 +364,22 @@ pub struct SpecularGeometry {
 impl SpecularGeometry {
     pub fn new(geo: &Geometry) -> Self {
         let (l, v, h) = (geo.light(), geo.view(), geo.half());
+        SpecularGeometry {
+            cos_i: l[2],
+            cos_r: v[2],
+            cos_h: h[2],
+            l_dot_h: dot(l, h),
+            v_dot_h: dot(v, h),
+            same_side: l[0] * v[0] + l[1] * v[1] > 0.0,
+        }
+    }
+
+    /// The angles for light from `l` seen from `v` (unit vectors, normal +z), any directions:
+    /// what predictions over a measured hemisphere evaluate the model at.
+    pub fn from_directions(l: Vec3, v: Vec3) -> Self {
+        let s = [l[0] + v[0], l[1] + v[1], l[2] + v[2]];
+        let n = dot(s, s).sqrt();
+        let h = [s[0] / n, s[1] / n, s[2] / n];
         SpecularGeometry {
             cos_i: l[2],
             cos_r: v[2],
@@ -658,6 +711,29 @@ mod tests {
                 .unwrap_err()
                 .contains("oren-nayar")
         );
+    }
+
+    /// At the 14 geometries the any-direction evaluation is the table evaluation.
+    #[test]
+    fn evaluate_at_matches_the_geometry_table() {
+        let p = Params {
+            kd: std::array::from_fn(|b| 0.02 + 0.003 * b as f64),
+            ks: 0.6,
+            alpha: 0.2,
+            ior: 1.5,
+            extra: [0.4, 0.0],
+        };
+        for kind in [ModelKind::Paper, ModelKind::OrenNayar] {
+            for fresnel in FresnelCosine::ALL {
+                let table = evaluate_model(&p, kind, fresnel, &SpecularGeometry::all());
+                for (g, want) in GEOMETRIES.iter().zip(&table) {
+                    let got = evaluate_at(&p, kind, fresnel, g.light(), g.view());
+                    for b in 0..BANDS {
+                        close(got[b], want[b], 1e-9);
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -32,6 +32,7 @@ pub mod show;
 pub mod status;
 pub mod sync;
 pub mod synth;
+pub mod validate;
 
 /// brdfd: spectral BRDF from two handheld instruments (X-Rite MA-T12 + Canon RA-532H).
 #[derive(Debug, Parser)]
@@ -46,6 +47,9 @@ pub struct Cli {
 pub enum Command {
     /// Fit the spectral Cook–Torrance model to one scan file, without a daemon or database.
     Fit(fit::FitArgs),
+    /// Validate the handheld estimate against a measured goniometric BRDF (ASTM E1392 or
+    /// RGL .bsdf): the 14 readings it would give, fitted, predicting every measured direction.
+    Validate(validate::ValidateArgs),
     /// Leave one geometry out of a scan file's fit, predict it, for each geometry and cost
     /// function: how well the fit predicts readings it has not seen.
     Crossval(crossval::CrossvalArgs),
@@ -185,6 +189,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fit(args) => fit::run(&args),
         Command::Crossval(args) => crossval::run(&args),
         Command::Synth(args) => synth::run(&args),
+        Command::Validate(args) => validate::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Report(args) => report::run(&args),
         Command::Render(args) => render::run(&args),

@@ -1,0 +1,153 @@
+//! `brdfd validate`: the handheld estimate against measured goniometric BRDFs
+//! ([`crate::gonio::validate`], SCIENCE.md §12.6).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context;
+
+use crate::cost::CostFunction;
+use crate::gonio::Measurement;
+use crate::gonio::validate::{Options, Prediction, Report, validate_with, variants_of};
+
+#[derive(Debug, clap::Args)]
+#[command(after_help = "\
+What it does, per file:
+  1. Reads the measured BRDF: an ASTM E1392 text file (spectral or R,G,B columns) or an
+     RGL-EPFL tensor file (.bsdf, spectral or RGB).
+  2. Derives the 14 readings the instruments would give on that material: the MA-T12's
+     reflectance factor π·f at its 12 geometries, the SRA's luminance Y at sra-20 and sra-60
+     (illuminant C, 2°). ASTM directions are scattered: the instrument geometries are
+     interpolated between them, and the interpolation's own leave-one-out error is reported.
+  3. Fits the readings under cf1, cf2 and m2, each with the paper's model (the default),
+     exact Fresnel, Oren–Nayar, and from the 12 MA-T12 readings alone.
+  4. Predicts every measured direction (ASTM) or a grid (RGL: θi 0–75°, θr 5–80°, φ 0–180°,
+     every 5°/5°/15°) and reports ΔE00 (D65/10°, ASTM E308): mean, median, p95, near-specular
+     (half vector within 10° of the normal) and the rest; beside the oracle (the same model
+     form fitted to every direction: the best the model can do) and the Lambert baseline
+     (the 45as45 reading everywhere). RGB files go through one spectral upsampling, measured
+     and predicted alike.
+
+A prediction close to the oracle means the 14 readings pin down what the model can hold; an
+oracle far above 1 means the material is out of the model's reach, however it is measured.
+
+Examples:
+  brdfd validate krylon_blue.astm
+  brdfd validate --json *.astm *.bsdf > validation.jsonl")]
+pub struct ValidateArgs {
+    /// Measured BRDF files: ASTM E1392 (.astm) or RGL tensor files (.bsdf).
+    #[arg(value_name = "FILE", required = true)]
+    pub files: Vec<PathBuf>,
+
+    /// The cost functions to fit with (repeat the option for several); all three by default.
+    #[arg(long, value_name = "cf1|cf2|m2")]
+    pub cost: Vec<crate::cost::CostFunction>,
+
+    /// Print one JSON object per file, one per line (material, format, readings with the
+    /// file's raw values, fits with their predictions, oracle, lambert, …) instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
+    for path in &args.files {
+        let file =
+            std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+        let m = Measurement::read(file).with_context(|| format!("reading {}", path.display()))?;
+        let costs = if args.cost.is_empty() {
+            CostFunction::ALL.to_vec()
+        } else {
+            args.cost.clone()
+        };
+        let mut report = validate_with(&m, &Options::default(), &variants_of(&costs))
+            .with_context(|| format!("validating {}", path.display()))?;
+        report.file = Some(path.display().to_string());
+        if args.json {
+            println!("{}", serde_json::to_string(&report)?);
+        } else {
+            print!("{}", table(&report));
+        }
+    }
+    Ok(())
+}
+
+fn cells(p: &Prediction) -> String {
+    let opt = |x: Option<f64>| x.map_or("—".to_string(), |v| format!("{v:.2}"));
+    format!(
+        "{:6.2} {:6.2} {:6.2} {:>6} {:>6}",
+        p.mean,
+        p.median,
+        p.p95,
+        opt(p.near_specular_mean),
+        opt(p.rest_mean)
+    )
+}
+
+/// The human-readable form of a validation.
+pub fn table(r: &Report) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "material         {}", r.material);
+    if let Some(f) = &r.file {
+        let _ = writeln!(t, "file             {f} ({}, {})", r.format, r.channels);
+    }
+    if let Some(u) = r.rgb_upsampling {
+        let _ = writeln!(t, "RGB upsampling   {u}");
+    }
+    let _ = writeln!(
+        t,
+        "predicted        {} directions ({}; {} near-specular), ΔE00 {}",
+        r.directions, r.prediction_set, r.near_specular_directions, r.colorimetry
+    );
+    if let Some(i) = &r.interpolation {
+        let _ = writeln!(
+            t,
+            "interpolation    {}: leave-one-out ΔE00 mean {:.2}, p95 {:.2}",
+            i.method, i.leave_one_out.mean, i.leave_one_out.p95
+        );
+    }
+    let _ = writeln!(
+        t,
+        "\n{:<4} {:<10} {:<10} {:<10} {:>8} | prediction ΔE00:  mean median    p95  n-spec   rest",
+        "cost", "model", "fresnel", "readings", "fit ΔE00"
+    );
+    for f in &r.fits {
+        let _ = writeln!(
+            t,
+            "{:<4} {:<10} {:<10} {:<10} {:8.2} | {:>17}{}{}",
+            f.cost.name(),
+            f.model.name(),
+            f.fresnel.name(),
+            f.readings,
+            f.fit_delta_e00_mean,
+            "",
+            cells(&f.prediction),
+            if f.default { "  (default)" } else { "" }
+        );
+    }
+    for o in &r.oracles {
+        let _ = writeln!(
+            t,
+            "{:<4} {:<10} {:<10} {:<10} {:>8} | {:>17}{}",
+            "orcl",
+            o.model.name(),
+            o.fresnel.name(),
+            "all dirs",
+            "",
+            "",
+            cells(&o.prediction)
+        );
+    }
+    let _ = writeln!(
+        t,
+        "{:<4} {:<10} {:<10} {:<10} {:>8} | {:>17}{}",
+        "lamb",
+        "lambert",
+        "",
+        r.lambert.geometry,
+        "",
+        "",
+        cells(&r.lambert.prediction)
+    );
+    let _ = writeln!(t, "({:.0} ms)\n", r.wall_ms);
+    t
+}

@@ -1,0 +1,630 @@
+//! The handheld estimate against a measured BRDF (`brdfd validate`, SCIENCE.md §12.6): derive
+//! the 14 readings the two instruments would give on the measured material, fit them under
+//! every cost function and model option, predict every measured direction (ASTM) or a dense
+//! grid (RGL), and report ΔE00 beside two references: the oracle (the same model form fitted
+//! to all directions: the model's own limit) and the Lambert baseline (one reading
+//! everywhere).
+//!
+//! - Readings: MA-T12 reflectance factor `π·f` at its 12 geometries (processed back to `f`,
+//!   sr⁻¹, as an instrument-calibrated export is); SRA the luminance `Y` of `f` at its two
+//!   geometries under the SRA model [`Options::sra`] (ISO 2813: illuminant C, 2°).
+//! - Predictions: the fitted model at each direction pair ([`crate::model::evaluate_at`]),
+//!   ΔE00 against the measured BRDF, both as reflectance factor `π·f`, under
+//!   [`Options::colorimetry`] (D65/10°, ASTM E308). Near-specular: half vector within
+//!   [`NEAR_SPECULAR_DEG`] of the normal.
+//! - Oracle: kd (31 bands) and ks by weighted linear least squares for each (α, μ[, σ]) of a
+//!   grid refined once around its best, weights `1/ȳ²` (relative error), over all prediction
+//!   directions.
+
+use std::collections::BTreeMap;
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::{Channels, Measurement, RGB_UPSAMPLING, direction};
+use crate::colour::{Colorimetry, Lab, Observer, Weighting, ciede2000};
+use crate::cost::CostFunction;
+use crate::fit::{FitRequest, ParamsDocument, fit_measured};
+use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, GeometrySet, MA_T12_COUNT, Vec3};
+use crate::model::{
+    Bounds, EXTRA, FresnelCosine, ModelKind, Params, SpecularGeometry, evaluate_at,
+    oren_nayar_factor_at, specular_term,
+};
+use crate::optimise::Settings;
+use crate::processing::MeasuredBrdf;
+use crate::spectral::{BANDS, Spectrum};
+use crate::sra_reading::{SraReading, luminance_with};
+
+/// Half-vector angle below which a direction counts as near-specular, degrees.
+pub const NEAR_SPECULAR_DEG: f64 = 10.0;
+
+/// The MA-T12 geometry whose reading the Lambert baseline predicts everywhere (0°/45°).
+pub const LAMBERT_GEOMETRY: &str = "45as45";
+
+/// The RGL prediction grid, degrees: θi 0–75 every 5, θr 5–80 every 5, φ 0–180 every 15.
+pub const RGL_GRID: ((f64, f64, f64), (f64, f64, f64), (f64, f64, f64)) =
+    ((0.0, 75.0, 5.0), (5.0, 80.0, 5.0), (0.0, 180.0, 15.0));
+
+/// What a validation runs with.
+#[derive(Debug, Clone, Copy)]
+pub struct Options {
+    /// How spectra become L*a*b* (D65/10°, ASTM E308 by default).
+    pub colorimetry: Colorimetry,
+    /// The SRA reading model the readings are derived and fitted with.
+    pub sra: SraReading,
+    /// The optimiser's seed.
+    pub seed: u64,
+    /// The model forms an oracle is fitted for (the first is the report's `oracle`).
+    pub oracle_forms: &'static [(ModelKind, FresnelCosine)],
+}
+
+/// Every model form the fits use: the paper's, exact Fresnel, Oren–Nayar.
+pub const ORACLE_FORMS: &[(ModelKind, FresnelCosine)] = &[
+    (ModelKind::Paper, FresnelCosine::Incidence),
+    (ModelKind::Paper, FresnelCosine::Exact),
+    (ModelKind::OrenNayar, FresnelCosine::Incidence),
+];
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            colorimetry: Colorimetry {
+                observer: Observer::Cie1964TenDegree,
+                weighting: Weighting::AstmE308,
+            },
+            sra: SraReading::LUMINANCE,
+            seed: Settings::default().seed,
+            oracle_forms: ORACLE_FORMS,
+        }
+    }
+}
+
+/// One fit a validation makes: cost function, model form, Fresnel factor, which readings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Variant {
+    pub cost: CostFunction,
+    pub model: ModelKind,
+    pub fresnel: FresnelCosine,
+    /// All 14 readings, or the 12 MA-T12 ones alone.
+    pub geometries: GeometrySet,
+}
+
+impl Variant {
+    /// The paper's model and Fresnel factor on all 14 readings.
+    pub fn is_default(&self) -> bool {
+        self.model == ModelKind::Paper
+            && self.fresnel == FresnelCosine::Incidence
+            && self.geometries == GeometrySet::ALL
+    }
+}
+
+/// Every fit `brdfd validate` makes: per cost function the paper's default, exact Fresnel,
+/// Oren–Nayar, and the default from the 12 MA-T12 readings alone.
+pub fn variants() -> Vec<Variant> {
+    variants_of(&CostFunction::ALL)
+}
+
+/// [`variants`] for the cost functions `costs` only.
+pub fn variants_of(costs: &[CostFunction]) -> Vec<Variant> {
+    let mut out = Vec::new();
+    for &cost in costs {
+        for (model, fresnel, geometries) in [
+            (ModelKind::Paper, FresnelCosine::Incidence, GeometrySet::ALL),
+            (ModelKind::Paper, FresnelCosine::Exact, GeometrySet::ALL),
+            (
+                ModelKind::OrenNayar,
+                FresnelCosine::Incidence,
+                GeometrySet::ALL,
+            ),
+            (
+                ModelKind::Paper,
+                FresnelCosine::Incidence,
+                GeometrySet::MA_T12,
+            ),
+        ] {
+            out.push(Variant {
+                cost,
+                model,
+                fresnel,
+                geometries,
+            });
+        }
+    }
+    out
+}
+
+/// ΔE00 over a set of predicted directions.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Prediction {
+    pub mean: f64,
+    pub median: f64,
+    /// 95th percentile (nearest rank).
+    pub p95: f64,
+    pub max: f64,
+    /// Mean over the near-specular directions (θh < 10°); `None` when there are none.
+    pub near_specular_mean: Option<f64>,
+    /// Mean over the other directions.
+    pub rest_mean: Option<f64>,
+}
+
+impl Prediction {
+    /// Summarises ΔE00 values; `near[k]` says whether direction k is near-specular.
+    pub fn of(de: &[f64], near: &[bool]) -> Prediction {
+        let mut s = de.to_vec();
+        s.sort_by(f64::total_cmp);
+        let n = s.len().max(1);
+        let mean_of = |it: &mut dyn Iterator<Item = f64>| {
+            let (sum, count) = it.fold((0.0, 0usize), |(a, c), x| (a + x, c + 1));
+            (count > 0).then(|| sum / count as f64)
+        };
+        Prediction {
+            mean: mean_of(&mut de.iter().copied()).unwrap_or(f64::NAN),
+            median: if s.len() % 2 == 1 {
+                s[s.len() / 2]
+            } else if s.is_empty() {
+                f64::NAN
+            } else {
+                0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2])
+            },
+            p95: s
+                .get((0.95 * n as f64).ceil() as usize - 1)
+                .copied()
+                .unwrap_or(f64::NAN),
+            max: s.last().copied().unwrap_or(f64::NAN),
+            near_specular_mean: mean_of(
+                &mut de.iter().zip(near).filter(|(_, n)| **n).map(|(d, _)| *d),
+            ),
+            rest_mean: mean_of(&mut de.iter().zip(near).filter(|(_, n)| !**n).map(|(d, _)| *d)),
+        }
+    }
+}
+
+/// One reading the instruments would give.
+#[derive(Debug, Clone, Serialize)]
+pub struct Reading {
+    /// The BRDF in sr⁻¹ exactly as the file gives it at this geometry (interpolated between
+    /// measured directions for ASTM), one value per channel, before any conversion.
+    pub raw: Vec<f64>,
+    /// What the instrument reads: the reflectance factor π·f per band (MA-T12), or the
+    /// luminance Y of f, sr⁻¹ (SRA).
+    pub reading: Vec<f64>,
+}
+
+/// One fit and its prediction.
+#[derive(Debug, Clone, Serialize)]
+pub struct FitResult {
+    pub cost: CostFunction,
+    pub model: ModelKind,
+    pub fresnel: FresnelCosine,
+    /// `ma-t12+sra` (all 14) or `ma-t12` (the 12 MA-T12 readings alone).
+    pub readings: &'static str,
+    /// The paper's model and Fresnel factor on all 14 readings.
+    pub default: bool,
+    /// Mean ΔE00 at the MA-T12 geometries fitted (the spectral readings; the SRA's are
+    /// achromatic and have no colour to compare).
+    pub fit_delta_e00_mean: f64,
+    pub params: ParamsDocument,
+    pub prediction: Prediction,
+}
+
+/// The oracle of one model form: fitted to every prediction direction.
+#[derive(Debug, Clone, Serialize)]
+pub struct Oracle {
+    pub model: ModelKind,
+    pub fresnel: FresnelCosine,
+    pub params: ParamsDocument,
+    #[serde(flatten)]
+    pub prediction: Prediction,
+}
+
+/// The interpolation's own error (ASTM): every measured direction predicted from the others.
+#[derive(Debug, Clone, Serialize)]
+pub struct Interpolation {
+    pub method: String,
+    pub leave_one_out: Prediction,
+}
+
+/// The Lambert baseline.
+#[derive(Debug, Clone, Serialize)]
+pub struct Lambert {
+    /// The geometry whose reading is predicted everywhere.
+    pub geometry: &'static str,
+    #[serde(flatten)]
+    pub prediction: Prediction,
+}
+
+/// A whole validation (`brdfd validate --json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    pub material: String,
+    /// The file, as named on the command line (set by the caller).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    pub format: &'static str,
+    /// `spectral` or `rgb`.
+    pub channels: &'static str,
+    /// The spectral upsampling of an RGB file (measured and predicted alike).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rgb_upsampling: Option<&'static str>,
+    pub colorimetry: String,
+    pub sra: SraReading,
+    /// What was predicted: every measured direction, or the RGL grid.
+    pub prediction_set: String,
+    pub directions: usize,
+    pub near_specular_directions: usize,
+    pub readings: BTreeMap<&'static str, Reading>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interpolation: Option<Interpolation>,
+    pub fits: Vec<FitResult>,
+    /// The oracle of the paper's model form (Schlick on cos θi).
+    pub oracle: Oracle,
+    /// The oracle of every model form the fits use.
+    pub oracles: Vec<Oracle>,
+    pub lambert: Lambert,
+    pub wall_ms: f64,
+}
+
+/// A direction pair to predict and its measured colour.
+pub struct Target {
+    pub wi: Vec3,
+    pub wo: Vec3,
+    pub measured: Spectrum,
+    lab: Lab,
+    near: bool,
+}
+
+/// The prediction directions of a measurement (module text) with their measured spectra.
+pub fn targets(m: &Measurement, colorimetry: Colorimetry) -> (Vec<Target>, String) {
+    let mk = |wi: Vec3, wo: Vec3, measured: Spectrum| {
+        let h = super::normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+        Target {
+            wi,
+            wo,
+            measured,
+            lab: colorimetry.reflectance_to_lab(&measured.map(|x| std::f64::consts::PI * x)),
+            near: h[2] > NEAR_SPECULAR_DEG.to_radians().cos(),
+        }
+    };
+    match m {
+        Measurement::Astm(a) => (
+            a.points
+                .iter()
+                .map(|p| {
+                    let (wi, wo) = p.directions();
+                    mk(wi, wo, a.channels.to_spectrum(&p.values))
+                })
+                .collect(),
+            "every measured direction".to_string(),
+        ),
+        Measurement::Rgl(_) => {
+            let ((ti0, ti1, tis), (tr0, tr1, trs), (p0, p1, ps)) = RGL_GRID;
+            let steps = |a: f64, b: f64, s: f64| {
+                (0..=((b - a) / s).round() as usize).map(move |k| a + s * k as f64)
+            };
+            let mut out = Vec::new();
+            for ti in steps(ti0, ti1, tis) {
+                for tr in steps(tr0, tr1, trs) {
+                    for p in steps(p0, p1, ps) {
+                        let wi = direction(ti.to_radians(), 0.0);
+                        // φ = 180°: the far side of the normal (toward the mirror direction).
+                        let wo = direction(tr.to_radians(), (180.0 - p).to_radians());
+                        out.push(mk(wi, wo, m.spectrum(wi, wo)));
+                    }
+                }
+            }
+            (
+                out,
+                format!(
+                    "grid θi {ti0}–{ti1}°, θr {tr0}–{tr1}°, φ {p0}–{p1}° every {tis}°/{trs}°/{ps}°"
+                ),
+            )
+        }
+    }
+}
+
+/// ΔE00 of a predicted BRDF at every target.
+pub fn predict(
+    targets: &[Target],
+    colorimetry: Colorimetry,
+    f: &dyn Fn(&Target) -> Spectrum,
+) -> Prediction {
+    let de: Vec<f64> = targets
+        .iter()
+        .map(|t| {
+            let lab = colorimetry.reflectance_to_lab(&f(t).map(|x| std::f64::consts::PI * x));
+            ciede2000(t.lab, lab)
+        })
+        .collect();
+    let near: Vec<bool> = targets.iter().map(|t| t.near).collect();
+    Prediction::of(&de, &near)
+}
+
+/// The measured BRDF the instruments' readings make (module text), and the readings.
+pub fn readings(
+    m: &Measurement,
+    sra: SraReading,
+) -> (MeasuredBrdf, BTreeMap<&'static str, Reading>) {
+    let weights = sra.weights();
+    let mut values = [[0.0; BANDS]; GEOMETRY_COUNT];
+    let mut docs = BTreeMap::new();
+    for g in &GEOMETRIES {
+        let raw = m.raw(g.light(), g.view());
+        let f = m.channels().to_spectrum(&raw);
+        let reading = if g.index < MA_T12_COUNT {
+            values[g.index] = f;
+            f.iter().map(|x| std::f64::consts::PI * x).collect()
+        } else {
+            let y = luminance_with(&weights, &f);
+            values[g.index] = [y; BANDS];
+            vec![y]
+        };
+        docs.insert(g.name, Reading { raw, reading });
+    }
+    (MeasuredBrdf::full(values), docs)
+}
+
+/// Fits the model form `kind` to every target (the oracle; module text).
+pub fn oracle(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) -> Params {
+    let bounds = Bounds::default();
+    let w: Vec<f64> = targets
+        .iter()
+        .map(|t| {
+            let y = t.measured.iter().sum::<f64>() / BANDS as f64;
+            1.0 / y.max(1e-4).powi(2)
+        })
+        .collect();
+    let sigmas: Vec<f64> = if kind == ModelKind::OrenNayar {
+        (0..=5).map(|k| k as f64 * 0.2).collect()
+    } else {
+        vec![0.0]
+    };
+    let solve = |alpha: f64, ior: f64, sigma: f64| -> (f64, Params) {
+        let mut extra = [0.0; EXTRA];
+        if kind == ModelKind::OrenNayar {
+            extra[0] = sigma;
+        }
+        let (mut sa, mut sb, mut sc, mut q) = (0.0, 0.0, 0.0, 0.0);
+        let mut pl = [0.0; BANDS];
+        let mut av = Vec::with_capacity(targets.len());
+        for (t, &wt) in targets.iter().zip(&w) {
+            let g = SpecularGeometry::from_directions(t.wi, t.wo);
+            let s = specular_term(1.0, alpha, ior, fresnel, &g);
+            let a = if kind == ModelKind::OrenNayar {
+                oren_nayar_factor_at(sigma, t.wi, t.wo)
+            } else {
+                1.0
+            };
+            sa += wt * a * a;
+            sb += wt * a * s;
+            sc += wt * s * s;
+            for (p, y) in pl.iter_mut().zip(&t.measured) {
+                *p += wt * a * y;
+                q += wt * s * y;
+            }
+            av.push((a, s));
+        }
+        let psum: f64 = pl.iter().sum();
+        let den = BANDS as f64 * (sc - sb * sb / sa);
+        let ks = if den > 0.0 {
+            ((q - sb * psum / sa) / den).clamp(bounds.ks.0, bounds.ks.1)
+        } else {
+            0.0
+        };
+        let kd: Spectrum = pl.map(|p| ((p - ks * sb) / sa).clamp(bounds.kd.0, bounds.kd.1));
+        let mut sse = 0.0;
+        for ((t, &wt), (a, s)) in targets.iter().zip(&w).zip(&av) {
+            for (k, y) in kd.iter().zip(&t.measured) {
+                let r = k * a + ks * s - y;
+                sse += wt * r * r;
+            }
+        }
+        (
+            sse,
+            Params {
+                kd,
+                ks,
+                alpha,
+                ior,
+                extra,
+            },
+        )
+    };
+    let alphas: Vec<f64> = (0..24)
+        .map(|k| (0.01f64.ln() + (1.0f64.ln() - 0.01f64.ln()) * k as f64 / 23.0).exp())
+        .collect();
+    let iors: Vec<f64> = (0..11).map(|k| 1.05 + 0.195 * k as f64).collect();
+    let mut best = (f64::INFINITY, None, (0.0, 0.0, 0.0));
+    for &sigma in &sigmas {
+        for &a in &alphas {
+            for &n in &iors {
+                let (sse, p) = solve(a, n, sigma);
+                if sse < best.0 {
+                    best = (sse, Some(p), (a, n, sigma));
+                }
+            }
+        }
+    }
+    // One refinement around the best grid point.
+    let (a0, n0, s0) = best.2;
+    let ratio = alphas[1] / alphas[0];
+    for i in -4..=4 {
+        for j in -4..=4 {
+            for k in -2i32..=2 {
+                let a = (a0 * ratio.powf(i as f64 / 4.0)).clamp(bounds.alpha.0, bounds.alpha.1);
+                let n = (n0 + 0.195 * j as f64 / 4.0).clamp(bounds.ior.0, bounds.ior.1);
+                let s = if kind == ModelKind::OrenNayar {
+                    (s0 + 0.1 * k as f64 / 2.0).clamp(0.0, 1.0)
+                } else if k != 0 {
+                    continue;
+                } else {
+                    0.0
+                };
+                let (sse, p) = solve(a, n, s);
+                if sse < best.0 {
+                    best = (sse, Some(p), (a, n, s));
+                }
+            }
+        }
+    }
+    best.1.expect("the grid is not empty")
+}
+
+/// Validates the handheld estimate against one measurement, with every fit of [`variants`].
+pub fn validate(m: &Measurement, opts: &Options) -> Result<Report, crate::fit::FitScanError> {
+    validate_with(m, opts, &variants())
+}
+
+/// [`validate`] with the fits of `variants` only.
+pub fn validate_with(
+    m: &Measurement,
+    opts: &Options,
+    variants: &[Variant],
+) -> Result<Report, crate::fit::FitScanError> {
+    let start = Instant::now();
+    let colorimetry = opts.colorimetry;
+    let (targets, prediction_set) = targets(m, colorimetry);
+    let (measured, reading_docs) = readings(m, opts.sra);
+    let mut fits = Vec::new();
+    for &v in variants {
+        let request = FitRequest {
+            settings: Settings {
+                cost: v.cost,
+                model: v.model,
+                fresnel: v.fresnel,
+                sra: opts.sra,
+                seed: opts.seed,
+                ..Settings::default()
+            },
+            colorimetry,
+            ..FitRequest::default()
+        };
+        let mb = MeasuredBrdf {
+            geometries: v.geometries,
+            ..measured
+        };
+        let report = fit_measured(
+            m.material(),
+            "goniometric measurement",
+            mb,
+            &request,
+            &mut |_| ControlFlow::Continue(()),
+        )?;
+        let p = report.outcome.params;
+        let prediction = predict(&targets, colorimetry, &|t| {
+            evaluate_at(&p, v.model, v.fresnel, t.wi, t.wo)
+        });
+        fits.push(FitResult {
+            cost: v.cost,
+            model: v.model,
+            fresnel: v.fresnel,
+            readings: if v.geometries == GeometrySet::ALL {
+                "ma-t12+sra"
+            } else {
+                "ma-t12"
+            },
+            default: v.is_default(),
+            fit_delta_e00_mean: report.evaluation.diffuse.mean,
+            params: ParamsDocument::new(&p, v.model),
+            prediction,
+        });
+    }
+    let mut oracles = Vec::new();
+    for &(model, fresnel) in opts.oracle_forms {
+        let p = oracle(&targets, model, fresnel);
+        let prediction = predict(&targets, colorimetry, &|t| {
+            evaluate_at(&p, model, fresnel, t.wi, t.wo)
+        });
+        oracles.push(Oracle {
+            model,
+            fresnel,
+            params: ParamsDocument::new(&p, model),
+            prediction,
+        });
+    }
+    let lambert_f = {
+        let g = crate::geometry::by_name(LAMBERT_GEOMETRY).expect("a table geometry");
+        measured.values[g.index]
+    };
+    let lambert = Lambert {
+        geometry: LAMBERT_GEOMETRY,
+        prediction: predict(&targets, colorimetry, &|_| lambert_f),
+    };
+    let interpolation = match m {
+        Measurement::Astm(a) => {
+            let loo = a.leave_one_out();
+            let de: Vec<f64> = a
+                .points
+                .iter()
+                .zip(&loo)
+                .map(|(p, q)| {
+                    let lab = |v: &[f64]| {
+                        colorimetry.reflectance_to_lab(
+                            &a.channels.to_spectrum(v).map(|x| std::f64::consts::PI * x),
+                        )
+                    };
+                    ciede2000(lab(&p.values), lab(q))
+                })
+                .collect();
+            let near: Vec<bool> = targets.iter().map(|t| t.near).collect();
+            Some(Interpolation {
+                method: format!(
+                    "inverse-square-distance weighting of the {} nearest measured pairs, isotropy and reciprocity folded in",
+                    super::astm::NEIGHBOURS
+                ),
+                leave_one_out: Prediction::of(&de, &near),
+            })
+        }
+        Measurement::Rgl(_) => None,
+    };
+    let near_specular_directions = targets.iter().filter(|t| t.near).count();
+    Ok(Report {
+        material: m.material().to_string(),
+        file: None,
+        format: m.format(),
+        channels: match m.channels() {
+            Channels::Rgb => "rgb",
+            Channels::Spectral(_) => "spectral",
+        },
+        rgb_upsampling: (*m.channels() == Channels::Rgb).then_some(RGB_UPSAMPLING),
+        colorimetry: colorimetry.to_string(),
+        sra: opts.sra,
+        prediction_set,
+        directions: targets.len(),
+        near_specular_directions,
+        readings: reading_docs,
+        interpolation,
+        fits,
+        oracle: oracles
+            .first()
+            .cloned()
+            .expect("at least one oracle form (Options::oracle_forms)"),
+        oracles,
+        lambert,
+        wall_ms: start.elapsed().as_secs_f64() * 1e3,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prediction_summary_splits_near_specular() {
+        let p = Prediction::of(&[1.0, 2.0, 3.0, 10.0], &[false, false, false, true]);
+        assert_eq!(p.mean, 4.0);
+        assert_eq!(p.median, 2.5);
+        assert_eq!(p.p95, 10.0);
+        assert_eq!(p.near_specular_mean, Some(10.0));
+        assert_eq!(p.rest_mean, Some(2.0));
+        let q = Prediction::of(&[1.0], &[false]);
+        assert_eq!(q.near_specular_mean, None);
+    }
+
+    #[test]
+    fn twelve_variants_one_default_per_cost() {
+        let v = variants();
+        assert_eq!(v.len(), 12);
+        assert_eq!(v.iter().filter(|v| v.is_default()).count(), 3);
+    }
+}

@@ -1,0 +1,220 @@
+//! `brdfd validate` on goniometric files the test writes itself from known BRDFs: brdfd's own
+//! model (the validation recovers it: prediction ΔE00 ≈ 0) and a form it cannot represent (a
+//! second, narrow lobe and a retro-reflective term: prediction and oracle clearly above 0), in
+//! both formats; the readers, the interpolation, the prediction figures and the JSON contract.
+
+use brdfd::cost::CostFunction;
+use brdfd::geometry::{GEOMETRIES, GeometrySet, Vec3};
+use brdfd::gonio::astm::{AstmFile, Point};
+use brdfd::gonio::rgl::{self, WriteOptions};
+use brdfd::gonio::validate::{Options, Report, Variant, validate_with};
+use brdfd::gonio::{Channels, Measurement};
+use brdfd::model::{EXTRA, FresnelCosine, ModelKind, Params, evaluate_at};
+use brdfd::spectral::{BANDS, wavelengths_nm};
+
+mod common;
+
+fn truth() -> Params {
+    Params {
+        kd: std::array::from_fn(|b| 0.02 + 0.1 * (-((b as f64 - 8.0) / 6.0).powi(2)).exp()),
+        ks: 0.3,
+        alpha: 0.15,
+        ior: 1.5,
+        extra: [0.0; EXTRA],
+    }
+}
+
+fn own_model(wi: Vec3, wo: Vec3) -> Vec<f64> {
+    evaluate_at(&truth(), ModelKind::Paper, FresnelCosine::Incidence, wi, wo).to_vec()
+}
+
+/// The model plus what it cannot represent: a second lobe of width 0.04 and a retro-reflective
+/// term peaking where the view is the light.
+fn out_of_reach(wi: Vec3, wo: Vec3) -> Vec<f64> {
+    let second = Params {
+        ks: 0.4,
+        alpha: 0.04,
+        kd: [0.0; BANDS],
+        ..truth()
+    };
+    let lobe = evaluate_at(&second, ModelKind::Paper, FresnelCosine::Incidence, wi, wo)[0];
+    let retro = 0.08
+        * (wi[0] * wo[0] + wi[1] * wo[1] + wi[2] * wo[2])
+            .max(0.0)
+            .powi(16);
+    own_model(wi, wo).iter().map(|v| v + lobe + retro).collect()
+}
+
+fn deg(d: f64) -> f64 {
+    d.to_radians()
+}
+
+/// An ASTM file of `f` over θi 10–70°, θs 0–80°, φs 0–180°, plus the 14 instrument geometries.
+fn astm(name: &str, f: &dyn Fn(Vec3, Vec3) -> Vec<f64>) -> AstmFile {
+    let mut points = Vec::new();
+    let mut push = |angles: [f64; 4]| {
+        let p = Point {
+            angles,
+            values: vec![],
+        };
+        let (wi, wo) = p.directions();
+        points.push(Point {
+            values: f(wi, wo),
+            ..p
+        });
+    };
+    for ti in [10.0, 30.0, 50.0, 70.0] {
+        for ts in (0..=8).map(|k| 10.0 * k as f64) {
+            for ps in [0.0, 45.0, 90.0, 135.0, 180.0] {
+                push([deg(ti), 0.0, deg(ts), deg(ps)]);
+            }
+        }
+    }
+    for g in &GEOMETRIES {
+        push([
+            deg(g.theta_i_deg),
+            0.0,
+            deg(g.theta_r_deg),
+            deg(g.phi_r_deg),
+        ]);
+    }
+    let w = wavelengths_nm().iter().map(|&n| f64::from(n)).collect();
+    AstmFile::new(name.into(), "test".into(), Channels::Spectral(w), points)
+}
+
+fn cf2(model: ModelKind, fresnel: FresnelCosine) -> Variant {
+    Variant {
+        cost: CostFunction::Cf2,
+        model,
+        fresnel,
+        geometries: GeometrySet::ALL,
+    }
+}
+
+fn run(m: &Measurement) -> Report {
+    let opts = Options {
+        oracle_forms: &[(ModelKind::Paper, FresnelCosine::Incidence)],
+        ..Options::default()
+    };
+    validate_with(m, &opts, &[cf2(ModelKind::Paper, FresnelCosine::Incidence)]).unwrap()
+}
+
+#[test]
+fn astm_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
+    let file = astm("own model", &own_model);
+    let m = Measurement::parse(file.write().as_bytes()).unwrap();
+    assert_eq!(m.format(), "astm-e1392");
+    let r = run(&m);
+    eprintln!("own-model ASTM validation: {:.0} ms", r.wall_ms);
+    // The readings are the file's values at the instrument geometries.
+    let g = brdfd::geometry::by_name("45as45").unwrap();
+    let want = own_model(g.light(), g.view());
+    for (a, b) in r.readings["45as45"].raw.iter().zip(&want) {
+        assert!((a - b).abs() < 1e-8, "{a} vs {b}");
+    }
+    let fit = &r.fits[0];
+    assert!(fit.default);
+    assert!(
+        fit.fit_delta_e00_mean < 0.05,
+        "fit {}",
+        fit.fit_delta_e00_mean
+    );
+    assert!(
+        fit.prediction.mean < 0.05,
+        "prediction {:?}",
+        fit.prediction
+    );
+    assert!(
+        r.oracle.prediction.mean < 0.3,
+        "oracle {:?}",
+        r.oracle.prediction
+    );
+    assert!(
+        r.lambert.prediction.mean > 1.0,
+        "lambert {:?}",
+        r.lambert.prediction
+    );
+    assert_eq!(r.directions, file.points.len());
+    let loo = &r.interpolation.as_ref().unwrap().leave_one_out;
+    assert!(loo.mean > 0.0 && loo.mean.is_finite());
+
+    let hard = astm("two lobes", &out_of_reach);
+    let h = run(&Measurement::parse(hard.write().as_bytes()).unwrap());
+    let p = &h.fits[0].prediction;
+    assert!(p.mean > 1.0, "out of reach predicted {p:?}");
+    assert!(
+        h.oracle.prediction.mean > 0.5,
+        "oracle {:?}",
+        h.oracle.prediction
+    );
+    // Near the mirror direction is where the second lobe lives.
+    assert!(p.near_specular_mean.unwrap() > p.rest_mean.unwrap());
+}
+
+/// Eight wavelengths, interpolated onto the grid: a small file, quick to write and read.
+fn rgl_file(name: &str, f: &dyn Fn(Vec3, Vec3) -> Vec<f64>) -> Vec<u8> {
+    let w: Vec<f64> = (0..8).map(|k| 400.0 + 300.0 * k as f64 / 7.0).collect();
+    let at = w.clone();
+    let g = move |wi: Vec3, wo: Vec3| {
+        let v = f(wi, wo);
+        at.iter()
+            .map(|nm| v[((nm - 400.0) / 10.0).round() as usize])
+            .collect()
+    };
+    let opts = WriteOptions {
+        theta_i_count: 8,
+        warp_resolution: 32,
+        value_resolution: 32,
+        ..WriteOptions::default()
+    };
+    rgl::write(name, &Channels::Spectral(w), &g, &opts)
+}
+
+#[test]
+fn rgl_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
+    let m = Measurement::parse(&rgl_file("own model", &own_model)).unwrap();
+    assert_eq!((m.format(), m.material()), ("rgl-bsdf", "own model"));
+    let r = run(&m);
+    eprintln!("own-model RGL validation: {:.0} ms", r.wall_ms);
+    assert!(r.interpolation.is_none());
+    assert_eq!(r.directions, 16 * 16 * 13);
+    // Not 0: the format interpolates between its nodes, and the spectrum between 8 bands.
+    assert!(
+        r.fits[0].prediction.mean < 0.5,
+        "{:?}",
+        r.fits[0].prediction
+    );
+    let h = run(&Measurement::parse(&rgl_file("two lobes", &out_of_reach)).unwrap());
+    assert!(
+        h.fits[0].prediction.mean > 1.0,
+        "{:?}",
+        h.fits[0].prediction
+    );
+    assert!(h.oracle.prediction.mean > 0.5, "{:?}", h.oracle.prediction);
+    // The JSON form of a report: the contract's keys (the command prints exactly this).
+    let doc = serde_json::to_value(&r).unwrap();
+    assert_eq!(doc["format"], "rgl-bsdf");
+    assert_eq!(
+        doc["readings"]["sra-20"]["raw"].as_array().unwrap().len(),
+        8
+    );
+    assert!(doc["fits"][0]["prediction"]["p95"].is_number());
+    assert!(doc["oracle"]["mean"].is_number() && doc["lambert"]["mean"].is_number());
+}
+
+/// The command refuses a malformed file with the line and field named, before any fit.
+#[test]
+fn validate_names_the_bad_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = astm("own model", &own_model).write();
+    text = text.replacen("NUM_POINTS 194", "NUM_POINTS 195", 1);
+    let path = dir.path().join("short.astm");
+    std::fs::write(&path, text).unwrap();
+    let out = common::run_brdfd(&["validate", "--json", path.to_str().unwrap()], None);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("NUM_POINTS") && err.contains("short.astm"),
+        "{err}"
+    );
+}
