@@ -211,6 +211,7 @@ impl FitReport {
             sra: self.request.settings.sra,
             specular_delta_l: self.specular_delta_l.map(SpecularDeltaLDocument::from),
             uncertainty: self.uncertainty.clone(),
+            at_bound: crate::jackknife::at_bound(p, &self.request.settings.bounds),
         }
     }
 }
@@ -283,6 +284,11 @@ pub struct FitDocument {
     /// The bootstrap intervals (`brdfd fit --bootstrap N`); absent without them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<Uncertainty>,
+    /// The fitted parameters at a bound of their range (`"ks"`, `"alpha"`, `"ior"`, `"kd"`
+    /// for any band; [`crate::jackknife::at_bound`]): the fit is not identified there. Empty
+    /// when none.
+    #[serde(default)]
+    pub at_bound: Vec<String>,
 }
 
 impl FitDocument {

@@ -50,6 +50,7 @@ pub mod fit;
 pub mod fonts;
 pub mod formats;
 pub mod geometry;
+pub mod jackknife;
 pub mod model;
 pub mod names;
 pub mod optimise;

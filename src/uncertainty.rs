@@ -131,6 +131,15 @@ pub struct Uncertainty {
     /// Why the intervals are not calibrated 95 % intervals (`None` when they are).
     #[serde(default = "unrated")]
     pub note: Option<String>,
+    /// The point fit's parameters at a bound of their range ([`crate::jackknife::at_bound`]);
+    /// empty when none. An interval collapsed on a bound is not calibrated.
+    #[serde(default)]
+    pub at_bound: Vec<String>,
+    /// The leave-one-geometry-out jackknife's own intervals ([`crate::jackknife`]); ks, α, μ and
+    /// kd above are the hull of these and the bootstrap's. `None` for intervals of the
+    /// bootstrap alone (stored before the jackknife, or from [`Uncertainty::from_draws`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub misfit: Option<crate::jackknife::Misfit>,
 }
 
 fn nominal() -> f64 {
@@ -522,8 +531,9 @@ pub fn draw(
     Ok(Draws { sigma, draws })
 }
 
-/// Bootstraps the fit `point` of `measured` (made with `settings`); `cancel` stops it between
-/// refits.
+/// Bootstraps the fit `point` of `measured` (made with `settings`) and widens the intervals by
+/// its leave-one-geometry-out jackknife ([`crate::jackknife`]), so that they include the
+/// model's misfit; `cancel` stops it between refits.
 pub fn bootstrap(
     measured: &MeasuredBrdf,
     settings: &Settings,
@@ -539,12 +549,11 @@ pub fn bootstrap(
         params: point,
     };
     let draws = draw(fit, opts, cancel)?;
-    Ok(Uncertainty::from_draws(
-        &draws,
-        settings,
-        measured.geometries.has_sra(),
-        opts,
-    ))
+    let jk = crate::jackknife::jackknife(fit, cancel)?;
+    Ok(
+        Uncertainty::from_draws(&draws, settings, measured.geometries.has_sra(), opts)
+            .with_jackknife(&jk, point, settings),
+    )
 }
 
 impl Uncertainty {
@@ -578,7 +587,40 @@ impl Uncertainty {
             delta_e00_mean: col(&|d| d.de_mean),
             delta_e00_diffuse_mean: col(&|d| d.de_diffuse),
             delta_e00_specular_mean: has_sra.then(|| col(&|d| d.de_specular.unwrap_or(f64::NAN))),
+            at_bound: Vec::new(),
+            misfit: None,
         }
+    }
+
+    /// These bootstrap intervals widened by the jackknife `jk` of the point fit `point` made
+    /// with `settings` (each interval the hull of both), with the parameters at a bound named
+    /// and the verdict withdrawn where one is.
+    pub fn with_jackknife(
+        mut self,
+        jk: &crate::jackknife::Jackknife,
+        point: &Params,
+        settings: &Settings,
+    ) -> Uncertainty {
+        use crate::jackknife::hull;
+        let misfit = jk.misfit(point, &settings.bounds);
+        self.ks = hull(self.ks, misfit.ks);
+        self.alpha = hull(self.alpha, misfit.alpha);
+        self.ior = hull(self.ior, misfit.ior);
+        for (iv, m) in self.kd.iter_mut().zip(&misfit.kd) {
+            *iv = hull(*iv, *m);
+        }
+        self.misfit = Some(misfit);
+        self.at_bound = crate::jackknife::at_bound(point, &settings.bounds);
+        if !self.at_bound.is_empty() {
+            self.calibrated = false;
+            self.note = Some(format!(
+                "{} at a bound of the range: the fit is not identified there and an interval \
+                 collapsed on the bound says nothing about the parameter; these are not \
+                 calibrated 95 % intervals",
+                self.at_bound.join(", ")
+            ));
+        }
+        self
     }
 }
 

@@ -195,6 +195,25 @@ pub(super) fn print_fits(detail: &ScanView) {
         print_fit_extras(fit);
     }
 }
+/// The done fit's parameters at a bound of the range it was fitted within (its stored settings'
+/// bounds), as the intervals record them or else from its parameters; empty when none or not
+/// done.
+fn at_bound(fit: &FitDetail) -> Vec<String> {
+    if let Some(u) = fit.uncertainty.as_ref().filter(|u| u.misfit.is_some()) {
+        return u.at_bound.clone();
+    }
+    let params = fit
+        .run
+        .result
+        .as_ref()
+        .and_then(|r| serde_json::from_value::<crate::model::Params>(r.params.clone()).ok());
+    let settings = serde_json::from_value::<crate::optimise::Settings>(fit.run.settings.clone());
+    match (params, settings) {
+        (Some(p), Ok(s)) => crate::jackknife::at_bound(&p, &s.bounds),
+        _ => Vec::new(),
+    }
+}
+
 /// Under a fit's row: the colorimetry of its ΔE00 and, once the bootstrap has run, the 95 %
 /// intervals of the lobe parameters (SCIENCE.md §7.1, §10).
 fn print_fit_extras(fit: &FitDetail) {
@@ -228,6 +247,13 @@ fn print_fit_extras(fit: &FitDetail) {
         "       SRA reading model {} (illuminant {}, {}° observer){delta_l}",
         sra.model, sra.illuminant, sra.observer
     );
+    let bound = at_bound(fit);
+    if !bound.is_empty() {
+        println!(
+            "       at a bound: {} (not identified there; an interval on the bound is not calibrated)",
+            bound.join(", ")
+        );
+    }
     if let Some(u) = &fit.uncertainty {
         let iv = |i: &[f64; 2]| format!("[{:.4}, {:.4}]", i[0], i[1]);
         println!(
