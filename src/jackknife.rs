@@ -217,6 +217,19 @@ pub fn at_bound(p: &Params, bounds: &Bounds) -> Vec<String> {
     out
 }
 
+/// The lobe parameters (`"ks"`, `"alpha"`, `"ior"`) whose intervals under two cost functions'
+/// fits of one scan do not overlap: where cf1 and cf2 disagree beyond their intervals, the
+/// lobe is not identified by the readings and neither interval should be read as the
+/// parameter's. Empty when they agree.
+pub fn disjoint(a: &crate::uncertainty::Uncertainty, b: &crate::uncertainty::Uncertainty) -> Vec<&'static str> {
+    let apart = |x: Interval, y: Interval| x[1] < y[0] || y[1] < x[0];
+    [("ks", a.ks, b.ks), ("alpha", a.alpha, b.alpha), ("ior", a.ior, b.ior)]
+        .into_iter()
+        .filter(|(_, x, y)| apart(*x, *y))
+        .map(|(n, _, _)| n)
+        .collect()
+}
+
 /// Per-geometry count of the MA-T12, which the jackknife leaves out one by one.
 const _: () = assert!(GEOMETRIES.len() == crate::geometry::MA_T12_COUNT + 2);
 
@@ -276,6 +289,19 @@ mod tests {
             held_out: vec![held(0, 40.0, 1.0), held(1, 40.0, 1.0)],
         };
         assert_eq!(one.prediction_interval(0), None);
+    }
+
+    #[test]
+    fn disjoint_names_the_lobe_parameters_whose_intervals_do_not_meet() {
+        let p = paper_samples()[0].params;
+        let a = crate::test_support::made_up_uncertainty(&p, true);
+        let mut b = a.clone();
+        assert!(disjoint(&a, &b).is_empty());
+        b.ks = [a.ks[1] * 1.01, a.ks[1] * 2.0];
+        b.ior = [a.ior[1], a.ior[1] + 1.0];
+        // Touching ends overlap.
+        assert_eq!(disjoint(&a, &b), ["ks"]);
+        assert_eq!(disjoint(&b, &a), ["ks"]);
     }
 
     #[test]

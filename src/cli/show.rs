@@ -194,6 +194,31 @@ pub(super) fn print_fits(detail: &ScanView) {
         );
         print_fit_extras(fit);
     }
+    print_lobe_identified(detail);
+}
+
+/// Where the latest cf1 and cf2 intervals of the scan do not overlap, says that the lobe is
+/// not identified (SCIENCE.md §10): neither fit's narrow interval is the parameter's.
+fn print_lobe_identified(detail: &ScanView) {
+    use crate::cost::CostFunction;
+    let latest = |cost: CostFunction| {
+        detail
+            .fits
+            .iter()
+            .rev()
+            .filter(|f| f.run.cost_function.known() == Some(&cost))
+            .find_map(|f| f.uncertainty.as_ref())
+    };
+    if let (Some(a), Some(b)) = (latest(CostFunction::Cf1), latest(CostFunction::Cf2)) {
+        let apart = crate::jackknife::disjoint(a, b);
+        if !apart.is_empty() {
+            println!(
+                "lobe not identified: cf1 and cf2 disagree beyond their intervals on {} (the \
+                 readings do not fix the lobe; read neither interval as the parameter's)",
+                apart.join(", ")
+            );
+        }
+    }
 }
 /// The done fit's parameters at a bound of the range it was fitted within (its stored settings'
 /// bounds), as the intervals record them or else from its parameters; empty when none or not
