@@ -221,13 +221,20 @@ pub fn at_bound(p: &Params, bounds: &Bounds) -> Vec<String> {
 /// fits of one scan do not overlap: where cf1 and cf2 disagree beyond their intervals, the
 /// lobe is not identified by the readings and neither interval should be read as the
 /// parameter's. Empty when they agree.
-pub fn disjoint(a: &crate::uncertainty::Uncertainty, b: &crate::uncertainty::Uncertainty) -> Vec<&'static str> {
+pub fn disjoint(
+    a: &crate::uncertainty::Uncertainty,
+    b: &crate::uncertainty::Uncertainty,
+) -> Vec<&'static str> {
     let apart = |x: Interval, y: Interval| x[1] < y[0] || y[1] < x[0];
-    [("ks", a.ks, b.ks), ("alpha", a.alpha, b.alpha), ("ior", a.ior, b.ior)]
-        .into_iter()
-        .filter(|(_, x, y)| apart(*x, *y))
-        .map(|(n, _, _)| n)
-        .collect()
+    [
+        ("ks", a.ks, b.ks),
+        ("alpha", a.alpha, b.alpha),
+        ("ior", a.ior, b.ior),
+    ]
+    .into_iter()
+    .filter(|(_, x, y)| apart(*x, *y))
+    .map(|(n, _, _)| n)
+    .collect()
 }
 
 /// Per-geometry count of the MA-T12, which the jackknife leaves out one by one.
@@ -341,7 +348,11 @@ mod tests {
         let j = run(&clean);
         assert_eq!(j.held_out.len(), 12);
         for h in &j.held_out {
-            assert!((h.params.ks / truth.ks - 1.0).abs() < 1e-3, "{}", h.params.ks);
+            assert!(
+                (h.params.ks / truth.ks - 1.0).abs() < 1e-3,
+                "{}",
+                h.params.ks
+            );
             assert!(h.error().iter().all(|e| e.abs() < 0.05), "{:?}", h.error());
         }
         let m = j.misfit(&truth, &settings.bounds);
