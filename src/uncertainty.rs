@@ -881,6 +881,67 @@ mod tests {
     }
 
     #[test]
+    fn a_fit_at_a_bound_is_not_calibrated() {
+        use crate::colour::Lab;
+        use crate::jackknife::{HeldOut, Jackknife};
+        let settings = Settings::default();
+        let mut point = paper_samples()[0].params;
+        point.ior = settings.bounds.ior.1;
+        let lab = Lab {
+            l: 50.0,
+            a: 0.0,
+            b: 0.0,
+        };
+        // Twelve left-out refits that move ks by up to 11 % and leave μ on its bound.
+        let held_out = (0..MA_T12_COUNT)
+            .map(|g| {
+                let mut p = point;
+                p.ks *= 1.0 + 0.01 * g as f64;
+                HeldOut {
+                    geometry: g,
+                    params: p,
+                    measured: lab,
+                    predicted: lab,
+                }
+            })
+            .collect();
+        let jk = Jackknife { held_out };
+        let mut u = crate::test_support::made_up_uncertainty(&point, true);
+        // A bootstrap that claims no spread of ks at all.
+        u.ks = [point.ks, point.ks];
+        let u = u.with_jackknife(&jk, &point, &settings);
+        assert!(!u.calibrated);
+        assert_eq!(u.at_bound, ["ior"]);
+        assert!(
+            u.note.as_deref().unwrap().contains("ior at a bound"),
+            "{:?}",
+            u.note
+        );
+        // The jackknife's spread widens ks to hold every left-out refit.
+        for h in &jk.held_out {
+            assert!(
+                u.contains("ks", h.params.ks),
+                "{} not in {:?}",
+                h.params.ks,
+                u.ks
+            );
+        }
+        let misfit = u.misfit.as_ref().unwrap();
+        assert_eq!(misfit.refits, 12);
+        // μ's own interval collapses on the bound.
+        assert_eq!(misfit.ior, [3.0, 3.0]);
+        let json = serde_json::to_value(&u).unwrap();
+        assert_eq!(json["at_bound"], serde_json::json!(["ior"]));
+        assert_eq!(json["misfit"]["method"], crate::jackknife::METHOD);
+        // Intervals stored before the jackknife read with no parameter at a bound.
+        let mut old = json.clone();
+        old.as_object_mut().unwrap().remove("at_bound");
+        old.as_object_mut().unwrap().remove("misfit");
+        let read: Uncertainty = serde_json::from_value(old).unwrap();
+        assert!(read.at_bound.is_empty() && read.misfit.is_none());
+    }
+
+    #[test]
     fn noise_free_scans_give_intervals_of_zero_width_at_the_truth() {
         let m = scan_measured(3, 0.0, 0);
         let truth = &paper_samples()[3].params;
