@@ -3,7 +3,8 @@
 //! killed with SIGKILL mid-scan, it leaves a store that opens, passes `PRAGMA
 //! integrity_check`, and marks no scan complete that is not; the next start marks the
 //! interrupted scan failed, keeping its readings, and scans again. SIGTERM mid-scan shuts it
-//! down gracefully: exit status 0, the scan marked aborted with the reason.
+//! down gracefully: exit status 0, the scan marked aborted with the reason. A `brdfd scan`
+//! following either scan exits 3 (no daemon), saying that the daemon stopped.
 
 mod common;
 
@@ -25,17 +26,53 @@ fn reference(client: &Client) {
     assert!(!client.get("/status").unwrap()["reference"].is_null());
 }
 
-/// Starts a scan and returns once at least one of its readings is stored (and not all).
-fn scan_until_some_readings(client: &Client, sample: &str) -> i64 {
-    let v = client
-        .post("/scans", Some(&json!({ "sample": sample })))
-        .unwrap();
-    let scan = v["scan"].as_i64().unwrap();
-    wait_until("the first readings", || {
-        let s: Value = client.get(&format!("/scans/{scan}")).unwrap();
-        s["scan"]["reading_count"].as_i64().unwrap_or(0) >= 1
+/// Runs `brdfd scan --sample SAMPLE` against the daemon `d` on a thread of its own, and
+/// returns the thread with the scan's id once at least one of its readings is stored.
+fn cli_scan_until_some_readings(
+    d: &ServeChild,
+    sample: &'static str,
+) -> (std::thread::JoinHandle<std::process::Output>, i64) {
+    let (addr, token) = (d.addr.to_string(), d.dir.join("brdfd.token"));
+    let cli = std::thread::spawn(move || {
+        run_brdfd(
+            &[
+                "scan",
+                "--sample",
+                sample,
+                "--addr",
+                &addr,
+                "--token-file",
+                token.to_str().unwrap(),
+            ],
+            None,
+        )
     });
-    scan
+    let mut scan = 0;
+    wait_until("the CLI's scan and its first readings", || {
+        let list: Value = d.client.get("/scans?limit=1").unwrap();
+        match list.as_array().and_then(|l| l.first()) {
+            Some(s) if s["sample"] == sample => {
+                scan = s["id"].as_i64().unwrap();
+                s["reading_count"].as_i64().unwrap_or(0) >= 1
+            }
+            _ => false,
+        }
+    });
+    (cli, scan)
+}
+
+/// The CLI that followed scan `scan` exited 3 (no daemon) with one line saying `why`.
+fn exited_no_daemon(out: std::process::Output, scan: i64, why: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains(why), "want {why:?} in {stderr}");
+    assert!(
+        stderr.contains(&format!("before scan {scan} ended"))
+            && stderr.contains(&format!("`brdfd show {scan}`")),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("the scan goes on"), "{stderr}");
 }
 
 async fn open_and_check(db: &Path) -> Store {
@@ -72,12 +109,17 @@ fn sigkill_mid_scan_leaves_a_sound_store_and_sigterm_aborts_the_scan_gracefully(
         .unwrap();
     let (tx, rx) = mpsc::channel();
     let body = std::thread::spawn(move || {
-        // SIGKILL mid-scan.
+        // SIGKILL mid-scan, under the `brdfd scan` that asked for it.
         let mut d = spawn_serve(&config, &[]);
         reference(&d.client);
-        let killed = scan_until_some_readings(&d.client, "T.Killed");
+        let (cli, killed) = cli_scan_until_some_readings(&d, "T.Killed");
         d.child.kill().unwrap(); // SIGKILL on Unix
         d.child.wait().unwrap();
+        exited_no_daemon(
+            cli.join().unwrap(),
+            killed,
+            "the daemon stopped: its event stream closed and nothing answers on",
+        );
         let (state, readings) = rt.block_on(async {
             let store = open_and_check(&db).await;
             let detail = store.scan_detail(ScanId(killed)).await.unwrap();
@@ -107,13 +149,18 @@ fn sigkill_mid_scan_leaves_a_sound_store_and_sigterm_aborts_the_scan_gracefully(
                 && d.client.get("/status").unwrap()["busy"].is_null()
         });
 
-        // SIGTERM mid-scan: a graceful stop.
-        let stopped = scan_until_some_readings(&d.client, "T.Terminated");
+        // SIGTERM mid-scan: a graceful stop, which the CLI following the scan hears of.
+        let (cli, stopped) = cli_scan_until_some_readings(&d, "T.Terminated");
         let pid = d.child.id().to_string();
         let sent = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
         assert!(sent.success());
         let status = d.child.wait().unwrap();
         assert!(status.success(), "graceful shutdown exits 0: {status}");
+        exited_no_daemon(
+            cli.join().unwrap(),
+            stopped,
+            "the daemon stopped: it is shutting down",
+        );
         rt.block_on(async {
             let store = open_and_check(&db).await;
             let detail = store.scan_detail(ScanId(stopped)).await.unwrap();

@@ -195,5 +195,20 @@ pub async fn render(service: &Service) -> Result<String, ServiceError> {
             &[(String::new(), f64::from(u8::from(sync.connected)))],
         );
     }
+    let budget = service.import_budget();
+    family(
+        &mut out,
+        "import_held_bytes",
+        "gauge",
+        "Bytes of import bodies held in memory now (uploads and watch-folder files).",
+        &[(String::new(), budget.held_bytes() as f64)],
+    );
+    family(
+        &mut out,
+        "import_held_limit_bytes",
+        "gauge",
+        "The bound on import bodies held at once ([ingest] max_held_mib).",
+        &[(String::new(), budget.total_bytes() as f64)],
+    );
     Ok(out)
 }

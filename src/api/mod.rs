@@ -24,7 +24,9 @@
 //! Every request but `GET /healthz` and the page's own files needs `Authorization: Bearer
 //! <token>` (or the web page's session cookie, see [`access`]); Host, Origin and
 //! body type are checked before any route runs ([`access`]); connections, header reads, idle
-//! connections, bodies (1 MiB) and event streams are bounded ([`server`], [`MAX_BODY_BYTES`]).
+//! connections, bodies (1 MiB) and event streams are bounded ([`server`], [`MAX_BODY_BYTES`]);
+//! the bodies of `POST /scans/import` held at once are bounded as a whole by the service's
+//! import budget (`[ingest] max_held_mib`), held before a byte is read (503 when full).
 //!
 //! Every refusal is a JSON object `{"error": "…"}` whose message says what to do; the status
 //! code says which kind: 404 no such thing, 409 the instruments are busy or the state forbids
@@ -246,6 +248,7 @@ struct EventPermits(Arc<Semaphore>, Duration);
 /// only router brdfd serves.
 pub fn router(service: Service, options: &ApiOptions) -> Router {
     let access = Arc::new(options.access.clone());
+    let held = service.clone();
     Router::new()
         .route("/healthz", get(healthz))
         .route("/status", get(status))
@@ -254,7 +257,9 @@ pub fn router(service: Service, options: &ApiOptions) -> Router {
         .route("/scans", post(request_scan).get(list_scans))
         .route(
             "/scans/import",
-            post(import_scan).layer(DefaultBodyLimit::max(MAX_IMPORT_BODY_BYTES)),
+            post(import_scan)
+                .layer(DefaultBodyLimit::max(MAX_IMPORT_BODY_BYTES))
+                .layer(axum::middleware::from_fn_with_state(held, hold_import_body)),
         )
         .route("/scans/{id}", get(show_scan))
         .route("/scans/{id}/export", get(export_scan))
@@ -458,6 +463,44 @@ async fn export_scan(
     ))
 }
 
+/// Holds a `POST /scans/import` body's bytes in the service's import budget before a byte of
+/// it is read (after the guard: only an authorised request holds any), until the import is
+/// over. A body whose bytes are not free is refused with 503 naming the bound; one of unknown
+/// length is held at the largest size taken.
+async fn hold_import_body(
+    State(s): State<Service>,
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    use crate::service::import_budget::BudgetError;
+    let declared = request
+        .headers()
+        .get(axum::http::header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.trim().parse::<u64>().ok());
+    let largest = MAX_IMPORT_BODY_BYTES as u64;
+    let held = match s
+        .import_budget()
+        .try_hold(declared.unwrap_or(largest).min(largest))
+    {
+        Ok(held) => held,
+        Err(e @ BudgetError::Full { .. }) => {
+            let mut r = limit_refusal(StatusCode::SERVICE_UNAVAILABLE, e.to_string());
+            r.headers_mut().insert(
+                axum::http::header::RETRY_AFTER,
+                axum::http::HeaderValue::from_static("1"),
+            );
+            return r;
+        }
+        Err(e @ BudgetError::TooLarge { .. }) => {
+            return limit_refusal(StatusCode::PAYLOAD_TOO_LARGE, e.to_string());
+        }
+    };
+    let response = next.run(request).await;
+    drop(held);
+    response
+}
+
 async fn import_scan(
     State(s): State<Service>,
     body: Result<axum::body::Bytes, axum::extract::rejection::BytesRejection>,
@@ -481,7 +524,7 @@ async fn import_scan(
     };
     // An .xlsx is a zip archive; a scan file is JSON text.
     if body.starts_with(b"PK\x03\x04") {
-        return import_xrite(&s, &body).await;
+        return import_xrite(&s, body).await;
     }
     if body.len() > MAX_BODY_BYTES {
         return Ok(limit_refusal(
@@ -509,10 +552,10 @@ async fn import_scan(
 /// `POST /scans/import` of an X-Rite QC `.xlsx` export: every measurement is read and checked
 /// before any is imported; each becomes a scan (reference: instrument calibration, no
 /// specular readings), fitted like a measured one.
-async fn import_xrite(s: &Service, body: &[u8]) -> Result<Response, ApiError> {
-    let owned = body.to_vec();
+async fn import_xrite(s: &Service, body: axum::body::Bytes) -> Result<Response, ApiError> {
+    // The body itself goes to the reader (no copy: its bytes are what the budget holds).
     let read = tokio::task::spawn_blocking(move || {
-        crate::formats::xrite::read(&owned, "the uploaded .xlsx")
+        crate::formats::xrite::read(&body, "the uploaded .xlsx")
     })
     .await
     .map_err(|e| ServiceError::BadRequest(format!("reading the .xlsx failed: {e}")))?;

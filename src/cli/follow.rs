@@ -71,8 +71,23 @@ enum Step {
     Continue,
     /// Everything followed has ended well.
     Finished,
-    /// The measurement failed or the daemon is going away: the reason.
+    /// The measurement failed: the reason.
     Failed(String),
+    /// The daemon said it is shutting down.
+    DaemonStopping,
+}
+
+/// The daemon went away under a followed operation (its event stream closed before the end,
+/// or it said it was shutting down): exit status 3, no daemon, as a refused connection.
+#[derive(Debug, thiserror::Error)]
+#[error("{why} before {what} ended; {advice}")]
+pub struct DaemonGone {
+    /// What happened, as seen from the client.
+    why: String,
+    /// `scan 49`, `reference 3`.
+    what: String,
+    /// Where to look now.
+    advice: String,
 }
 
 /// The state of a following: what is followed, what is still running, the display.
@@ -224,9 +239,7 @@ impl Follower<'_> {
             Event::FitCancelled { fit, .. } if mine => {
                 return self.fit_ended(*fit, &format!("fit {fit} cancelled"));
             }
-            Event::ShuttingDown => {
-                return Step::Failed("the daemon is shutting down".into());
-            }
+            Event::ShuttingDown => return Step::DaemonStopping,
             _ => {}
         }
         Step::Continue
@@ -273,12 +286,46 @@ impl Follower<'_> {
         }
     }
 
-    /// Where to look when the event stream closed before the end.
-    fn lost_stream_advice(&self) -> String {
-        match self.followed {
-            Followed::Scan(scan) => format!("the scan goes on: `brdfd show {scan}`"),
-            Followed::Reference(r) => format!("reference {r} may go on: `brdfd status`"),
-        }
+    /// The error for a daemon gone before the end: `stopping` (it said so), or the event
+    /// stream closed; then whether it still answers tells a stopped daemon from a broken
+    /// connection.
+    fn daemon_gone(&self, stopping: bool) -> DaemonGone {
+        let what = match self.followed {
+            Followed::Scan(scan) => format!("scan {scan}"),
+            Followed::Reference(r) => format!("reference {r}"),
+        };
+        let see = match self.followed {
+            Followed::Scan(scan) => format!("`brdfd show {scan}`"),
+            Followed::Reference(_) => "`brdfd status`".to_string(),
+        };
+        let addr = self.client.addr();
+        let answers = !stopping && self.client.health().is_ok();
+        let (why, advice) = if answers {
+            (
+                format!(
+                    "the connection to the daemon broke (its event stream closed; the daemon \
+                     still answers on {addr})"
+                ),
+                format!("it goes on without this command: {see}"),
+            )
+        } else {
+            (
+                if stopping {
+                    "the daemon stopped: it is shutting down".to_string()
+                } else {
+                    format!(
+                        "the daemon stopped: its event stream closed and nothing answers on \
+                         {addr} any more"
+                    )
+                },
+                format!(
+                    "start it again (`systemctl start brdfd`, or `brdfd serve`), then {see} \
+                     says what became of it (a measurement the daemon stopped under is marked \
+                     failed or aborted, its readings kept; unfinished fits are queued again)"
+                ),
+            )
+        };
+        DaemonGone { why, what, advice }
     }
 }
 
@@ -352,14 +399,12 @@ fn follow(
             Step::Continue => {}
             Step::Finished => return Ok(()),
             Step::Failed(reason) => bail!(reason),
+            Step::DaemonStopping => return Err(follower.daemon_gone(true).into()),
         }
     }
     // An event stream that closes before the end is a lost daemon (restarted, killed, or the
     // connection cut), not a success.
-    bail!(
-        "lost the daemon's event stream; {}",
-        follower.lost_stream_advice()
-    )
+    Err(follower.daemon_gone(false).into())
 }
 
 /// The fits of scan `scan` still queued or running, from its detail.

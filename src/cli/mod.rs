@@ -108,7 +108,8 @@ Exit status:
   0  done
   1  failed: the work ran and failed (a scan or fit failed or was aborted), or another error
   2  usage: bad arguments, or a request the daemon refused as malformed
-  3  no daemon: nothing answers on the address, or the connection broke
+  3  no daemon: nothing answers on the address, or the connection broke, or the daemon
+     stopped under a command following a reference, scan or fits
   4  busy: the instruments are busy or the daemon is shutting down or full; retry later
   5  not authorised: the API token is missing or wrong, or the request was refused as
      cross-origin or for a wrong Host
@@ -153,6 +154,9 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
         }
         if cause.downcast_ref::<MalformedTokenEnv>().is_some() {
             return exit::NOT_AUTHORISED;
+        }
+        if cause.downcast_ref::<follow::DaemonGone>().is_some() {
+            return exit::NO_DAEMON;
         }
         if let Some(e) = cause.downcast_ref::<ClientError>() {
             return match e {

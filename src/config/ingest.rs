@@ -25,6 +25,9 @@ pub struct IngestConfig {
     /// The largest file read, in bytes (`max_file_mib`); a larger one goes to `failed/`
     /// unread.
     pub max_file_bytes: u64,
+    /// The import bodies held in memory at once, in bytes (`max_held_mib`), across the watch
+    /// folder and `POST /scans/import` (src/service/import_budget.rs).
+    pub max_held_bytes: u64,
 }
 
 impl Default for IngestConfig {
@@ -36,6 +39,7 @@ impl Default for IngestConfig {
             pair_wait: Duration::from_millis(defaults::INGEST_PAIR_WAIT_MS),
             reference: crate::formats::DEFAULT_REFERENCE.to_string(),
             max_file_bytes: defaults::INGEST_MAX_FILE_MIB << 20,
+            max_held_bytes: defaults::INGEST_MAX_HELD_MIB << 20,
         }
     }
 }
@@ -48,6 +52,11 @@ mod defaults {
     pub const INGEST_PAIR_WAIT_MS: u64 = 60_000;
     /// An export of a whole session is a few MiB at most.
     pub const INGEST_MAX_FILE_MIB: u64 = 32;
+    /// Two of the largest uploads `POST /scans/import` takes (64 MiB each), or dozens of real
+    /// exports; well inside the shipped unit's `MemoryMax=1G` with the readers' own budgets.
+    pub const INGEST_MAX_HELD_MIB: u64 = 128;
+    /// The smallest bound: one upload of the largest size the API takes always fits.
+    pub const INGEST_MAX_HELD_MIB_MIN: u64 = 64;
 }
 
 // ---- Stage 1: the section's shape ----------------------------------------------------------
@@ -61,6 +70,7 @@ pub(super) struct RawIngest {
     pair_wait_ms: S<u64>,
     reference: S<String>,
     max_file_mib: S<u64>,
+    max_held_mib: S<u64>,
 }
 
 // ---- Stage 2: its checks ------------------------------------------------------------------
@@ -77,7 +87,7 @@ impl Checker<'_> {
                 }
             }
         };
-        Ok(IngestConfig {
+        let config = IngestConfig {
             watch: self.path("ingest.watch", &raw.watch)?,
             settle: self.value(
                 "ingest.settle_ms",
@@ -115,7 +125,35 @@ impl Checker<'_> {
                 defaults::INGEST_MAX_FILE_MIB,
                 |n| bounded_count(n, 1, 1024).map(|n| (n as u64) << 20),
             )?,
-        })
+            max_held_bytes: self.value(
+                "ingest.max_held_mib",
+                &raw.max_held_mib,
+                defaults::INGEST_MAX_HELD_MIB,
+                |n| {
+                    bounded_count(n, defaults::INGEST_MAX_HELD_MIB_MIN, 65_536)
+                        .map(|n| (n as u64) << 20)
+                },
+            )?,
+        };
+        if config.max_held_bytes < config.max_file_bytes {
+            let message = format!(
+                "max_held_mib ({} MiB) is less than max_file_mib ({} MiB): a file the watch \
+                 folder takes could never be held; raise max_held_mib or lower max_file_mib",
+                config.max_held_bytes >> 20,
+                config.max_file_bytes >> 20
+            );
+            return Err(match &raw.max_held_mib {
+                Some(v) => self.invalid("ingest.max_held_mib", v, message),
+                None => self.invalid(
+                    "ingest.max_file_mib",
+                    raw.max_file_mib
+                        .as_ref()
+                        .expect("the default max_held_mib holds the default max_file_mib"),
+                    message,
+                ),
+            });
+        }
+        Ok(config)
     }
 }
 
@@ -147,5 +185,25 @@ mod tests {
         );
         let e = parse("[ingest]\nwatch = \"\"\n").unwrap_err().to_string();
         assert!(e.contains("ingest.watch: must not be empty"), "{e}");
+        assert_eq!(d.max_held_bytes, 128 << 20);
+        let c = parse("[ingest]\nmax_held_mib = 512\n").unwrap();
+        assert_eq!(c.ingest.max_held_bytes, 512 << 20);
+        let e = parse("[ingest]\nmax_held_mib = 32\n")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "test.toml:2: ingest.max_held_mib: 32 is out of range: 64 to 65536"
+        );
+        // A file the folder takes must fit the bound on what is held at once.
+        let e = parse("[ingest]\nmax_file_mib = 200\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "ingest.max_file_mib: max_held_mib (128 MiB) is less than max_file_mib (200 MiB)"
+            ),
+            "{e}"
+        );
     }
 }

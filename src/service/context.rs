@@ -1,5 +1,5 @@
 //! What every part of the service shares, and nothing else: the store, the event bus, the
-//! settings, the timings, and the stop signal with its task tracking.
+//! settings, the timings, the import budget, and the stop signal with its task tracking.
 //!
 //! Each part (`acquisition.rs`, `orchestrator.rs`, `pipeline.rs`, `fit_worker.rs`,
 //! `ingest.rs`, `forwarder.rs`) holds a clone of one [`Context`] beside the handles and state
@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use crate::store::Store;
 
 use super::events::{Event, EventBus};
+use super::import_budget::ImportBudget;
 use super::shutdown::{Coordinator, Shutdown, TaskGuard};
 use super::{ServiceError, ServiceSettings, Timings};
 
@@ -24,6 +25,8 @@ pub(super) struct Context {
     pub(super) events: EventBus,
     pub(super) settings: Arc<ServiceSettings>,
     pub(super) timings: Arc<Timings>,
+    /// The import bodies held in memory at once, across every door.
+    pub(super) import_budget: ImportBudget,
     /// Set at shutdown, before the stop signal: fits break off at their next generation and are
     /// left `running` for the next start to queue again; new requests are refused. An atomic
     /// (not the stop signal) because the fits read it on blocking threads, once a generation.
@@ -35,6 +38,7 @@ pub(super) struct Context {
 impl Context {
     pub(super) fn new(store: Store, settings: ServiceSettings) -> Context {
         Context {
+            import_budget: ImportBudget::new(settings.max_held_import_bytes),
             store,
             events: EventBus::new(),
             settings: Arc::new(settings),

@@ -21,13 +21,25 @@
 //! **Crash safety.** A file taken is first renamed into `DIR/.importing/` (atomic on one file
 //! system), read from there, hashed (SHA-256) and parsed; its scans and its hash are written in
 //! one store transaction (`ingested_files`, `migrations/0012_ingest.sql`); then its fits are
-//! queued and the hash row marked so; only then is the file renamed into `DIR/done/`. Whatever
-//! is in `.importing/` at any pass (at start: what a stopped daemon left there) is finished
-//! first: a hash already recorded means the import committed, and the file goes to `done/`;
-//! otherwise the import runs again (it left nothing behind). Scans imported but whose fits were
-//! not queued yet are queued at start. A file is never imported twice: the same content dropped
-//! again, under any name, is moved to `failed/` naming the earlier import. A store failure (a
-//! full disk) leaves the file in `.importing/` to be tried again at the next pass.
+//! queued and the hash row marked so; only then is the file renamed into `DIR/done/`. What a
+//! stopped daemon left in `.importing/` is settled at start, before any pass, and never parsed:
+//! a hash already recorded means the import committed, and the file goes to `done/`; any
+//! other file was being imported when the daemon stopped, perhaps because of it (a reader
+//! that aborts the process), so it goes to `failed/` with a note saying so, is named in the
+//! log and in `status` (`interrupted`), and is not read again unless someone drops it again:
+//! one file cannot keep the daemon down through its restarts. Scans imported but whose fits
+//! were not queued yet are queued at start. A file is never imported twice: the same content
+//! dropped again, under any name, is moved to `failed/` naming the earlier import. A store
+//! failure (a full disk) leaves the file in `.importing/` to be tried again at a later pass of
+//! the same run.
+//!
+//! **Bounded.** Imports run off the folder's pass, each on a task of its own,
+//! [`IMPORTS_AT_ONCE`] at a time; a file's bytes are held in the service's import budget
+//! (`[ingest] max_held_mib`, shared with `POST /scans/import`,
+//! [`super::import_budget`]) from before it is read until its import is over. A file is
+//! taken only when a slot and its bytes are free; until then it waits in the folder
+//! (`waiting` in `status`) and the files behind it go on, so one slow file does not hold up
+//! the rest. A reader's own time and memory are bounded in the reader (`src/formats/`).
 //!
 //! **What the folder can do to the daemon.** Whoever can write into DIR can drop files, not
 //! redirect brdfd's writes: DIR and its three subfolders are opened once at start and held
@@ -46,13 +58,14 @@
 //! [`WatchFolder`] owns the folder's status (only its task changes it); the imported scans go
 //! to the pipeline to be fitted, as an import through the API would.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
+use tokio::sync::Semaphore;
 
 use crate::formats::xrite_xlsx::TextureImage;
 use crate::formats::{self, Format, ImportOptions};
@@ -62,13 +75,19 @@ use crate::store::{FileImport, ImportedScan, NewTexture, Provenance, Source, Sto
 
 use super::context::Context;
 use super::events::Event;
+use super::import_budget::{BudgetError, HeldBytes};
 use super::pipeline::{IMPORTED_SUFFIX, Pipeline, check_name, new_readings, new_textures};
+use super::shutdown::TaskGuard;
 use super::{RefitRequest, ServiceError};
 
 /// Where finished files go, and the folder of files being imported.
 pub const DONE: &str = "done";
 pub const FAILED: &str = "failed";
 pub const IMPORTING: &str = ".importing";
+
+/// Imports the watch folder runs at once, each on a task of its own: a slow file holds one,
+/// and the files behind it go on through the other.
+pub const IMPORTS_AT_ONCE: usize = 2;
 
 /// The watch folder's settings (`[ingest]`).
 #[derive(Debug, Clone, PartialEq)]
@@ -111,6 +130,11 @@ pub struct IngestStatus {
     pub last_file: Option<String>,
     /// The last rejection or error, with its file.
     pub last_error: Option<String>,
+    /// Files found in `.importing/` at start, their import not committed: the daemon stopped
+    /// while importing them (perhaps because of them), so they were moved to `failed/` with a
+    /// note instead of being read again.
+    #[serde(default)]
+    pub interrupted: Vec<String>,
 }
 
 /// What a file in the folder is.
@@ -368,21 +392,72 @@ enum Failure {
 /// (the instrument camera's, from an X-Rite `.xlsx`; none from other files).
 type UnitContent = (String, Vec<Scan>, Vec<Vec<TextureImage>>);
 
-/// The scans in a unit's files (read from `.importing/`), with their content hash and texture
-/// images.
-fn read_unit(dir: &Dir, unit: &Unit, reference: &str, max: u64) -> Result<UnitContent, String> {
-    let read = |name: &str| {
-        dir.read_bounded(name, max).map_err(|e| match e {
-            FsError::TooLarge { size, .. } => format!(
-                "{name} is {size} bytes, over the watch folder's limit of {} MiB ([ingest] \
-                 max_file_mib); nothing was read",
-                max >> 20
-            ),
-            e => format!("{name}: {e}"),
+/// How much of a file in `.importing/` is read: the bytes held for it in the import budget
+/// (its size when they were held), within `[ingest] max_file_mib`.
+#[derive(Debug, Clone, Copy)]
+struct ReadLimit {
+    bytes: u64,
+    max_file: u64,
+}
+
+/// Each file of `unit` (in `dir`, where it is now): how much of it is read, its size now at
+/// most `max_file_mib`.
+fn read_limits(
+    settings: &IngestSettings,
+    dir: &Dir,
+    unit: &Unit,
+) -> Result<Vec<ReadLimit>, String> {
+    unit.names()
+        .into_iter()
+        .map(|name| match dir.entry(name) {
+            Ok(Some(e)) => Ok(ReadLimit {
+                bytes: e.size.min(settings.max_file_bytes),
+                max_file: settings.max_file_bytes,
+            }),
+            Ok(None) => Err(format!("{name} is gone from the watch folder")),
+            Err(e) => Err(format!("{name}: {e}")),
         })
+        .collect()
+}
+
+/// What an import holds while it runs: an import slot, its files' bytes in the import budget
+/// (given back when dropped), and how much of each file is read.
+struct Held {
+    _slot: tokio::sync::OwnedSemaphorePermit,
+    _bytes: HeldBytes,
+    limits: Vec<ReadLimit>,
+}
+
+/// Reads `name` from `dir`, no further than `limit`.
+fn read_held(dir: &Dir, name: &str, limit: ReadLimit) -> Result<Vec<u8>, String> {
+    dir.read_bounded(name, limit.bytes).map_err(|e| match e {
+        FsError::TooLarge { size, .. } if size > limit.max_file => format!(
+            "{name} is {size} bytes, over the watch folder's limit of {} MiB ([ingest] \
+             max_file_mib); nothing was read",
+            limit.max_file >> 20
+        ),
+        FsError::TooLarge { size, .. } => format!(
+            "{name} grew to {size} bytes while it was being imported (it was {} bytes when \
+             taken): something still writes to it; drop it again once it is written",
+            limit.bytes
+        ),
+        e => format!("{name}: {e}"),
+    })
+}
+
+/// The scans in a unit's files (read from `.importing/`, each within its limit), with their
+/// content hash and texture images.
+fn read_unit(
+    dir: &Dir,
+    unit: &Unit,
+    reference: &str,
+    limits: &[ReadLimit],
+) -> Result<UnitContent, String> {
+    let main = read_held(dir, &unit.main, limits[0])?;
+    let partner = match &unit.partner {
+        Some(p) => Some(read_held(dir, p, limits[1])?),
+        None => None,
     };
-    let main = read(&unit.main)?;
-    let partner = unit.partner.as_deref().map(read).transpose()?;
     let hash = content_hash(&main, partner.as_deref());
     let (kind, stem) = kind_of(&unit.main).ok_or("not a file the watch folder reads")?;
     let text = |name: &str, bytes: Vec<u8>| {
@@ -451,6 +526,10 @@ pub(super) struct WatchFolder {
     pipeline: Pipeline,
     /// Changed by the folder's task alone; read by `status`.
     status: Arc<Mutex<IngestStatus>>,
+    /// The names in `.importing/` whose import runs now (not to be taken again).
+    in_flight: Arc<Mutex<HashSet<String>>>,
+    /// One permit per import running at once ([`IMPORTS_AT_ONCE`]).
+    slots: Arc<Semaphore>,
 }
 
 impl WatchFolder {
@@ -483,22 +562,30 @@ impl WatchFolder {
             rejected: 0,
             last_file: None,
             last_error: None,
+            interrupted: Vec::new(),
         }));
         let watch_folder = WatchFolder {
             ctx,
             pipeline,
             status,
+            in_flight: Arc::default(),
+            slots: Arc::new(Semaphore::new(IMPORTS_AT_ONCE)),
         };
         let (guard, mut stop) = watch_folder.ctx.task_slot().await?;
         tracing::info!(dir = %dir.display(), "watching the folder for exports and scan files");
         let folder = watch_folder.clone();
+        let (settings, folders) = (Arc::new(settings), Arc::new(folders));
         tokio::spawn(async move {
-            let _guard = guard;
+            folder.settle_interrupted(&settings, &folders).await;
             folder.queue_pending_ingest_fits().await;
             let mut watch = Watch::default();
             loop {
                 match folders.check(&settings.dir) {
-                    Ok(()) => folder.ingest_pass(&settings, &folders, &mut watch).await,
+                    Ok(()) => {
+                        folder
+                            .ingest_pass(&settings, &folders, &mut watch, &guard)
+                            .await
+                    }
                     Err(e) => folder.note_error(e),
                 }
                 tokio::select! {
@@ -567,21 +654,196 @@ impl WatchFolder {
         }
     }
 
-    /// One pass: finish what is in `.importing/`, then take the files that have settled.
-    async fn ingest_pass(&self, settings: &IngestSettings, f: &Folders, watch: &mut Watch) {
-        // 1. In flight (left by a stopped daemon, or a store failure at the last pass).
+    /// At start, before any pass: what a stopped daemon left in `.importing/`. A unit whose
+    /// hash is recorded committed before the stop and goes to `done/` (only hashed, not
+    /// parsed). Any other was being imported when the daemon stopped, and perhaps stopped it
+    /// (a reader that aborts the process): it goes to `failed/` with a note saying so, is
+    /// named in the log and in `status`, and is never read again automatically, so that one
+    /// file cannot keep the daemon down through its restarts.
+    async fn settle_interrupted(&self, settings: &IngestSettings, f: &Folders) {
+        let (files, refused) = match list(&f.importing) {
+            Ok(l) => l,
+            Err(e) => return self.note_error(e.to_string()),
+        };
+        for (name, why) in refused {
+            self.refuse_unread(f, &f.importing, &name, &why);
+        }
+        let files: Vec<_> = files.into_iter().map(|(n, k, s, _, _)| (n, k, s)).collect();
+        let (units, _) = units(&files, |_| true, |_| true);
+        for unit in units {
+            let committed = match self.unit_hash(settings, f, &unit).await {
+                Ok(hash) => match self.ctx.store.ingested_file(&hash).await {
+                    Ok(found) => found.is_some(),
+                    Err(e) => {
+                        // Unknown: left where it is; the passes' recovery decides later.
+                        self.note_error(format!("{}: the store failed: {e}", unit.shown()));
+                        continue;
+                    }
+                },
+                Err(_) => false,
+            };
+            if committed {
+                // Its fits, if not queued yet, are queued by `queue_pending_ingest_fits`.
+                for name in unit.names() {
+                    if let Err(e) = self.file_to_done(f, name) {
+                        self.note_error(format!("cannot move {name} into {DONE}/: {e}"));
+                    }
+                }
+                continue;
+            }
+            let file = unit.shown();
+            let reason = format!(
+                "brdfd stopped while importing this file (it was found in {IMPORTING}/ at the \
+                 next start, its import not committed). It is not read again automatically, in \
+                 case reading it is what stopped the daemon; nothing of it is in the store. If \
+                 the daemon stopped for another reason (a restart, a power cut), move it back \
+                 into the watch folder to import it."
+            );
+            tracing::error!(
+                file = %file,
+                "the daemon stopped while importing this file; moved to {FAILED}/ unread, with a note"
+            );
+            for name in unit.names() {
+                if let Err(e) = self.file_to_failed(f, &f.importing, name, &reason) {
+                    self.note_error(format!("cannot move {name} into {FAILED}/: {e}"));
+                }
+            }
+            self.with_ingest_status(|s| {
+                s.rejected += 1;
+                s.interrupted.push(file.clone());
+                s.last_file = Some(file.clone());
+                s.last_error = Some(format!(
+                    "{file}: the daemon stopped while importing it; moved to {FAILED}/, not read \
+                     again"
+                ));
+            });
+            self.ctx.events.send(Event::FileRejected { file, reason });
+        }
+    }
+
+    /// The content hash of a unit in `.importing/`, read within the import budget.
+    async fn unit_hash(
+        &self,
+        settings: &IngestSettings,
+        f: &Folders,
+        unit: &Unit,
+    ) -> Result<String, String> {
+        let limits = read_limits(settings, &f.importing, unit)?;
+        let _held = self
+            .ctx
+            .import_budget
+            .hold(limits.iter().map(|l| l.bytes).sum())
+            .await
+            .map_err(|e| format!("{}: {e}", unit.shown()))?;
+        let dir = f.importing.try_clone().map_err(|e| e.to_string())?;
+        let unit = unit.clone();
+        tokio::task::spawn_blocking(move || {
+            let main = read_held(&dir, &unit.main, limits[0])?;
+            let partner = match &unit.partner {
+                Some(p) => Some(read_held(&dir, p, limits[1])?),
+                None => None,
+            };
+            Ok(content_hash(&main, partner.as_deref()))
+        })
+        .await
+        .map_err(|e| e.to_string())?
+    }
+
+    /// Holds an import slot and the bytes of a unit's files (in `dir`, where they are now) in
+    /// the import budget, without waiting: `None` when either is not free now (the unit waits
+    /// for a later pass, and the files behind it go on).
+    fn try_hold_unit(
+        &self,
+        settings: &IngestSettings,
+        dir: &Dir,
+        unit: &Unit,
+    ) -> Result<Option<Held>, String> {
+        let limits = read_limits(settings, dir, unit)?;
+        let Ok(slot) = self.slots.clone().try_acquire_owned() else {
+            return Ok(None);
+        };
+        match self
+            .ctx
+            .import_budget
+            .try_hold(limits.iter().map(|l| l.bytes).sum())
+        {
+            Ok(bytes) => Ok(Some(Held {
+                _slot: slot,
+                _bytes: bytes,
+                limits,
+            })),
+            Err(BudgetError::Full { .. }) => Ok(None),
+            Err(e) => Err(format!("{}: {e}", unit.shown())),
+        }
+    }
+
+    /// Runs a unit's import on a task of its own, with what it holds, a guard (shutdown waits
+    /// for it) and its names in `in_flight`; nothing when a name is in flight already.
+    fn spawn_import(
+        &self,
+        settings: &Arc<IngestSettings>,
+        f: &Arc<Folders>,
+        unit: Unit,
+        recovering: bool,
+        held: Held,
+        guard: &TaskGuard,
+    ) {
+        {
+            let mut in_flight = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
+            if unit.names().iter().any(|n| in_flight.contains(*n)) {
+                return;
+            }
+            in_flight.extend(unit.names().into_iter().map(str::to_string));
+        }
+        let (folder, settings, f, guard) =
+            (self.clone(), settings.clone(), f.clone(), guard.clone());
+        tokio::spawn(async move {
+            let _guard = guard;
+            folder.finish(&settings, &f, &unit, recovering, held).await;
+            let mut in_flight = folder.in_flight.lock().unwrap_or_else(|p| p.into_inner());
+            for name in unit.names() {
+                in_flight.remove(name);
+            }
+        });
+    }
+
+    /// Whether any of `names` is being imported now.
+    fn in_flight(&self, names: &[&str]) -> bool {
+        let in_flight = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
+        names.iter().any(|n| in_flight.contains(*n))
+    }
+
+    /// One pass: go on with what is in `.importing/` and not being imported (a store failure
+    /// at an earlier pass), then take the files that have settled. Each import runs on a task
+    /// of its own ([`IMPORTS_AT_ONCE`] at most); a file with no free slot waits in the folder.
+    async fn ingest_pass(
+        &self,
+        settings: &Arc<IngestSettings>,
+        f: &Arc<Folders>,
+        watch: &mut Watch,
+        guard: &TaskGuard,
+    ) {
+        // 1. In flight and not running: a store failure at an earlier pass.
         match list(&f.importing) {
             Ok((files, refused)) if !files.is_empty() || !refused.is_empty() => {
                 for (name, why) in refused {
                     self.refuse_unread(f, &f.importing, &name, &why);
                 }
-                let files: Vec<_> = files.into_iter().map(|(n, k, s, _, _)| (n, k, s)).collect();
+                let files: Vec<_> = files
+                    .into_iter()
+                    .map(|(n, k, s, _, _)| (n, k, s))
+                    .filter(|(n, _, _)| !self.in_flight(&[n]))
+                    .collect();
                 let (units, _) = units(&files, |_| true, |_| true);
                 for unit in units {
                     if self.ingest_stopping() {
                         return;
                     }
-                    self.finish(settings, f, &unit, true).await;
+                    match self.try_hold_unit(settings, &f.importing, &unit) {
+                        Ok(Some(held)) => self.spawn_import(settings, f, unit, true, held, guard),
+                        Ok(None) => {}
+                        Err(e) => self.note_error(e),
+                    }
                 }
             }
             Ok(_) => {}
@@ -625,7 +887,7 @@ impl WatchFolder {
             .into_iter()
             .map(|(n, k, s, _, _)| (n, k, s))
             .collect();
-        let (units, waiting) = units(
+        let (units, mut waiting) = units(
             &files,
             |n| {
                 watch
@@ -640,7 +902,6 @@ impl WatchFolder {
                     .is_some_and(|s| now.duration_since(s.first_seen) >= settings.pair_wait)
             },
         );
-        self.with_ingest_status(|s| s.waiting = waiting);
         for unit in units {
             if self.ingest_stopping() {
                 return;
@@ -652,8 +913,22 @@ impl WatchFolder {
                 .iter()
                 .any(|n| !matches!(f.importing.entry(n), Ok(None)))
             {
+                waiting += unit.names().len();
                 continue;
             }
+            // So does a file with no free import slot, or whose bytes are not free in the
+            // import budget now: it stays in the folder, and the files behind it go on.
+            let held = match self.try_hold_unit(settings, &f.root, &unit) {
+                Ok(Some(held)) => held,
+                Ok(None) => {
+                    waiting += unit.names().len();
+                    continue;
+                }
+                Err(e) => {
+                    self.note_error(e);
+                    continue;
+                }
+            };
             // Into .importing/ first: from here on the file is the daemon's.
             let mut moved = Vec::new();
             let mut failed = None;
@@ -680,8 +955,9 @@ impl WatchFolder {
                 self.note_error(e);
                 continue;
             }
-            self.finish(settings, f, &unit, false).await;
+            self.spawn_import(settings, f, unit, false, held, guard);
         }
+        self.with_ingest_status(|s| s.waiting = waiting);
     }
 
     /// Moves an entry that is not a plain regular file (a link, a hard link, a pipe) from
@@ -762,7 +1038,14 @@ impl WatchFolder {
     /// Imports a unit whose files are in `.importing/`, and moves them to `done/` or
     /// `failed/`. `recovering`: the files were found in `.importing/` (a previous pass or run
     /// took them), so a recorded hash means that import committed.
-    async fn finish(&self, settings: &IngestSettings, f: &Folders, unit: &Unit, recovering: bool) {
+    async fn finish(
+        &self,
+        settings: &IngestSettings,
+        f: &Folders,
+        unit: &Unit,
+        recovering: bool,
+        held: Held,
+    ) {
         let outcome = if unit.orphan {
             Err(Failure::Rejected(format!(
                 "{}: an SRA CSV with no MA-T12 export beside it within {} s; drop it together \
@@ -771,7 +1054,8 @@ impl WatchFolder {
                 settings.pair_wait.as_secs()
             )))
         } else {
-            self.import_unit(settings, f, unit, recovering).await
+            self.import_unit(settings, f, unit, recovering, &held.limits)
+                .await
         };
         match outcome {
             Ok(done) => {
@@ -824,16 +1108,17 @@ impl WatchFolder {
         f: &Folders,
         unit: &Unit,
         recovering: bool,
+        limits: &[ReadLimit],
     ) -> Result<Option<(String, Vec<crate::store::ScanId>, String)>, Failure> {
         let (hash, scans, textures) = {
+            let limits = limits.to_vec();
             let unit = unit.clone();
             let reference = settings.reference.clone();
-            let max = settings.max_file_bytes;
             let dir = f
                 .importing
                 .try_clone()
                 .map_err(|e| Failure::Retry(e.to_string()))?;
-            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference, max))
+            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference, &limits))
                 .await
                 .map_err(|e| Failure::Retry(format!("reading the file failed: {e}")))?
                 .map_err(Failure::Rejected)?

@@ -26,6 +26,8 @@
 //! - `fit_worker.rs` ([`fit_worker::FitWorker`]): the fit queue, permits, cancel flags and
 //!   counters, and the bootstraps;
 //! - `ingest.rs` ([`ingest::WatchFolder`]): the watch folder and its status;
+//! - `import_budget.rs` ([`import_budget::ImportBudget`]): the bound on import bodies held in
+//!   memory at once, shared by the watch folder and `POST /scans/import` (in the context);
 //! - `forwarder.rs` ([`forwarder::Forwarding`]): forwarding to the central database and its
 //!   status.
 //!
@@ -50,6 +52,7 @@ mod error;
 pub mod events;
 mod fit_worker;
 mod forwarder;
+pub mod import_budget;
 pub mod ingest;
 mod orchestrator;
 mod pipeline;
@@ -116,6 +119,8 @@ pub struct ServiceSettings {
     pub bootstrap: u32,
     /// The watch folder (`[ingest]`); `None`: none.
     pub ingest: Option<IngestSettings>,
+    /// The import bodies held in memory at once, in bytes (`[ingest] max_held_mib`).
+    pub max_held_import_bytes: u64,
 }
 
 impl ServiceSettings {
@@ -139,6 +144,7 @@ impl ServiceSettings {
             colorimetry: config.colour,
             bootstrap: config.fit.bootstrap,
             ingest: IngestSettings::from_config(&config.ingest),
+            max_held_import_bytes: config.ingest.max_held_bytes,
         }
     }
 
@@ -480,6 +486,12 @@ impl Service {
             sync: self.inner.forwarding.as_ref().map(Forwarding::status),
             ingest: self.ingest_status(),
         })
+    }
+
+    /// The bound on import bodies held in memory at once, which `POST /scans/import` holds
+    /// its body's bytes from before reading it.
+    pub fn import_budget(&self) -> &import_budget::ImportBudget {
+        &self.inner.ctx.import_budget
     }
 
     /// The watch folder's state, when one is configured.
