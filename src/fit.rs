@@ -586,6 +586,7 @@ mod tests {
             "reference",
             "specular_readings",
             "lab",
+            "at_bound",
         ]);
         let mut got = keys.clone();
         got.sort();
