@@ -64,8 +64,8 @@ pub use crate::service::{
 pub use crate::spectral::Spectrum;
 pub use crate::sra_reading::{SpecularDeltaL, SraReading};
 pub use crate::store::{
-    DeltaESummary, FitRunId, FitStatus, InstrumentProvenance, ReadingValues, ReferenceId,
-    ReferenceStatus, ScanId, ScanState, Source, TextureSummary,
+    DeltaESummary, FitRunId, FitStatus, InstrumentOrigin, InstrumentProvenance, ReadingValues,
+    ReferenceId, ReferenceStatus, ScanId, ScanState, Source, TextureSummary,
 };
 pub use crate::sync::{Lag, SyncStatus};
 pub use crate::uncertainty::Uncertainty;

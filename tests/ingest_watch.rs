@@ -586,6 +586,26 @@ fn a_daemon_killed_mid_import_starts_again_with_what_it_was_importing_in_failed(
             .is_some_and(|e| e.contains("the daemon stopped while importing it")),
         "{status}"
     );
+    // `brdfd status` says it too.
+    let token = lab.dir.join("brdfd.token");
+    let out = run_brdfd(
+        &[
+            "status",
+            "--addr",
+            &daemon.addr.to_string(),
+            "--token-file",
+            token.to_str().unwrap(),
+        ],
+        None,
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("the daemon stopped while importing")
+            && stdout.contains("fresh.scan.json")
+            && stdout.contains("not read again"),
+        "{stdout}"
+    );
     // How far the first run got, and what the kill interrupted, vary.
     eprintln!(
         "{done_before} of 40 files were done when the daemon was killed; {} interrupted",

@@ -16,7 +16,7 @@ use brdfd::report::load::{Selection, from_store};
 use brdfd::report::{Analysis, FitState};
 use brdfd::scan::Scan;
 use brdfd::store::{
-    FitResult, InstrumentProvenance, NewFit, Provenance, ReadingValues, Source, Store,
+    FitResult, InstrumentProvenance, NewFit, NewReading, Provenance, ReadingValues, Source, Store,
 };
 use brdfd::synth::{SynthOptions, paper_samples, synth_scan};
 
@@ -74,6 +74,7 @@ async fn fill(path: &Path) -> Vec<Scan> {
             serial,
             firmware: "2.1.0".into(),
             simulated: Some(false),
+            origin: brdfd::store::InstrumentOrigin::Measured,
         };
         store
             .set_scan_provenance(
@@ -411,7 +412,12 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
     // The provenance table names each scan's instruments.
     assert!(md.contains("Table 5. Provenance"), "{md}");
     assert!(
-        md.contains("| measured | MA-T12 serial MT-001 firmware 2.1.0 | RA-532H serial RA-001 firmware 2.1.0 |"),
+        md.contains("| measured | MA-T12 serial MT-001 firmware 2.1.0 (measured) | RA-532H serial RA-001 firmware 2.1.0 (measured) |"),
+        "{md}"
+    );
+    // And which scans it pooled.
+    assert!(
+        md.contains("Pooled: the 3 scans of this study are real — 3 measured on this bench"),
         "{md}"
     );
 
@@ -478,6 +484,8 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
             assert_eq!(&first[col("source")], "measured");
             assert_eq!(&first[col("ma_t12_serial")], "MT-000");
             assert_eq!(&first[col("sra_simulated")], "no");
+            assert_eq!(&first[col("ma_t12_origin")], "measured");
+            assert_eq!(&first[col("sra_origin")], "measured");
             assert!(first[col("measured_at")].ends_with('Z'));
         }
         let back = dir.path().join(format!("back-{format}"));
@@ -511,4 +519,61 @@ async fn stored_scans_and_fits_make_a_report_and_exports() {
         "{v}"
     );
     assert_eq!(v["figures"].as_array().unwrap().len(), 4 + 3 + 3 + 7, "{v}");
+
+    // A simulated scan joins the store (a brdfd.scan/1 file of a replayed scan, imported):
+    // `--all` pools the three real scans only, and says so.
+    let store = Store::open(&db).await.unwrap();
+    let readings = |r: &brdfd::scan::DeviceReadings| -> Vec<NewReading<'static>> {
+        GEOMETRIES
+            .iter()
+            .map(|g| NewReading {
+                device: g.device,
+                geometry: g,
+                values: values(r, g),
+                raw_frame: b"",
+            })
+            .collect()
+    };
+    let simulated = InstrumentProvenance {
+        simulated: Some(true),
+        ..InstrumentProvenance::unknown()
+    };
+    let (_, sim_id) = store
+        .import_scan(
+            "sim-copy",
+            "N9 (imported)",
+            &Provenance {
+                ma_t12: simulated.clone(),
+                sra: simulated,
+                source: Source::Imported,
+                source_detail: Some("simulated — replayed from a recording".into()),
+            },
+            &readings(&scans[0].reference.as_ref().unwrap().readings),
+            &readings(&scans[0].readings),
+        )
+        .await
+        .unwrap();
+    store.close().await;
+    let third = dir.path().join("rep-real");
+    let out = Command::new(env!("CARGO_BIN_EXE_brdfd"))
+        .args(["report", "--all", "--db", db_s, "--out"])
+        .arg(&third)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("3 samples"), "{stdout}");
+    assert!(
+        stderr.contains(&format!(
+            "pooling the 3 real scans (scan 1, scan 2, scan 3) only; left out 1 scans from \
+             simulated instruments (scan {sim_id})"
+        )),
+        "{stderr}"
+    );
+    let md = std::fs::read_to_string(third.join("summary.md")).unwrap();
+    assert!(md.contains("Pooled: the 3 scans"), "{md}");
+    assert!(!md.contains("sim-copy"), "{md}");
 }

@@ -168,8 +168,7 @@ pub fn load_study(path: &Path, selection: &Selection) -> anyhow::Result<Study> {
 }
 
 /// Which of `scans` were measured on simulated instruments and which on real ones; an error
-/// naming both kinds when they are mixed and `include_simulated` is false. Scans whose
-/// provenance was never recorded count as neither.
+/// naming both kinds when they are mixed and `include_simulated` is false.
 pub fn check_provenance_mix(
     scans: &[crate::store::ScanSummary],
     include_simulated: bool,
@@ -193,6 +192,30 @@ pub fn check_provenance_mix(
         );
     }
     Ok(())
+}
+
+/// What `--all` pools: every scan when they are all of one kind or `include_simulated`; when
+/// the store holds real and simulated scans, only the real ones, the left-out simulated ones
+/// named on stderr. `None`: every scan, as selected.
+fn pool_real(scans: &[crate::store::ScanSummary], include_simulated: bool) -> Option<Vec<ScanId>> {
+    let (simulated, real): (Vec<_>, Vec<_>) = scans.iter().partition(|s| s.provenance.simulated());
+    if include_simulated || simulated.is_empty() || real.is_empty() {
+        return None;
+    }
+    let ids = |v: &[&crate::store::ScanSummary]| {
+        let mut ids: Vec<i64> = v.iter().map(|s| s.id.0).collect();
+        ids.sort_unstable();
+        ids
+    };
+    eprintln!(
+        "pooling the {} real scans ({}) only; left out {} scans from simulated instruments \
+         ({}): pass --include-simulated to pool them too",
+        real.len(),
+        list_ids(&ids(&real)),
+        simulated.len(),
+        list_ids(&ids(&simulated))
+    );
+    Some(ids(&real).into_iter().map(ScanId).collect())
 }
 
 fn list_ids(ids: &[i64]) -> String {
@@ -244,11 +267,17 @@ pub fn load_study_checked(
                 out
             }
         };
-        if let Err(e) = check_provenance_mix(&summaries, include_simulated) {
+        let pooled = match selection {
+            Selection::All => pool_real(&summaries, include_simulated).map(Selection::Scans),
+            Selection::Scans(_) => None,
+        };
+        if pooled.is_none()
+            && let Err(e) = check_provenance_mix(&summaries, include_simulated)
+        {
             store.close().await;
             return Err(e);
         }
-        let study = from_store(&store, selection)
+        let study = from_store(&store, pooled.as_ref().unwrap_or(selection))
             .await
             .with_context(|| format!("reading the study from {}", path.display()));
         store.close().await;
@@ -335,6 +364,11 @@ mod tests {
             simulated,
             ..InstrumentProvenance::unknown()
         };
+        let source = if simulated.is_none() {
+            Source::Imported
+        } else {
+            Source::Measured
+        };
         ScanSummary {
             id: ScanId(id),
             sample_id: crate::store::SampleId(1),
@@ -350,18 +384,38 @@ mod tests {
             provenance: Provenance {
                 ma_t12: one.clone(),
                 sra: one,
-                source: Source::Measured,
+                source,
                 source_detail: None,
-            },
+            }
+            .settled(true),
         }
+    }
+
+    #[test]
+    fn all_pools_only_the_real_scans_of_a_mixed_store() {
+        // Scan 2 imported from an export (its simulated flags unknown), 3 measured on real
+        // instruments, 1 and 4 on simulated ones.
+        let store = [
+            scan(1, Some(true)),
+            scan(2, None),
+            scan(3, Some(false)),
+            scan(4, Some(true)),
+        ];
+        assert!(check_provenance_mix(&store, false).is_err());
+        assert_eq!(pool_real(&store, false), Some(vec![ScanId(2), ScanId(3)]));
+        assert_eq!(pool_real(&store, true), None);
+        assert_eq!(pool_real(&store[..1], false), None);
+        assert_eq!(pool_real(&store[1..3], false), None);
     }
 
     #[test]
     fn simulated_and_real_scans_are_not_mixed_unless_asked() {
         let all_sim = [scan(1, Some(true)), scan(2, Some(true))];
         assert!(check_provenance_mix(&all_sim, false).is_ok());
-        let unknown_and_real = [scan(1, None), scan(2, Some(false))];
-        assert!(check_provenance_mix(&unknown_and_real, false).is_ok());
+        let imported_and_real = [scan(1, None), scan(2, Some(false))];
+        assert!(check_provenance_mix(&imported_and_real, false).is_ok());
+        let imported_and_simulated = [scan(1, None), scan(2, Some(true))];
+        assert!(check_provenance_mix(&imported_and_simulated, false).is_err());
         let mixed = [
             scan(1, Some(true)),
             scan(2, Some(false)),

@@ -41,19 +41,19 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<4} reason; source of a simulated scan",
-        "id", "sample", "state", "readings", "requested (local time)", "sim"
+        "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<9} reason; source of a simulated scan",
+        "id", "sample", "state", "readings", "requested (local time)", "origin"
     );
     let mut last = None;
     for r in &rows {
         println!(
-            "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<4} {}",
+            "{:>5}  {:<22} {:<9} {:>8}  {:<26}  {:<9} {}",
             r.id,
             terminal_safe(&r.sample),
             terminal_safe(&r.state.to_string()),
             r.reading_count,
             local_time(r.requested_at_ms),
-            simulated_mark(&r.provenance),
+            origin_mark(&r.provenance),
             [
                 r.reason.as_deref().map(terminal_safe),
                 super::show::simulated_note(&r.provenance),
@@ -72,14 +72,12 @@ pub fn scans(args: &ScansArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
-/// "sim" when either instrument was simulated, "?" when not recorded, "" for real ones.
-fn simulated_mark(provenance: &Provenance) -> &'static str {
-    let flags = [provenance.ma_t12.simulated, provenance.sra.simulated];
-    if flags.contains(&Some(true)) {
-        "sim"
-    } else if flags.contains(&None) {
-        "?"
+/// "simulated" when either instrument was, else the MA-T12's origin ("measured",
+/// "imported").
+fn origin_mark(provenance: &Provenance) -> &'static str {
+    if provenance.simulated() {
+        "simulated"
     } else {
-        ""
+        provenance.ma_t12.origin.as_str()
     }
 }

@@ -4,7 +4,8 @@
 use super::operator::{DaemonArgs, json_pretty, local_time, terminal_safe};
 use crate::store::ScanId;
 use crate::wire::{
-    FitDetail, FitStatus, InstrumentProvenance, Provenance, ReadingValues, ScanView,
+    FitDetail, FitStatus, InstrumentOrigin, InstrumentProvenance, Provenance, ReadingValues,
+    ScanView,
 };
 
 #[derive(Debug, clap::Args)]
@@ -41,9 +42,10 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
             .unwrap_or_default()
     );
     println!(
-        "requested {}, {} of 14 readings",
+        "requested {}, {} of {} readings",
         local_time(scan.requested_at_ms),
-        scan.reading_count
+        scan.reading_count,
+        if scan.specular_readings { 14 } else { 12 }
     );
     let provenance = &scan.provenance;
     println!(
@@ -128,12 +130,15 @@ pub fn show(args: &ShowArgs) -> anyhow::Result<()> {
     Ok(())
 }
 /// One instrument's provenance as `show` prints it: its model (`kind` when it never said),
-/// serial and firmware.
+/// serial and firmware, and its origin (measured, imported, simulated; absent when the scan
+/// has no readings of it).
 fn instrument_line(p: &InstrumentProvenance, kind: &str) -> String {
-    let simulated = match p.simulated {
-        Some(true) => " — SIMULATED",
-        Some(false) => "",
-        None => " — simulated or real: not recorded",
+    let simulated = match (p.origin, p.simulated) {
+        (InstrumentOrigin::Absent, _) => return format!("{kind} absent (no readings of it)"),
+        (InstrumentOrigin::Simulated, _) => " — SIMULATED",
+        (InstrumentOrigin::Imported, _) => " — imported (real readings from a file)",
+        (InstrumentOrigin::Measured, Some(_)) => " — measured",
+        (InstrumentOrigin::Measured, None) => " — simulated or real: not recorded",
     };
     let model = match p.model.as_str() {
         m if !m.is_empty() && m != "unknown" => terminal_safe(m),

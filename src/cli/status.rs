@@ -83,6 +83,14 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
                 None => String::new(),
             }
         );
+        if !ingest.interrupted.is_empty() {
+            println!(
+                "the daemon stopped while importing {}: moved to {}/failed/ with a note, not read \
+                 again (drop a file again to import it)",
+                terminal_safe(&ingest.interrupted.join(", ")),
+                terminal_safe(&ingest.dir)
+            );
+        }
     }
     Ok(())
 }

@@ -7,7 +7,7 @@
 //! `KEYWORD` (`DATA_KIND`, `REFERENCE_NAME`, `COST_FUNCTION`, `METHOD`, `GEOMETRY`), as the
 //! standard asks, so strict readers (LittleCMS built with `CMS_STRICT_CGATS`) accept the file.
 //! Data fields: `SAMPLE_ID SAMPLE_NAME DATA_KIND REFERENCE_NAME COST_FUNCTION METHOD GEOMETRY`,
-//! the sample's provenance (`SCAN_ID STATION MEASURED_AT SOURCE MA_T12_MODEL … SRA_SIMULATED`,
+//! the sample's provenance (`SCAN_ID STATION MEASURED_AT SOURCE MA_T12_MODEL … SRA_ORIGIN`,
 //! all quoted), `SPECTRAL_NM400 … SPECTRAL_NM700`; text values are quoted, numbers use Rust's shortest
 //! round-trip form. `COST_FUNCTION` and `METHOD` are `""` except on `estimated` rows.
 //!
@@ -25,7 +25,7 @@ use crate::study::Study;
 /// Fields that are not CGATS.17 standard ones and so are declared with `KEYWORD`: the row's
 /// kind, reference, fit and geometry, then the sample's provenance
 /// ([`super::PROVENANCE_FIELDS`], upper-cased).
-pub const DECLARED: [&str; 17] = [
+pub const DECLARED: [&str; 19] = [
     "DATA_KIND",
     "REFERENCE_NAME",
     "COST_FUNCTION",
@@ -43,6 +43,8 @@ pub const DECLARED: [&str; 17] = [
     "SRA_SERIAL",
     "SRA_FIRMWARE",
     "SRA_SIMULATED",
+    "MA_T12_ORIGIN",
+    "SRA_ORIGIN",
 ];
 
 /// A CGATS quoted string; CGATS has no escape for `"` or a line break, so those are refused.
@@ -353,6 +355,10 @@ mod tests {
             row.contains("\"11\"\t\"bench-2\"\t\"2024-05-01T12:00:00Z\"\t\"measured\"\t\"MA-T12\"\t\"MT-7\"\t\"2.1.0\"\t\"no\""),
             "{row}"
         );
+        assert!(
+            row.contains("\"sim\"\t\"yes\"\t\"measured\"\t\"simulated\""),
+            "{row}"
+        );
     }
 
     #[test]
@@ -365,12 +371,13 @@ mod tests {
         }
         assert!(text.starts_with("CGATS.17\n"));
         let table = parse("x", &text).unwrap();
-        assert_eq!(table.fields.len(), 50);
+        assert_eq!(table.fields.len(), 52);
         assert_eq!(table.fields[6], "GEOMETRY");
         assert_eq!(table.fields[7], "SCAN_ID");
         assert_eq!(table.fields[18], "SRA_SIMULATED");
-        assert_eq!(table.fields[19], "SPECTRAL_NM400");
-        assert_eq!(table.fields[49], "SPECTRAL_NM700");
+        assert_eq!(table.fields[20], "SRA_ORIGIN");
+        assert_eq!(table.fields[21], "SPECTRAL_NM400");
+        assert_eq!(table.fields[51], "SPECTRAL_NM700");
         assert_eq!(table.rows.len(), (3 * 3 + 8) * 14);
         assert_eq!(table.rows[0].1[1], "T.Freesia pink");
         let est = table.rows.iter().find(|r| r.1[2] == "estimated").unwrap();
@@ -433,7 +440,7 @@ mod tests {
         assert_eq!(
             e,
             format!(
-                "m.txt:{}: data set: 49 values, expected 50 (one per field of BEGIN_DATA_FORMAT, one data set per line)",
+                "m.txt:{}: data set: 51 values, expected 52 (one per field of BEGIN_DATA_FORMAT, one data set per line)",
                 data + 1
             )
         );
@@ -457,7 +464,7 @@ mod tests {
             .position(|l| l.contains("\"reference\"") && l.contains("\"45as45\""))
             .unwrap();
         let mut cells: Vec<String> = lines[r].split('\t').map(str::to_string).collect();
-        cells[22] = "0".into(); // SPECTRAL_NM430, after 7 + 12 text fields
+        cells[24] = "0".into(); // SPECTRAL_NM430, after 7 + 14 text fields
         lines[r] = cells.join("\t");
         let e = err(&lines.join("\n"));
         assert!(

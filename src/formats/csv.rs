@@ -4,7 +4,7 @@
 //!
 //! Columns: `sample,data_kind,reference,cost_function,method,device,geometry,theta_i_deg,
 //! theta_r_deg,phi_r_deg`, the sample's provenance ([`super::PROVENANCE_FIELDS`]: `scan_id,
-//! station,measured_at,source,ma_t12_model,…,sra_simulated`), then `nm400,…,nm700`. The angle
+//! station,measured_at,source,ma_t12_model,…,sra_origin`), then `nm400,…,nm700`. The angle
 //! columns are for the reader's convenience; on import the geometry is taken from its name
 //! (SCIENCE.md §2), never from the angles, and the provenance columns are not read (an imported
 //! scan's provenance is the import).

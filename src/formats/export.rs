@@ -32,9 +32,10 @@ pub struct SpectralRow {
 /// cases them): the store's scan id, the station (central database only), when the scan was
 /// measured (RFC 3339 UTC), how its readings came in (`measured`, `imported`, `replay`), and per
 /// instrument its model, serial, firmware and whether it was simulated (`yes`, `no`,
-/// `unknown`). A study made in memory (`brdfd demo`) has no scan id, station or time (empty)
-/// and `unknown` instruments.
-pub const PROVENANCE_FIELDS: [&str; 12] = [
+/// `unknown`), then each instrument's origin (`measured`, `imported`, `simulated`, `absent`).
+/// A study made in memory (`brdfd demo`) has no scan id, station or time (empty), `unknown`
+/// instruments and an empty origin.
+pub const PROVENANCE_FIELDS: [&str; 14] = [
     "scan_id",
     "station",
     "measured_at",
@@ -47,6 +48,8 @@ pub const PROVENANCE_FIELDS: [&str; 12] = [
     "sra_serial",
     "sra_firmware",
     "sra_simulated",
+    "ma_t12_origin",
+    "sra_origin",
 ];
 
 /// One sample's [`PROVENANCE_FIELDS`] values.
@@ -59,6 +62,10 @@ pub fn provenance_values(s: &SampleStudy) -> [String; PROVENANCE_FIELDS.len()] {
             &o.provenance,
         ),
         None => (String::new(), String::new(), &unknown),
+    };
+    let origin = |i: &crate::store::InstrumentProvenance| match &s.origin {
+        Some(_) => i.origin.to_string(),
+        None => String::new(),
     };
     let simulated = |v: Option<bool>| match v {
         Some(true) => "yes",
@@ -78,6 +85,8 @@ pub fn provenance_values(s: &SampleStudy) -> [String; PROVENANCE_FIELDS.len()] {
         p.sra.serial.clone(),
         p.sra.firmware.clone(),
         simulated(p.sra.simulated).into(),
+        origin(&p.ma_t12),
+        origin(&p.sra),
     ]
 }
 
@@ -207,7 +216,9 @@ mod tests {
                 "RA-532H",
                 "SIM-RA",
                 "sim",
-                "yes"
+                "yes",
+                "measured",
+                "simulated"
             ]
             .map(String::from)
         );
@@ -219,6 +230,7 @@ mod tests {
         assert_eq!(mem[0].origin[0], "");
         assert_eq!(mem[0].origin[3], "unknown");
         assert_eq!(mem[0].origin[7], "unknown");
+        assert_eq!(mem[0].origin[12], "");
     }
 
     fn rows_of_memory() -> Vec<SpectralRow> {

@@ -200,6 +200,9 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             )
         }));
     }
+    if let Some(pooled) = real_statement(&study.samples) {
+        b.push(Block::Para(pooled));
+    }
     if !analysis.repeats.is_empty() {
         b.extend(introduced_list(
             format!(
@@ -397,7 +400,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
             .collect();
         b.push(Block::Heading("Where the scans were measured".into()));
         b.push(Block::Table {
-            caption: "Table 5. Provenance of each scan: the store's scan id, when it was measured, how its readings came in (measured by the daemon, imported from a file, replayed), and each instrument as it reported itself — model, serial, firmware, and whether it was a simulated instrument. A report mixes simulated and real scans only with --include-simulated.".into(),
+            caption: "Table 5. Provenance of each scan: the store's scan id, when it was measured, how its readings came in (measured by the daemon, imported from a file, replayed), and each instrument as it reported itself — model, serial, firmware — with its origin: measured on this bench, imported from a file, simulated, or absent (the scan has no readings of it). A report pools simulated with real scans only with --include-simulated.".into(),
             head,
             rows,
         });
@@ -618,4 +621,44 @@ pub fn html(study: &Study, analysis: &Analysis, figures: &[Figure]) -> String {
     }
     t.push_str("</body>\n</html>\n");
     t
+}
+
+/// "Pooled: the 3 scans of this study are real — 2 measured on this bench, 1 imported from a
+/// file (…)", when every scan loaded from a store is real (no simulated instrument); `None`
+/// for a study with simulated scans (said by [`simulated_statement`]) or made in memory.
+fn real_statement(samples: &[SampleStudy]) -> Option<String> {
+    use crate::store::InstrumentOrigin;
+    let origins: Vec<_> = samples
+        .iter()
+        .map(|s| s.origin.as_ref().map(|o| &o.provenance))
+        .collect::<Option<_>>()?;
+    if origins.is_empty() || origins.iter().any(|p| p.simulated()) {
+        return None;
+    }
+    let named = |origin: InstrumentOrigin| -> Vec<&str> {
+        samples
+            .iter()
+            .zip(&origins)
+            .filter(|(_, p)| p.ma_t12.origin == origin)
+            .map(|(s, _)| s.name.as_str())
+            .collect()
+    };
+    let parts: Vec<String> = [
+        (InstrumentOrigin::Measured, "measured on this bench"),
+        (
+            InstrumentOrigin::Imported,
+            "imported from instrument exports or scan files",
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(o, said)| {
+        let n = named(o);
+        (!n.is_empty()).then(|| format!("{} {said} ({})", n.len(), n.join(", ")))
+    })
+    .collect();
+    Some(format!(
+        "Pooled: the {} scans of this study are real — {}. Scans from simulated instruments are left out unless the report is asked for them (--include-simulated).",
+        samples.len(),
+        parts.join("; ")
+    ))
 }

@@ -20,7 +20,9 @@ use drivers::Instrument;
 use serde::{Deserialize, Serialize};
 use tokio::sync::{Notify, broadcast};
 
-use crate::store::{InstrumentProvenance, Provenance, ReferenceId, ScanId, Source, now_ms};
+use crate::store::{
+    InstrumentOrigin, InstrumentProvenance, Provenance, ReferenceId, ScanId, Source, now_ms,
+};
 
 use super::context::Context;
 use super::events::Event;
@@ -323,6 +325,11 @@ impl Acquisition {
                 p.firmware = id.firmware.clone();
             }
             p.simulated = Some(simulated);
+            p.origin = if simulated {
+                InstrumentOrigin::Simulated
+            } else {
+                InstrumentOrigin::Measured
+            };
             p
         };
         let simulated = self.simulated();

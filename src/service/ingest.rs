@@ -132,7 +132,7 @@ pub struct IngestStatus {
     pub last_error: Option<String>,
     /// Files found in `.importing/` at start, their import not committed: the daemon stopped
     /// while importing them (perhaps because of them), so they were moved to `failed/` with a
-    /// note instead of being read again.
+    /// note instead of being read again (the first 20).
     #[serde(default)]
     pub interrupted: Vec<String>,
 }
@@ -710,7 +710,10 @@ impl WatchFolder {
             }
             self.with_ingest_status(|s| {
                 s.rejected += 1;
-                s.interrupted.push(file.clone());
+                // Named in full up to a screenful; the notes in failed/ say the rest.
+                if s.interrupted.len() < 20 {
+                    s.interrupted.push(file.clone());
+                }
                 s.last_file = Some(file.clone());
                 s.last_error = Some(format!(
                     "{file}: the daemon stopped while importing it; moved to {FAILED}/, not read \

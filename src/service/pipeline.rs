@@ -19,8 +19,8 @@ use crate::geometry::{Device, MA_T12_COUNT};
 use crate::processing::{self, ProcessingOptions};
 use crate::scan::{DeviceReadings, Scan, ScanError};
 use crate::store::{
-    FitRunId, ImportedScan, InstrumentProvenance, NewFit, NewReading, NewTexture, Provenance,
-    ReadingValues, ScanDetail, ScanId, ScanState, Source, StoreError,
+    FitRunId, ImportedScan, InstrumentOrigin, InstrumentProvenance, NewFit, NewReading, NewTexture,
+    Provenance, ReadingValues, ScanDetail, ScanId, ScanState, Source, StoreError,
 };
 
 use std::sync::Arc;
@@ -293,6 +293,11 @@ pub fn imported_provenance(
         serial: i.serial.clone().unwrap_or_else(|| "unknown".into()),
         firmware: "unknown".into(),
         simulated: Some(i.simulated),
+        origin: if i.simulated {
+            InstrumentOrigin::Simulated
+        } else {
+            InstrumentOrigin::Imported
+        },
     };
     if let Some(i) = &origin.ma_t12 {
         provenance.ma_t12 = instrument(i);

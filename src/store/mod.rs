@@ -55,9 +55,9 @@ pub use lineage::begin_incarnation;
 pub use lock::{LockError, StoreLock};
 pub use records::{
     DeltaESummary, EvaluationRecord, FitDetail, FitResult, FitRun, FitStatus, Instrument,
-    InstrumentProvenance, NewFit, NewReading, Processed, Provenance, Reading, ReadingValues,
-    ReferenceDetail, ReferenceStatus, ReferenceSummary, ScanDetail, ScanFilter, ScanState,
-    ScanSummary, Source,
+    InstrumentOrigin, InstrumentProvenance, NewFit, NewReading, Processed, Provenance, Reading,
+    ReadingValues, ReferenceDetail, ReferenceStatus, ReferenceSummary, ScanDetail, ScanFilter,
+    ScanState, ScanSummary, Source,
 };
 pub use scans::ImportedScan;
 pub use textures::{NewTexture, TextureSummary};

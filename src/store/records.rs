@@ -256,14 +256,60 @@ text_enum!(
     }
 );
 
+text_enum!(
+    /// Where one instrument's readings of a scan or reference set came from: the one
+    /// provenance every view (store, API, CLI, page, report, exports) shows. Derived from the
+    /// stored source, simulated flag and geometries ([`InstrumentOrigin::of`]).
+    InstrumentOrigin {
+        /// Measured on this bench by a real instrument.
+        Measured = "measured",
+        /// Real readings imported from a file: an instrument-software export, or a
+        /// brdfd.scan/1 file of a scan measured on real instruments.
+        Imported = "imported",
+        /// Produced by a simulated instrument (a replayed recording, a synthetic sample).
+        Simulated = "simulated",
+        /// The scan has no readings of this instrument (an export without SRA readings, a scan
+        /// measured with the SRA turned off).
+        Absent = "absent",
+    }
+);
+
+impl InstrumentOrigin {
+    /// The origin of an instrument whose simulated flag is `simulated` (`None`: not
+    /// recorded), of readings that came in by `source`; `present` is false when the scan has
+    /// none of its geometries. A replay is simulated whatever its flag; rows from before
+    /// provenance was recorded count as measured.
+    pub fn of(simulated: Option<bool>, source: Source, present: bool) -> InstrumentOrigin {
+        if !present {
+            return InstrumentOrigin::Absent;
+        }
+        match (simulated, source) {
+            (Some(true), _) | (_, Source::Replay) => InstrumentOrigin::Simulated,
+            (_, Source::Imported) => InstrumentOrigin::Imported,
+            _ => InstrumentOrigin::Measured,
+        }
+    }
+
+    /// Real readings: measured on this bench or imported from real instruments.
+    pub fn real(self) -> bool {
+        matches!(
+            self,
+            InstrumentOrigin::Measured | InstrumentOrigin::Imported
+        )
+    }
+}
+
 /// One instrument as it reported itself for a reference set or scan.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
 pub struct InstrumentProvenance {
     pub model: String,
     pub serial: String,
     pub firmware: String,
-    /// A simulated instrument (a replayed recording); `None` when not known (older rows).
+    /// A simulated instrument (a replayed recording); `None` when not known (older rows,
+    /// imports whose file does not say, an absent instrument).
     pub simulated: Option<bool>,
+    /// Measured, imported, simulated or absent ([`InstrumentOrigin`]).
+    pub origin: InstrumentOrigin,
 }
 
 impl InstrumentProvenance {
@@ -274,18 +320,22 @@ impl InstrumentProvenance {
             serial: "unknown".into(),
             firmware: "unknown".into(),
             simulated: None,
+            origin: InstrumentOrigin::Measured,
         }
     }
 
-    /// "MA-T12 serial 123 firmware 1.0 (simulated)", for people.
+    /// "MA-T12 serial 123 firmware 1.0 (simulated)", for people; "absent" for an instrument
+    /// the scan has no readings of.
     pub fn describe(&self) -> String {
-        let sim = match self.simulated {
-            Some(true) => " (simulated)",
-            Some(false) => "",
-            None => " (simulated or not: unknown)",
+        let origin = match (self.origin, self.simulated) {
+            (InstrumentOrigin::Absent, _) => return "absent".into(),
+            (InstrumentOrigin::Simulated, _) => " (simulated)",
+            (InstrumentOrigin::Imported, _) => " (imported)",
+            (InstrumentOrigin::Measured, None) => " (simulated or not: not recorded)",
+            (InstrumentOrigin::Measured, Some(_)) => " (measured)",
         };
         format!(
-            "{} serial {} firmware {}{sim}",
+            "{} serial {} firmware {}{origin}",
             self.model, self.serial, self.firmware
         )
     }
@@ -303,14 +353,17 @@ pub struct Provenance<Src = Source> {
 }
 
 impl<Src> Provenance<Src> {
-    /// Whether any instrument was simulated (unknown counts as not known to be real).
+    /// Whether any instrument was simulated.
     pub fn simulated(&self) -> bool {
-        self.ma_t12.simulated == Some(true) || self.sra.simulated == Some(true)
+        [&self.ma_t12, &self.sra]
+            .iter()
+            .any(|i| i.origin == InstrumentOrigin::Simulated || i.simulated == Some(true))
     }
 
-    /// Whether both instruments are known to be real.
+    /// Whether the readings are real: no instrument simulated, and the MA-T12's measured on
+    /// this bench or imported.
     pub fn real(&self) -> bool {
-        self.ma_t12.simulated == Some(false) && self.sra.simulated == Some(false)
+        !self.simulated() && self.ma_t12.origin.real()
     }
 }
 
@@ -322,6 +375,15 @@ impl Provenance {
             source: Source::Unknown,
             source_detail: None,
         }
+    }
+
+    /// The same provenance with each instrument's `origin` derived from its simulated flag
+    /// and the source ([`InstrumentOrigin::of`]); `sra_present` is false for a scan or
+    /// reference set without SRA readings.
+    pub fn settled(mut self, sra_present: bool) -> Provenance {
+        self.ma_t12.origin = InstrumentOrigin::of(self.ma_t12.simulated, self.source, true);
+        self.sra.origin = InstrumentOrigin::of(self.sra.simulated, self.source, sra_present);
+        self
     }
 
     /// The same provenance with its source mapped by `f`.
@@ -344,6 +406,11 @@ impl Provenance {
             (true, Some(d)) => format!("simulated — {d}"),
             (true, None) => "simulated — replayed from a recording".into(),
             (false, Some(d)) => format!("{}: {d}", self.source),
+            (false, None) if self.sra.origin == InstrumentOrigin::Absent => format!(
+                "{} by {}; no SRA readings",
+                self.source,
+                self.ma_t12.describe()
+            ),
             (false, None) => format!(
                 "{} by {} and {}",
                 self.source,
@@ -383,7 +450,9 @@ pub(crate) fn provenance_columns(a: &str) -> String {
 }
 
 impl ProvenanceRow {
-    pub(crate) fn into_provenance(self) -> Result<Provenance, String> {
+    /// The provenance, each instrument's origin derived (`sra_present`: the row has SRA
+    /// geometries).
+    pub(crate) fn into_provenance(self, sra_present: bool) -> Result<Provenance, String> {
         let flag = |v: Option<i64>| match v {
             None => Ok(None),
             Some(0) => Ok(Some(false)),
@@ -396,16 +465,19 @@ impl ProvenanceRow {
                 serial: self.ma_t12_serial,
                 firmware: self.ma_t12_firmware,
                 simulated: flag(self.ma_t12_simulated)?,
+                origin: InstrumentOrigin::Measured,
             },
             sra: InstrumentProvenance {
                 model: self.sra_model,
                 serial: self.sra_serial,
                 firmware: self.sra_firmware,
                 simulated: flag(self.sra_simulated)?,
+                origin: InstrumentOrigin::Measured,
             },
             source: self.source.parse()?,
             source_detail: self.source_detail,
-        })
+        }
+        .settled(sra_present))
     }
 }
 

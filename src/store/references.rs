@@ -87,7 +87,10 @@ impl ReferenceRow {
                 other => return Err(corrupt(format!("unknown geometries \"{other}\""))),
             },
             reading_count: self.reading_count as usize,
-            provenance: self.provenance.into_provenance().map_err(corrupt)?,
+            provenance: self
+                .provenance
+                .into_provenance(self.geometries != super::scans::GEOMETRIES_MA_T12)
+                .map_err(corrupt)?,
         })
     }
 }

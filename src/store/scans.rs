@@ -93,13 +93,14 @@ impl ScanRow {
                     });
                 }
             },
-            provenance: self.provenance.into_provenance().map_err(|detail| {
-                StoreError::Corrupt {
+            provenance: self
+                .provenance
+                .into_provenance(self.geometries != GEOMETRIES_MA_T12)
+                .map_err(|detail| StoreError::Corrupt {
                     table: "scans",
                     id: self.id,
                     detail,
-                }
-            })?,
+                })?,
         })
     }
 }

@@ -612,6 +612,7 @@ async fn an_import_is_stored_whole_or_not_at_all() {
         .unwrap();
     let d = store.scan_detail(scan).await.unwrap();
     assert_eq!(d.scan.state, ScanState::Complete);
+    let provenance = provenance.clone().settled(true);
     assert_eq!(d.scan.provenance, provenance);
     assert_eq!(d.reference.reference.id, reference_id);
     assert_eq!(d.reference.reference.provenance, provenance);
@@ -1330,4 +1331,86 @@ async fn instrument_calibration_scans_without_sra_readings() {
     assert!(e.per_geometry[12].is_nan() && e.per_geometry[13].is_nan());
     assert!((e.all.mean - (0.5 + 0.55)).abs() < 1e-12, "{:?}", e.all);
     assert!(d.specular_delta_l.is_none());
+}
+
+#[tokio::test]
+async fn each_instrument_of_a_scan_says_its_origin() {
+    let store = Store::open_in_memory().await.unwrap();
+    let origins = |d: &ScanDetail| {
+        let p = &d.scan.provenance;
+        (p.ma_t12.origin, p.sra.origin, p.simulated(), p.real())
+    };
+    // An instrument export without SRA readings: the MA-T12 imported, the SRA absent.
+    let readings: Vec<NewReading<'_>> = crate::geometry::ma_t12()
+        .iter()
+        .map(|g| NewReading {
+            device: Device::MaT12,
+            geometry: g,
+            values: ReadingValues::Spectrum([0.3; BANDS]),
+            raw_frame: &[],
+        })
+        .collect();
+    let provenance = Provenance {
+        source: Source::Imported,
+        source_detail: Some("paint.xlsx".into()),
+        ..Provenance::unknown()
+    };
+    let (_, export) = store
+        .import(&ImportedScan {
+            sample_name: "paint",
+            reference_name: "instrument calibration",
+            provenance: &provenance,
+            reference_readings: None,
+            readings: &readings,
+            taken_at_ms: None,
+            textures: &[],
+        })
+        .await
+        .unwrap();
+    let d = store.scan_detail(export).await.unwrap();
+    assert_eq!(
+        origins(&d),
+        (
+            InstrumentOrigin::Imported,
+            InstrumentOrigin::Absent,
+            false,
+            true
+        )
+    );
+    let json = serde_json::to_value(&d.scan).unwrap();
+    assert_eq!(json["provenance"]["ma_t12"]["origin"], "imported");
+    assert_eq!(json["provenance"]["sra"]["origin"], "absent");
+    assert_eq!(
+        d.scan.provenance.summary(),
+        "imported: paint.xlsx",
+        "the file is named once"
+    );
+
+    // The daemon's scans: on simulated instruments, then on real ones.
+    let reference = complete_reference(&store).await;
+    for (simulated, expect) in [
+        (true, InstrumentOrigin::Simulated),
+        (false, InstrumentOrigin::Measured),
+    ] {
+        let (scan, _) = measuring_scan(&store, reference, "S", GEOMETRY_COUNT).await;
+        store.complete_scan(scan).await.unwrap();
+        let one = InstrumentProvenance {
+            simulated: Some(simulated),
+            ..InstrumentProvenance::unknown()
+        };
+        let p = Provenance {
+            ma_t12: one.clone(),
+            sra: one,
+            source: Source::Measured,
+            source_detail: None,
+        };
+        store.set_scan_provenance(scan, &p).await.unwrap();
+        let d = store.scan_detail(scan).await.unwrap();
+        assert_eq!(origins(&d), (expect, expect, simulated, !simulated));
+    }
+    // A replay is simulated whatever its flag says.
+    assert_eq!(
+        InstrumentOrigin::of(Some(false), Source::Replay, true),
+        InstrumentOrigin::Simulated
+    );
 }

@@ -479,6 +479,7 @@ pub(crate) mod tests {
         use crate::store::{InstrumentProvenance, Provenance, Source};
         let sim = InstrumentProvenance {
             simulated: Some(true),
+            origin: crate::store::InstrumentOrigin::Simulated,
             ..InstrumentProvenance::unknown()
         };
         for (s, r) in study.samples.iter_mut().zip(recordings) {

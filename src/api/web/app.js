@@ -671,10 +671,17 @@ async function renderScans(params) {
 
 // ---------- one scan's result ----------
 
+/** What each instrument origin means, as the result page says it. */
+const ORIGIN_TEXT = {
+  measured: "measured on this bench",
+  imported: "imported (real readings from a file)",
+  simulated: "SIMULATED",
+};
+
 /** "simulated — replayed from …" of a provenance, or null when no instrument was simulated. */
 function simulatedNote(prov) {
   if (!prov) return null;
-  const sim = (prov.ma_t12 && prov.ma_t12.simulated) || (prov.sra && prov.sra.simulated);
+  const sim = [prov.ma_t12, prov.sra].some((i) => i && (i.simulated || i.origin === "simulated"));
   if (!sim) return null;
   const d = prov.source_detail || "";
   return d.startsWith("simulated") ? d : `simulated${d ? ` — ${d}` : " — the recording was not recorded"}`;
@@ -685,7 +692,10 @@ function sourceText(prov) {
   if (!prov) return "?";
   const sim = simulatedNote(prov);
   if (sim) return sim;
-  if (prov.source === "imported") return `imported${prov.source_detail ? ` from ${prov.source_detail}` : ""}`;
+  if (prov.source === "imported") {
+    const d = prov.source_detail || "";
+    return d.startsWith("imported") ? d : `imported${d ? ` from ${d}` : ""}`;
+  }
   return prov.source || "?";
 }
 
@@ -754,7 +764,9 @@ async function renderResult(id) {
   }
   const ref = view.reference.reference;
   const prov = scan.provenance || {};
-  const inst = (p, name) => p ? `${name}: ${p.model} · serial ${p.serial} · firmware ${p.firmware}${p.simulated ? " · SIMULATED" : ""}` : `${name}: unknown`;
+  const inst = (p, name) => !p ? `${name}: not recorded`
+    : p.origin === "absent" ? `${name}: absent (this scan has no readings of it)`
+    : `${name}: ${p.model} · serial ${p.serial} · firmware ${p.firmware} · ${ORIGIN_TEXT[p.origin] || p.origin}`;
   const fitsDone = (sw && sw.fits) || [];
   const best = fitsDone.length ? fitsDone.reduce((a, b) => (b.delta_e00_all < a.delta_e00_all ? b : a)) : null;
   const latestDone = new Map();
