@@ -205,7 +205,10 @@ def fit(
     unc = doc.get("uncertainty")
     intervals = None
     if unc is not None:
-        intervals = {k: (np.array(v, dtype=float) if isinstance(v, list) else v)
+        # Numeric lists become arrays; "at_bound" (parameter names) stays a list.
+        intervals = {k: (np.array(v, dtype=float)
+                         if isinstance(v, list) and not any(isinstance(x, str) for x in v)
+                         else v)
                      for k, v in unc.items()}
     measured = np.array([[np.nan] * len(WAVELENGTHS) if m is None else m
                          for m in report.measured()], dtype=float)
