@@ -11,6 +11,10 @@
 //! - `bootstrap/all_costs_200`: the bootstrap intervals (SCIENCE.md §10) of the three fits of the
 //!   same scan, 200 resamples each, on 2 threads — the target is ≤ 2 s wall.
 //!   `bootstrap/<cost>_200`: one cost function's, on one thread.
+//! - `crossval/<scan>_<fresnel>`: a scan's full set, one core — the three cost functions, each
+//!   fitted to every reading and once per MA-T12 geometry held out (39 fits; SCIENCE.md §12.5,
+//!   `brdfd crossval`): on the real export `tests/data/real-mat12/PAR_PW_RO_NG_1.xlsx` (12
+//!   geometries) and on the synthetic scan (14). The target is ≤ 2 s.
 //! - `cost_eval/<cost>`: one model evaluation (14 specular terms, 434 values) plus one cost,
 //!   through the public API — the price of one GA individual.
 //!
@@ -20,6 +24,8 @@ use std::hint::black_box;
 
 use brdfd::colour::Colorimetry;
 use brdfd::cost::{CostFunction, cost};
+use brdfd::crossval::crossval_measured;
+use brdfd::fit::FitRequest;
 use brdfd::model::{FresnelCosine, SpecularGeometry, evaluate};
 use brdfd::optimise::{Method, Settings, fit, synthetic};
 use brdfd::uncertainty::{BootstrapOptions, bootstrap};
@@ -110,6 +116,43 @@ fn benches(c: &mut Criterion) {
     group.bench_function("all_costs_200", |b| {
         b.iter(|| points.iter().map(|p| run(p, 2)).collect::<Vec<_>>())
     });
+    group.finish();
+
+    let mut group = c.benchmark_group("crossval");
+    group.sample_size(10);
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/real-mat12/PAR_PW_RO_NG_1.xlsx");
+    let real = brdfd::formats::xrite::read_file(&path).expect("the committed real export")[0]
+        .scan
+        .clone();
+    let real = brdfd::processing::process(&real, &Default::default()).expect("processes");
+    for (name, measured) in [("real", &real), ("synthetic", &m)] {
+        for fresnel in [FresnelCosine::Incidence, FresnelCosine::Exact] {
+            let full_set = || {
+                CostFunction::ALL.map(|cost| {
+                    let request = FitRequest {
+                        settings: Settings {
+                            cost,
+                            fresnel,
+                            ..Settings::default()
+                        },
+                        ..FitRequest::default()
+                    };
+                    crossval_measured("bench", "N9", black_box(measured), &request).unwrap()
+                })
+            };
+            for cv in full_set() {
+                eprintln!(
+                    "crossval/{name}_{}: {} held-out mean ΔE00 {:.4} (fitted {:.4})",
+                    fresnel.name(),
+                    cv.cost,
+                    cv.held_out_mean,
+                    cv.fitted_mean
+                );
+            }
+            group.bench_function(format!("{name}_{}", fresnel.name()), |b| b.iter(full_set));
+        }
+    }
     group.finish();
 
     let geos = SpecularGeometry::all();

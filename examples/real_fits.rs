@@ -1,20 +1,23 @@
-//! What the paper's model does on real materials: the six real MA-T12 measurements in
-//! `tests/data/real-mat12/` (X-Rite's QC exports; painted marble mock-ups), each fitted under
+//! What the paper's model does on real materials: the 47 real MA-T12 measurements in
+//! `tests/data/real-mat12/` and `more/` (X-Rite's QC exports; painted marble mock-ups), each fitted under
 //! the three cost functions with the default method over its 12 geometries, normalised by the
 //! instrument's own calibration (SCIENCE.md §3).
 //!
 //! Prints, per cost function and geometry, the mean and largest ΔE00 over the samples and the
-//! mean signed ΔL* (fitted − measured: positive where the model is too bright), then the same
+//! mean signed ΔL* (measured − fitted, as everywhere in brdfd: positive where the model is too
+//! dark), then the same
 //! by leave-one-geometry-out prediction: fit 11 of the 12 geometries, predict the 12th, so that
 //! a model cannot win by reproducing readings it was fitted to.
 //!
 //! Every model option (SCIENCE.md §4.1) is judged the same way, and a last table sets them
 //! side by side: per option and cost function, the fitted and the held-out mean ΔE00, the
-//! held-out ΔE00 at 45as-15, and the held-out mean relative to the paper's model.
+//! held-out ΔE00 at 45as-15, and the held-out mean relative to the paper's model; and, per
+//! option and cost function, a paired two-sided sign test of each sample's held-out mean
+//! against the paper model's (samples better / worse, p).
 //!
-//! Run: `cargo run --release --example real_fits [-- [DIR] [--model paper,oren-nayar,two-lobe]
-//! [--fresnel incidence,light-half,exact]]` (DIR: other `.xlsx` exports, by default the
-//! committed six; `--model`, `--fresnel`: the options to judge, every pair of the two lists,
+//! Run: `cargo run --release --example real_fits [-- [DIR…] [--model paper,oren-nayar,two-lobe]
+//! [--fresnel incidence,light-half,exact]]` (DIR: folders of `.xlsx` exports, by default the
+//! committed 47 in both folders; `--model`, `--fresnel`: the options to judge, every pair of the two lists,
 //! by default all). Colorimetry: D65, 10° observer, ASTM E308 weighting, as X-Rite's software
 //! reports the files' L*a*b*.
 
@@ -29,7 +32,7 @@ use brdfd::optimise::{Settings, fit};
 use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
 
 fn main() {
-    let mut dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-mat12");
+    let mut dirs: Vec<PathBuf> = Vec::new();
     let mut models: Vec<ModelKind> = ModelKind::ALL.to_vec();
     let mut fresnels: Vec<FresnelCosine> = FresnelCosine::ALL.to_vec();
     let mut args = std::env::args().skip(1);
@@ -52,18 +55,26 @@ fn main() {
                 })
                 .collect();
         } else {
-            dir = PathBuf::from(a);
+            dirs.push(PathBuf::from(a));
         }
     }
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()))
-        .map(|e| e.expect("readable entry").path())
-        .filter(|p| {
-            p.extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("xlsx"))
-        })
-        .collect();
-    files.sort();
+    if dirs.is_empty() {
+        let real = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-mat12");
+        dirs = vec![real.clone(), real.join("more")];
+    }
+    let mut files: Vec<PathBuf> = Vec::new();
+    for dir in &dirs {
+        let mut in_dir: Vec<PathBuf> = std::fs::read_dir(dir)
+            .unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()))
+            .map(|e| e.expect("readable entry").path())
+            .filter(|p| {
+                p.extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("xlsx"))
+            })
+            .collect();
+        in_dir.sort();
+        files.extend(in_dir);
+    }
     let mut scans: Vec<(String, MeasuredBrdf)> = Vec::new();
     for path in &files {
         for x in brdfd::formats::xrite::read_file(path)
@@ -80,10 +91,15 @@ fn main() {
     println!(
         "{} real MA-T12 measurements from {}; colorimetry {colorimetry}; default method",
         scans.len(),
-        dir.display()
+        dirs.iter()
+            .map(|d| d.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     // (model, Fresnel, cost, fitted mean, held-out mean, held-out 45as-15, seconds)
     let mut summary: Vec<(ModelKind, FresnelCosine, CostFunction, f64, f64, f64, f64)> = Vec::new();
+    // Per (model, Fresnel, cost): each sample's held-out mean ΔE00, in scan order.
+    let mut per_scan: Vec<Vec<f64>> = Vec::new();
     let variants: Vec<(ModelKind, FresnelCosine)> = models
         .iter()
         .flat_map(|&m| fresnels.iter().map(move |&f| (m, f)))
@@ -117,7 +133,7 @@ fn main() {
                 let lab_e = lab_per_geometry_with(&est, colorimetry);
                 for g in 0..MA_T12_COUNT {
                     de[g].push(e.per_geometry[g]);
-                    dl[g].push(lab_e[g].l - lab_m[g].l);
+                    dl[g].push(lab_m[g].l - lab_e[g].l);
                 }
                 for g in 0..MA_T12_COUNT {
                     let held = MeasuredBrdf {
@@ -129,12 +145,17 @@ fn main() {
                     let e = evaluate_with(&m.values, &est, colorimetry, m.geometries);
                     let lab_e = lab_per_geometry_with(&est, colorimetry);
                     de_out[g].push(e.per_geometry[g]);
-                    dl_out[g].push(lab_e[g].l - lab_m[g].l);
+                    dl_out[g].push(lab_m[g].l - lab_e[g].l);
                 }
             }
             let mean = |xs: &[f64]| xs.iter().sum::<f64>() / xs.len() as f64;
             let max = |xs: &[f64]| xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             let g45 = GEOMETRIES.iter().position(|g| g.name == "45as-15").unwrap();
+            per_scan.push(
+                (0..scans.len())
+                    .map(|i| mean(&de_out.iter().map(|d| d[i]).collect::<Vec<_>>()))
+                    .collect(),
+            );
             summary.push((
                 model,
                 fresnel,
@@ -171,7 +192,7 @@ fn main() {
                 "geometry",
                 "ΔE00 mean",
                 "ΔE00 max",
-                "ΔL* fit−m",
+                "ΔL* m−fit",
                 "held mean",
                 "held max",
                 "held ΔL*"
@@ -216,5 +237,39 @@ fn main() {
             paper,
             secs
         );
+    }
+    println!();
+    for base in [FresnelCosine::Incidence, FresnelCosine::Exact] {
+        println!();
+        println!(
+            "paired sign test of each sample's held-out mean against the paper model with Fresnel {}",
+            base.name()
+        );
+        println!(
+            "  {:<10} {:<10} {:<4} {:>8} {:>8} {:>10}",
+            "model", "fresnel", "cost", "better", "worse", "p"
+        );
+        for (i, &(model, fresnel, cost, ..)) in summary.iter().enumerate() {
+            let Some(j) = summary
+                .iter()
+                .position(|r| r.0 == ModelKind::Paper && r.1 == base && r.2 == cost)
+            else {
+                continue;
+            };
+            if i == j {
+                continue;
+            }
+            // minus: this option's held-out mean below the baseline's (better).
+            let t = brdfd::stats::sign_test(&per_scan[i], &per_scan[j]);
+            println!(
+                "  {:<10} {:<10} {:<4} {:>8} {:>8} {:>10.2e}",
+                model.name(),
+                fresnel.name(),
+                cost.name(),
+                t.minus,
+                t.plus,
+                t.p
+            );
+        }
     }
 }

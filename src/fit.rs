@@ -59,6 +59,9 @@ pub struct FitReport {
     pub specular_delta_l: Option<SpecularDeltaL>,
     /// The bootstrap intervals, when asked for ([`FitReport::with_uncertainty`]).
     pub uncertainty: Option<Uncertainty>,
+    /// The predictions of the readings held out of the fit
+    /// ([`crate::crossval::fit_holding_out`]); `None` for a fit to every reading.
+    pub held_out: Option<Vec<HeldOut>>,
 }
 
 /// Why a scan could not be fitted.
@@ -141,6 +144,7 @@ pub fn fit_measured(
         evaluation,
         specular_delta_l,
         uncertainty: None,
+        held_out: None,
     })
 }
 
@@ -212,6 +216,7 @@ impl FitReport {
             specular_delta_l: self.specular_delta_l.map(SpecularDeltaLDocument::from),
             uncertainty: self.uncertainty.clone(),
             at_bound: crate::jackknife::at_bound(p, &self.request.settings.bounds),
+            held_out: self.held_out.clone(),
         }
     }
 }
@@ -289,6 +294,11 @@ pub struct FitDocument {
     /// when none.
     #[serde(default)]
     pub at_bound: Vec<String>,
+    /// The readings held out of the fit and their prediction (`brdfd fit --hold-out`):
+    /// `[{"geometry", "delta_e00", "measured_lab", "predicted_lab"}, …]`; absent for a fit to
+    /// every reading (`delta_e00` and `lab` then cover the readings fitted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<Vec<HeldOut>>,
 }
 
 impl FitDocument {
@@ -306,6 +316,19 @@ impl FitDocument {
         "delta_e00",
         "delta_e00_mean",
     ];
+}
+
+/// The prediction of one reading the fit did not see ([`crate::crossval`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldOut {
+    /// The geometry's name (`"45as-15"`).
+    pub geometry: String,
+    /// ΔE00 between the measured and the predicted colour there.
+    pub delta_e00: f64,
+    /// Measured L*a*b* under the fit's colorimetry.
+    pub measured_lab: [f64; 3],
+    /// The fitted model's L*a*b* there.
+    pub predicted_lab: [f64; 3],
 }
 
 /// `{"sra-20": x, "sra-60": y, "mean": m}`: |ΔL*| at the SRA geometries.

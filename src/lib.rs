@@ -45,6 +45,7 @@ pub mod client;
 pub mod colour;
 pub mod config;
 pub mod cost;
+pub mod crossval;
 pub mod evaluation;
 pub mod fit;
 pub mod fonts;

@@ -186,9 +186,83 @@ fn bad_cost_fails_with_one_line() {
     assert!(err.contains("unknown cost function \"cf9\""), "{err}");
 }
 
+#[test]
+fn fit_hold_out_predicts_what_crossval_predicts() {
+    // `fit --hold-out` leaves the reading out of the fit and its figures, and predicts it; the
+    // same fit is the one `crossval` makes for that geometry, to the last bit.
+    let scan = example("t-freesia-pink.scan.json");
+    let out = brdfd(&[
+        "fit",
+        "--input",
+        &scan,
+        "--cost",
+        "m2",
+        "--hold-out",
+        "45as-15",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let de = fit["delta_e00"].as_object().unwrap();
+    assert_eq!(de.len(), 13);
+    assert!(!de.contains_key("45as-15"));
+    let held = fit["held_out"].as_array().unwrap();
+    assert_eq!(held.len(), 1);
+    assert_eq!(held[0]["geometry"], "45as-15");
+    assert!(held[0]["delta_e00"].as_f64().unwrap() > 0.0);
+
+    let out = brdfd(&["crossval", &scan, "--cost", "m2", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cv: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(cv["sample"], "T.Freesia pink");
+    let fits = cv["fits"].as_array().unwrap();
+    assert_eq!(fits.len(), 1);
+    assert_eq!(fits[0]["cost"], "m2");
+    assert_eq!(fits[0]["model"], "paper");
+    assert_eq!(fits[0]["fresnel"], "incidence");
+    let all = fits[0]["held_out"].as_array().unwrap();
+    assert_eq!(all.len(), 12, "one per MA-T12 geometry");
+    let same = all.iter().find(|h| h["geometry"] == "45as-15").unwrap();
+    assert_eq!(same, &held[0]);
+    let mean = all
+        .iter()
+        .map(|h| h["delta_e00"].as_f64().unwrap())
+        .sum::<f64>()
+        / 12.0;
+    assert!((fits[0]["held_out_mean"].as_f64().unwrap() - mean).abs() < 1e-12);
+    for h in all {
+        assert_eq!(h["measured_lab"].as_array().unwrap().len(), 3);
+        assert_eq!(h["predicted_lab"].as_array().unwrap().len(), 3);
+    }
+}
+
+#[test]
+fn hold_out_of_no_geometry_fails_with_one_line() {
+    let scan = example("t-freesia-pink.scan.json");
+    for (arg, says) in [
+        ("45as-16", "\"45as-16\" is not a geometry"),
+        ("sra-20", "sra-20 is an SRA geometry"),
+    ] {
+        let out = brdfd(&["fit", "--input", &scan, "--cost", "m2", "--hold-out", arg]);
+        assert_eq!(out.status.code(), Some(1));
+        assert!(out.stdout.is_empty());
+        let err = stderr_one_line(&out);
+        assert!(err.contains(says), "{err}");
+    }
+}
+
 /// Every subcommand of `brdfd`, as `--help` lists them (README.md and GUIDE.md teach them).
-const SUBCOMMANDS: [&str; 24] = [
+const SUBCOMMANDS: [&str; 25] = [
     "fit",
+    "crossval",
     "synth",
     "demo",
     "report",

@@ -26,6 +26,7 @@ __all__ = [
     "read_scan",
     "import_export",
     "fit",
+    "crossval",
     "evaluate",
     "geometries",
     "wavelengths",
@@ -115,6 +116,11 @@ class FitResult:
         return self.document["delta_e00_mean"]
 
     @property
+    def cost(self) -> float:
+        """The cost function's value at the fitted parameters (``document["cost"]``)."""
+        return self.document["cost"]
+
+    @property
     def geometries(self) -> List[str]:
         """The geometries measured, in table order (14, or 12 without SRA readings)."""
         return list(self.delta_e00)
@@ -183,16 +189,20 @@ def fit(
     sra_illuminant: Optional[str] = None,
     sra_observer: Optional[str] = None,
     model: Optional[str] = None,
+    hold_out: Optional[Sequence[str]] = None,
 ) -> FitResult:
     """Fits a scan as ``brdfd fit`` does with the same options (``cost``: cf1, cf2, m2;
     ``method``: the default or "paper"; ``sra``: "luminance" (the default) or "flat"; ``bootstrap``:
     resamples for 95 % intervals, 0 skips them; ``model``: "paper" (the default), "oren-nayar"
-    or "two-lobe"; ``fresnel``: "incidence" (the default), "light-half" or "exact").  Runs
-    without holding the GIL."""
+    or "two-lobe"; ``fresnel``: "incidence" (the default), "light-half" or "exact";
+    ``hold_out``: MA-T12 geometries left out of the fit and predicted, as ``brdfd fit
+    --hold-out``: their predictions are ``document["held_out"]``).  Runs without holding the
+    GIL."""
     report = _native.fit(
         scan, cost, method, seed, bootstrap, sra, specular=specular, fresnel=fresnel,
         observer=observer, weighting=weighting, sra_illuminant=sra_illuminant,
         sra_observer=sra_observer, model=model,
+        hold_out=None if hold_out is None else list(hold_out),
     )
     text = report.to_json()
     doc = json.loads(text)
@@ -222,6 +232,30 @@ def fit(
         estimated=np.array(report.estimated(), dtype=float),
         _json=text,
     )
+
+
+def crossval(
+    scan: Scan,
+    cost: Optional[Union[str, Sequence[str]]] = None,
+    *,
+    model: Optional[str] = None,
+    fresnel: Optional[str] = None,
+    method: Optional[str] = None,
+    seed: Optional[int] = None,
+    sra: Optional[str] = None,
+    observer: Optional[str] = None,
+    weighting: Optional[str] = None,
+) -> Dict[str, Any]:
+    """Leave-one-geometry-out cross-validation as ``brdfd crossval --json`` makes it with the
+    same options: each MA-T12 geometry held out of the fit in turn and predicted. ``cost``: one
+    cost function or several (all three when ``None``). Returns that JSON object as Python
+    values: ``{"sample", "reference", "fits": [{"cost", "model", "fresnel", "fitted_mean",
+    "held_out_mean", "held_out": [{"geometry", "delta_e00", "measured_lab",
+    "predicted_lab"}, …]}, …]}``.  Runs without holding the GIL."""
+    costs = [cost] if isinstance(cost, str) else (None if cost is None else list(cost))
+    text = _native.crossval(scan, costs, model=model, fresnel=fresnel, method=method, seed=seed,
+                            sra=sra, observer=observer, weighting=weighting)
+    return json.loads(text)
 
 
 def evaluate(

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 
+use brdfd::cli::crossval::{CrossvalArgs, crossval_with};
 use brdfd::cli::exchange::{ImportArgs, read_one};
 use brdfd::cli::fit::{FitArgs, fit_with, parse_fresnel};
 use brdfd::fit::FitReport;
@@ -154,7 +155,7 @@ impl PyFitReport {
 #[pyfunction]
 #[pyo3(signature = (scan, cost, method=None, seed=None, bootstrap=0, sra=None, specular=None,
     fresnel=None, observer=None, weighting=None, sra_illuminant=None, sra_observer=None,
-    model=None))]
+    model=None, hold_out=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -171,6 +172,7 @@ fn fit(
     sra_illuminant: Option<&str>,
     sra_observer: Option<&str>,
     model: Option<&str>,
+    hold_out: Option<Vec<String>>,
 ) -> PyResult<PyFitReport> {
     let args = FitArgs {
         input: scan.source.clone(),
@@ -213,11 +215,72 @@ fn fit(
             .transpose()?
             .unwrap_or_default(),
         bootstrap,
+        hold_out: hold_out.unwrap_or_default(),
         json: true,
     };
     let scan = &scan.scan;
     let report = py.detach(|| fit_with(scan, &args)).map_err(value_error)?;
     Ok(PyFitReport { report })
+}
+
+/// Leave-one-geometry-out cross-validation exactly as `brdfd crossval` makes it with the same
+/// options: the JSON text `brdfd crossval --json` prints. `cost`: the cost functions (all
+/// three when `None`).
+#[pyfunction]
+#[pyo3(signature = (scan, cost=None, model=None, fresnel=None, method=None, seed=None,
+    sra=None, observer=None, weighting=None))]
+#[allow(clippy::too_many_arguments)]
+fn crossval(
+    py: Python<'_>,
+    scan: &PyScan,
+    cost: Option<Vec<String>>,
+    model: Option<&str>,
+    fresnel: Option<&str>,
+    method: Option<&str>,
+    seed: Option<u64>,
+    sra: Option<&str>,
+    observer: Option<&str>,
+    weighting: Option<&str>,
+) -> PyResult<String> {
+    let args = CrossvalArgs {
+        input: scan.source.clone(),
+        cost: cost
+            .unwrap_or_default()
+            .iter()
+            .map(|c| parse("cost function", c))
+            .collect::<PyResult<_>>()?,
+        model: model
+            .map(|m| parse("model", m))
+            .transpose()?
+            .unwrap_or_default(),
+        fresnel: match fresnel {
+            Some(f) => parse_fresnel(f).map_err(PyValueError::new_err)?,
+            None => parse_fresnel("incidence").expect("the default Fresnel cosine"),
+        },
+        method: method
+            .map(|m| parse("method", m))
+            .transpose()?
+            .unwrap_or_default(),
+        seed: seed.unwrap_or(brdfd::optimise::Settings::default().seed),
+        sra: sra
+            .map(|s| parse("SRA model", s))
+            .transpose()?
+            .unwrap_or(SraModel::MEASURED_DEFAULT),
+        observer: observer
+            .map(|o| parse("observer", o))
+            .transpose()?
+            .unwrap_or_default(),
+        weighting: weighting
+            .map(|w| parse("weighting", w))
+            .transpose()?
+            .unwrap_or_default(),
+        json: true,
+    };
+    let scan = &scan.scan;
+    let doc = py
+        .detach(|| crossval_with(scan, &args))
+        .map_err(value_error)?;
+    serde_json::to_string(&doc).map_err(|e| value_error(e.into()))
 }
 
 /// The 14 geometries: (name, device, θi, θr, φr, aspecular), degrees, in table order.
@@ -377,6 +440,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_scan, m)?)?;
     m.add_function(wrap_pyfunction!(import_export, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(crossval, m)?)?;
     m.add_function(wrap_pyfunction!(geometries, m)?)?;
     m.add_function(wrap_pyfunction!(wavelengths, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;

@@ -105,6 +105,28 @@ def test_a_model_option_equals_the_cli_bit_for_bit():
         brdfd.fit(scan, cost="cf1", model="lambert")
 
 
+def test_hold_out_and_crossval_equal_the_cli_bit_for_bit():
+    scan = brdfd.read_scan(SCAN)
+    got = brdfd.fit(scan, cost="m2", seed=4, hold_out=["45as-15", "15as80"])
+    cli = json.loads(run("fit", "--input", str(SCAN), "--cost", "m2", "--seed", "4",
+                         "--hold-out", "45as-15,15as80", "--json"))
+    same_bits(without_timing(got.document), without_timing(cli))
+    assert [h["geometry"] for h in got.document["held_out"]] == ["15as80", "45as-15"]
+    assert "45as-15" not in got.delta_e00 and len(got.delta_e00) == 12
+
+    cv = brdfd.crossval(scan, "m2", fresnel="exact", seed=4)
+    cli = json.loads(run("crossval", str(SCAN), "--cost", "m2", "--fresnel", "exact",
+                         "--seed", "4", "--json"))
+    same_bits(cv, cli)
+    (one,) = cv["fits"]
+    assert (one["cost"], one["model"], one["fresnel"]) == ("m2", "paper", "exact")
+    assert len(one["held_out"]) == 12
+    assert math.isclose(one["held_out_mean"],
+                        sum(h["delta_e00"] for h in one["held_out"]) / 12, rel_tol=1e-12)
+    with pytest.raises(ValueError, match="is not a geometry"):
+        brdfd.fit(scan, cost="m2", hold_out=["45as-16"])
+
+
 def test_bootstrap_intervals_hold_the_default_fit():
     # The default method ends in a local optimum, so the warm-started refits of the resamples
     # stay around it. (The paper GA's point need not be one: its refits may descend elsewhere.)
@@ -144,6 +166,7 @@ def test_result_values_are_plain_python_and_numpy():
     assert list(r.delta_e00) == brdfd.geometries()
     assert all(isinstance(v, float) for v in r.delta_e00.values())
     assert r.delta_e00_mean == pytest.approx(np.mean(list(r.delta_e00.values())))
+    assert r.cost == r.document["cost"] and r.cost > 0
     lab = r.lab["45as15"]
     assert lab["measured"].shape == (3,) and lab["fitted"].shape == (3,)
     assert r.intervals is None

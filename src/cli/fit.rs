@@ -7,11 +7,12 @@ use anyhow::Context;
 
 use crate::colour::{Colorimetry, Observer, Weighting};
 use crate::cost::CostFunction;
+use crate::crossval::{fit_holding_out, parse_hold_out};
 use crate::fit::{FitReport, FitRequest, fit_scan};
 use crate::geometry::GEOMETRIES;
 use crate::model::{FresnelCosine, ModelKind};
 use crate::optimise::{Method, Settings};
-use crate::processing::{ProcessingOptions, SpecularStrategy};
+use crate::processing::{self, ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::wavelengths_nm;
 use crate::sra_reading::{SraIlluminant, SraModel, SraReading};
@@ -93,6 +94,13 @@ pub struct FitArgs {
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub bootstrap: u32,
 
+    /// MA-T12 geometries to leave out of the fit (comma-separated names, e.g. `45as-15` or
+    /// `15as-45,45as110`): the fit is made to the other readings and predicts these; the
+    /// prediction (ΔE00, measured and predicted L*a*b*) is printed after the fit, and is
+    /// `held_out` in `--json`. `brdfd crossval` holds out each geometry in turn.
+    #[arg(long, value_name = "GEOMETRY[,…]", value_delimiter = ',')]
+    pub hold_out: Vec<String>,
+
     /// Print one JSON object on stdout (sample, cost_function, method, seed, params, cost,
     /// evaluations, generations, wall_ms, delta_e00 per geometry, delta_e00_mean, …) instead
     /// of a table.
@@ -154,8 +162,22 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
 /// bootstrap included; what the Python package's `brdfd.fit` calls too, so both give the same
 /// numbers to the last bit.
 pub fn fit_with(scan: &Scan, args: &FitArgs) -> anyhow::Result<FitReport> {
-    let mut report = fit_scan(scan, &args.request())
-        .with_context(|| format!("fitting {}", args.input.display()))?;
+    let request = args.request();
+    let mut report = if args.hold_out.is_empty() {
+        fit_scan(scan, &request)
+    } else {
+        let measured = processing::process(scan, &request.processing)?;
+        let held = parse_hold_out(&args.hold_out, measured.geometries)
+            .with_context(|| format!("--hold-out for {}", args.input.display()))?;
+        fit_holding_out(
+            &scan.sample,
+            scan.reference_label(),
+            &measured,
+            &request,
+            &held,
+        )
+    }
+    .with_context(|| format!("fitting {}", args.input.display()))?;
     if args.bootstrap > 0 {
         let opts = BootstrapOptions {
             resamples: args.bootstrap,
@@ -322,6 +344,23 @@ pub fn table(r: &FitReport) -> String {
         _ => {
             let _ = writeln!(t, "  specular       no specular readings");
         }
+    }
+    if let Some(held) = &r.held_out {
+        let _ = writeln!(
+            t,
+            "held out         not fitted, predicted: ΔE00, L*a*b* measured → predicted"
+        );
+        for h in held {
+            let [lm, am, bm] = h.measured_lab;
+            let [lp, ap, bp] = h.predicted_lab;
+            let _ = writeln!(
+                t,
+                "  {:<8} {:>6}  {:8.4}   ({lm:6.2} {am:6.2} {bm:6.2}) → ({lp:6.2} {ap:6.2} {bp:6.2})",
+                h.geometry, "ma_t12", h.delta_e00
+            );
+        }
+        let mean = held.iter().map(|h| h.delta_e00).sum::<f64>() / held.len() as f64;
+        let _ = writeln!(t, "held-out mean    {mean:.4}");
     }
     t
 }

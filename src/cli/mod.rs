@@ -10,6 +10,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod crossval;
 pub mod demo;
 pub mod doctor;
 pub mod exchange;
@@ -45,6 +46,9 @@ pub struct Cli {
 pub enum Command {
     /// Fit the spectral Cook–Torrance model to one scan file, without a daemon or database.
     Fit(fit::FitArgs),
+    /// Leave one geometry out of a scan file's fit, predict it, for each geometry and cost
+    /// function: how well the fit predicts readings it has not seen.
+    Crossval(crossval::CrossvalArgs),
     /// Write the eight synthetic example scans and their ground truth to a directory.
     Synth(synth::SynthArgs),
     /// The main job on the embedded default: replay the committed recordings (N9 reference and
@@ -180,6 +184,7 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Fit(args) => fit::run(&args),
+        Command::Crossval(args) => crossval::run(&args),
         Command::Synth(args) => synth::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Report(args) => report::run(&args),

@@ -165,8 +165,22 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     let samples = if analysis.repeats.is_empty() {
         format!("{} samples", study.samples.len())
     } else {
+        // A repeat shares a replayed recording, or the readings themselves (the same file
+        // imported again): each called what it is.
+        let replayed = analysis
+            .repeats
+            .iter()
+            .filter(|r| r.shared.starts_with("the recording"))
+            .count();
+        let what = if replayed == analysis.repeats.len() {
+            "a recording replayed again"
+        } else if replayed == 0 {
+            "the same readings again (a file imported again)"
+        } else {
+            "a recording replayed again or the same readings again"
+        };
         format!(
-            "{} samples ({} scans, {} of them a recording replayed again and counted once)",
+            "{} samples ({} scans, {} of them {what} and counted once)",
             study.samples.len(),
             study.samples.len() + analysis.repeats.len(),
             analysis.repeats.len()
@@ -206,7 +220,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     if !analysis.repeats.is_empty() {
         b.extend(introduced_list(
             format!(
-                "Counted once: {} scans repeat a measurement another scan of the study already holds (the same recording replayed again, or the same readings). One measurement is one sample: each counts once, as the last of its scans whose fits all finished, in every table, figure and statistic below; the repeats are left out:",
+                "Counted once: {} scans repeat a measurement another scan of the study already holds (the same recording replayed again, or the same readings, as a file imported again holds). One measurement is one sample: each counts once, as the last of its scans whose fits all finished, in every table, figure and statistic below; the repeats are left out:",
                 analysis.repeats.len()
             ),
             analysis
@@ -661,4 +675,30 @@ fn real_statement(samples: &[SampleStudy]) -> Option<String> {
         samples.len(),
         parts.join("; ")
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The same file imported twice holds the same readings, not a replayed recording: the
+    /// summary calls the repeat what it is.
+    #[test]
+    fn a_repeated_import_is_not_called_a_replayed_recording() {
+        let mut study = crate::study::tests::study_from_truth(2, None);
+        let mut again = study.samples[0].clone();
+        again.name = format!("{} (again)", again.name);
+        study.samples.push(again);
+        let analysis = Analysis::of(&study);
+        assert_eq!(analysis.repeats.len(), 1);
+        let md = markdown(&study, &analysis, &[]);
+        assert!(
+            md.contains(
+                "scans, 1 of them the same readings again (a file imported again) and counted \
+                 once)"
+            ),
+            "{md}"
+        );
+        assert!(!md.contains("recording replayed again and"), "{md}");
+    }
 }
