@@ -329,6 +329,11 @@ pub struct HeldOut {
     pub measured_lab: [f64; 3],
     /// The fitted model's L*a*b* there.
     pub predicted_lab: [f64; 3],
+    /// The 95 % prediction interval of the held-out L* (`brdfd crossval`:
+    /// [`crate::jackknife::prediction_interval`] from the other geometries' held-out errors);
+    /// absent where there are not enough of them (`brdfd fit --hold-out`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predicted_l_interval: Option<[f64; 2]>,
 }
 
 /// `{"sra-20": x, "sra-60": y, "mean": m}`: |ΔL*| at the SRA geometries.

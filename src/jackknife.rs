@@ -119,25 +119,9 @@ impl Jackknife {
     /// [`Jackknife::held_out`], from the held-out errors at the other geometries (module
     /// docs); `None` with fewer than two other geometries.
     pub fn prediction_interval(&self, i: usize) -> Option<[Interval; 3]> {
-        let others: Vec<[f64; 3]> = self
-            .held_out
-            .iter()
-            .enumerate()
-            .filter(|(j, _)| *j != i)
-            .map(|(_, h)| h.error())
-            .collect();
-        let m = others.len();
-        if m < 2 {
-            return None;
-        }
-        let t = crate::stats::t_quantile(0.975, (m - 1) as f64)?;
-        let k = t * (1.0 + 1.0 / m as f64).sqrt();
+        let errors: Vec<[f64; 3]> = self.held_out.iter().map(HeldOut::error).collect();
         let p = self.held_out[i].predicted;
-        let centre = [p.l, p.a, p.b];
-        Some(std::array::from_fn(|c| {
-            let rms = (others.iter().map(|e| e[c] * e[c]).sum::<f64>() / m as f64).sqrt();
-            [centre[c] - k * rms, centre[c] + k * rms]
-        }))
+        prediction_interval(&errors, i, [p.l, p.a, p.b])
     }
 
     /// The held-out geometry `geometry` (index in [`GEOMETRIES`]), with its 95 % L* interval.
@@ -174,6 +158,33 @@ impl Jackknife {
                 .collect(),
         }
     }
+}
+
+/// The 95 % prediction intervals `[L*, a*, b*]` around `predicted`, the held-out prediction at
+/// position `i` of `errors` (each held-out geometry's predicted − measured L*, a*, b*), from the
+/// errors at the other positions only (module docs); `None` with fewer than two others. `brdfd
+/// crossval` gives each held-out geometry its L* interval this way.
+pub fn prediction_interval(
+    errors: &[[f64; 3]],
+    i: usize,
+    predicted: [f64; 3],
+) -> Option<[Interval; 3]> {
+    let others: Vec<[f64; 3]> = errors
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| *j != i)
+        .map(|(_, e)| *e)
+        .collect();
+    let m = others.len();
+    if m < 2 {
+        return None;
+    }
+    let t = crate::stats::t_quantile(0.975, (m - 1) as f64)?;
+    let k = t * (1.0 + 1.0 / m as f64).sqrt();
+    Some(std::array::from_fn(|c| {
+        let rms = (others.iter().map(|e| e[c] * e[c]).sum::<f64>() / m as f64).sqrt();
+        [predicted[c] - k * rms, predicted[c] + k * rms]
+    }))
 }
 
 /// The jackknife's own intervals, kept beside the combined ones in the `uncertainty` object.
