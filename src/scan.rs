@@ -227,6 +227,11 @@ pub enum ScanError {
     BadReference { field: String, value: f64 },
     #[error("{field}: reading {value} is negative; a device reading cannot be")]
     NegativeReading { field: String, value: f64 },
+    #[error(
+        "{field}: reading {value:e} is beyond any reflectance factor an instrument reads (at most \
+         {MAX_REFLECTANCE_FACTOR}); the value is corrupt"
+    )]
+    Unphysical { field: String, value: f64 },
     #[error("{field}: expected an object of readings or \"{expected}\", got \"{found}\"")]
     UnknownTag {
         field: &'static str,
@@ -272,6 +277,21 @@ fn band_field(role: Role, geo: &Geometry, band: usize) -> String {
     )
 }
 
+/// The largest MA-T12 reading accepted, as a reflectance factor (0–1 scale). A reflectance
+/// factor is the sample's radiance over a perfect diffuser's, `R = π·L/E`; it exceeds 1 only
+/// near the mirror direction, and is largest for a perfect mirror (reflectance 1) seen within
+/// the illuminating beam: `R = π / Ω`, with `Ω` the beam's solid angle. 10⁴ is a beam of
+/// 0.57° half-angle, narrower than any goniospectrophotometer's, so no instrument reads more;
+/// a glossy sample near specular reads in the hundreds at most. The SRA's readings are in the
+/// device's own unit and are only required to be finite.
+pub const MAX_REFLECTANCE_FACTOR: f64 = 1e4;
+
+/// Whether `value` can be an MA-T12 reading (a reflectance factor at most
+/// [`MAX_REFLECTANCE_FACTOR`]); the one check every reader applies.
+pub fn physical_reflectance_factor(value: f64) -> bool {
+    value.is_finite() && value <= MAX_REFLECTANCE_FACTOR
+}
+
 fn check_value(role: Role, field: impl FnOnce() -> String, value: f64) -> Result<(), ScanError> {
     if !value.is_finite() {
         return Err(ScanError::NonFinite {
@@ -299,6 +319,12 @@ impl DeviceReadings {
                 Device::MaT12 => {
                     for (band, &v) in self.ma_t12[geo.index].iter().enumerate() {
                         check_value(role, || band_field(role, geo, band), v)?;
+                        if !physical_reflectance_factor(v) {
+                            return Err(ScanError::Unphysical {
+                                field: band_field(role, geo, band),
+                                value: v,
+                            });
+                        }
                     }
                 }
                 Device::Sra => {

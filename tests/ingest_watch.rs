@@ -213,7 +213,7 @@ async fn watching_service(store: &brdfd::store::Store, inbox: &Path) -> brdfd::s
             poll: Duration::from_millis(20),
             pair_wait: Duration::from_secs(600),
             reference: "Munsell N9".into(),
-            max_file_bytes: 32 << 20,
+            budget: brdfd::formats::budget::Budget::default(),
         }),
         ..settings()
     };

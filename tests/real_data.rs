@@ -147,7 +147,7 @@ fn the_daemon_imports_real_exports_by_watch_folder_and_http_and_fits_them() {
     assert_eq!(scans.len(), 6, "{list}");
     let expected_textures: Vec<(String, Vec<(String, Vec<u8>)>)> = REAL_EXPORTS
         .iter()
-        .flat_map(|f| brdfd::formats::xrite::read_file(&real(f)).unwrap())
+        .flat_map(|f| brdfd::formats::xrite::read_file(&real(f), &Default::default()).unwrap())
         .map(|x| {
             let t = x
                 .textures

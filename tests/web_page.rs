@@ -991,7 +991,7 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "xlsx"))
-        .flat_map(|p| brdfd::formats::xrite::read_file(&p).unwrap())
+        .flat_map(|p| brdfd::formats::xrite::read_file(&p, &Default::default()).unwrap())
         .find(|x| !x.textures.is_empty())
         .expect("a shared export with texture images");
     let (provenance, taken) = brdfd::service::imported_provenance(&x.scan, "test import").unwrap();

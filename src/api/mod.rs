@@ -207,7 +207,7 @@ pub const MAX_BODY_BYTES: usize = 1024 * 1024;
 
 /// The largest body `POST /scans/import` accepts: an X-Rite `.xlsx` export carries camera
 /// images (1–3 MiB each file); the reader's own cap.
-pub const MAX_IMPORT_BODY_BYTES: usize = crate::formats::xrite_xlsx::MAX_FILE_BYTES as usize;
+pub const MAX_IMPORT_BODY_BYTES: usize = crate::formats::budget::MAX_UPLOAD_BYTES as usize;
 
 /// Everything [`ApiServer`] needs besides the service: who may call, and the bounds.
 #[derive(Debug, Clone)]
@@ -554,8 +554,9 @@ async fn import_scan(
 /// specular readings), fitted like a measured one.
 async fn import_xrite(s: &Service, body: axum::body::Bytes) -> Result<Response, ApiError> {
     // The body itself goes to the reader (no copy: its bytes are what the budget holds).
+    let budget = s.settings().budget;
     let read = tokio::task::spawn_blocking(move || {
-        crate::formats::xrite::read(&body, "the uploaded .xlsx")
+        crate::formats::xrite::read(&body, "the uploaded .xlsx", &budget)
     })
     .await
     .map_err(|e| ServiceError::BadRequest(format!("reading the .xlsx failed: {e}")))?;

@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::formats::budget::Budget;
 use crate::formats::{self, ExportOptions, Format, ImportOptions};
 use crate::scan::ScanError;
 
@@ -245,6 +246,18 @@ pub struct Imported {
 /// The scans `brdfd import-format` reads from `file` with these options (its `files`, `out`,
 /// `force` and `json` are not read); the Python package's `brdfd.import_export` calls it too.
 pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>> {
+    let imported = read_unchecked(args, file)?;
+    // The names the daemon would refuse (control characters, length) are refused here too.
+    for i in &imported {
+        let s = &i.scan;
+        crate::service::check_name("sample name", &s.sample)
+            .and_then(|()| crate::service::check_name("reference name", s.reference_label()))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
+    }
+    Ok(imported)
+}
+
+fn read_unchecked(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>> {
     let format = args.format.unwrap_or_else(|| format_of(file));
     match format {
         ImportFormat::XriteXlsx => {
@@ -254,7 +267,7 @@ pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>>
                     file.display()
                 );
             }
-            let scans = formats::xrite::read_file(file)?;
+            let scans = formats::xrite::read_file(file, &Budget::default())?;
             Ok(scans
                 .into_iter()
                 .map(|s| Imported {
@@ -264,9 +277,13 @@ pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>>
                 .collect())
         }
         ImportFormat::Exchange(format) => {
-            let text = formats::read_text(file)?;
+            let budget = Budget::default();
+            let text = formats::read_text_within(file, &budget)?;
             let sra = match &args.sra {
-                Some(p) => Some((p.display().to_string(), formats::read_text(p)?)),
+                Some(p) => Some((
+                    p.display().to_string(),
+                    formats::read_text_within(p, &budget)?,
+                )),
                 None => None,
             };
             let scans = formats::import(
@@ -276,6 +293,7 @@ pub fn read_one(args: &ImportArgs, file: &Path) -> anyhow::Result<Vec<Imported>>
                 sra.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
                 &ImportOptions {
                     reference: args.reference.clone(),
+                    budget,
                 },
             )?;
             Ok(scans

@@ -63,7 +63,8 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
 /// `brdfd import` of an X-Rite `.xlsx`: read and checked here (errors name the file), sent
 /// as it is, each scan's fits followed in turn.
 fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
-    let scans = crate::formats::xrite::read_file(&args.file)?;
+    let scans =
+        crate::formats::xrite::read_file(&args.file, &crate::formats::budget::Budget::default())?;
     for s in &scans {
         if let Some(w) = s.warning() {
             eprintln!("warning: {w}");

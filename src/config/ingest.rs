@@ -7,6 +7,7 @@ use std::time::Duration;
 use serde::Deserialize;
 
 use super::check::{Checker, ConfigError, S, bounded_count};
+use crate::formats::budget::Budget;
 
 /// `[ingest]`: the watch folder (src/service/ingest.rs).
 #[derive(Debug, Clone, PartialEq)]
@@ -22,9 +23,10 @@ pub struct IngestConfig {
     pub pair_wait: Duration,
     /// In an instrument's export, the object with this name is the white reference tile.
     pub reference: String,
-    /// The largest file read, in bytes (`max_file_mib`); a larger one goes to `failed/`
-    /// unread.
-    pub max_file_bytes: u64,
+    /// The limits every imported file is read within, by every door (`max_file_mib`: the
+    /// largest file read, a larger one goes to `failed/` unread; `max_sheet_cells`,
+    /// `max_images`, `max_image_mib`, `max_image_megapixels`, `max_records`).
+    pub budget: Budget,
     /// The import bodies held in memory at once, in bytes (`max_held_mib`), across the watch
     /// folder and `POST /scans/import` (src/service/import_budget.rs).
     pub max_held_bytes: u64,
@@ -38,7 +40,7 @@ impl Default for IngestConfig {
             poll: Duration::from_millis(defaults::INGEST_POLL_MS),
             pair_wait: Duration::from_millis(defaults::INGEST_PAIR_WAIT_MS),
             reference: crate::formats::DEFAULT_REFERENCE.to_string(),
-            max_file_bytes: defaults::INGEST_MAX_FILE_MIB << 20,
+            budget: Budget::default(),
             max_held_bytes: defaults::INGEST_MAX_HELD_MIB << 20,
         }
     }
@@ -50,8 +52,6 @@ mod defaults {
     pub const INGEST_SETTLE_MS: u64 = 2_000;
     pub const INGEST_POLL_MS: u64 = 1_000;
     pub const INGEST_PAIR_WAIT_MS: u64 = 60_000;
-    /// An export of a whole session is a few MiB at most.
-    pub const INGEST_MAX_FILE_MIB: u64 = 32;
     /// Two of the largest uploads `POST /scans/import` takes (64 MiB each), or dozens of real
     /// exports; well inside the shipped unit's `MemoryMax=1G` with the readers' own budgets.
     pub const INGEST_MAX_HELD_MIB: u64 = 128;
@@ -70,6 +70,11 @@ pub(super) struct RawIngest {
     pair_wait_ms: S<u64>,
     reference: S<String>,
     max_file_mib: S<u64>,
+    max_sheet_cells: S<u64>,
+    max_images: S<u64>,
+    max_image_mib: S<u64>,
+    max_image_megapixels: S<u64>,
+    max_records: S<u64>,
     max_held_mib: S<u64>,
 }
 
@@ -119,12 +124,7 @@ impl Checker<'_> {
                     }
                 },
             )?,
-            max_file_bytes: self.value(
-                "ingest.max_file_mib",
-                &raw.max_file_mib,
-                defaults::INGEST_MAX_FILE_MIB,
-                |n| bounded_count(n, 1, 1024).map(|n| (n as u64) << 20),
-            )?,
+            budget: self.budget(raw)?,
             max_held_bytes: self.value(
                 "ingest.max_held_mib",
                 &raw.max_held_mib,
@@ -135,12 +135,12 @@ impl Checker<'_> {
                 },
             )?,
         };
-        if config.max_held_bytes < config.max_file_bytes {
+        if config.max_held_bytes < config.budget.max_file_bytes {
             let message = format!(
                 "max_held_mib ({} MiB) is less than max_file_mib ({} MiB): a file the watch \
                  folder takes could never be held; raise max_held_mib or lower max_file_mib",
                 config.max_held_bytes >> 20,
-                config.max_file_bytes >> 20
+                config.budget.max_file_bytes >> 20
             );
             return Err(match &raw.max_held_mib {
                 Some(v) => self.invalid("ingest.max_held_mib", v, message),
@@ -154,6 +154,53 @@ impl Checker<'_> {
             });
         }
         Ok(config)
+    }
+
+    /// The `[ingest]` keys of the import budget (src/formats/budget.rs), each within a range
+    /// that keeps an import inside the memory the daemon is given.
+    fn budget(&self, raw: &RawIngest) -> Result<Budget, ConfigError> {
+        use crate::formats::budget::defaults as d;
+        let d0 = Budget::default();
+        let count = |lo: u64, hi: u64| move |n: u64| bounded_count(n, lo, hi).map(|n| n as u64);
+        Ok(Budget {
+            max_file_bytes: self.value(
+                "ingest.max_file_mib",
+                &raw.max_file_mib,
+                d::MAX_FILE_MIB,
+                |n| bounded_count(n, 1, 1024).map(|n| (n as u64) << 20),
+            )?,
+            max_sheet_cells: self.value(
+                "ingest.max_sheet_cells",
+                &raw.max_sheet_cells,
+                d::MAX_SHEET_CELLS,
+                count(1_000, 1_000_000),
+            )?,
+            max_images: self.value(
+                "ingest.max_images",
+                &raw.max_images,
+                d::MAX_IMAGES,
+                count(0, 1_000),
+            )?,
+            max_image_bytes: self.value(
+                "ingest.max_image_mib",
+                &raw.max_image_mib,
+                d::MAX_IMAGE_MIB,
+                |n| bounded_count(n, 1, 16).map(|n| (n as u64) << 20),
+            )?,
+            max_image_pixels: self.value(
+                "ingest.max_image_megapixels",
+                &raw.max_image_megapixels,
+                d::MAX_IMAGE_MEGAPIXELS,
+                |n| bounded_count(n, 1, 100).map(|n| n as u64 * 1_000_000),
+            )?,
+            max_records: self.value(
+                "ingest.max_records",
+                &raw.max_records,
+                d::MAX_RECORDS,
+                count(1, 200_000),
+            )?,
+            ..d0
+        })
     }
 }
 

@@ -359,7 +359,7 @@ mod tests {
     #[test]
     fn every_key_of_the_shipped_file_is_there_with_a_comment() {
         // Every key of the raw structs, set or shown commented out (`# key = …`).
-        const KEYS: [&str; 34] = [
+        const KEYS: [&str; 39] = [
             "path",
             "listen",
             "allow_remote",
@@ -393,6 +393,11 @@ mod tests {
             "pair_wait_ms",
             "reference",
             "max_file_mib",
+            "max_sheet_cells",
+            "max_images",
+            "max_image_mib",
+            "max_image_megapixels",
+            "max_records",
             "max_held_mib",
         ];
         let lines: Vec<&str> = SHIPPED.lines().collect();

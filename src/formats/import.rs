@@ -226,6 +226,19 @@ impl Slots {
                 });
             };
             let check = |v: f64, band: Option<usize>| -> Result<f64, FormatError> {
+                if g.device == Device::MaT12 && !crate::scan::physical_reflectance_factor(v) {
+                    return Err(FormatError::invalid(
+                        &at.file,
+                        at.line,
+                        field_name(fields, band),
+                        format!(
+                            "{who} at {}: {v:e} is beyond any reflectance factor an instrument \
+                             reads (at most {}); the value is corrupt",
+                            g.name,
+                            crate::scan::MAX_REFLECTANCE_FACTOR
+                        ),
+                    ));
+                }
                 let ok = if reference { v > 0.0 } else { v >= 0.0 };
                 if ok {
                     return Ok(v);

@@ -34,6 +34,7 @@
 //! correctly rounded `str::parse`, so export → import gives the same scan to the last bit in
 //! every format. Every error names the file, the line and the field.
 
+pub mod budget;
 pub mod certificate;
 pub mod cgats;
 pub mod csv;
@@ -97,6 +98,9 @@ pub enum FormatError {
         #[source]
         source: ScanError,
     },
+    /// A part of the file is beyond the import budget.
+    #[error(transparent)]
+    Budget(#[from] budget::OverBudget),
     /// The study cannot be written in this format.
     #[error("{format}: {message}")]
     Unwritable {
@@ -203,14 +207,40 @@ pub fn export(study: &Study, format: Format, opts: &ExportOptions) -> Result<Str
 pub struct ImportOptions {
     /// In an instrument's export, the object with this name is the reference tile.
     pub reference: String,
+    /// The limits the reader works within.
+    pub budget: budget::Budget,
 }
 
 impl Default for ImportOptions {
     fn default() -> Self {
         ImportOptions {
             reference: DEFAULT_REFERENCE.to_string(),
+            budget: budget::Budget::default(),
         }
     }
+}
+
+/// Reads `path` as UTF-8 text within `budget`'s file size (a larger file is refused unread).
+pub fn read_text_within(path: &Path, budget: &budget::Budget) -> Result<String, FormatError> {
+    let io = |source| FormatError::Read {
+        path: path.to_path_buf(),
+        source,
+    };
+    let bytes = budget
+        .read_file(path, &path.display().to_string())
+        .map_err(|e| match e {
+            budget::ReadError::Io(e) => io(e),
+            budget::ReadError::Over(e) => FormatError::Budget(e),
+        })?;
+    String::from_utf8(bytes).map_err(|e| {
+        io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "not UTF-8 text (byte {}): export it as UTF-8",
+                e.utf8_error().valid_up_to()
+            ),
+        ))
+    })
 }
 
 /// Reads the scans in `text` (the contents of `file`, named in errors) in `format`, taking the
@@ -226,6 +256,12 @@ pub fn import(
     // whole file (a CGATS header), or one per sample (CxF3 objects).
     let mut file_origin = None;
     let mut sample_origins = BTreeMap::new();
+    if matches!(format, Format::Cgats | Format::Csv) {
+        // What the parsers hold grows with the lines (a few kB each): bounded before parsing.
+        let lines = text.lines().count() as u64;
+        opts.budget
+            .check(budget::Limit::Records, file, "the whole file", lines)?;
+    }
     let mut obs = match format {
         Format::Cgats => {
             let t = cgats::parse(file, text)?;

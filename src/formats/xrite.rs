@@ -16,6 +16,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use super::budget::Budget;
+
 use super::xrite_xlsx::{
     self, COLORIMETRY_THRESHOLD, ColorimetryCheck, TextureImage, XlsxError, XriteExport,
     XriteMeasurement,
@@ -64,14 +66,15 @@ pub fn scans(export: &XriteExport) -> Result<Vec<XriteScan>, XlsxError> {
         .collect()
 }
 
-/// Reads an export file and turns it into scans.
-pub fn read_file(path: &Path) -> Result<Vec<XriteScan>, XlsxError> {
-    scans(&xrite_xlsx::read_file(path)?)
+/// Reads an export file within `budget` and turns it into scans.
+pub fn read_file(path: &Path, budget: &Budget) -> Result<Vec<XriteScan>, XlsxError> {
+    scans(&xrite_xlsx::read_file(path, budget)?)
 }
 
-/// Reads an export from its bytes (`file_name` is named in errors) and turns it into scans.
-pub fn read(bytes: &[u8], file_name: &str) -> Result<Vec<XriteScan>, XlsxError> {
-    scans(&xrite_xlsx::read(bytes, file_name)?)
+/// Reads an export from its bytes within `budget` (`file_name` is named in errors) and turns
+/// it into scans.
+pub fn read(bytes: &[u8], file_name: &str, budget: &Budget) -> Result<Vec<XriteScan>, XlsxError> {
+    scans(&xrite_xlsx::read(bytes, file_name, budget)?)
 }
 
 fn scan_of(export: &XriteExport, m: &XriteMeasurement, check: &ColorimetryCheck) -> Scan {
@@ -151,7 +154,12 @@ mod tests {
 
     #[test]
     fn a_real_export_becomes_an_instrument_calibration_scan_that_round_trips() {
-        let scans = read(&real("PAR_PW_RO_NG_1.xlsx"), "PAR_PW_RO_NG_1.xlsx").unwrap();
+        let scans = read(
+            &real("PAR_PW_RO_NG_1.xlsx"),
+            "PAR_PW_RO_NG_1.xlsx",
+            &Budget::default(),
+        )
+        .unwrap();
         assert_eq!(scans.len(), 1);
         let s = &scans[0];
         assert!(s.scan.reference.is_none());

@@ -39,16 +39,10 @@ use std::path::Path;
 use calamine::{Data, Range, Reader, Xlsx};
 use sha2::{Digest, Sha256};
 
+use super::budget::{Budget, Limit, OverBudget};
 use crate::colour::{Colorimetry, Lab, Observer, Weighting, ciede2000};
 use crate::geometry::{Device, MA_T12_COUNT, by_name, ma_t12};
 use crate::spectral::{BANDS, FIRST_NM, STEP_NM, Spectrum};
-
-/// The largest `.xlsx` file read (64 MiB); the real exports are 1–3 MB, mostly PNG images.
-pub const MAX_FILE_BYTES: u64 = 64 * 1024 * 1024;
-
-/// The largest uncompressed part of the archive read (64 MiB), so that a small file cannot
-/// unpack into an unbounded one.
-pub const MAX_PART_BYTES: u64 = 64 * 1024 * 1024;
 
 /// ΔE00 between X-Rite's L*a*b* and brdfd's above which a geometry is flagged by
 /// [`check_colorimetry`]: the two agree to about 1e-5 on real files (ASTM E308 weighting), so a
@@ -144,21 +138,9 @@ pub enum XlsxError {
         path: std::path::PathBuf,
         source: std::io::Error,
     },
-    #[error(
-        "{file}: {size} bytes is more than the {limit} bytes an X-Rite export is read up to \
-         (the real ones are a few MB); is this the right file?"
-    )]
-    TooLarge { file: String, size: u64, limit: u64 },
-    #[error(
-        "{file}: part \"{part}\" unpacks to {size} bytes, more than the {limit} bytes read; the \
-         file is not an X-Rite export"
-    )]
-    PartTooLarge {
-        file: String,
-        part: String,
-        size: u64,
-        limit: u64,
-    },
+    /// A part of the file is beyond the import budget.
+    #[error(transparent)]
+    Budget(#[from] OverBudget),
     #[error("{file}: not a zip archive, so not an .xlsx file ({message})")]
     NotZip { file: String, message: String },
     #[error("{file}: a zip archive but not a readable .xlsx workbook: {message}")]
@@ -201,6 +183,17 @@ pub enum XlsxError {
          at least 0"
     )]
     Negative {
+        file: String,
+        sheet: &'static str,
+        cell: String,
+        value: f64,
+    },
+    #[error(
+        "{file}: sheet \"{sheet}\", cell {cell}: {value:e} is beyond any reflectance factor an \
+         instrument reads (at most {}); the cell is corrupt",
+        crate::scan::MAX_REFLECTANCE_FACTOR
+    )]
+    Unphysical {
         file: String,
         sheet: &'static str,
         cell: String,
@@ -275,43 +268,31 @@ pub const REAL_EXPORTS: [&str; 6] = [
 /// Where [`REAL_EXPORTS`] are, in the source tree (their source in its README).
 pub const REAL_EXPORTS_DIR: &str = "tests/data/real-mat12";
 
-/// Reads the file at `path` (refused unread when larger than [`MAX_FILE_BYTES`]).
-pub fn read_file(path: &Path) -> Result<XriteExport, XlsxError> {
-    let io = |source| XlsxError::Read {
-        path: path.to_path_buf(),
-        source,
-    };
+/// Reads the file at `path` within `budget` (refused unread when larger than its file size).
+pub fn read_file(path: &Path, budget: &Budget) -> Result<XriteExport, XlsxError> {
     let name = path.file_name().map_or_else(
         || path.display().to_string(),
         |n| n.to_string_lossy().into_owned(),
     );
-    let file = std::fs::File::open(path).map_err(io)?;
-    let size = file.metadata().map_err(io)?.len();
-    if size > MAX_FILE_BYTES {
-        return Err(XlsxError::TooLarge {
-            file: name,
-            size,
-            limit: MAX_FILE_BYTES,
-        });
-    }
-    let mut bytes = Vec::with_capacity(size as usize);
-    // The file may grow while read: never take more than the cap plus one byte.
-    file.take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(io)?;
-    read(&bytes, &name)
+    let bytes = budget.read_file(path, &name).map_err(|e| match e {
+        super::budget::ReadError::Io(source) => XlsxError::Read {
+            path: path.to_path_buf(),
+            source,
+        },
+        super::budget::ReadError::Over(e) => XlsxError::Budget(e),
+    })?;
+    read(&bytes, &name, budget)
 }
 
-/// Reads an export from its bytes; `file_name` names it in errors.
-pub fn read(bytes: &[u8], file_name: &str) -> Result<XriteExport, XlsxError> {
+/// Reads an export from its bytes within `budget`; `file_name` names it in errors.
+pub fn read(bytes: &[u8], file_name: &str, budget: &Budget) -> Result<XriteExport, XlsxError> {
     let file = file_name.to_string();
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(XlsxError::TooLarge {
-            file,
-            size: bytes.len() as u64,
-            limit: MAX_FILE_BYTES,
-        });
-    }
+    budget.check(
+        Limit::FileBytes,
+        &file,
+        "the whole file",
+        bytes.len() as u64,
+    )?;
     let mut zip = zip::ZipArchive::new(Cursor::new(bytes)).map_err(|e| XlsxError::NotZip {
         file: file.clone(),
         message: e.to_string(),
@@ -321,13 +302,26 @@ pub fn read(bytes: &[u8], file_name: &str) -> Result<XriteExport, XlsxError> {
             file: file.clone(),
             message: e.to_string(),
         })?;
-        if entry.size() > MAX_PART_BYTES {
-            return Err(XlsxError::PartTooLarge {
-                file: file.clone(),
-                part: entry.name().map(|n| n.into_owned()).unwrap_or_default(),
-                size: entry.size(),
-                limit: MAX_PART_BYTES,
-            });
+        let part = format!(
+            "part \"{}\"",
+            entry.name().map(|n| n.into_owned()).unwrap_or_default()
+        );
+        budget.check(Limit::PartBytes, &file, &part, entry.size())?;
+    }
+    let mut parts = Parts {
+        file: &file,
+        zip: &mut zip,
+        budget,
+        images: BTreeMap::new(),
+    };
+    // What the spreadsheet reader will hold is checked before it reads anything: the shared
+    // strings it reads whole, and the bounding box of each sheet it is asked for, which it
+    // allocates as a dense grid.
+    let workbook = parts.workbook()?;
+    parts.check_shared_strings()?;
+    for name in [COLOR_SHEET, SPECTRAL_SHEET, TEXTURE_IMAGES_SHEET] {
+        if let Some(part) = workbook.sheets.get(name) {
+            parts.check_sheet(name, part)?;
         }
     }
     let not_xlsx = |message: String| XlsxError::NotXlsx {
@@ -371,12 +365,6 @@ pub fn read(bytes: &[u8], file_name: &str) -> Result<XriteExport, XlsxError> {
     let spectral = sheet(SPECTRAL_SHEET, true)?.expect("required");
     let images_sheet = sheet(TEXTURE_IMAGES_SHEET, false)?;
     drop(book);
-
-    let mut parts = Parts {
-        file: &file,
-        zip: &mut zip,
-    };
-    let workbook = parts.workbook()?;
 
     let s_meta = spectral.metadata()?;
     let c_meta = color.metadata()?;
@@ -502,19 +490,20 @@ pub fn check_colorimetry(m: &XriteMeasurement) -> Result<ColorimetryCheck, XlsxE
 
 /// `A1`-style name of a 0-based cell position.
 fn cell_name(row: u32, col: u32) -> String {
+    cell_name_u64(u64::from(row) + 1, u64::from(col) + 1)
+}
+
+/// `A1`-style name of a 1-based cell position.
+fn cell_name_u64(row: u64, col: u64) -> String {
     let mut letters = Vec::new();
-    let mut c = col as u64 + 1;
+    let mut c = col;
     while c > 0 {
         let r = ((c - 1) % 26) as u8;
         letters.push(b'A' + r);
         c = (c - 1) / 26;
     }
     letters.reverse();
-    format!(
-        "{}{}",
-        String::from_utf8(letters).expect("ASCII"),
-        row as u64 + 1
-    )
+    format!("{}{row}", String::from_utf8(letters).expect("ASCII"))
 }
 
 /// The labelled rows above a sheet's header.
@@ -896,6 +885,14 @@ impl Sheet {
                         value: v,
                     });
                 }
+                if !crate::scan::physical_reflectance_factor(v) {
+                    return Err(XlsxError::Unphysical {
+                        file: self.file.clone(),
+                        sheet: self.name,
+                        cell: cell_name(row, col),
+                        value: v,
+                    });
+                }
                 spectrum[b] = v;
             }
             let i = match out.iter().position(|m| m.at == when.at && m.name == name) {
@@ -1108,6 +1105,9 @@ struct Workbook {
 struct Parts<'a, 'b> {
     file: &'a str,
     zip: &'a mut zip::ZipArchive<Cursor<&'b [u8]>>,
+    budget: &'a Budget,
+    /// Each image part as read, once however many anchors point at it.
+    images: BTreeMap<String, std::rc::Rc<Vec<u8>>>,
 }
 
 const REL_NS: &str = "http://schemas.openxmlformats.org/officeDocument/2006/relationships";
@@ -1120,41 +1120,134 @@ impl Parts<'_, '_> {
         }
     }
 
-    /// The part's bytes; `None` when the archive has no such part.
-    fn bytes(&mut self, part: &str) -> Result<Option<Vec<u8>>, XlsxError> {
+    /// The part's bytes, read up to `limit`'s allowance (a part that unpacks to more is
+    /// refused, whatever size the archive declares); `None` when the archive has no such part.
+    fn bytes(&mut self, part: &str, limit: Limit) -> Result<Option<Vec<u8>>, XlsxError> {
         let file = self.file;
         let not_xlsx = |e: &dyn std::fmt::Display| XlsxError::NotXlsx {
             file: file.to_string(),
             message: format!("part \"{part}\": {e}"),
         };
+        let allowed = self.budget.allowed(limit);
         let mut f = match self.zip.by_name(part) {
             Ok(f) => f,
             Err(zip::result::ZipError::FileNotFound) => return Ok(None),
             Err(e) => return Err(not_xlsx(&e)),
         };
-        let mut out = Vec::new();
-        if let Err(e) = (&mut f).take(MAX_PART_BYTES + 1).read_to_end(&mut out) {
+        self.budget
+            .check(limit, file, &format!("part \"{part}\""), f.size())?;
+        let mut out = Vec::with_capacity(f.size() as usize);
+        if let Err(e) = (&mut f).take(allowed + 1).read_to_end(&mut out) {
             return Err(not_xlsx(&e));
         }
         drop(f);
-        if out.len() as u64 > MAX_PART_BYTES {
-            return Err(XlsxError::PartTooLarge {
-                file: self.file.to_string(),
-                part: part.to_string(),
-                size: out.len() as u64,
-                limit: MAX_PART_BYTES,
-            });
-        }
+        self.budget
+            .check(limit, file, &format!("part \"{part}\""), out.len() as u64)?;
         Ok(Some(out))
     }
 
     fn text(&mut self, part: &str) -> Result<Option<String>, XlsxError> {
-        match self.bytes(part)? {
+        match self.bytes(part, Limit::MarkupBytes)? {
             None => Ok(None),
             Some(b) => String::from_utf8(b)
                 .map(Some)
                 .map_err(|_| self.not_xlsx(format!("part \"{part}\" is not UTF-8 XML"))),
         }
+    }
+
+    /// The shared strings (every part of the archive named so, whichever the workbook
+    /// points at): at most the markup allowance in all, a declared and a held count within
+    /// the budget, and no string longer than the text allowance.
+    fn check_shared_strings(&mut self) -> Result<(), XlsxError> {
+        let names: Vec<String> = self
+            .zip
+            .file_names()
+            .filter_map(|n| n.ok())
+            .filter(|n| n.to_ascii_lowercase().ends_with("sharedstrings.xml"))
+            .map(|n| n.into_owned())
+            .collect();
+        for part in names {
+            let Some(xml) = self.bytes(&part, Limit::MarkupBytes)? else {
+                continue;
+            };
+            let what = format!("part \"{part}\"");
+            let mut held = 0u64;
+            let mut open = None;
+            for tag in tags(&xml) {
+                match (tag.local, tag.closing) {
+                    (b"sst", false) => {
+                        for key in [&b"uniqueCount"[..], b"count"] {
+                            if let Some(n) = tag.attribute(key) {
+                                let n = parse_u64(n).unwrap_or(u64::MAX);
+                                self.budget
+                                    .check(Limit::SharedStrings, self.file, &what, n)?;
+                            }
+                        }
+                    }
+                    (b"si", false) => {
+                        held += 1;
+                        self.budget
+                            .check(Limit::SharedStrings, self.file, &what, held)?;
+                        open = Some(tag.end);
+                    }
+                    (b"si", true) => {
+                        if let Some(start) = open.take() {
+                            self.budget.check(
+                                Limit::TextBytes,
+                                self.file,
+                                &format!("{what}, shared string {}", held - 1),
+                                tag.start.saturating_sub(start) as u64,
+                            )?;
+                        }
+                    }
+                    _ => {}
+                }
+            }
+            if let Some(start) = open {
+                self.budget.check(
+                    Limit::TextBytes,
+                    self.file,
+                    &format!("{what}, shared string {}", held - 1),
+                    (xml.len() - start) as u64,
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Sheet `name` (part `part`): its declared dimension, and the bounding box and count of
+    /// the cells it holds, within the sheet-cells allowance.
+    fn check_sheet(&mut self, name: &str, part: &str) -> Result<(), XlsxError> {
+        let Some(xml) = self.bytes(part, Limit::PartBytes)? else {
+            return Ok(());
+        };
+        let e = Extent::of(&xml);
+        let what = |detail: &str| format!("sheet \"{name}\" ({detail})");
+        if let Some((rows, cols)) = e.declared {
+            self.budget.check(
+                Limit::SheetCells,
+                self.file,
+                &what(&format!(
+                    "declared dimension of {rows} rows × {cols} columns"
+                )),
+                rows.saturating_mul(cols),
+            )?;
+        }
+        self.budget
+            .check(Limit::SheetCells, self.file, &what("cells held"), e.cells)?;
+        if let Some((rows, cols)) = e.bounding_box() {
+            let last = cell_name_u64(e.rows.1, e.cols.1);
+            self.budget.check(
+                Limit::SheetCells,
+                self.file,
+                &what(&format!(
+                    "{} cells spread over {rows} rows × {cols} columns, to cell {last}",
+                    e.cells
+                )),
+                rows.saturating_mul(cols),
+            )?;
+        }
+        Ok(())
     }
 
     fn with_xml<T>(
@@ -1279,9 +1372,20 @@ impl Parts<'_, '_> {
             })?
             .ok_or_else(|| me.not_xlsx(format!("no part \"{drawing}\"")))?;
 
-        // Headings: rows with column A empty and text in column B.
+        let images = anchors.len() as u64;
+        let what = format!("sheet \"{}\" ({images} image anchors)", sheet.name);
+        me.budget.check(Limit::Images, me.file, &what, images)?;
+
+        // Headings: rows with column A empty and text in column B, found in one pass over the
+        // sheet (whose rows the budget bounds); an anchor's is the last one above it.
         let label_col = 0;
+        let headings: Vec<(u32, String)> = sheet
+            .rows()
+            .filter(|&r| sheet.text(r, label_col).is_none())
+            .filter_map(|r| sheet.text(r, label_col + 1).map(|h| (r, h)))
+            .collect();
         let mut out = Vec::with_capacity(anchors.len());
+        let mut total = 0u64;
         for (row, col, embed) in anchors {
             let anchor = cell_name(row, col);
             let geometry = sheet.text(row, label_col).ok_or_else(|| {
@@ -1293,13 +1397,8 @@ impl Parts<'_, '_> {
                     ),
                 )
             })?;
-            let heading = (0..row).rev().find_map(|r| {
-                sheet
-                    .text(r, label_col)
-                    .is_none()
-                    .then(|| sheet.text(r, label_col + 1))
-                    .flatten()
-            });
+            let above = headings.partition_point(|(r, _)| *r < row);
+            let heading = above.checked_sub(1).map(|i| headings[i].1.clone());
             let image = embed
                 .as_ref()
                 .and_then(|id| rels.get(id))
@@ -1307,26 +1406,264 @@ impl Parts<'_, '_> {
                 .ok_or_else(|| {
                     sheet.cell_error(row, col, "the image anchored here has no image part")
                 })?;
-            let png = me.bytes(&image)?.ok_or_else(|| {
+            let png = me.image(&image)?.ok_or_else(|| {
                 sheet.cell_error(row, col, format!("the image part \"{image}\" is missing"))
             })?;
-            if !png.starts_with(b"\x89PNG\r\n\x1a\n") {
+            total += png.len() as u64;
+            me.budget.check(
+                Limit::ImagesBytes,
+                me.file,
+                &format!(
+                    "sheet \"{}\", the images up to the one anchored in {anchor}",
+                    sheet.name
+                ),
+                total,
+            )?;
+            let Some((width, height)) = png_size(&png) else {
                 return Err(sheet.cell_error(
                     row,
                     col,
                     format!("the image anchored here (\"{image}\") is not a PNG"),
                 ));
-            }
+            };
+            me.budget.check(
+                Limit::ImagePixels,
+                me.file,
+                &format!("image \"{image}\" of {width} × {height} pixels, anchored in {anchor}"),
+                u64::from(width) * u64::from(height),
+            )?;
             out.push((
                 heading,
                 TextureImage {
                     geometry,
                     anchor,
-                    png,
+                    png: png.as_ref().clone(),
                 },
             ));
         }
         Ok(out)
+    }
+
+    /// An image part, read once (within the image-size allowance) however many anchors point
+    /// at it; `None` when the archive has no such part.
+    fn image(&mut self, part: &str) -> Result<Option<std::rc::Rc<Vec<u8>>>, XlsxError> {
+        if let Some(png) = self.images.get(part) {
+            return Ok(Some(png.clone()));
+        }
+        let Some(png) = self.bytes(part, Limit::ImageBytes)? else {
+            return Ok(None);
+        };
+        let png = std::rc::Rc::new(png);
+        self.images.insert(part.to_string(), png.clone());
+        Ok(Some(png))
+    }
+}
+
+/// A PNG's width and height as its IHDR chunk declares them; `None` when `png` is no PNG.
+fn png_size(png: &[u8]) -> Option<(u32, u32)> {
+    if !png.starts_with(b"\x89PNG\r\n\x1a\n") || png.get(12..16)? != b"IHDR" {
+        return None;
+    }
+    let be = |at: usize| -> Option<u32> {
+        Some(u32::from_be_bytes(png.get(at..at + 4)?.try_into().ok()?))
+    };
+    Some((be(16)?, be(20)?))
+}
+
+/// One tag of an XML part, as the budget checks scan it (without building a document):
+/// its local name, whether it closes an element, its attributes' text and its byte span.
+struct Tag<'a> {
+    local: &'a [u8],
+    closing: bool,
+    attrs: &'a [u8],
+    start: usize,
+    end: usize,
+}
+
+impl<'a> Tag<'a> {
+    /// The value of the attribute named `key` (without a prefix), if the tag has it.
+    fn attribute(&self, key: &[u8]) -> Option<&'a [u8]> {
+        let a = self.attrs;
+        let mut i = 0;
+        while i < a.len() {
+            while i < a.len() && (a[i].is_ascii_whitespace() || a[i] == b'/') {
+                i += 1;
+            }
+            let name_start = i;
+            while i < a.len() && a[i] != b'=' && !a[i].is_ascii_whitespace() {
+                i += 1;
+            }
+            let name = &a[name_start..i];
+            while i < a.len() && (a[i].is_ascii_whitespace() || a[i] == b'=') {
+                i += 1;
+            }
+            let quote = *a.get(i)?;
+            if quote != b'"' && quote != b'\'' {
+                return None;
+            }
+            let value_start = i + 1;
+            let len = a[value_start..].iter().position(|&b| b == quote)?;
+            i = value_start + len + 1;
+            if name == key {
+                return Some(&a[value_start..value_start + len]);
+            }
+        }
+        None
+    }
+}
+
+/// The tags of `xml` in document order (comments, CDATA, declarations and processing
+/// instructions skipped).
+fn tags(xml: &[u8]) -> impl Iterator<Item = Tag<'_>> {
+    let mut at = 0;
+    std::iter::from_fn(move || {
+        loop {
+            let lt = at + xml.get(at..)?.iter().position(|&b| b == b'<')?;
+            let rest = &xml[lt + 1..];
+            if rest.starts_with(b"![CDATA[") || rest.starts_with(b"!--") {
+                let close: &[u8] = if rest[1] == b'[' { b"]]>" } else { b"-->" };
+                at = find(&xml[lt..], close).map_or(xml.len(), |i| lt + i + close.len());
+                continue;
+            }
+            let gt = lt + xml[lt..].iter().position(|&b| b == b'>')?;
+            at = gt + 1;
+            let inner = &xml[lt + 1..gt];
+            if matches!(inner.first(), Some(b'?' | b'!')) {
+                continue;
+            }
+            let closing = inner.first() == Some(&b'/');
+            let body = if closing { &inner[1..] } else { inner };
+            let name_end = body
+                .iter()
+                .position(|b| b.is_ascii_whitespace() || *b == b'/')
+                .unwrap_or(body.len());
+            let name = &body[..name_end];
+            let local = name.rsplit(|&b| b == b':').next().unwrap_or(name);
+            return Some(Tag {
+                local,
+                closing,
+                attrs: &body[name_end..],
+                start: lt,
+                end: gt + 1,
+            });
+        }
+    })
+}
+
+fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
+    hay.windows(needle.len()).position(|w| w == needle)
+}
+
+/// A decimal number; `None` when it is not one (an overflow saturates).
+fn parse_u64(text: &[u8]) -> Option<u64> {
+    let t = text.trim_ascii();
+    if t.is_empty() || !t.iter().all(u8::is_ascii_digit) {
+        return None;
+    }
+    Some(t.iter().fold(0u64, |n, d| {
+        n.saturating_mul(10).saturating_add(u64::from(d - b'0'))
+    }))
+}
+
+/// An `A1`-style reference as 1-based (row, column): `None` for the row when it has no
+/// digits; `None` when it is no reference.
+fn parse_reference(text: &[u8]) -> Option<(Option<u64>, u64)> {
+    let t = text.trim_ascii();
+    let t = t.strip_prefix(b"$").unwrap_or(t);
+    let letters = t.iter().take_while(|b| b.is_ascii_alphabetic()).count();
+    if letters == 0 {
+        return None;
+    }
+    let col = t[..letters].iter().fold(0u64, |n, b| {
+        n.saturating_mul(26)
+            .saturating_add(u64::from(b.to_ascii_uppercase() - b'A' + 1))
+    });
+    let digits = &t[letters..];
+    let digits = digits.strip_prefix(b"$").unwrap_or(digits);
+    let row = if digits.is_empty() {
+        None
+    } else {
+        Some(parse_u64(digits)?)
+    };
+    Some((row, col))
+}
+
+/// What a sheet part declares and holds, as the spreadsheet reader will place it.
+#[derive(Debug, Default, PartialEq)]
+struct Extent {
+    /// The `<dimension ref>`: rows × columns.
+    declared: Option<(u64, u64)>,
+    /// The `<c>` elements.
+    cells: u64,
+    /// First and last row (1-based) of a cell.
+    rows: (u64, u64),
+    /// First and last column (1-based) of a cell.
+    cols: (u64, u64),
+}
+
+impl Extent {
+    fn of(xml: &[u8]) -> Extent {
+        let mut e = Extent {
+            rows: (u64::MAX, 0),
+            cols: (u64::MAX, 0),
+            ..Extent::default()
+        };
+        let (mut row, mut col) = (0u64, 0u64);
+        for tag in tags(xml) {
+            if tag.closing {
+                continue;
+            }
+            match tag.local {
+                b"dimension" => {
+                    let Some(r) = tag.attribute(b"ref") else {
+                        continue;
+                    };
+                    let mut ends = r.split(|&b| b == b':').filter_map(parse_reference);
+                    if let Some((r1, c1)) = ends.next() {
+                        let (r2, c2) = ends.next().unwrap_or((r1, c1));
+                        let (r1, r2) = (r1.unwrap_or(1), r2.unwrap_or(1));
+                        e.declared = Some((
+                            r1.abs_diff(r2).saturating_add(1),
+                            c1.abs_diff(c2).saturating_add(1),
+                        ));
+                    }
+                }
+                b"row" => {
+                    row = match tag.attribute(b"r") {
+                        Some(r) => parse_u64(r).unwrap_or(u64::MAX),
+                        None => row.saturating_add(1),
+                    };
+                    col = 0;
+                }
+                b"c" => {
+                    match tag.attribute(b"r").and_then(parse_reference) {
+                        Some((r, c)) => {
+                            if let Some(r) = r {
+                                row = r;
+                            }
+                            col = c;
+                        }
+                        None => col = col.saturating_add(1),
+                    }
+                    let r = row.max(1);
+                    e.cells += 1;
+                    e.rows = (e.rows.0.min(r), e.rows.1.max(r));
+                    e.cols = (e.cols.0.min(col), e.cols.1.max(col));
+                }
+                _ => {}
+            }
+        }
+        e
+    }
+
+    /// Rows × columns of the cells' bounding box; `None` without cells.
+    fn bounding_box(&self) -> Option<(u64, u64)> {
+        (self.cells > 0).then(|| {
+            (
+                self.rows.1 - self.rows.0 + 1,
+                self.cols.1.saturating_sub(self.cols.0).saturating_add(1),
+            )
+        })
     }
 }
 
@@ -1359,6 +1696,15 @@ fn normalise<'a>(parts: impl Iterator<Item = &'a str>) -> String {
 mod tests {
     use super::*;
     use std::io::Write;
+
+    /// The reader with the shipped budget.
+    pub(super) fn read(bytes: &[u8], name: &str) -> Result<XriteExport, XlsxError> {
+        super::read(bytes, name, &Budget::default())
+    }
+
+    pub(super) fn read_file(path: &Path) -> Result<XriteExport, XlsxError> {
+        super::read_file(path, &Budget::default())
+    }
 
     pub(super) fn path(name: &str) -> std::path::PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -1784,13 +2130,195 @@ mod tests {
             .unwrap();
         let e = read_file(&big).unwrap_err().to_string();
         assert!(
-            e.starts_with("big.xlsx: 209715200 bytes is more than"),
+            e.starts_with("big.xlsx: the whole file: 209715200 bytes is beyond the import limit"),
             "{e}"
         );
         let e = read_file(&dir.path().join("none.xlsx"))
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("cannot read"), "{e}");
+    }
+
+    #[test]
+    fn a_cell_far_out_is_refused_before_the_grid_is_built() {
+        // One cell in the last row and column of a sheet: calamine would allocate 1,048,576 ×
+        // 16,384 cells for it.
+        for (cell, part) in [("XFD1048576", SPECTRAL), ("Z1000000", COLOR)] {
+            let b = edited(REGULAR, part, |x| {
+                x.replace(
+                    "</sheetData>",
+                    &format!(
+                        r#"<row r="{0}"><c r="{1}{0}"><v>1</v></c></row></sheetData>"#,
+                        cell.trim_start_matches(char::is_alphabetic),
+                        cell.trim_end_matches(|c: char| c.is_ascii_digit())
+                    ),
+                )
+            });
+            let e = err(&b);
+            assert!(
+                e.starts_with("PAR_x.xlsx: sheet \"")
+                    && e.contains(&format!("to cell {cell})"))
+                    && e.contains("the import limit \"sheet cells\" of 250000 cells")
+                    && e.contains("ingest.max_sheet_cells"),
+                "{e}"
+            );
+        }
+        // A declared dimension of the whole sheet, and cells without references that run on.
+        let b = edited(REGULAR, SPECTRAL, |x| {
+            let d = x.find("<dimension ").unwrap();
+            let e = d + x[d..].find("/>").unwrap() + 2;
+            format!("{}<dimension ref=\"A1:XFD1048576\"/>{}", &x[..d], &x[e..])
+        });
+        let e = err(&b);
+        assert!(
+            e.contains("declared dimension of 1048576 rows × 16384 columns"),
+            "{e}"
+        );
+        let b = edited(REGULAR, SPECTRAL, |x| {
+            x.replace(
+                "</sheetData>",
+                &format!("<row>{}</row></sheetData>", "<c/>".repeat(300_000)),
+            )
+        });
+        assert!(err(&b).contains("(cells held): 30"), "{}", err(&b));
+        // The padded real file (1,000 rows) is well inside.
+        let x = unzip(&bytes("PAR_NB_NP_CC_0.xlsx"));
+        let sheet = &x.iter().find(|(n, _)| n == SPECTRAL).unwrap().1;
+        let e = Extent::of(sheet);
+        let (rows, cols) = e.bounding_box().unwrap();
+        assert!(rows <= 1_000 && cols < 40, "{e:?}");
+    }
+
+    #[test]
+    fn extents_follow_the_references_as_the_reader_places_cells() {
+        let e = Extent::of(
+            br#"<x:worksheet><x:dimension ref="B2:C3"/><x:sheetData><x:row r="2"><x:c r="B2"/><x:c/></x:row><row><c r='$d$4'><v>1</v></c></row><!-- <c r="Z99"/> --></x:sheetData></x:worksheet>"#,
+        );
+        assert_eq!(e.declared, Some((2, 2)));
+        assert_eq!((e.cells, e.rows, e.cols), (3, (2, 4), (2, 4)));
+        assert_eq!(e.bounding_box(), Some((3, 3)));
+        assert_eq!(
+            parse_reference(b"XFD1048576"),
+            Some((Some(1_048_576), 16_384))
+        );
+        assert_eq!(cell_name_u64(1_048_576, 16_384), "XFD1048576");
+    }
+
+    #[test]
+    fn shared_strings_and_values_beyond_the_budget_are_refused_naming_them() {
+        let sst = "xl/sharedStrings.xml";
+        let long = "x".repeat(5_000);
+        let b = edited(REGULAR, sst, |x| {
+            x.replacen("<t>", &format!("<t>{long}"), 1)
+        });
+        let e = err(&b);
+        assert!(
+            e.contains("part \"xl/sharedStrings.xml\", shared string 0: 50")
+                && e.contains("\"text size\" of 4096 bytes"),
+            "{e}"
+        );
+        let b = edited(REGULAR, sst, |x| {
+            let at = x.find("uniqueCount=\"").unwrap() + 13;
+            let end = at + x[at..].find('"').unwrap();
+            format!("{}4000000000{}", &x[..at], &x[end..])
+        });
+        assert!(
+            err(&b).contains("4000000000 strings is beyond"),
+            "{}",
+            err(&b)
+        );
+        let b = edited(REGULAR, SPECTRAL, |x| {
+            set_cell(x, "D7", r#"<c r="D7" s="3"><v>1e308</v></c>"#)
+        });
+        let e = err(&b);
+        assert!(
+            e.starts_with(
+                "PAR_x.xlsx: sheet \"Spectral Data\", cell D7: 1e308 is beyond any reflectance"
+            ),
+            "{e}"
+        );
+        // In the hundreds (a glossy sample near specular) is a reading.
+        let b = edited(REGULAR, SPECTRAL, |x| {
+            set_cell(x, "D7", r#"<c r="D7" s="3"><v>350.5</v></c>"#)
+        });
+        assert_eq!(
+            read(&b, "x.xlsx").unwrap().measurements[0].spectra[3][0],
+            350.5
+        );
+    }
+
+    #[test]
+    fn images_are_read_once_and_bounded_in_number_size_and_pixels() {
+        const DRAWING: &str = "xl/drawings/drawing1.xml";
+        // Every anchor points at the first anchor's image: read once, seven copies kept.
+        let first_embed = |x: &str| {
+            let at = x.find("r:embed=\"").unwrap() + 9;
+            x[at..at + x[at..].find('"').unwrap()].to_string()
+        };
+        let b = edited(REGULAR, DRAWING, |x| {
+            let id = first_embed(&x);
+            let mut out = x.clone();
+            for i in 1..=7 {
+                out = out.replace(&format!("r:embed=\"rId{i}\""), &format!("r:embed=\"{id}\""));
+            }
+            out
+        });
+        let x = read(&b, "x.xlsx").unwrap();
+        let t = &x.measurements[0].textures;
+        assert!(t.len() == 7 && t.iter().all(|i| i.png == t[0].png));
+        // 65 anchors.
+        let b = edited(REGULAR, DRAWING, |x| {
+            let s = x
+                .find("<xdr:twoCellAnchor")
+                .or_else(|| x.find("<xdr:oneCellAnchor"))
+                .unwrap();
+            let close = if x[s..].starts_with("<xdr:two") {
+                "</xdr:twoCellAnchor>"
+            } else {
+                "</xdr:oneCellAnchor>"
+            };
+            let e = s + x[s..].find(close).unwrap() + close.len();
+            format!("{}{}{}", &x[..e], x[s..e].repeat(58), &x[e..])
+        });
+        let e = err(&b);
+        assert!(
+            e.contains("(65 image anchors): 65 images is beyond")
+                && e.contains("ingest.max_images"),
+            "{e}"
+        );
+        // A PNG that declares 100,000 × 100,000 pixels.
+        let mut parts = unzip(&bytes(REGULAR));
+        let png = &mut parts
+            .iter_mut()
+            .find(|(n, _)| n == "xl/media/image1.png")
+            .unwrap()
+            .1;
+        png[16..24].copy_from_slice(&[0, 1, 0x86, 0xa0, 0, 1, 0x86, 0xa0]);
+        let e = err(&rezip(&parts));
+        assert!(
+            e.contains("of 100000 × 100000 pixels") && e.contains("ingest.max_image_megapixels"),
+            "{e}"
+        );
+        // The images' bytes together, and each part's.
+        let small = Budget {
+            max_images_bytes: 1 << 20,
+            ..Budget::default()
+        };
+        let e = super::read(&bytes(REGULAR), "x.xlsx", &small)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("\"images size per file\""), "{e}");
+        let small = Budget {
+            max_image_bytes: 100_000,
+            ..Budget::default()
+        };
+        let e = super::read(&bytes(REGULAR), "x.xlsx", &small)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("\"image size\" of 100000 bytes") && e.contains("xl/media/"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -1817,7 +2345,7 @@ mod tests {
 mod proptests {
     use std::sync::LazyLock;
 
-    use super::tests::{bytes, rezip, unzip};
+    use super::tests::{bytes, read, rezip, unzip};
     use super::*;
     use proptest::prelude::*;
 

@@ -98,8 +98,8 @@ pub struct IngestSettings {
     pub pair_wait: Duration,
     /// In an instrument's export, the object with this name is the reference tile.
     pub reference: String,
-    /// The largest file read.
-    pub max_file_bytes: u64,
+    /// The limits every file is read within (its file size: the largest file read).
+    pub budget: crate::formats::budget::Budget,
 }
 
 impl IngestSettings {
@@ -110,7 +110,7 @@ impl IngestSettings {
             poll: c.poll,
             pair_wait: c.pair_wait,
             reference: c.reference.clone(),
-            max_file_bytes: c.max_file_bytes,
+            budget: c.budget,
         })
     }
 }
@@ -411,8 +411,8 @@ fn read_limits(
         .into_iter()
         .map(|name| match dir.entry(name) {
             Ok(Some(e)) => Ok(ReadLimit {
-                bytes: e.size.min(settings.max_file_bytes),
-                max_file: settings.max_file_bytes,
+                bytes: e.size.min(settings.budget.max_file_bytes),
+                max_file: settings.budget.max_file_bytes,
             }),
             Ok(None) => Err(format!("{name} is gone from the watch folder")),
             Err(e) => Err(format!("{name}: {e}")),
@@ -452,6 +452,7 @@ fn read_unit(
     unit: &Unit,
     reference: &str,
     limits: &[ReadLimit],
+    budget: &crate::formats::budget::Budget,
 ) -> Result<UnitContent, String> {
     let main = read_held(dir, &unit.main, limits[0])?;
     let partner = match &unit.partner {
@@ -471,7 +472,8 @@ fn read_unit(
     let scans = match kind {
         Kind::ScanFile => vec![Scan::from_json(&main).map_err(|e| format!("{}: {e}", unit.main))?],
         Kind::XriteXlsx => {
-            let scans = formats::xrite::read(&main, &unit.main).map_err(|e| e.to_string())?;
+            let scans =
+                formats::xrite::read(&main, &unit.main, budget).map_err(|e| e.to_string())?;
             for s in &scans {
                 if let Some(w) = s.warning() {
                     tracing::warn!(file = %unit.main, "{w}");
@@ -500,6 +502,7 @@ fn read_unit(
                 sra.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
                 &ImportOptions {
                     reference: reference.to_string(),
+                    budget: *budget,
                 },
             )
             .map_err(|e| {
@@ -1117,14 +1120,17 @@ impl WatchFolder {
             let limits = limits.to_vec();
             let unit = unit.clone();
             let reference = settings.reference.clone();
+            let budget = settings.budget;
             let dir = f
                 .importing
                 .try_clone()
                 .map_err(|e| Failure::Retry(e.to_string()))?;
-            tokio::task::spawn_blocking(move || read_unit(&dir, &unit, &reference, &limits))
-                .await
-                .map_err(|e| Failure::Retry(format!("reading the file failed: {e}")))?
-                .map_err(Failure::Rejected)?
+            tokio::task::spawn_blocking(move || {
+                read_unit(&dir, &unit, &reference, &limits, &budget)
+            })
+            .await
+            .map_err(|e| Failure::Retry(format!("reading the file failed: {e}")))?
+            .map_err(Failure::Rejected)?
         };
         for s in &scans {
             check_name("sample name", &s.sample)

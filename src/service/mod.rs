@@ -79,7 +79,7 @@ pub use error::ServiceError;
 pub use events::{Event, EventBus, ReadingShown};
 pub use fit_worker::{FitFn, FitJob, default_fit_fn};
 pub use ingest::{IngestSettings, IngestStatus};
-pub use pipeline::{IMPORTED_SUFFIX, imported_provenance, scan_from_detail};
+pub use pipeline::{IMPORTED_SUFFIX, check_name, imported_provenance, scan_from_detail};
 
 use acquisition::Acquisition;
 use context::Context;
@@ -119,6 +119,8 @@ pub struct ServiceSettings {
     pub bootstrap: u32,
     /// The watch folder (`[ingest]`); `None`: none.
     pub ingest: Option<IngestSettings>,
+    /// The limits every imported file is read within (`[ingest]`), whatever its door.
+    pub budget: crate::formats::budget::Budget,
     /// The import bodies held in memory at once, in bytes (`[ingest] max_held_mib`).
     pub max_held_import_bytes: u64,
 }
@@ -144,6 +146,7 @@ impl ServiceSettings {
             colorimetry: config.colour,
             bootstrap: config.fit.bootstrap,
             ingest: IngestSettings::from_config(&config.ingest),
+            budget: config.ingest.budget,
             max_held_import_bytes: config.ingest.max_held_bytes,
         }
     }

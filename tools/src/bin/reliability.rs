@@ -79,7 +79,9 @@ fn real(mut out: Vec<(String, f64, MeasuredBrdf)>) -> Vec<(String, f64, Measured
         .collect();
     files.sort();
     for path in files {
-        for x in brdfd::formats::xrite::read_file(&path).expect("the real exports read") {
+        for x in brdfd::formats::xrite::read_file(&path, &Default::default())
+            .expect("the real exports read")
+        {
             let m = process(&x.scan, &ProcessingOptions::default()).expect("real scans process");
             // Noise unknown: the real residual is the point.
             out.push((format!("real:{}", x.scan.sample), f64::NAN, m));
