@@ -42,7 +42,9 @@ fn exports() -> Vec<(String, MeasuredBrdf)> {
     };
     let mut out = Vec::new();
     for path in list(&root).into_iter().chain(list(&root.join("more"))) {
-        for x in brdfd::formats::xrite::read_file(&path).expect("the real exports read") {
+        for x in brdfd::formats::xrite::read_file(&path, &Default::default())
+            .expect("the real exports read")
+        {
             let m = process(&x.scan, &ProcessingOptions::default()).expect("real scans process");
             out.push((x.scan.sample.clone(), m));
         }
