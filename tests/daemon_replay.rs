@@ -39,6 +39,15 @@ fn demo_replays_the_recordings_into_a_local_store_and_runs_twice() {
         .collect();
     assert_eq!(rows.len(), 24, "{out}");
     assert!(out.contains("diffuse") && out.contains("specular"));
+    // Which SRA reading model it ran under, and what its specular ΔE00 means.
+    assert!(
+        out.contains("SRA reading model: flat (the paper's"),
+        "{out}"
+    );
+    assert!(
+        out.contains("specular: ΔE00 at sra-20 and sra-60 against the grey spectrum"),
+        "{out}"
+    );
     assert!(out.contains("database: brdfd-demo/brdfd.db (new"), "{out}");
     assert!(out.contains("outputs: brdfd-demo/report.txt"), "{out}");
     assert!(out.contains("timing:") && out.contains("store") && out.contains("fitting"));

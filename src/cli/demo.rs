@@ -254,7 +254,18 @@ pub fn summary(result: &DemoResult) -> String {
         result.method,
         result.seed
     );
+    let _ = writeln!(
+        t,
+        "SRA reading model: flat (the paper's: each SRA reading spread into a grey spectrum); \
+         `brdfd serve` fits under [fit] sra = \"luminance\" by default, so the same recording's \
+         ΔE00 differs there (SCIENCE.md §12.2)"
+    );
     let _ = writeln!(t, "mean ΔE00 between measured and fitted colour per sample");
+    let _ = writeln!(
+        t,
+        "specular: ΔE00 at sra-20 and sra-60 against the grey spectrum the SRA reading is spread \
+         into (the paper's metric, not a colour measured there); `brdfd show` adds |ΔL*|"
+    );
     let _ = writeln!(
         t,
         "{:<20} {:>4} {:<4} {:>9} {:>9} {:>9} {:>10} {:>9}",

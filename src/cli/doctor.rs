@@ -503,7 +503,7 @@ fn central_check(config: &Config) -> Check {
         Err(e) => {
             use crate::sync::SyncError;
             let fix = match &e {
-                SyncError::Forked { .. } | SyncError::StoreBehind { .. } => format!(
+                SyncError::Forked { .. } => format!(
                     "this store is a copy of station \"{}\"'s store: stop its daemon, run \
                      `brdfd sync --db {} --adopt NEW_ID` and set [station] id = \"NEW_ID\"; or, \
                      to make it the station (a bench moved to a new PC), stop the old store's \

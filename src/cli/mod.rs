@@ -147,7 +147,6 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
     for cause in err.chain() {
         if let Some(
             SyncError::Forked { .. }
-            | SyncError::StoreBehind { .. }
             | SyncError::StationTaken { .. }
             | SyncError::StoreHasOtherId { .. }
             | SyncError::Retire { .. }

@@ -148,7 +148,7 @@ impl Store {
         adopt_reworded_migrations(&pools.writer).await?;
         MIGRATOR.run(&pools.writer).await?;
         // A writer opened it: a new incarnation of the store (lineage.rs).
-        lineage::begin_incarnation(&pools.writer).await?;
+        lineage::begin_incarnation(&pools.writer, lineage::file_id(path).as_deref()).await?;
         Ok(Store {
             writer: pools.writer,
             reader: pools.reader,
@@ -248,6 +248,13 @@ impl Store {
     /// Closes every connection, waiting for queries under way. Call at shutdown: the last
     /// connection to close checkpoints the write-ahead log into the database file.
     pub async fn close(&self) {
+        // A clean end of this incarnation (lineage.rs); a store already closed has nothing
+        // to mark.
+        if !self.writer.is_closed()
+            && let Err(e) = lineage::end_incarnation(&self.writer).await
+        {
+            tracing::debug!(error = %e, "marking the store's incarnation closed");
+        }
         self.reader.close().await;
         self.writer.close().await;
         // Only now may another owner open it.

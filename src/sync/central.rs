@@ -201,24 +201,26 @@ impl Central {
             .map_err(|e| self.error(e))
     }
 
-    /// The station's lineage standing (src/sync/lineage.rs) and cursor.
-    pub async fn standing(&self, station: &str) -> Result<(Standing, i64), SyncError> {
-        let row =
-            sqlx::query("SELECT incarnation, horizon, cursor FROM stations WHERE station = $1")
-                .bind(station)
-                .fetch_one(&self.pool)
-                .await
-                .map_err(|e| self.error(e))?;
-        Ok((
-            Standing {
-                incarnation: row.get(0),
-                horizon: row.get(1),
-            },
-            row.get(2),
-        ))
+    /// The station's standing (src/sync/lineage.rs): cursor, horizon, chain head and last
+    /// incarnation.
+    pub async fn standing(&self, station: &str) -> Result<Standing, SyncError> {
+        let row = sqlx::query(
+            "SELECT cursor, horizon, head, incarnation FROM stations WHERE station = $1",
+        )
+        .bind(station)
+        .fetch_one(&self.pool)
+        .await
+        .map_err(|e| self.error(e))?;
+        Ok(Standing {
+            cursor: row.get(0),
+            horizon: row.get(1),
+            head: row.get(2),
+            incarnation: row.get(3),
+        })
     }
 
-    /// The station's incarnation is alive (an idle forwarder's look at its cursor).
+    /// The station's store was seen (an idle forwarder's look at its cursor): information for
+    /// the lab's administrator and for `--retire-old`, never part of the identity rule.
     pub async fn heartbeat(&self, station: &str) -> Result<(), SyncError> {
         sqlx::query("UPDATE stations SET heartbeat_at = now() WHERE station = $1")
             .bind(station)

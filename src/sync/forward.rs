@@ -352,7 +352,6 @@ impl Forwarder {
     pub(super) async fn ensure_ready(&mut self) -> Result<(), SyncError> {
         if self.central.is_none() {
             let central = Central::connect_and_migrate(&self.options.url).await?;
-            central.register(&self.options.station, &self.uid).await?;
             self.central = Some(central);
             self.cursor = None;
         }
@@ -360,41 +359,36 @@ impl Forwarder {
             return Ok(());
         }
         let central = self.central.as_ref().expect("connected above");
-        let (standing, cursor) = central.standing(&self.options.station).await?;
-        let highest = self.highest_seq().await?;
-        let lineage = lineage::read(&self.source)
-            .await
-            .map_err(SyncError::Local)?;
-        lineage::check(&self.options.station, &standing, &lineage, highest)?;
-        if cursor > highest {
-            return Err(SyncError::StoreBehind {
-                station: self.options.station.clone(),
-                cursor,
-                local: highest,
-            });
-        }
-        if cursor < self.deleted_up_to(highest).await? {
+        // Registering again is a no-op, and brings back a station a restored central
+        // database lost.
+        central.register(&self.options.station, &self.uid).await?;
+        let standing = central.standing(&self.options.station).await?;
+        let cursor = standing.cursor;
+        let (highest, lineage, deleted) = {
+            let mut c = self.source.begin().await.map_err(SyncError::Local)?;
+            let highest = highest_seq(&mut c).await.map_err(SyncError::Local)?;
+            let lineage = lineage::read(&mut *c).await.map_err(SyncError::Local)?;
+            let deleted = deleted_up_to(&mut c, highest)
+                .await
+                .map_err(SyncError::Local)?;
+            c.commit().await.map_err(SyncError::Local)?;
+            (highest, lineage, deleted)
+        };
+        let verdict = lineage::decide(
+            &self.options.station,
+            &standing,
+            &self.uid,
+            &lineage,
+            highest,
+            deleted,
+        )?;
+        if verdict == lineage::Verdict::CentralBehind {
             self.needs_verify = true;
         }
         // Only a store the station accepts counts the central cursor as its own.
         self.acknowledged = cursor;
         self.cursor = Some(cursor);
         Ok(())
-    }
-
-    /// The outbox entries this store deleted as acknowledged reach this far.
-    async fn deleted_up_to(&self, highest: i64) -> Result<i64, SyncError> {
-        let lowest: Option<i64> = sqlx::query_scalar("SELECT MIN(seq) FROM sync_outbox")
-            .fetch_one(&self.source)
-            .await
-            .map_err(SyncError::Local)?;
-        Ok(lowest.map_or(highest, |l| l - 1))
-    }
-
-    /// The highest outbox number this store ever gave out (pruned entries included).
-    async fn highest_seq(&self) -> Result<i64, SyncError> {
-        let mut c = self.source.acquire().await.map_err(SyncError::Local)?;
-        highest_seq(&mut c).await.map_err(SyncError::Local)
     }
 
     /// Forwards one batch; `None` when the outbox holds nothing after the cursor.
@@ -434,14 +428,8 @@ impl Forwarder {
             Err(e) => {
                 // The COMMIT may or may not have happened: read the cursor back next time.
                 self.cursor = None;
-                let refused = matches!(
-                    e,
-                    SyncError::Forked { .. }
-                        | SyncError::StoreBehind { .. }
-                        | SyncError::SecondLive { .. }
-                );
-                let recorded =
-                    matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. });
+                let refused = matches!(e, SyncError::Forked { .. });
+                let recorded = matches!(e, SyncError::Forked { .. });
                 if recorded && self.last_refusal.as_deref() != Some(&e.to_string()) {
                     if let Some(c) = &self.central {
                         let incarnation = lineage::read(&self.source)
@@ -504,13 +492,13 @@ impl Forwarder {
             if self.last_look.elapsed() >= LOOK {
                 self.last_look = std::time::Instant::now();
                 let central = self.central.as_ref().expect("ensure_ready connects");
-                let (standing, now) = central.standing(&self.options.station).await?;
-                if now != cursor {
+                let standing = central.standing(&self.options.station).await?;
+                if standing.cursor != cursor {
                     self.cursor = None;
                 } else if standing.incarnation.is_some()
                     && standing.incarnation.as_deref() == self.incarnation().await.as_deref()
                 {
-                    // Still the station's: say so, so that a copy is not taken for it.
+                    // Last seen (information only: no decision rests on it).
                     central.heartbeat(&self.options.station).await?;
                 }
             }
@@ -530,6 +518,7 @@ impl Forwarder {
             high,
         )
         .await?;
+        let head = lineage::chain_head(&self.uid, &lineage, high);
         let mut counts = Vec::new();
         for (table, table_rows) in &rows {
             if table_rows.is_empty() {
@@ -546,6 +535,7 @@ impl Forwarder {
             &self.options.station,
             new_cursor,
             high,
+            &head,
             &incarnation,
         )
         .await?;
@@ -672,7 +662,7 @@ impl Forwarder {
                 Err(e) => {
                     let message = e.to_string();
                     if last_logged.as_deref() != Some(message.as_str()) {
-                        if matches!(e, SyncError::Forked { .. } | SyncError::StoreBehind { .. }) {
+                        if matches!(e, SyncError::Forked { .. }) {
                             tracing::error!("forwarding to the central database: {message}");
                         } else {
                             tracing::warn!("forwarding to the central database: {message}");
@@ -740,10 +730,6 @@ impl Forwarder {
     }
 }
 
-/// How long after the last sign of life of the station's incarnation another one is refused
-/// as a second live copy.
-pub(super) const LIVE: Duration = Duration::from_secs(5);
-
 /// How often an idle forwarder looks at the central cursor.
 const LOOK: Duration = Duration::from_secs(1);
 
@@ -776,17 +762,17 @@ pub async fn diagnose(path: &Path, url: &str, station: &str) -> Result<String, S
 }
 
 async fn diagnose_on(central: &Central, path: &Path, station: &str) -> Result<String, SyncError> {
-    let has_lineage: bool = sqlx::query_scalar(
+    let has_chain: bool = sqlx::query_scalar(
         "SELECT to_regclass('stations') IS NOT NULL
             AND EXISTS (SELECT 1 FROM information_schema.columns
-                        WHERE table_name = 'stations' AND column_name = 'horizon')",
+                        WHERE table_name = 'stations' AND column_name = 'head')",
     )
     .fetch_one(&central.pool)
     .await
     .map_err(|e| central.error(e))?;
-    let row = if has_lineage {
+    let row = if has_chain {
         sqlx::query(
-            "SELECT store_uid, cursor, horizon, incarnation,
+            "SELECT store_uid, cursor, horizon, head, incarnation,
                     to_char(registered_at AT TIME ZONE 'UTC', 'YYYY-MM-DD HH24:MI:SS \"UTC\"'),
                     COALESCE(host, '?')
              FROM stations WHERE station = $1",
@@ -807,10 +793,13 @@ async fn diagnose_on(central: &Central, path: &Path, station: &str) -> Result<St
     }
     let source = open_read_only(path).await?;
     let uid = store_uid(&source, &path.display().to_string()).await?;
-    let mut c = source.acquire().await.map_err(SyncError::Local)?;
+    let mut c = source.begin().await.map_err(SyncError::Local)?;
     let highest = highest_seq(&mut c).await.map_err(SyncError::Local)?;
     let lineage = lineage::read(&mut *c).await.map_err(SyncError::Local)?;
-    drop(c);
+    let deleted = deleted_up_to(&mut c, highest)
+        .await
+        .map_err(SyncError::Local)?;
+    c.commit().await.map_err(SyncError::Local)?;
     let Some(row) = row else {
         let waiting: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM sync_outbox")
             .fetch_one(&source)
@@ -824,37 +813,38 @@ async fn diagnose_on(central: &Central, path: &Path, station: &str) -> Result<St
         ));
     };
     let holder: String = row.get(0);
-    let cursor: i64 = row.get(1);
+    let standing = lineage::Standing {
+        cursor: row.get(1),
+        horizon: row.get(2),
+        head: row.get(3),
+        incarnation: row.get(4),
+    };
+    let cursor = standing.cursor;
     if holder != uid {
         source.close().await;
         return Err(SyncError::StationTaken {
             station: station.to_string(),
-            registered: row.get(4),
-            host: row.get(5),
+            registered: row.get(5),
+            host: row.get(6),
         });
     }
-    let standing = lineage::Standing {
-        incarnation: row.get(3),
-        horizon: row.get(2),
-    };
-    let checked = lineage::check(station, &standing, &lineage, highest);
+    let verdict = lineage::decide(station, &standing, &uid, &lineage, highest, deleted);
     let waiting: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM sync_outbox WHERE seq > $1")
         .bind(cursor)
         .fetch_one(&source)
         .await
         .map_err(SyncError::Local)?;
     source.close().await;
-    checked?;
-    if cursor > highest {
-        return Err(SyncError::StoreBehind {
-            station: station.to_string(),
-            cursor,
-            local: highest,
-        });
-    }
+    let behind = match verdict? {
+        lineage::Verdict::Continue => "",
+        lineage::Verdict::CentralBehind => {
+            "; the central database is behind what this store already pruned (restored from \
+             a backup?): the next sync compares and sends again from the store's tables"
+        }
+    };
     Ok(format!(
         "{} answers; station \"{station}\" is this store's, forwarded up to entry {cursor} of \
-         {highest}, {waiting} entries waiting",
+         {highest}, {waiting} entries waiting{behind}",
         central.url
     ))
 }
@@ -878,6 +868,18 @@ pub(super) async fn highest_seq(c: &mut sqlx::SqliteConnection) -> Result<i64, s
         .fetch_one(&mut *c)
         .await?;
     Ok(from_sequence.unwrap_or(0).max(from_table.unwrap_or(0)))
+}
+
+/// The outbox entries the store deleted as acknowledged reach this far (`highest` when its
+/// outbox is empty).
+pub(super) async fn deleted_up_to(
+    c: &mut sqlx::SqliteConnection,
+    highest: i64,
+) -> Result<i64, sqlx::Error> {
+    let lowest: Option<i64> = sqlx::query_scalar("SELECT MIN(seq) FROM sync_outbox")
+        .fetch_one(&mut *c)
+        .await?;
+    Ok(lowest.map_or(highest, |l| l - 1))
 }
 
 /// The rows of `table` whose `selected_by` column is one of `ids`, decoded.
@@ -910,8 +912,7 @@ pub(super) async fn read_rows(
 
 /// Locks the station's row for the transaction `tx` and checks, before any row is written,
 /// that this store may forward for it: the same store, the cursor where this forwarder left
-/// it, and a lineage the central database accepts (src/sync/lineage.rs). Returns the
-/// incarnation to record.
+/// it, and the identity rule ([`lineage::decide`]). Returns the incarnation to record.
 pub(super) async fn lock_station(
     tx: &mut sqlx::PgConnection,
     central: &Central,
@@ -922,10 +923,9 @@ pub(super) async fn lock_station(
     high: i64,
 ) -> Result<String, SyncError> {
     let row = sqlx::query(
-        "SELECT store_uid, cursor, horizon, incarnation,
+        "SELECT store_uid, cursor, horizon, head, incarnation,
                 to_char(registered_at AT TIME ZONE 'UTC', 'YYYY-MM-DD HH24:MI:SS \"UTC\"'),
-                COALESCE(host, '?'),
-                EXTRACT(EPOCH FROM now() - heartbeat_at)::float8
+                COALESCE(host, '?')
          FROM stations WHERE station = $1 FOR UPDATE",
     )
     .bind(station)
@@ -941,58 +941,55 @@ pub(super) async fn lock_station(
         )));
     };
     let holder: String = row.get(0);
-    let cursor: i64 = row.get(1);
+    let standing = lineage::Standing {
+        cursor: row.get(1),
+        horizon: row.get(2),
+        head: row.get(3),
+        incarnation: row.get(4),
+    };
     if holder != uid {
         return Err(SyncError::StationTaken {
             station: station.to_string(),
-            registered: row.get(4),
-            host: row.get(5),
+            registered: row.get(5),
+            host: row.get(6),
         });
     }
-    if cursor != expected_cursor {
+    if standing.cursor != expected_cursor {
         return Err(SyncError::CursorMoved {
             station: station.to_string(),
             expected: expected_cursor,
         });
     }
-    let standing = lineage::Standing {
-        incarnation: row.get(3),
-        horizon: row.get(2),
-    };
-    lineage::check(station, &standing, lineage, high)?;
-    let mine = lineage.last().map(|i| i.id.as_str());
-    let silent: Option<f64> = row.get(6);
-    if let (Some(head), Some(seconds)) = (standing.incarnation.as_deref(), silent)
-        && Some(head) != mine
-        && seconds < LIVE.as_secs_f64()
-    {
-        return Err(SyncError::SecondLive {
-            station: station.to_string(),
-            seconds,
-        });
-    }
+    // The cursor is where this forwarder left it, so whether the central database is behind
+    // the store's pruning was decided when the cursor was read: only acceptance matters here.
+    lineage::decide(station, &standing, uid, lineage, high, 0)?;
     Ok(lineage
         .last()
         .map(|i| i.id.clone())
         .unwrap_or_else(|| uid.to_string()))
 }
 
-/// Moves the station's cursor and horizon and records its incarnation, in `tx`.
+/// Moves the station's cursor, horizon (`high`, the snapshot the rows were read from) and
+/// chain head there, and records its incarnation, in `tx`.
 pub(super) async fn advance_station(
     tx: &mut sqlx::PgConnection,
     central: &Central,
     station: &str,
     cursor: i64,
     high: i64,
+    head: &str,
     incarnation: &str,
 ) -> Result<(), SyncError> {
+    // `high` is at least the old horizon: the identity rule refuses a store that does not
+    // reach it.
     sqlx::query(
-        "UPDATE stations SET cursor = $1, horizon = GREATEST(horizon, $2), incarnation = $3,
+        "UPDATE stations SET cursor = $1, horizon = $2, head = $3, incarnation = $4,
                 last_synced_at = now(), heartbeat_at = now()
-         WHERE station = $4",
+         WHERE station = $5",
     )
     .bind(cursor)
     .bind(high)
+    .bind(head)
     .bind(incarnation)
     .bind(station)
     .execute(&mut *tx)

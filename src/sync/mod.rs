@@ -88,20 +88,6 @@ pub enum SyncError {
     )]
     StoreHasOtherId { station: String, existing: String },
 
-    /// The central cursor is past everything this store ever queued: the file is an older
-    /// copy (a backup restored) of the store that forwarded under this station id.
-    #[error(
-        "the central database has station \"{station}\" up to outbox entry {cursor}, but this \
-         store has only {local} entries: it is an older copy of that station's store; restore the \
-         newest copy, or make this one a station of its own with `brdfd sync --db FILE --adopt \
-         NEW_ID`"
-    )]
-    StoreBehind {
-        station: String,
-        cursor: i64,
-        local: i64,
-    },
-
     /// This store is a copy of the station's store that went its own way after the copy, or
     /// the station went on without it (src/sync/lineage.rs): nothing of it is written.
     #[error(
@@ -112,15 +98,6 @@ pub enum SyncError {
          ARCHIVE_ID`"
     )]
     Forked { station: String, detail: String },
-
-    /// Another incarnation of this store forwarded for the station moments ago: two live
-    /// copies. Retried: a restarted daemon is accepted once its previous life is silent.
-    #[error(
-        "station \"{station}\" is being forwarded by another copy of this store (seen {seconds:.0} s \
-         ago); if that copy was stopped this one is accepted within seconds, else stop one of \
-         them (a copy to keep: `brdfd sync --db FILE --adopt NEW_ID`)"
-    )]
-    SecondLive { station: String, seconds: f64 },
 
     /// The station's cursor is not where this forwarder left it: another forwarder of the
     /// same store moved it, or the central database was restored from a backup. The cursor is
@@ -171,7 +148,6 @@ impl SyncError {
                 | SyncError::Central { .. }
                 | SyncError::Local(_)
                 | SyncError::CursorMoved { .. }
-                | SyncError::SecondLive { .. }
         )
     }
 }

@@ -21,9 +21,14 @@
 
 use sqlx::Row;
 
+use super::SyncError;
 use super::central::Central;
 use super::tables::TABLES;
-use super::{SyncError, forward::LIVE};
+
+/// How long after the old store was last seen forwarding retiring it is refused: an operator's
+/// safeguard against retiring a store that still runs (the identity rule itself reads no
+/// clock, src/sync/lineage.rs).
+const LIVE: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// What [`retire`] moved.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -108,10 +113,10 @@ pub async fn retire(
     // store registers as both (a store holds one station id).
     sqlx::query(
         "INSERT INTO stations (station, store_uid, cursor, host, brdfd_version, registered_at,
-                               last_synced_at, incarnation, horizon, heartbeat_at,
+                               last_synced_at, incarnation, horizon, head, heartbeat_at,
                                retired_from, retired_at)
          SELECT $2, 'retired:' || store_uid, cursor, host, brdfd_version, registered_at,
-                last_synced_at, incarnation, horizon, NULL, station, now()
+                last_synced_at, incarnation, horizon, head, NULL, station, now()
          FROM stations WHERE station = $1",
     )
     .bind(station)
@@ -164,7 +169,8 @@ pub async fn retire(
         .map_err(err)?;
     // The station afresh, for this store and this incarnation.
     sqlx::query(
-        "UPDATE stations SET store_uid = $2, cursor = 0, horizon = 0, incarnation = $3,
+        "UPDATE stations SET store_uid = $2, cursor = 0, horizon = 0, head = NULL,
+                incarnation = $3,
                 heartbeat_at = NULL, last_synced_at = NULL, registered_at = now(), host = $4,
                 brdfd_version = $5
          WHERE station = $1",

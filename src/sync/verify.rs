@@ -260,7 +260,17 @@ impl Forwarder {
             });
         }
         let cursor = expected.max(high);
-        advance_station(&mut tx, central, &station, cursor, high, &incarnation).await?;
+        let head = lineage::chain_head(&self.uid, &lineage, high);
+        advance_station(
+            &mut tx,
+            central,
+            &station,
+            cursor,
+            high,
+            &head,
+            &incarnation,
+        )
+        .await?;
         tx.commit().await.map_err(|e| central.error(e))?;
         local.commit().await.map_err(SyncError::Local)?;
         self.cursor = Some(cursor);

@@ -1,0 +1,11 @@
+-- Central step 10: a station's store known by what it holds (src/sync/lineage.rs).
+--
+-- * `stations.head`: the chain head of the station's store at `stations.horizon` — SHA-256
+--   over the store id and the incarnations that wrote its outbox entries up to there, each link
+--   covering the one before. A store is accepted for the station when its own chain has this
+--   head at the horizon, whenever it last forwarded; a store whose chain differs there (a copy
+--   that went its own way) is refused. NULL for a station last forwarded before this step: its
+--   store is then checked by its incarnation (step 5) once, and the next batch records the head,
+--   so an upgraded station goes on from its cursor without sending anything again.
+-- * `stations.heartbeat_at` stays as information ("last seen"); no decision rests on it.
+ALTER TABLE stations ADD COLUMN head TEXT;
