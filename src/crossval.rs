@@ -121,6 +121,7 @@ pub fn predictions(full: &MeasuredBrdf, report: &FitReport, held: &[usize]) -> V
             delta_e00: e.per_geometry[g],
             measured_lab: arr(lab_m[g]),
             predicted_lab: arr(lab_p[g]),
+            predicted_l_interval: None,
         })
         .collect()
 }
@@ -210,6 +211,15 @@ pub fn crossval_of_fit(
             &mut observer,
         )?;
         held_out.extend(r.held_out.expect("set by fit_holding_out_with"));
+    }
+    // Each geometry's 95 % L* interval from the other geometries' held-out errors.
+    let errors: Vec<[f64; 3]> = held_out
+        .iter()
+        .map(|h| std::array::from_fn(|c| h.predicted_lab[c] - h.measured_lab[c]))
+        .collect();
+    for (i, h) in held_out.iter_mut().enumerate() {
+        h.predicted_l_interval =
+            crate::jackknife::prediction_interval(&errors, i, h.predicted_lab).map(|[l, _, _]| l);
     }
     let held_out_mean = held_out.iter().map(|h| h.delta_e00).sum::<f64>() / held_out.len() as f64;
     Ok(CrossValidation {
@@ -354,5 +364,19 @@ mod tests {
         assert!(cv.held_out_mean >= cv.fitted_mean * 0.9, "{cv:?}");
         assert!(cv.held_out_mean < 1.0, "{cv:?}");
         assert_eq!(cv.cost, CostFunction::M2);
+        // Each held-out L* has a 95 % interval centred on its prediction, and the scale comes
+        // from the other geometries' errors.
+        let errors: Vec<[f64; 3]> = cv
+            .held_out
+            .iter()
+            .map(|h| std::array::from_fn(|c| h.predicted_lab[c] - h.measured_lab[c]))
+            .collect();
+        for (i, h) in cv.held_out.iter().enumerate() {
+            let [lo, hi] = h.predicted_l_interval.unwrap();
+            assert!(lo < h.predicted_lab[0] && h.predicted_lab[0] < hi, "{h:?}");
+            assert!(((lo + hi) / 2.0 - h.predicted_lab[0]).abs() < 1e-9);
+            let want = crate::jackknife::prediction_interval(&errors, i, h.predicted_lab).unwrap();
+            assert_eq!([lo, hi], want[0]);
+        }
     }
 }

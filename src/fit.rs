@@ -215,6 +215,7 @@ impl FitReport {
             sra: self.request.settings.sra,
             specular_delta_l: self.specular_delta_l.map(SpecularDeltaLDocument::from),
             uncertainty: self.uncertainty.clone(),
+            at_bound: crate::jackknife::at_bound(p, &self.request.settings.bounds),
             held_out: self.held_out.clone(),
         }
     }
@@ -288,6 +289,11 @@ pub struct FitDocument {
     /// The bootstrap intervals (`brdfd fit --bootstrap N`); absent without them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<Uncertainty>,
+    /// The fitted parameters at a bound of their range (`"ks"`, `"alpha"`, `"ior"`, `"kd"`
+    /// for any band; [`crate::jackknife::at_bound`]): the fit is not identified there. Empty
+    /// when none.
+    #[serde(default)]
+    pub at_bound: Vec<String>,
     /// The readings held out of the fit and their prediction (`brdfd fit --hold-out`):
     /// `[{"geometry", "delta_e00", "measured_lab", "predicted_lab"}, …]`; absent for a fit to
     /// every reading (`delta_e00` and `lab` then cover the readings fitted).
@@ -323,6 +329,11 @@ pub struct HeldOut {
     pub measured_lab: [f64; 3],
     /// The fitted model's L*a*b* there.
     pub predicted_lab: [f64; 3],
+    /// The 95 % prediction interval of the held-out L* (`brdfd crossval`:
+    /// [`crate::jackknife::prediction_interval`] from the other geometries' held-out errors);
+    /// absent where there are not enough of them (`brdfd fit --hold-out`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predicted_l_interval: Option<[f64; 2]>,
 }
 
 /// `{"sra-20": x, "sra-60": y, "mean": m}`: |ΔL*| at the SRA geometries.
@@ -603,6 +614,7 @@ mod tests {
             "reference",
             "specular_readings",
             "lab",
+            "at_bound",
         ]);
         let mut got = keys.clone();
         got.sort();

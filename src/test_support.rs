@@ -43,5 +43,7 @@ pub(crate) fn made_up_uncertainty(
         delta_e00_specular_mean: Some([1.0, 2.0]),
         calibrated,
         note: None,
+        at_bound: Vec::new(),
+        misfit: None,
     }
 }

@@ -230,8 +230,22 @@ fn fit_hold_out_predicts_what_crossval_predicts() {
     assert_eq!(fits[0]["fresnel"], "incidence");
     let all = fits[0]["held_out"].as_array().unwrap();
     assert_eq!(all.len(), 12, "one per MA-T12 geometry");
-    let same = all.iter().find(|h| h["geometry"] == "45as-15").unwrap();
-    assert_eq!(same, &held[0]);
+    // The same prediction as `fit --hold-out`; crossval adds the 95 % L* interval built from
+    // the other geometries' errors.
+    let mut same = all
+        .iter()
+        .find(|h| h["geometry"] == "45as-15")
+        .unwrap()
+        .clone();
+    let iv = same
+        .as_object_mut()
+        .unwrap()
+        .remove("predicted_l_interval")
+        .expect("crossval gives each held-out geometry its L* interval");
+    assert_eq!(&same, &held[0]);
+    let l = same["predicted_lab"][0].as_f64().unwrap();
+    let (lo, hi) = (iv[0].as_f64().unwrap(), iv[1].as_f64().unwrap());
+    assert!(lo < l && l < hi, "{lo} {l} {hi}");
     let mean = all
         .iter()
         .map(|h| h["delta_e00"].as_f64().unwrap())

@@ -215,7 +215,10 @@ def fit(
     unc = doc.get("uncertainty")
     intervals = None
     if unc is not None:
-        intervals = {k: (np.array(v, dtype=float) if isinstance(v, list) else v)
+        # Numeric lists become arrays; "at_bound" (parameter names) stays a list.
+        intervals = {k: (np.array(v, dtype=float)
+                         if isinstance(v, list) and not any(isinstance(x, str) for x in v)
+                         else v)
                      for k, v in unc.items()}
     measured = np.array([[np.nan] * len(WAVELENGTHS) if m is None else m
                          for m in report.measured()], dtype=float)
@@ -248,7 +251,8 @@ def crossval(
     cost function or several (all three when ``None``). Returns that JSON object as Python
     values: ``{"sample", "reference", "fits": [{"cost", "model", "fresnel", "fitted_mean",
     "held_out_mean", "held_out": [{"geometry", "delta_e00", "measured_lab",
-    "predicted_lab"}, …]}, …]}``.  Runs without holding the GIL."""
+    "predicted_lab", "predicted_l_interval"}, …]}, …]}`` (the last the 95 % interval of the
+    held-out L*).  Runs without holding the GIL."""
     costs = [cost] if isinstance(cost, str) else (None if cost is None else list(cost))
     text = _native.crossval(scan, costs, model=model, fresnel=fresnel, method=method, seed=seed,
                             sra=sra, observer=observer, weighting=weighting)

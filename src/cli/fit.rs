@@ -240,6 +240,14 @@ pub fn table(r: &FitReport) -> String {
         "specular lobe    ks {:.5}  alpha {:.5}  ior {:.5}",
         p.ks, p.alpha, p.ior
     );
+    let bound = crate::jackknife::at_bound(p, &s.bounds);
+    if !bound.is_empty() {
+        let _ = writeln!(
+            t,
+            "at a bound       {} (the fit is not identified there: an interval on the bound is not calibrated)",
+            bound.join(", ")
+        );
+    }
     if let Some(u) = &r.uncertainty {
         let _ = writeln!(
             t,
@@ -268,7 +276,7 @@ pub fn table(r: &FitReport) -> String {
             _ => {
                 let _ = writeln!(
                     t,
-                    "                 calibrated: coverage measured ≥ 90 % for this cost function and SRA model"
+                    "                 calibrated: coverage measured ≥ 90 % for this cost function and SRA model, and on held-out real geometries"
                 );
             }
         }

@@ -199,7 +199,9 @@ pub(super) fn print_fits(detail: &ScanView) {
         );
         print_fit_extras(fit);
     }
+    print_lobe_identified(detail);
 }
+
 /// A fit's held-out ΔE00 beside its fitted one, over the MA-T12 geometries, and the geometry
 /// predicted worst (SCIENCE.md §12.5).
 pub(super) fn held_out_line(cv: &crate::crossval::CrossValidation) -> String {
@@ -215,6 +217,50 @@ pub(super) fn held_out_line(cv: &crate::crossval::CrossValidation) -> String {
         cv.held_out_mean, cv.fitted_mean
     )
 }
+
+/// Where the latest cf1 and cf2 intervals of the scan do not overlap, says that the lobe is
+/// not identified (SCIENCE.md §10): neither fit's narrow interval is the parameter's.
+fn print_lobe_identified(detail: &ScanView) {
+    use crate::cost::CostFunction;
+    let latest = |cost: CostFunction| {
+        detail
+            .fits
+            .iter()
+            .rev()
+            .filter(|f| f.run.cost_function.known() == Some(&cost))
+            .find_map(|f| f.uncertainty.as_ref())
+    };
+    if let (Some(a), Some(b)) = (latest(CostFunction::Cf1), latest(CostFunction::Cf2)) {
+        let apart = crate::jackknife::disjoint(a, b);
+        if !apart.is_empty() {
+            println!(
+                "lobe not identified: cf1 and cf2 disagree beyond their intervals on {} (the \
+                 readings do not fix the lobe; read neither interval as the parameter's)",
+                apart.join(", ")
+            );
+        }
+    }
+}
+
+/// The done fit's parameters at a bound of the range it was fitted within (its stored settings'
+/// bounds), as the intervals record them or else from its parameters; empty when none or not
+/// done.
+fn at_bound(fit: &FitDetail) -> Vec<String> {
+    if let Some(u) = fit.uncertainty.as_ref().filter(|u| u.misfit.is_some()) {
+        return u.at_bound.clone();
+    }
+    let params = fit
+        .run
+        .result
+        .as_ref()
+        .and_then(|r| serde_json::from_value::<crate::model::Params>(r.params.clone()).ok());
+    let settings = serde_json::from_value::<crate::optimise::Settings>(fit.run.settings.clone());
+    match (params, settings) {
+        (Some(p), Ok(s)) => crate::jackknife::at_bound(&p, &s.bounds),
+        _ => Vec::new(),
+    }
+}
+
 /// Under a fit's row: the colorimetry of its ΔE00, once computed the held-out ΔE00 of its
 /// cross-validation, and once the bootstrap has run the 95 % intervals of the lobe parameters
 /// (SCIENCE.md §7.1, §10, §12.5).
@@ -252,6 +298,13 @@ fn print_fit_extras(fit: &FitDetail) {
         "       SRA reading model {} (illuminant {}, {}° observer){delta_l}",
         sra.model, sra.illuminant, sra.observer
     );
+    let bound = at_bound(fit);
+    if !bound.is_empty() {
+        println!(
+            "       at a bound: {} (not identified there; an interval on the bound is not calibrated)",
+            bound.join(", ")
+        );
+    }
     if let Some(u) = &fit.uncertainty {
         let iv = |i: &[f64; 2]| format!("[{:.4}, {:.4}]", i[0], i[1]);
         println!(

@@ -511,6 +511,7 @@ mod tests {
             delta_e00: de,
             measured_lab: [50.0, 1.0, 2.0],
             predicted_lab: [51.0, 1.0, 2.0],
+            predicted_l_interval: None,
         };
         d.crossval = Some(crate::crossval::CrossValidation {
             cost: CostFunction::Cf1,

@@ -396,7 +396,13 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
                                 cell(p.ior, u.ior),
                                 cell(d.evaluation.all.mean, u.delta_e00_mean),
                                 u.resamples.to_string(),
-                                if u.calibrated { "yes" } else { "no" }.to_string(),
+                                match (u.calibrated, u.at_bound.is_empty()) {
+                                    (true, _) => "yes".to_string(),
+                                    (false, true) => "no".to_string(),
+                                    (false, false) => {
+                                        format!("no ({} at a bound)", u.at_bound.join(", "))
+                                    }
+                                },
                             ]);
                         }
                         None => {
@@ -415,7 +421,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
                 })
                 .collect();
             b.push(Block::Table {
-                caption: "Table 4. Fitted ks, α, μ (ior) and mean ΔE00, each with its 95 % bootstrap interval [low, high]: the measured BRDF perturbed with the noise the scan shows, refitted per resample (parametric bootstrap, SCIENCE.md §10). The ΔE00 interval is the spread of each resample's fit against its resample. Fig. 8 draws the kd intervals as error bars. Calibrated: whether intervals of that cost function and SRA model were measured to hold the truth in ≥ 90 % of synthetic trials (SCIENCE.md §10); where \"no\", they are bootstrap intervals, not calibrated 95 % intervals. A fit without intervals is marked \"no interval\".".into(),
+                caption: "Table 4. Fitted ks, α, μ (ior) and mean ΔE00, each with its 95 % bootstrap interval [low, high]: the measured BRDF perturbed with the noise the scan shows, refitted per resample (parametric bootstrap), widened to the spread of refits with each geometry left out (jackknife, SCIENCE.md §10). The ΔE00 interval is the spread of each resample's fit against its resample. Fig. 8 draws the kd intervals as error bars. Calibrated: whether intervals of that cost function and SRA model were measured to hold the truth in ≥ 90 % of synthetic trials and of held-out real geometries, with no parameter at a bound of its range (SCIENCE.md §10); where \"no\", they are not calibrated 95 % intervals. A fit without intervals is marked \"no interval\".".into(),
                 head: ["sample", "cost", "ks", "α", "μ", "mean ΔE00", "resamples", "calibrated"]
                     .map(String::from)
                     .to_vec(),

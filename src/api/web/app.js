@@ -917,12 +917,14 @@ function paramRow(f) {
   const u = f.uncertainty;
   // Intervals whose coverage was not measured to hold are marked, with the reason as a tooltip.
   const rated = u && u.calibrated ? "" : " (not 95 %)";
-  const iv = (v, range) => (range ? `${fmt(v, 3)} [${fmt(range[0], 3)}, ${fmt(range[1], 3)}]${rated}` : `${fmt(v, 3)}${p && f.run.status === "done" ? " (interval not computed yet)" : ""}`);
+  // A parameter at a bound of its range is not identified there: flagged beside its interval.
+  const bound = (name) => (u && (u.at_bound || []).includes(name) ? " (at bound)" : "");
+  const iv = (v, range, name) => (range ? `${fmt(v, 3)} [${fmt(range[0], 3)}, ${fmt(range[1], 3)}]${rated}${bound(name)}` : `${fmt(v, 3)}${p && f.run.status === "done" ? " (interval not computed yet)" : ""}`);
   return h("tr", { "data-fit": f.run.id, "data-calibrated": u ? String(Boolean(u.calibrated)) : null, title: u && !u.calibrated ? u.note || "" : null },
     h("td", {}, h("a", { href: `/fits/${f.run.id}` }, String(f.run.id))),
     h("td", {}, f.run.cost_function), h("td", {}, f.run.status, f.run.error ? `: ${f.run.error}` : ""),
-    h("td", {}, p ? iv(p.ks, u && u.ks) : "—"), h("td", {}, p ? iv(p.alpha, u && u.alpha) : "—"),
-    h("td", {}, p ? iv(p.ior, u && u.ior) : "—"),
+    h("td", {}, p ? iv(p.ks, u && u.ks, "ks") : "—"), h("td", {}, p ? iv(p.alpha, u && u.alpha, "alpha") : "—"),
+    h("td", {}, p ? iv(p.ior, u && u.ior, "ior") : "—"),
     h("td", {}, p ? [5, 15, 25].map((b) => fmt(p.kd[b], 4)).join(" / ") : "—"));
 }
 
