@@ -122,7 +122,8 @@ fn benches(c: &mut Criterion) {
     group.sample_size(10);
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/real-mat12/PAR_PW_RO_NG_1.xlsx");
-    let real = brdfd::formats::xrite::read_file(&path).expect("the committed real export")[0]
+    let real = brdfd::formats::xrite::read_file(&path, &Default::default())
+        .expect("the committed real export")[0]
         .scan
         .clone();
     let real = brdfd::processing::process(&real, &Default::default()).expect("processes");

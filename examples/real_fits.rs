@@ -77,7 +77,7 @@ fn main() {
     }
     let mut scans: Vec<(String, MeasuredBrdf)> = Vec::new();
     for path in &files {
-        for x in brdfd::formats::xrite::read_file(path)
+        for x in brdfd::formats::xrite::read_file(path, &Default::default())
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
         {
             let m = process(&x.scan, &ProcessingOptions::default()).expect("a real scan processes");
