@@ -154,11 +154,11 @@ mod tests {
         let e = err(&lines.join("\n"));
         assert_eq!(
             e,
-            "x.csv:6: record: 52 values, expected 53 (one per column of the header)"
+            "x.csv:6: record: 54 values, expected 55 (one per column of the header)"
         );
         let mut lines: Vec<String> = good.lines().map(str::to_string).collect();
         let mut cells: Vec<String> = lines[3].split(',').map(str::to_string).collect();
-        cells[24] = "NaN".into(); // nm420, after 10 geometry and 12 provenance columns
+        cells[26] = "NaN".into(); // nm420, after 10 geometry and 14 provenance columns
         lines[3] = cells.join(",");
         let e = err(&lines.join("\n"));
         assert_eq!(e, "x.csv:4: nm420: NaN is not a finite number");
@@ -174,7 +174,7 @@ mod tests {
         );
         let mut lines: Vec<String> = good.lines().map(str::to_string).collect();
         let mut cells: Vec<String> = lines[2].split(',').map(str::to_string).collect();
-        cells[32] = "-0.5".into();
+        cells[34] = "-0.5".into();
         lines[2] = cells.join(",");
         let e = err(&lines.join("\n"));
         assert_eq!(
