@@ -274,8 +274,9 @@ fn hold_out_of_no_geometry_fails_with_one_line() {
 }
 
 /// Every subcommand of `brdfd`, as `--help` lists them (README.md and GUIDE.md teach them).
-const SUBCOMMANDS: [&str; 25] = [
+const SUBCOMMANDS: [&str; 26] = [
     "fit",
+    "validate",
     "crossval",
     "synth",
     "demo",
