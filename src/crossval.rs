@@ -219,7 +219,8 @@ pub fn crossval_of_fit(
         .collect();
     for (i, h) in held_out.iter_mut().enumerate() {
         h.predicted_l_interval =
-            crate::jackknife::prediction_interval(&errors, i, h.predicted_lab).map(|[l, _, _]| l);
+            crate::uncertainty::jackknife::prediction_interval(&errors, i, h.predicted_lab)
+                .map(|[l, _, _]| l);
     }
     let held_out_mean = held_out.iter().map(|h| h.delta_e00).sum::<f64>() / held_out.len() as f64;
     Ok(CrossValidation {
@@ -375,7 +376,9 @@ mod tests {
             let [lo, hi] = h.predicted_l_interval.unwrap();
             assert!(lo < h.predicted_lab[0] && h.predicted_lab[0] < hi, "{h:?}");
             assert!(((lo + hi) / 2.0 - h.predicted_lab[0]).abs() < 1e-9);
-            let want = crate::jackknife::prediction_interval(&errors, i, h.predicted_lab).unwrap();
+            let want =
+                crate::uncertainty::jackknife::prediction_interval(&errors, i, h.predicted_lab)
+                    .unwrap();
             assert_eq!([lo, hi], want[0]);
         }
     }

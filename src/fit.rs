@@ -215,7 +215,7 @@ impl FitReport {
             sra: self.request.settings.sra,
             specular_delta_l: self.specular_delta_l.map(SpecularDeltaLDocument::from),
             uncertainty: self.uncertainty.clone(),
-            at_bound: crate::jackknife::at_bound(p, &self.request.settings.bounds),
+            at_bound: crate::uncertainty::jackknife::at_bound(p, &self.request.settings.bounds),
             held_out: self.held_out.clone(),
         }
     }
@@ -290,7 +290,7 @@ pub struct FitDocument {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<Uncertainty>,
     /// The fitted parameters at a bound of their range (`"ks"`, `"alpha"`, `"ior"`, `"kd"`
-    /// for any band; [`crate::jackknife::at_bound`]): the fit is not identified there. Empty
+    /// for any band; [`crate::uncertainty::jackknife::at_bound`]): the fit is not identified there. Empty
     /// when none.
     #[serde(default)]
     pub at_bound: Vec<String>,
@@ -330,7 +330,7 @@ pub struct HeldOut {
     /// The fitted model's L*a*b* there.
     pub predicted_lab: [f64; 3],
     /// The 95 % prediction interval of the held-out L* (`brdfd crossval`:
-    /// [`crate::jackknife::prediction_interval`] from the other geometries' held-out errors);
+    /// [`crate::uncertainty::jackknife::prediction_interval`] from the other geometries' held-out errors);
     /// absent where there are not enough of them (`brdfd fit --hold-out`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub predicted_l_interval: Option<[f64; 2]>,

@@ -54,7 +54,6 @@ pub mod fonts;
 pub mod formats;
 pub mod geometry;
 pub mod gonio;
-pub mod jackknife;
 pub mod model;
 pub mod names;
 pub mod optimise;

@@ -1,7 +1,7 @@
 //! How well a fit's parameters are determined: a parametric bootstrap with warm-started refits
 //! (SCIENCE.md §10), giving 95 % intervals for ks, α, μ and kd per band, and the spread of the
 //! ΔE00 summaries; [`bootstrap`] widens them by the leave-one-geometry-out jackknife
-//! ([`crate::jackknife`]) so that they include the model's misfit, and rates them calibrated
+//! ([`crate::uncertainty::jackknife`]) so that they include the model's misfit, and rates them calibrated
 //! only where both the synthetic coverage and the held-out coverage on real paint hold.
 //!
 //! Decisions (SCIENCE.md §10 gives the reasons in full):
@@ -39,6 +39,8 @@ use crate::optimise::{FitError, Settings, refit_local};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::BANDS;
 use crate::sra_reading::SraModel;
+
+pub mod jackknife;
 
 /// The method's name as written into the `uncertainty` object.
 pub const METHOD: &str = "parametric-bootstrap";
@@ -133,15 +135,15 @@ pub struct Uncertainty {
     /// Why the intervals are not calibrated 95 % intervals (`None` when they are).
     #[serde(default = "unrated")]
     pub note: Option<String>,
-    /// The point fit's parameters at a bound of their range ([`crate::jackknife::at_bound`]);
+    /// The point fit's parameters at a bound of their range ([`crate::uncertainty::jackknife::at_bound`]);
     /// empty when none. An interval collapsed on a bound is not calibrated.
     #[serde(default)]
     pub at_bound: Vec<String>,
-    /// The leave-one-geometry-out jackknife's own intervals ([`crate::jackknife`]); ks, α, μ and
+    /// The leave-one-geometry-out jackknife's own intervals ([`crate::uncertainty::jackknife`]); ks, α, μ and
     /// kd above are the hull of these and the bootstrap's. `None` for intervals of the
     /// bootstrap alone (stored before the jackknife, or from [`Uncertainty::from_draws`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub misfit: Option<crate::jackknife::Misfit>,
+    pub misfit: Option<crate::uncertainty::jackknife::Misfit>,
 }
 
 fn nominal() -> f64 {
@@ -248,7 +250,7 @@ pub const CALIBRATION: [Coverage; 9] = [
 ];
 
 /// The measured coverage of the 95 % held-out prediction intervals on real paint
-/// ([`crate::jackknife`]): per cent of held-out geometries of the real MA-T12 exports whose
+/// ([`crate::uncertainty::jackknife`]): per cent of held-out geometries of the real MA-T12 exports whose
 /// measured L* (and L*, a* and b* at once) lies in its interval, for one cost function under
 /// the paper's model and Fresnel.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -589,7 +591,7 @@ pub fn draw(
 }
 
 /// Bootstraps the fit `point` of `measured` (made with `settings`) and widens the intervals by
-/// its leave-one-geometry-out jackknife ([`crate::jackknife`]), so that they include the
+/// its leave-one-geometry-out jackknife ([`crate::uncertainty::jackknife`]), so that they include the
 /// model's misfit; `cancel` stops it between refits.
 pub fn bootstrap(
     measured: &MeasuredBrdf,
@@ -606,7 +608,7 @@ pub fn bootstrap(
         params: point,
     };
     let draws = draw(fit, opts, cancel)?;
-    let jk = crate::jackknife::jackknife(fit, cancel)?;
+    let jk = crate::uncertainty::jackknife::jackknife(fit, cancel)?;
     Ok(
         Uncertainty::from_draws(&draws, settings, measured.geometries.has_sra(), opts)
             .with_jackknife(&jk, point, settings),
@@ -654,11 +656,11 @@ impl Uncertainty {
     /// and the verdict withdrawn where one is.
     pub fn with_jackknife(
         mut self,
-        jk: &crate::jackknife::Jackknife,
+        jk: &crate::uncertainty::jackknife::Jackknife,
         point: &Params,
         settings: &Settings,
     ) -> Uncertainty {
-        use crate::jackknife::hull;
+        use crate::uncertainty::jackknife::hull;
         let misfit = jk.misfit(point, &settings.bounds);
         self.ks = hull(self.ks, misfit.ks);
         self.alpha = hull(self.alpha, misfit.alpha);
@@ -667,7 +669,7 @@ impl Uncertainty {
             *iv = hull(*iv, *m);
         }
         self.misfit = Some(misfit);
-        self.at_bound = crate::jackknife::at_bound(point, &settings.bounds);
+        self.at_bound = crate::uncertainty::jackknife::at_bound(point, &settings.bounds);
         if !self.at_bound.is_empty() {
             self.calibrated = false;
             self.note = Some(format!(
@@ -883,7 +885,7 @@ mod tests {
     #[test]
     fn a_fit_at_a_bound_is_not_calibrated() {
         use crate::colour::Lab;
-        use crate::jackknife::{HeldOut, Jackknife};
+        use crate::uncertainty::jackknife::{HeldOut, Jackknife};
         let settings = Settings::default();
         let mut point = paper_samples()[0].params;
         point.ior = settings.bounds.ior.1;
@@ -932,7 +934,10 @@ mod tests {
         assert_eq!(misfit.ior, [3.0, 3.0]);
         let json = serde_json::to_value(&u).unwrap();
         assert_eq!(json["at_bound"], serde_json::json!(["ior"]));
-        assert_eq!(json["misfit"]["method"], crate::jackknife::METHOD);
+        assert_eq!(
+            json["misfit"]["method"],
+            crate::uncertainty::jackknife::METHOD
+        );
         // Intervals stored before the jackknife read with no parameter at a bound.
         let mut old = json.clone();
         old.as_object_mut().unwrap().remove("at_bound");

@@ -240,7 +240,7 @@ pub fn table(r: &FitReport) -> String {
         "specular lobe    ks {:.5}  alpha {:.5}  ior {:.5}",
         p.ks, p.alpha, p.ior
     );
-    let bound = crate::jackknife::at_bound(p, &s.bounds);
+    let bound = crate::uncertainty::jackknife::at_bound(p, &s.bounds);
     if !bound.is_empty() {
         let _ = writeln!(
             t,

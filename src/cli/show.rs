@@ -231,7 +231,7 @@ fn print_lobe_identified(detail: &ScanView) {
             .find_map(|f| f.uncertainty.as_ref())
     };
     if let (Some(a), Some(b)) = (latest(CostFunction::Cf1), latest(CostFunction::Cf2)) {
-        let apart = crate::jackknife::disjoint(a, b);
+        let apart = crate::uncertainty::jackknife::disjoint(a, b);
         if !apart.is_empty() {
             println!(
                 "lobe not identified: cf1 and cf2 disagree beyond their intervals on {} (the \
@@ -256,7 +256,7 @@ fn at_bound(fit: &FitDetail) -> Vec<String> {
         .and_then(|r| serde_json::from_value::<crate::model::Params>(r.params.clone()).ok());
     let settings = serde_json::from_value::<crate::optimise::Settings>(fit.run.settings.clone());
     match (params, settings) {
-        (Some(p), Ok(s)) => crate::jackknife::at_bound(&p, &s.bounds),
+        (Some(p), Ok(s)) => crate::uncertainty::jackknife::at_bound(&p, &s.bounds),
         _ => Vec::new(),
     }
 }

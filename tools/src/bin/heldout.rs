@@ -1,6 +1,6 @@
 //! Coverage of the held-out prediction intervals on the real MA-T12 exports (SCIENCE.md §10,
 //! §12.3): for every export in `tests/data/real-mat12/` and `more/` and every cost function, the
-//! fit, its leave-one-geometry-out jackknife (`brdfd::jackknife`), and for each of the 12
+//! fit, its leave-one-geometry-out jackknife (`brdfd::uncertainty::jackknife`), and for each of the 12
 //! geometries whether the 95 % prediction interval of its L*, a* and b* (built without that
 //! geometry's reading or error) contains the measured value. Also how many left-out refits land
 //! outside the fit's parameter intervals: the bootstrap's alone (`--bootstrap N` resamples; 0,
@@ -21,10 +21,10 @@ use std::time::Instant;
 use brdfd::colour::Colorimetry;
 use brdfd::cost::CostFunction;
 use brdfd::geometry::GEOMETRIES;
-use brdfd::jackknife::{Jackknife, hull, jackknife};
 use brdfd::model::{FresnelCosine, Params};
 use brdfd::optimise::Settings;
 use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
+use brdfd::uncertainty::jackknife::{Jackknife, hull, jackknife};
 use brdfd::uncertainty::{BootstrapOptions, Interval, PointFit, Uncertainty, draw};
 use brdfd_tools::shared::arg;
 
@@ -154,8 +154,9 @@ fn main() {
                     params_seen += 1;
                 }
             }
-            bounded +=
-                usize::from(!brdfd::jackknife::at_bound(&fit.params, &settings.bounds).is_empty());
+            bounded += usize::from(
+                !brdfd::uncertainty::jackknife::at_bound(&fit.params, &settings.bounds).is_empty(),
+            );
         }
         half.sort_by(f64::total_cmp);
         let pct = |k: usize| 100.0 * k as f64 / n as f64;
