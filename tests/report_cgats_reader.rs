@@ -109,7 +109,7 @@ fn littlecms_reads_the_cgats_export_in_strict_mode() {
     let it8 = It8::load(&text).unwrap_or_else(|e| panic!("LittleCMS refused the export: {e}"));
 
     let fields = it8.fields();
-    assert_eq!(fields.len(), 50);
+    assert_eq!(fields.len(), 52);
     assert_eq!(
         &fields[..7],
         [
