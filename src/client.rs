@@ -29,9 +29,10 @@ pub const DEFAULT_ADDR: &str = "127.0.0.1:7878";
 /// Why a request to the daemon failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
-    /// Nothing listens on the address.
-    #[error("no brdfd daemon is listening on {addr} — start one with `brdfd serve`")]
-    NotRunning { addr: SocketAddr },
+    /// Nothing listens on the address. `hint` (empty, or starting with "; ") says where the
+    /// address came from and how to point at a daemon elsewhere.
+    #[error("no brdfd daemon is listening on {addr} — start one with `brdfd serve`{hint}")]
+    NotRunning { addr: SocketAddr, hint: String },
     /// The daemon wants the API token, or another one.
     #[error("the daemon on {addr} refused the request: {message} (this command {token_source})")]
     Unauthorized {
@@ -106,6 +107,8 @@ pub struct Client {
     authorization: Option<String>,
     /// Where the token came from (or why there is none), for the 401 message.
     token_source: String,
+    /// Added to the "no daemon" message ([`ClientError::NotRunning`]).
+    not_running_hint: String,
     agent: ureq::Agent,
     /// For the event stream: no overall timeout (it lasts as long as the scan).
     stream_agent: ureq::Agent,
@@ -128,6 +131,7 @@ impl Client {
             addr,
             authorization: None,
             token_source: "sent no token".into(),
+            not_running_hint: String::new(),
             agent,
             stream_agent,
         }
@@ -138,6 +142,13 @@ impl Client {
     pub fn with_token(mut self, token: &crate::api::Token, source: impl Into<String>) -> Client {
         self.authorization = Some(format!("Bearer {}", token.as_str()));
         self.token_source = source.into();
+        self
+    }
+
+    /// Adds `hint` ("; …": where the address came from, how to name another) to the message
+    /// when no daemon listens on the address.
+    pub fn with_not_running_hint(mut self, hint: impl Into<String>) -> Client {
+        self.not_running_hint = hint.into();
         self
     }
 
@@ -185,7 +196,10 @@ impl Client {
             _ => false,
         };
         if refused {
-            ClientError::NotRunning { addr: self.addr }
+            ClientError::NotRunning {
+                addr: self.addr,
+                hint: self.not_running_hint.clone(),
+            }
         } else {
             ClientError::Transport {
                 addr: self.addr,
@@ -370,15 +384,24 @@ impl Client {
         self.get_text(&format!("/scans/{scan}/export"))
     }
 
-    /// `POST /scans/import` of a `brdfd.scan/1` file's text.
-    pub fn import_scan(&self, file: &str) -> Result<wire::Imported, ClientError> {
-        let text = self.finish(self.post_request("/scans/import").send(file))?;
+    /// `POST /scans/import` of a `brdfd.scan/1` file's text, with the file's name and whether
+    /// to import it again if it was imported before.
+    pub fn import_scan(
+        &self,
+        file: &str,
+        query: &wire::ImportQuery,
+    ) -> Result<wire::Imported, ClientError> {
+        let text = self.finish(self.post_request(&import_path(query)).send(file))?;
         self.typed("POST /scans/import", &text)
     }
 
-    /// `POST /scans/import` of an X-Rite QC `.xlsx` export.
-    pub fn import_xlsx(&self, bytes: &[u8]) -> Result<wire::Imported, ClientError> {
-        let text = self.post_bytes_for_text("/scans/import", bytes)?;
+    /// `POST /scans/import` of an X-Rite QC `.xlsx` export, as [`Client::import_scan`].
+    pub fn import_xlsx(
+        &self,
+        bytes: &[u8],
+        query: &wire::ImportQuery,
+    ) -> Result<wire::Imported, ClientError> {
+        let text = self.post_bytes_for_text(&import_path(query), bytes)?;
         self.typed("POST /scans/import", &text)
     }
 
@@ -493,6 +516,22 @@ pub fn scans_path(query: &wire::ScanQuery) -> String {
 }
 
 /// A percent-encoding of a query value (sample names have spaces and dots).
+/// `/scans/import` with the query's parameters.
+fn import_path(q: &wire::ImportQuery) -> String {
+    let mut params = Vec::new();
+    if let Some(f) = &q.file {
+        params.push(format!("file={}", urlencode(f)));
+    }
+    if q.again {
+        params.push("again=true".to_string());
+    }
+    if params.is_empty() {
+        "/scans/import".to_string()
+    } else {
+        format!("/scans/import?{}", params.join("&"))
+    }
+}
+
 fn urlencode(text: &str) -> String {
     text.bytes()
         .map(|b| match b {

@@ -272,9 +272,14 @@ pub struct Cancelling {
 }
 
 /// `POST /scans/import`: the scan (the first, for an `.xlsx`) and the fits queued; an
-/// `.xlsx` adds every scan and each measurement's colorimetry check.
+/// `.xlsx` adds every scan and each measurement's colorimetry check. A file imported before
+/// (the same bytes, through any door) is not imported again unless asked (`again=true`): the
+/// answer (200, not 201) names the earlier import's scans in `scan` and `scans`, queues no fit,
+/// and says so in `already_imported`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Imported {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub already_imported: Option<AlreadyImported>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub colorimetry_checks: Option<Vec<ColorimetryCheck>>,
     pub fits: Vec<FitRunId>,
@@ -282,6 +287,32 @@ pub struct Imported {
     pub scan: Option<ScanId>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scans: Option<Vec<ScanId>>,
+}
+
+/// In [`Imported`]: the file was imported before, and not again.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AlreadyImported {
+    /// "already imported as scan 3 on 2026-12-04T19:14:14Z from PAR_1.xlsx (the same content,
+    /// SHA-256 …); nothing was imported again; add again=true to import it anyway".
+    pub message: String,
+    /// The earlier import's file name, when known.
+    pub file_name: Option<String>,
+    /// When the earlier import was made, ms since the epoch.
+    pub imported_at_ms: i64,
+    /// SHA-256 of the content, 64 lower-case hex digits.
+    pub sha256: String,
+}
+
+/// `POST /scans/import` query: `?file=NAME&again=true`, both optional.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImportQuery {
+    /// The file's name (its directory is dropped), recorded with its scans and named in their
+    /// provenance.
+    pub file: Option<String>,
+    /// Import it even if the same content was imported before.
+    #[serde(default)]
+    pub again: bool,
 }
 
 /// How closely brdfd's L*a*b* of one imported X-Rite measurement matches the file's.

@@ -310,3 +310,127 @@ fn every_operator_command_says_when_no_daemon_is_listening() {
         );
     }
 }
+
+/// A port nothing listens on now: bound, noted, closed.
+fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().port()
+}
+
+/// `dir/brdfd.toml` with simulated instruments, listening on `port`, its store `brdfd.db` as
+/// a relative path.
+fn relative_config(dir: &std::path::Path, port: u16) {
+    std::fs::write(
+        dir.join("brdfd.toml"),
+        format!(
+            "[store]\npath = \"brdfd.db\"\n\n[api]\nlisten = \"127.0.0.1:{port}\"\n\n\
+             [fit]\ncrossval = false\n\n[log]\nlevel = \"warn\"\n\n\
+             [devices.ma_t12]\ntransport = \"simulated\"\n\n[devices.sra]\ntransport = \"simulated\"\n"
+        ),
+    )
+    .unwrap();
+}
+
+/// A `brdfd serve` child, killed when dropped.
+struct Child(std::process::Child);
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn a_configuration_read_from_another_directory_keeps_its_own_paths() {
+    let _serial = serial();
+    let tmp = tempfile::tempdir().unwrap();
+    let lab = tmp.path().join("lab");
+    std::fs::create_dir(&lab).unwrap();
+    let port = free_port();
+    relative_config(&lab, port);
+    // The daemon started in its own directory, as an operator does.
+    let mut child = Child(
+        std::process::Command::new(env!("CARGO_BIN_EXE_brdfd"))
+            .args(["serve", "--config", "brdfd.toml"])
+            .current_dir(&lab)
+            .env_remove("BRDFD_TOKEN")
+            .env_remove("BRDFD_CONFIG")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let line = common::serve::first_line(&mut child.0).expect("the daemon prints where it listens");
+    assert!(line.contains(&format!("127.0.0.1:{port}")), "{line}");
+    assert!(lab.join("brdfd.db").is_file() && lab.join("brdfd.token").is_file());
+    // From the directory above, naming the same file: the same store and token (a scan that
+    // does not exist is the daemon's 404, exit 6, not a missing token, exit 5).
+    for (args, code) in [
+        (vec!["show", "99", "--config", "lab/brdfd.toml"], 6),
+        (vec!["status", "--config", "lab/brdfd.toml"], 0),
+    ] {
+        let out = run_brdfd(&args, Some(tmp.path()));
+        assert_eq!(
+            out.status.code(),
+            Some(code),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    drop(child);
+    // A store left in the working directory by the old reading of relative paths is named,
+    // not silently replaced by a new one beside the file.
+    let old = tmp.path().join("old");
+    std::fs::create_dir(&old).unwrap();
+    std::fs::create_dir(old.join("etc")).unwrap();
+    relative_config(&old.join("etc"), port);
+    std::fs::write(old.join("brdfd.db"), "").unwrap();
+    let out = run_brdfd(&["status", "--config", "etc/brdfd.toml"], Some(&old));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("store.path"), "{stderr}");
+    assert!(stderr.contains("Write its full path"), "{stderr}");
+    assert!(!old.join("etc/brdfd.db").exists());
+}
+
+#[test]
+fn no_daemon_on_the_configured_address_says_how_to_name_another() {
+    let tmp = tempfile::tempdir().unwrap();
+    let port = free_port();
+    relative_config(tmp.path(), port);
+    let out = run_brdfd(&["status", "--config", "brdfd.toml"], Some(tmp.path()));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{stderr}");
+    assert!(
+        stderr.contains(&format!("no brdfd daemon is listening on 127.0.0.1:{port}")),
+        "{stderr}"
+    );
+    assert!(stderr.contains("[api] listen of brdfd.toml"), "{stderr}");
+    assert!(stderr.contains("--addr IP:PORT"), "{stderr}");
+    assert!(stderr.contains("--config"), "{stderr}");
+}
+
+#[test]
+fn a_port_in_use_is_said_once_with_the_option_that_moves_it() {
+    let _serial = serial();
+    let tmp = tempfile::tempdir().unwrap();
+    relative_config(tmp.path(), 0);
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = taken.local_addr().unwrap().to_string();
+    let out = run_brdfd(
+        &["serve", "--config", "brdfd.toml", "--listen", &addr],
+        Some(tmp.path()),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    let error: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(error.len(), 1, "{stderr}");
+    assert_eq!(
+        error[0].to_lowercase().matches("in use").count(),
+        1,
+        "{stderr}"
+    );
+    assert!(error[0].contains("--listen 127.0.0.1:PORT"), "{stderr}");
+    assert!(error[0].contains("[api] listen"), "{stderr}");
+}

@@ -269,8 +269,8 @@ fn files_written_slowly_in_pieces_are_imported_whole_and_fitted() {
     assert_eq!(shown["scan"]["provenance"]["source"], "imported");
     assert_eq!(
         shown["scan"]["provenance"]["source_detail"],
-        "imported from session 1.cgats and session 1.sra.csv, instrument software export; \
-         CGATS export session 1.cgats; originator MA-T12 software"
+        "CGATS export session 1.cgats; originator MA-T12 software; SRA readings from \
+         session 1.sra.csv"
     );
     let exported = Scan::from_json(
         daemon
@@ -407,37 +407,175 @@ fn the_same_content_twice_is_imported_once() {
     let bytes = example("t-sky-blue").to_json_pretty().unwrap();
     std::fs::write(lab.sub("a.scan.json"), &bytes).unwrap();
     wait_for("a.scan.json in done/", || lab.names("done").len() == 1);
-    // The same bytes again, under the same name and under another.
+    let first = scans(&daemon.client)[0]["id"].as_i64().unwrap();
+    // The same bytes again, under the same name and under another: not imported, moved to
+    // done/ (not failed/) beside a note naming the first import.
     std::fs::write(lab.sub("a.scan.json"), &bytes).unwrap();
     std::fs::write(lab.sub("b.scan.json"), &bytes).unwrap();
-    wait_for("both copies in failed/", || lab.names("failed").len() == 4);
+    wait_for("both copies in done/ with their notes", || {
+        lab.names("done").len() == 5
+    });
     assert!(lab.settled());
+    assert!(lab.names("failed").is_empty(), "{:?}", lab.names("failed"));
     assert_eq!(
-        lab.names("failed"),
+        lab.names("done"),
         BTreeSet::from([
             "a.scan.json".into(),
-            "a.scan.json.error.txt".into(),
+            "a-2.scan.json".into(),
+            "a-2.scan.json.note.txt".into(),
             "b.scan.json".into(),
-            "b.scan.json.error.txt".into(),
+            "b.scan.json.note.txt".into(),
         ])
     );
-    let why = std::fs::read_to_string(lab.sub("failed/b.scan.json.error.txt")).unwrap();
-    assert!(why.contains("already imported"), "{why}");
+    let why = std::fs::read_to_string(lab.sub("done/b.scan.json.note.txt")).unwrap();
+    assert!(
+        why.contains(&format!("already imported as scan {first} on ")),
+        "{why}"
+    );
     assert!(why.contains("from a.scan.json"), "{why}");
+    assert!(why.contains("brdfd import --again b.scan.json"), "{why}");
     assert_eq!(scans(&daemon.client).len(), 1);
-    // A second drop of a name already in done/ keeps both files there.
+    let status = daemon.ingest();
+    assert_eq!(status["already_imported"], 2, "{status}");
+    assert_eq!(status["rejected"], 0, "{status}");
+    // A second drop of a name already in done/ keeps every file there.
     let other = example("t-pebble-grey").to_json_pretty().unwrap();
     std::fs::write(lab.sub("a.scan.json"), &other).unwrap();
     wait_for("the new a.scan.json in done/", || {
-        lab.names("done").len() == 2
+        lab.names("done").len() == 6
     });
-    assert_eq!(
-        lab.names("done"),
-        BTreeSet::from(["a.scan.json".into(), "a-2.scan.json".into()])
-    );
+    assert!(lab.names("done").contains("a-3.scan.json"));
     assert_eq!(scans(&daemon.client).len(), 2);
     daemon.stop();
     assert_eq!(ingested(&lab).len(), 2);
+}
+
+/// The real X-Rite export the door tests import.
+fn xlsx() -> (PathBuf, &'static str) {
+    let name = "PAR_PW_CB_NG_1.xlsx";
+    (
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/real-mat12")
+            .join(name),
+        name,
+    )
+}
+
+/// `brdfd import FILE --detach` (and `extra`) against the lab's daemon: exit code and stdout.
+fn cli_import(lab: &Lab, file: &Path, extra: &[&str]) -> (Option<i32>, String) {
+    let config = lab.dir.join("brdfd.toml");
+    let mut args = vec![
+        "import",
+        file.to_str().unwrap(),
+        "--detach",
+        "--config",
+        config.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let out = run_brdfd(&args, None);
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{args:?}: {stdout} {stderr}");
+    (out.status.code(), stdout)
+}
+
+/// One file through every door: `brdfd import` twice gives one scan and names it the second
+/// time; dropped into the watch folder under another name it goes to done/ with a note; over
+/// HTTP the answer is the first scan; `--again` imports it anyway. The file's name is in the
+/// scan's provenance once, whatever the door.
+#[test]
+fn a_file_is_imported_once_whatever_the_door_unless_asked_again() {
+    let _serial = serial();
+    let lab = Lab::new(100, 600_000);
+    let daemon = lab.serve();
+    let (path, name) = xlsx();
+    // The CLI, twice.
+    let (_, first_out) = cli_import(&lab, &path, &[]);
+    assert!(first_out.contains("imported as scan"), "{first_out}");
+    let list = scans(&daemon.client);
+    assert_eq!(list.len(), 1, "{list:?}");
+    let first = list[0]["id"].as_i64().unwrap();
+    let (_, again_out) = cli_import(&lab, &path, &[]);
+    assert!(
+        again_out.contains(&format!("already imported as scan {first} on ")),
+        "{again_out}"
+    );
+    assert!(again_out.contains(&format!("from {name}")), "{again_out}");
+    assert!(again_out.contains("--again"), "{again_out}");
+    assert_eq!(scans(&daemon.client).len(), 1);
+    // The file name once in the provenance, not "the uploaded .xlsx".
+    let shown = daemon.client.get(&format!("/scans/{first}")).unwrap();
+    let detail = shown["scan"]["provenance"]["source_detail"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert_eq!(detail.matches(name).count(), 1, "{detail}");
+    assert!(!detail.contains("uploaded"), "{detail}");
+    assert!(!detail.starts_with("imported from"), "{detail}");
+    // The watch folder, under another name: done/ with a note, no new scan.
+    std::fs::copy(&path, lab.sub("renamed.xlsx")).unwrap();
+    wait_for("renamed.xlsx in done/ with its note", || {
+        lab.names("done").len() == 2
+    });
+    assert!(lab.names("failed").is_empty(), "{:?}", lab.names("failed"));
+    let note = std::fs::read_to_string(lab.sub("done/renamed.xlsx.note.txt")).unwrap();
+    assert!(
+        note.contains(&format!("already imported as scan {first} on ")),
+        "{note}"
+    );
+    assert!(note.contains(&format!("from {name}")), "{note}");
+    assert_eq!(daemon.ingest()["already_imported"], 1);
+    // HTTP: 200, the first scan, no fit queued, the message.
+    let bytes = std::fs::read(&path).unwrap();
+    let v = daemon
+        .client
+        .post_bytes("/scans/import?file=other.xlsx", &bytes)
+        .unwrap();
+    assert_eq!(v["scan"].as_i64(), Some(first), "{v}");
+    assert_eq!(v["fits"].as_array().unwrap().len(), 0, "{v}");
+    let message = v["already_imported"]["message"].as_str().unwrap();
+    assert!(message.contains(&format!("from {name}")), "{v}");
+    assert!(message.contains("again=true"), "{v}");
+    assert_eq!(scans(&daemon.client).len(), 1);
+    // --again imports it anyway: a second scan.
+    let (_, forced) = cli_import(&lab, &path, &["--again"]);
+    assert!(forced.contains("imported as scan"), "{forced}");
+    assert!(!forced.contains("already"), "{forced}");
+    let list = scans(&daemon.client);
+    assert_eq!(list.len(), 2, "{list:?}");
+    // Then the repeat names both.
+    let (_, third) = cli_import(&lab, &path, &[]);
+    assert!(third.contains("already imported as scans"), "{third}");
+    daemon.stop();
+}
+
+/// A scan file uploaded over HTTP with its name, then given to `brdfd import`: recognised.
+#[test]
+fn a_file_uploaded_over_http_is_recognised_by_the_cli() {
+    let _serial = serial();
+    let lab = Lab::new(100, 600_000);
+    let daemon = lab.serve();
+    let text = example("t-sky-blue").to_json_pretty().unwrap();
+    let file = lab.dir.join("sky.scan.json");
+    std::fs::write(&file, &text).unwrap();
+    let v = daemon
+        .client
+        .post_text("/scans/import?file=sky.scan.json", &text)
+        .unwrap();
+    let first = v["scan"].as_i64().unwrap();
+    let shown = daemon.client.get(&format!("/scans/{first}")).unwrap();
+    assert_eq!(
+        shown["scan"]["provenance"]["source_detail"], "brdfd.scan/1 file sky.scan.json",
+        "{shown}"
+    );
+    let (_, out) = cli_import(&lab, &file, &[]);
+    assert!(
+        out.contains(&format!("already imported as scan {first} on ")),
+        "{out}"
+    );
+    assert!(out.contains("from sky.scan.json"), "{out}");
+    assert_eq!(scans(&daemon.client).len(), 1);
+    daemon.stop();
 }
 
 /// `n` distinct scans: the examples under numbered sample names.

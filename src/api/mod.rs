@@ -12,7 +12,7 @@
 //! | `GET /scans/{id}` | a scan, its readings, reference and fits | 200 |
 //! | `GET /scans/{id}/export` | the scan as `brdfd.scan/1` | 200 |
 //! | `GET /scans/{id}/textures/{n}.png` | the instrument camera's image `n` kept with an imported scan (listed in the scan's `textures`) | 200 `image/png` |
-//! | `POST /scans/import` (a `brdfd.scan/1` body, or an X-Rite QC `.xlsx` export) | import its scans, fit them | 201 `{"scan", "fits"}` (an `.xlsx`: `"scans"` and `"colorimetry_checks"` too) |
+//! | `POST /scans/import?file=NAME&again=true` (a `brdfd.scan/1` body, or an X-Rite QC `.xlsx` export; both parameters optional) | import its scans, fit them; the same bytes imported before (through any door) are not imported again unless `again=true` | 201 `{"scan", "fits"}` (an `.xlsx`: `"scans"` and `"colorimetry_checks"` too); 200 `{"scan", "scans", "fits": [], "already_imported": {"message", …}}` for a repeat |
 //! | `POST /scans/{id}/refit` [`RefitRequest`] (`sra`: `"flat"`/`"luminance"`) | queue fits again | 202 `{"fits": [id]}` |
 //! | `POST /abort` | stop the reference or scan in progress | 200 `{"aborted": …}` |
 //! | `GET /fits/{id}` | a fit run and its evaluation | 200 |
@@ -503,8 +503,17 @@ async fn hold_import_body(
 
 async fn import_scan(
     State(s): State<Service>,
+    query: Result<Query<wire::ImportQuery>, axum::extract::rejection::QueryRejection>,
     body: Result<axum::body::Bytes, axum::extract::rejection::BytesRejection>,
 ) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|e| {
+        rejected_body(
+            "POST /scans/import",
+            "the parameters are file (the file's name) and again (true to import a file \
+             imported before)",
+            &e.body_text(),
+        )
+    })?;
     let body = match body {
         Ok(b) => b,
         Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
@@ -522,9 +531,27 @@ async fn import_scan(
             ))));
         }
     };
+    // The name as the file had it, without a directory (a client may send a path).
+    let file_name = match query.file.as_deref() {
+        Some(f) => {
+            let name = f.rsplit(['/', '\\']).next().unwrap_or(f).trim();
+            crate::service::check_name("file name", name)?;
+            (!name.is_empty()).then(|| name.to_string())
+        }
+        None => None,
+    };
+    let sha256 = {
+        use sha2::Digest;
+        hex::encode(sha2::Sha256::digest(&body))
+    };
+    let import = Upload {
+        sha256,
+        file_name,
+        again: query.again,
+    };
     // An .xlsx is a zip archive; a scan file is JSON text.
     if body.starts_with(b"PK\x03\x04") {
-        return import_xrite(&s, body).await;
+        return import_xrite(&s, body, &import).await;
     }
     if body.len() > MAX_BODY_BYTES {
         return Ok(limit_refusal(
@@ -536,41 +563,140 @@ async fn import_scan(
         ));
     }
     let file = Scan::from_json(&body).map_err(ServiceError::InvalidScan)?;
-    let (scan, fits) = s.import_scan(&file).await?;
-    Ok((
-        StatusCode::CREATED,
+    let (provenance, taken_at_ms) = crate::service::file_provenance(
+        &file,
+        crate::service::SCAN_FILE,
+        import.file_name.as_deref(),
+    )
+    .map_err(ServiceError::InvalidScan)?;
+    let one = crate::service::ScanToImport {
+        scan: &file,
+        provenance,
+        taken_at_ms,
+        textures: &[],
+    };
+    match s.import_file(import.file(), &[one], import.again).await? {
+        crate::service::FileImported::Imported(scans) => {
+            let (scan, fits) = scans.into_iter().next().ok_or_else(|| {
+                ServiceError::BadRequest("the scan file gave no scan".to_string())
+            })?;
+            Ok((
+                StatusCode::CREATED,
+                Json(wire::Imported {
+                    already_imported: None,
+                    colorimetry_checks: None,
+                    fits,
+                    scan: Some(scan),
+                    scans: None,
+                }),
+            )
+                .into_response())
+        }
+        crate::service::FileImported::Already(prior) => Ok(already_imported(prior)),
+    }
+}
+
+/// What `POST /scans/import` knows of the file it receives.
+struct Upload {
+    /// SHA-256 of the body.
+    sha256: String,
+    /// The `file` parameter, without a directory.
+    file_name: Option<String>,
+    /// The `again` parameter.
+    again: bool,
+}
+
+impl Upload {
+    fn file(&self) -> crate::store::ImportFile<'_> {
+        crate::store::ImportFile {
+            sha256: &self.sha256,
+            file_name: self.file_name.as_deref(),
+        }
+    }
+}
+
+/// The answer to a file imported before: 200 with the earlier import's scans, no fit queued.
+fn already_imported(prior: crate::store::PriorImport) -> Response {
+    let message = format!(
+        "{}; add again=true to import it anyway",
+        crate::service::already_imported(&prior)
+    );
+    (
+        StatusCode::OK,
         Json(wire::Imported {
+            already_imported: Some(wire::AlreadyImported {
+                message,
+                file_name: prior.file_name,
+                imported_at_ms: prior.imported_at_ms,
+                sha256: prior.sha256,
+            }),
             colorimetry_checks: None,
-            fits,
-            scan: Some(scan),
-            scans: None,
+            fits: Vec::new(),
+            scan: prior.scans.first().copied(),
+            scans: Some(prior.scans),
         }),
     )
-        .into_response())
+        .into_response()
 }
 
 /// `POST /scans/import` of an X-Rite QC `.xlsx` export: every measurement is read and checked
-/// before any is imported; each becomes a scan (reference: instrument calibration, no
-/// specular readings), fitted like a measured one.
-async fn import_xrite(s: &Service, body: axum::body::Bytes) -> Result<Response, ApiError> {
+/// before any is imported; all are imported in one transaction, each a scan (reference:
+/// instrument calibration, no specular readings) fitted like a measured one.
+async fn import_xrite(
+    s: &Service,
+    body: axum::body::Bytes,
+    import: &Upload,
+) -> Result<Response, ApiError> {
     // The body itself goes to the reader (no copy: its bytes are what the budget holds).
     let budget = s.settings().budget;
-    let read = tokio::task::spawn_blocking(move || {
-        crate::formats::xrite::read(&body, "the uploaded .xlsx", &budget)
-    })
-    .await
-    .map_err(|e| ServiceError::BadRequest(format!("reading the .xlsx failed: {e}")))?;
+    let name = import
+        .file_name
+        .clone()
+        .unwrap_or_else(|| "the uploaded .xlsx".to_string());
+    let read =
+        tokio::task::spawn_blocking(move || crate::formats::xrite::read(&body, &name, &budget))
+            .await
+            .map_err(|e| ServiceError::BadRequest(format!("reading the .xlsx failed: {e}")))?;
     let scans = read.map_err(|e| ServiceError::BadRequest(e.to_string()))?;
+    let mut to_import = Vec::with_capacity(scans.len());
+    for x in &scans {
+        let (provenance, taken_at_ms) = crate::service::file_provenance(
+            &x.scan,
+            crate::service::XRITE_XLSX,
+            import.file_name.as_deref(),
+        )
+        .map_err(ServiceError::InvalidScan)?;
+        to_import.push(crate::service::ScanToImport {
+            scan: &x.scan,
+            provenance,
+            taken_at_ms,
+            textures: &x.textures,
+        });
+    }
+    if to_import.is_empty() {
+        return Ok((
+            StatusCode::CREATED,
+            Json(wire::Imported {
+                already_imported: None,
+                colorimetry_checks: Some(Vec::new()),
+                fits: Vec::new(),
+                scan: None,
+                scans: Some(Vec::new()),
+            }),
+        )
+            .into_response());
+    }
+    let imported = match s
+        .import_file(import.file(), &to_import, import.again)
+        .await?
+    {
+        crate::service::FileImported::Imported(imported) => imported,
+        crate::service::FileImported::Already(prior) => return Ok(already_imported(prior)),
+    };
     let mut ids = Vec::with_capacity(scans.len());
     let mut all_fits = Vec::new();
     let mut checks = Vec::with_capacity(scans.len());
-    for x in &scans {
-        let (provenance, taken_at_ms) =
-            crate::service::imported_provenance(&x.scan, "uploaded X-Rite QC .xlsx export")
-                .map_err(ServiceError::InvalidScan)?;
-        let (scan, fits) = s
-            .import_scan_as(&x.scan, &provenance, taken_at_ms, &x.textures)
-            .await?;
+    for (x, (scan, fits)) in scans.iter().zip(imported) {
         if let Some(w) = x.warning() {
             tracing::warn!(scan = %scan, "{w}");
         }
@@ -587,6 +713,7 @@ async fn import_xrite(s: &Service, body: axum::body::Bytes) -> Result<Response, 
     Ok((
         StatusCode::CREATED,
         Json(wire::Imported {
+            already_imported: None,
             colorimetry_checks: Some(checks),
             fits: all_fits,
             scan: ids.first().copied(),
@@ -747,15 +874,36 @@ pub struct ApiServer {
 /// Why the API could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum ApiStartError {
-    #[error(
-        "cannot listen on {addr}: {source}; is another brdfd running? (`brdfd status`), or \
-         change [api] listen"
-    )]
+    /// The address could not be bound. The message says why once (the system's error is not
+    /// repeated as a cause) and what to do.
+    #[error("cannot listen on {addr}: {}", bind_advice(*.addr, .error))]
     Bind {
         addr: SocketAddr,
-        #[source]
-        source: std::io::Error,
+        /// Not a `source`: its text is in the message already.
+        error: std::io::Error,
     },
+}
+
+/// Why binding `addr` failed and the fix, in one sentence.
+fn bind_advice(addr: SocketAddr, source: &std::io::Error) -> String {
+    let elsewhere = format!(
+        "listen on another port with `brdfd serve --listen {}:PORT` or [api] listen in the \
+         configuration file",
+        match addr.ip() {
+            std::net::IpAddr::V6(ip) => format!("[{ip}]"),
+            ip => ip.to_string(),
+        }
+    );
+    match source.kind() {
+        std::io::ErrorKind::AddrInUse => format!(
+            "the address is already in use, by another brdfd (`brdfd status --addr {addr}`) or \
+             another program; stop it, or {elsewhere}"
+        ),
+        std::io::ErrorKind::PermissionDenied => {
+            format!("permission denied (ports below 1024 need privileges); {elsewhere}")
+        }
+        _ => format!("{source}; {elsewhere}"),
+    }
 }
 
 impl ApiServer {
@@ -767,11 +915,10 @@ impl ApiServer {
         options: ApiOptions,
     ) -> Result<ApiServer, ApiStartError> {
         server::raise_fd_limit();
-        let listener =
-            server::listen(addr).map_err(|source| ApiStartError::Bind { addr, source })?;
+        let listener = server::listen(addr).map_err(|error| ApiStartError::Bind { addr, error })?;
         let addr = listener
             .local_addr()
-            .map_err(|source| ApiStartError::Bind { addr, source })?;
+            .map_err(|error| ApiStartError::Bind { addr, error })?;
         let (stop, stopped) = watch::channel(false);
         let app = router(service, &options);
         let task = tokio::spawn(server::serve(listener, app, options.connections, stopped));
@@ -796,6 +943,29 @@ impl ApiServer {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod bind_tests {
+    #[tokio::test]
+    async fn a_port_in_use_is_said_once_with_the_fix() {
+        let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = taken.local_addr().unwrap();
+        let error = super::server::listen(addr).unwrap_err();
+        let e = anyhow::Error::new(super::ApiStartError::Bind { addr, error });
+        let line = crate::cli::one_line(&e);
+        assert_eq!(line.matches("in use").count(), 1, "{line}");
+        assert!(
+            !line.to_lowercase().contains("address already in use"),
+            "{line}"
+        );
+        assert!(line.contains("--listen 127.0.0.1:PORT"), "{line}");
+        assert!(line.contains("[api] listen"), "{line}");
+        assert!(
+            line.contains(&format!("brdfd status --addr {addr}")),
+            "{line}"
+        );
+    }
+}
 
 #[cfg(test)]
 mod body_tests {

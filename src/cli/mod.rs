@@ -340,7 +340,13 @@ mod tests {
             message: "m".into(),
         };
         let cases = [
-            (ClientError::NotRunning { addr }, exit::NO_DAEMON),
+            (
+                ClientError::NotRunning {
+                    addr,
+                    hint: String::new(),
+                },
+                exit::NO_DAEMON,
+            ),
             (
                 ClientError::Transport {
                     addr,

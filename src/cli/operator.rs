@@ -8,11 +8,12 @@
 //! no daemon gives "no brdfd daemon is listening on … — start one with `brdfd serve`".
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
 use crate::client::Client;
+use crate::config::ConfigOrigin;
 
 /// Where the daemon is, and its API token.
 #[derive(Debug, Clone, clap::Args)]
@@ -38,6 +39,15 @@ impl DaemonArgs {
         )?)
     }
 
+    /// Where the address came from, and how to name another, for the "no daemon" message:
+    /// nothing when `--addr` was given.
+    fn not_running_hint(&self, origin: &ConfigOrigin) -> String {
+        if self.addr.is_some() {
+            return String::new();
+        }
+        not_running_hint(origin, std::env::current_dir().ok().as_deref())
+    }
+
     /// The address asked for: `--addr`, else the configuration's.
     pub fn addr(&self) -> anyhow::Result<SocketAddr> {
         match self.addr {
@@ -49,9 +59,9 @@ impl DaemonArgs {
     /// A client with the token from BRDFD_TOKEN, `--token-file` or the configuration. A token
     /// that cannot be read is not an error yet: the daemon's 401, if it comes, says why.
     pub fn client(&self) -> anyhow::Result<Client> {
-        let config = self.config()?;
+        let (config, origin) = crate::config::Config::load_found(self.config.as_deref())?;
         let addr = self.addr.unwrap_or(config.api.listen);
-        let client = Client::new(addr);
+        let client = Client::new(addr).with_not_running_hint(self.not_running_hint(&origin));
         if let Ok(text) = std::env::var("BRDFD_TOKEN") {
             return match crate::api::Token::parse(&text) {
                 Some(t) => Ok(client.with_token(&t, "sent the token of BRDFD_TOKEN")),
@@ -70,6 +80,37 @@ impl DaemonArgs {
         })
     }
 }
+/// "; …" for the "no daemon" message of a command that took its address from `origin` (a
+/// configuration file, or the built-in default), run in `cwd`: where the address came from,
+/// and `--addr` / `--config` to name another; a `brdfd.toml` or `brdfd.token` in `cwd` that
+/// was not read is pointed at.
+pub(super) fn not_running_hint(origin: &ConfigOrigin, cwd: Option<&Path>) -> String {
+    let (from, used) = match origin {
+        ConfigOrigin::File { path, via } => (
+            format!("[api] listen of {} (from {via})", path.display()),
+            std::path::absolute(path).ok(),
+        ),
+        ConfigOrigin::Defaults => (
+            "the default address (no configuration file was found)".to_string(),
+            None,
+        ),
+    };
+    let mut hint = format!(
+        "; that is {from}. For a daemon on another address pass --addr IP:PORT, or --config \
+         with the daemon's configuration file"
+    );
+    if let Some(cwd) = cwd {
+        let config = cwd.join("brdfd.toml");
+        let here = |name: &str| cwd.join(name).is_file();
+        if here("brdfd.toml") && std::path::absolute(&config).ok() != used {
+            hint.push_str(" (there is one here: --config brdfd.toml)");
+        } else if here("brdfd.token") && used.is_none() {
+            hint.push_str(" (brdfd.token is here: the daemon that wrote it may listen elsewhere)");
+        }
+    }
+    hint
+}
+
 /// A date and time in UTC from milliseconds since the Unix epoch, e.g. `2026-11-24 19:14:14Z`.
 pub fn utc(ms: i64) -> String {
     crate::formats::rfc3339_utc(ms.div_euclid(1000)).replacen('T', " ", 1)
@@ -143,6 +184,7 @@ mod tests {
     #[test]
     fn a_tagged_answer_keeps_its_fields_in_alphabetical_order() {
         let answer = crate::wire::Imported {
+            already_imported: None,
             colorimetry_checks: None,
             fits: vec![crate::store::FitRunId(4)],
             scan: Some(crate::store::ScanId(2)),
@@ -152,6 +194,35 @@ mod tests {
             tagged("accepted", &answer).unwrap(),
             r#"{"fits":[4],"scan":2,"type":"accepted"}"#
         );
+    }
+
+    #[test]
+    fn no_daemon_says_where_the_address_came_from_and_how_to_name_another() {
+        let dir = tempfile::tempdir().unwrap();
+        let defaults = not_running_hint(&ConfigOrigin::Defaults, Some(dir.path()));
+        assert!(
+            defaults.contains("no configuration file was found"),
+            "{defaults}"
+        );
+        assert!(defaults.contains("--addr IP:PORT"), "{defaults}");
+        assert!(defaults.contains("--config"), "{defaults}");
+        assert!(!defaults.contains("here"), "{defaults}");
+        // A daemon's token in the directory, no configuration read.
+        std::fs::write(dir.path().join("brdfd.token"), "x").unwrap();
+        let token = not_running_hint(&ConfigOrigin::Defaults, Some(dir.path()));
+        assert!(token.contains("brdfd.token is here"), "{token}");
+        // A configuration in the directory that was not the one read.
+        std::fs::write(dir.path().join("brdfd.toml"), "").unwrap();
+        let nearby = not_running_hint(&ConfigOrigin::Defaults, Some(dir.path()));
+        assert!(nearby.contains("--config brdfd.toml"), "{nearby}");
+        // The one read names itself, and is not suggested again.
+        let read = ConfigOrigin::File {
+            path: dir.path().join("brdfd.toml"),
+            via: "--config",
+        };
+        let used = not_running_hint(&read, Some(dir.path()));
+        assert!(used.contains("[api] listen of"), "{used}");
+        assert!(!used.contains("there is one here"), "{used}");
     }
 
     #[test]

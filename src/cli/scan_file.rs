@@ -7,7 +7,7 @@ use anyhow::Context;
 use serde_json::json;
 
 use super::follow::{follow_scan, pending_fits, print_scan_result};
-use super::operator::{DaemonArgs, tagged};
+use super::operator::{DaemonArgs, tagged, terminal_safe};
 use crate::store::ScanId;
 
 #[derive(Debug, clap::Args)]
@@ -37,6 +37,11 @@ pub struct ImportArgs {
     /// through `brdfd import-format` first.
     #[arg(value_name = "FILE")]
     pub file: PathBuf,
+    /// Import FILE even if the same file (the same bytes, whatever its name or the way it
+    /// came in: `brdfd import`, the watch folder, `POST /scans/import`) was imported before;
+    /// without it, a file imported before is not imported again, and its scans are named.
+    #[arg(long)]
+    pub again: bool,
     /// Return once imported, without following the fits.
     #[arg(long)]
     pub detach: bool,
@@ -73,7 +78,10 @@ fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
     let bytes = std::fs::read(&args.file)
         .with_context(|| format!("cannot read {}", args.file.display()))?;
     let client = args.daemon.client()?;
-    let v = client.import_xlsx(&bytes)?;
+    let v = client.import_xlsx(&bytes, &query(args))?;
+    if repeated(args, &v)? {
+        return Ok(());
+    }
     if args.json {
         println!("{}", tagged("accepted", &v)?);
     }
@@ -128,7 +136,10 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     }
     let client = args.daemon.client()?;
     let events = (!args.detach).then(|| client.events()).transpose()?;
-    let v = client.import_scan(&text)?;
+    let v = client.import_scan(&text, &query(args))?;
+    if repeated(args, &v)? {
+        return Ok(());
+    }
     let scan = v.scan.ok_or_else(|| {
         anyhow::anyhow!(
             "the daemon imported {} without naming its scan",
@@ -156,4 +167,45 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
         print_scan_result(&client.scan(scan)?, args.json)?;
     }
     Ok(())
+}
+
+/// What `brdfd import` sends with the file: its name (recorded with its scans) and `--again`.
+fn query(args: &ImportArgs) -> crate::wire::ImportQuery {
+    crate::wire::ImportQuery {
+        file: args
+            .file
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned()),
+        again: args.again,
+    }
+}
+
+/// Says so and returns true when the daemon answered that the file was imported before: "FILE:
+/// already imported as scan 3 on … from …; nothing was imported again; `brdfd import --again
+/// FILE` imports it anyway" (with --json, the answer tagged `already_imported`).
+fn repeated(args: &ImportArgs, v: &crate::wire::Imported) -> anyhow::Result<bool> {
+    let Some(a) = &v.already_imported else {
+        return Ok(false);
+    };
+    if args.json {
+        println!("{}", tagged("already_imported", v)?);
+        return Ok(true);
+    }
+    let prior = crate::store::PriorImport {
+        sha256: a.sha256.clone(),
+        scans: v
+            .scans
+            .clone()
+            .unwrap_or_else(|| v.scan.into_iter().collect()),
+        file_name: a.file_name.clone(),
+        imported_at_ms: a.imported_at_ms,
+    };
+    let file = args.file.display();
+    println!(
+        "{}: {}; `brdfd import --again {}` imports it anyway",
+        terminal_safe(&file.to_string()),
+        terminal_safe(&crate::service::already_imported(&prior)),
+        terminal_safe(&file.to_string())
+    );
+    Ok(true)
 }

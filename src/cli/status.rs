@@ -80,10 +80,14 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
     }
     if let Some(ingest) = &v.ingest {
         println!(
-            "watch folder {}: {} imported, {} rejected since start, {} waiting{}",
+            "watch folder {}: {} imported, {} rejected since start{}, {} waiting{}",
             ingest.dir,
             ingest.imported,
             ingest.rejected,
+            match ingest.already_imported {
+                0 => String::new(),
+                n => format!(", {n} imported before (moved to done/ with a note)"),
+            },
             ingest.waiting,
             match &ingest.last_error {
                 Some(e) => format!("; last error: {e}"),

@@ -2,7 +2,7 @@
 //! and the key), the [`Checker`] that turns toml's byte spans into lines, and the range checks
 //! more than one section uses.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use toml::Spanned;
 
@@ -60,6 +60,9 @@ pub(super) struct Checker<'a> {
     pub(super) origin: &'a str,
     /// Whether `[devices.*] transport` must be set (always, for a file read by brdfd).
     pub(super) require_transport: bool,
+    /// The directory of the file read, which relative paths in it are relative to; `None` for
+    /// text not read from a file (its paths are kept as written).
+    pub(super) base: Option<&'a Path>,
 }
 
 impl Checker<'_> {
@@ -117,7 +120,17 @@ impl Checker<'_> {
                 v,
                 "must not be empty; leave the key out instead".into(),
             )),
-            Some(v) => Ok(Some(PathBuf::from(v.get_ref()))),
+            Some(v) => Ok(Some(self.resolve(v.get_ref()))),
+        }
+    }
+
+    /// A path as the file writes it: a relative one is relative to the file's directory
+    /// (never the working directory of whoever reads the file, daemon or command).
+    pub(super) fn resolve(&self, path: &str) -> PathBuf {
+        let p = PathBuf::from(path);
+        match self.base {
+            Some(base) if p.is_relative() => base.join(p),
+            _ => p,
         }
     }
 

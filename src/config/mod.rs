@@ -148,13 +148,24 @@ impl SearchEnv {
 }
 
 impl Config {
-    /// Reads and checks a configuration file.
+    /// Reads and checks a configuration file. Its relative paths (`[store] path`,
+    /// `[api] token_file`, `[ingest] watch`, `[devices.*] session` and `record`, a
+    /// `[reference]` certificate) are relative to the file's directory, whoever reads it from
+    /// wherever: the daemon and every command agree on the store and the token.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             path: path.to_path_buf(),
             source,
         })?;
-        Config::from_toml(&text, &path.display().to_string())
+        let base = std::path::absolute(path)
+            .ok()
+            .and_then(|p| p.parent().map(Path::to_path_buf));
+        Config::parse_text(
+            &text,
+            &path.display().to_string(),
+            true,
+            Some(base.as_deref().unwrap_or(Path::new(""))),
+        )
     }
 
     /// The file at `path` if given, else the first found by [`Config::search`] (the built-in
@@ -214,21 +225,25 @@ impl Config {
     }
 
     /// Parses and checks TOML text; `origin` names it in errors (the file name). Keys left out
-    /// take their defaults.
+    /// take their defaults. Paths are kept as written (a `[reference]` certificate's is
+    /// relative to `origin`'s directory); [`Config::load`] makes a file's relative to it.
     pub fn from_toml(text: &str, origin: &str) -> Result<Config, ConfigError> {
-        Config::parse_text(text, origin, true)
+        Config::parse_text(text, origin, true, None)
     }
 
-    /// [`Config::from_toml`], with `require_transport` false for tests of other sections.
+    /// [`Config::from_toml`], with `require_transport` false for tests of other sections, and
+    /// `base` the directory relative paths are relative to.
     fn parse_text(
         text: &str,
         origin: &str,
         require_transport: bool,
+        base: Option<&Path>,
     ) -> Result<Config, ConfigError> {
         let c = Checker {
             text,
             origin,
             require_transport,
+            base,
         };
         let raw: RawConfig = toml::from_str(text).map_err(|e| c.syntax(e))?;
 
@@ -318,7 +333,7 @@ mod tests {
 
     /// Sections other than `[devices.*]` on their own: transports may be left out.
     pub(super) fn parse(text: &str) -> Result<Config, ConfigError> {
-        Config::parse_text(text, "test.toml", false)
+        Config::parse_text(text, "test.toml", false, None)
     }
 
     #[test]
@@ -339,6 +354,9 @@ mod tests {
         let mut expected = Config::default();
         expected.devices.ma_t12.transport = shipped.devices.ma_t12.transport.clone();
         expected.devices.sra.transport = shipped.devices.sra.transport.clone();
+        // The store where the systemd unit keeps the daemon's state: a relative path would be
+        // relative to /etc/brdfd, where the file is installed.
+        expected.store.path = PathBuf::from("/var/lib/brdfd/brdfd.db");
         assert_eq!(shipped, expected);
         // No file at all runs with no instrument (loudly) and writes a local SQLite file.
         assert!(matches!(
@@ -349,7 +367,7 @@ mod tests {
             Config::default().devices.sra.transport,
             SraTransport::Simulated { session: None }
         ));
-        assert!(shipped.store.path.is_relative());
+        assert!(Config::default().store.path.is_relative());
         assert!(shipped.api.listen.ip().is_loopback());
         assert_eq!(shipped.fit.max_concurrent_fits.get(), 1);
         assert_eq!(shipped.fit.cost_functions, CostFunction::ALL);
@@ -482,6 +500,63 @@ mod tests {
         let missing = dir.path().join("missing.toml");
         let e = Config::load(&missing).unwrap_err();
         assert!(matches!(e, ConfigError::Read { .. }), "{e}");
+    }
+
+    #[test]
+    fn relative_paths_in_a_file_are_relative_to_its_directory() {
+        let dir = tempfile::tempdir().unwrap();
+        let lab = dir.path().join("lab");
+        std::fs::create_dir(&lab).unwrap();
+        std::fs::write(lab.join("tile.cgats"), "not read: the key is left out").unwrap();
+        let text = "[store]\npath = \"data/brdfd.db\"\n\
+                    [api]\ntoken_file = \"secret/brdfd.token\"\n\
+                    [ingest]\nwatch = \"inbox\"\n\
+                    [devices.ma_t12]\ntransport = \"simulated\"\nsession = \"rec/ma.session\"\n\
+                    record = \"ma-recorded.session\"\n\
+                    [devices.sra]\ntransport = \"simulated\"\nsession = \"/abs/sra.session\"\n\
+                    record = \"../sra-recorded.session\"\n";
+        std::fs::write(lab.join("brdfd.toml"), text).unwrap();
+        // Read as `--config lab/brdfd.toml` would name it from `dir`, whatever the working
+        // directory of the process: every relative path is under lab/.
+        let c = Config::load(&lab.join("brdfd.toml")).unwrap();
+        let lab = std::path::absolute(&lab).unwrap();
+        assert_eq!(c.store.path, lab.join("data/brdfd.db"));
+        assert_eq!(c.api.token_file, Some(lab.join("secret/brdfd.token")));
+        assert_eq!(c.ingest.watch, Some(lab.join("inbox")));
+        assert_eq!(
+            c.devices.ma_t12.transport,
+            MaT12Transport::Simulated {
+                session: Some(lab.join("rec/ma.session"))
+            }
+        );
+        assert_eq!(
+            c.devices.ma_t12.record,
+            Some(lab.join("ma-recorded.session"))
+        );
+        // Absolute paths stay as they are.
+        assert_eq!(
+            c.devices.sra.transport,
+            SraTransport::Simulated {
+                session: Some(PathBuf::from("/abs/sra.session"))
+            }
+        );
+        assert_eq!(
+            c.devices.sra.record,
+            Some(lab.join("../sra-recorded.session"))
+        );
+        // Without token_file, the token beside the store: the one the daemon writes.
+        std::fs::write(
+            lab.join("brdfd.toml"),
+            "[store]\npath = \"brdfd.db\"\n[devices.ma_t12]\ntransport = \"simulated\"\n\
+             [devices.sra]\ntransport = \"simulated\"\n",
+        )
+        .unwrap();
+        let c = Config::load(&lab.join("brdfd.toml")).unwrap();
+        assert_eq!(c.store.path, lab.join("brdfd.db"));
+        assert_eq!(c.api.token_path(&c.store.path), lab.join("brdfd.token"));
+        // Text not read from a file keeps its paths as written.
+        let c = Config::from_toml(text, "lab/brdfd.toml").unwrap();
+        assert_eq!(c.store.path, PathBuf::from("data/brdfd.db"));
     }
 }
 

@@ -24,6 +24,7 @@ pub struct ReferenceConfig {
 fn reference_reflectance(
     v: &toml::Value,
     origin: &str,
+    base: Option<&Path>,
 ) -> Result<(crate::spectral::Spectrum, String), String> {
     use crate::spectral::BANDS;
     let number = |v: &toml::Value| match v {
@@ -36,7 +37,7 @@ fn reference_reflectance(
             return Err("must not be empty; leave the key out for ρ_ref = 1".into());
         }
         toml::Value::String(path) => {
-            let dir = Path::new(origin).parent().unwrap_or(Path::new(""));
+            let dir = base.unwrap_or(Path::new(origin).parent().unwrap_or(Path::new("")));
             let full = dir.join(path);
             let text = crate::formats::read_text(&full).map_err(|e| e.to_string())?;
             let rho = crate::formats::certificate::read(&full.display().to_string(), &text)
@@ -90,7 +91,7 @@ impl Checker<'_> {
         Ok(match &raw.reflectance {
             None => ReferenceConfig::default(),
             Some(v) => {
-                let (rho, source) = reference_reflectance(v.get_ref(), self.origin)
+                let (rho, source) = reference_reflectance(v.get_ref(), self.origin, self.base)
                     .map_err(|m| self.invalid("reference.reflectance", v, m))?;
                 ReferenceConfig {
                     reflectance: Some(rho),

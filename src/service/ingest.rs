@@ -29,9 +29,11 @@
 //! log and in `status` (`interrupted`), and is not read again unless someone drops it again:
 //! one file cannot keep the daemon down through its restarts. Scans imported but whose fits
 //! were not queued yet are queued at start. A file is never imported twice: the same content
-//! dropped again, under any name, is moved to `failed/` naming the earlier import. A store
-//! failure (a full disk) leaves the file in `.importing/` to be tried again at a later pass of
-//! the same run.
+//! dropped again, under any name, or imported before through `brdfd import` or
+//! `POST /scans/import` (every door records each scan's file, `scan_imports`), is not imported
+//! again: it is moved to `done/` beside `NAME.note.txt` naming the earlier import, and counted
+//! in `status` (`already_imported`). A store failure (a full disk) leaves the file in
+//! `.importing/` to be tried again at a later pass of the same run.
 //!
 //! **Bounded.** Imports run off the folder's pass, each on a task of its own,
 //! [`IMPORTS_AT_ONCE`] at a time; a file's bytes are held in the service's import budget
@@ -50,8 +52,8 @@
 //! but a regular file is moved to `failed/` unread; a file over `[ingest] max_file_mib` too,
 //! and no file is read past that bound.
 //!
-//! **Outcomes.** `DIR/done/NAME`, or `DIR/failed/NAME` with `DIR/failed/NAME.error.txt` saying
-//! why (the parser's message names file, line and field); an existing name there gets `-2`,
+//! **Outcomes.** `DIR/done/NAME` (with `DIR/done/NAME.note.txt` for a file imported before),
+//! or `DIR/failed/NAME` with `DIR/failed/NAME.error.txt` saying why (the parser's message names file, line and field); an existing name there gets `-2`,
 //! `-3`, … before its first dot. Each file gives an [`Event::FileImported`] or
 //! [`Event::FileRejected`], and `status` shows the folder's counts and last error.
 //!
@@ -71,12 +73,15 @@ use crate::formats::xrite_xlsx::TextureImage;
 use crate::formats::{self, Format, ImportOptions};
 use crate::safe_fs::{Dir, EntryKind, FsError, Replace};
 use crate::scan::Scan;
-use crate::store::{FileImport, ImportedScan, NewTexture, Provenance, Source, StoreError};
+use crate::store::{FileImport, ImportedScan, NewTexture, Provenance, StoreError};
 
 use super::context::Context;
 use super::events::Event;
 use super::import_budget::{BudgetError, HeldBytes};
-use super::pipeline::{IMPORTED_SUFFIX, Pipeline, check_name, new_readings, new_textures};
+use super::pipeline::{
+    IMPORTED_SUFFIX, Pipeline, already_imported, check_name, file_provenance, new_readings,
+    new_textures,
+};
 use super::shutdown::TaskGuard;
 use super::{RefitRequest, ServiceError};
 
@@ -126,6 +131,10 @@ pub struct IngestStatus {
     pub imported: u64,
     /// Files moved to failed/ since start.
     pub rejected: u64,
+    /// Files moved to done/ since start without being imported: their content was imported
+    /// before (through any door), as the note beside each says.
+    #[serde(default)]
+    pub already_imported: u64,
     /// The last file imported or rejected.
     pub last_file: Option<String>,
     /// The last rejection or error, with its file.
@@ -388,6 +397,16 @@ enum Failure {
     Retry(String),
 }
 
+/// What became of a unit that did not fail.
+enum Outcome {
+    /// Imported now: the file (as shown), its scans, its content hash.
+    Imported(String, Vec<crate::store::ScanId>, String),
+    /// An import that committed before a stop (recovering): only the move was left.
+    Committed,
+    /// Its content was imported before: not imported again; the note says by which import.
+    Repeat(String),
+}
+
 /// What a unit's files hold: their content hash, the scans, and each scan's texture images
 /// (the instrument camera's, from an X-Rite `.xlsx`; none from other files).
 type UnitContent = (String, Vec<Scan>, Vec<Vec<TextureImage>>);
@@ -563,6 +582,7 @@ impl WatchFolder {
             waiting: 0,
             imported: 0,
             rejected: 0,
+            already_imported: 0,
             last_file: None,
             last_error: None,
             interrupted: Vec::new(),
@@ -1016,13 +1036,14 @@ impl WatchFolder {
         Err(last.expect("tried at least once"))
     }
 
-    /// Moves `name` from `.importing/` to a free name in `done/`, never replacing one.
-    fn file_to_done(&self, f: &Folders, name: &str) -> Result<(), FsError> {
+    /// Moves `name` from `.importing/` to a free name in `done/`, never replacing one; returns
+    /// the name it has there.
+    fn file_to_done(&self, f: &Folders, name: &str) -> Result<String, FsError> {
         let mut last = None;
         for _ in 0..8 {
             let to = f.done.free_name(name)?;
             match f.importing.move_to(name, &f.done, &to) {
-                Ok(()) => return Ok(()),
+                Ok(()) => return Ok(to),
                 Err(e @ FsError::Exists { .. }) => last = Some(e),
                 Err(e) => return Err(e),
             }
@@ -1064,13 +1085,47 @@ impl WatchFolder {
                 .await
         };
         match outcome {
+            Ok(Outcome::Repeat(note)) => {
+                let anyway = match &unit.partner {
+                    Some(p) => format!(
+                        "brdfd import-format {} --sra {p} --out DIR, then brdfd import each \
+                         DIR/*.scan.json",
+                        unit.main
+                    ),
+                    None => format!("brdfd import --again {}", unit.main),
+                };
+                for name in unit.names() {
+                    match self.file_to_done(f, name) {
+                        Ok(to) => {
+                            let text = format!(
+                                "{name} was not imported again: {note}.\n\nTo import it \
+                                 anyway, as new scans: {anyway}\n"
+                            );
+                            if let Err(e) = f.done.write(
+                                &format!("{to}.note.txt"),
+                                text.as_bytes(),
+                                Replace::Never,
+                            ) {
+                                tracing::warn!(error = %e, file = %to, "cannot write the note");
+                            }
+                        }
+                        Err(e) => self.note_error(format!("cannot move {name} into {DONE}/: {e}")),
+                    }
+                }
+                let file = unit.shown();
+                tracing::info!(file = %file, "{note}; moved to {DONE}/ with a note");
+                self.with_ingest_status(|s| {
+                    s.already_imported += 1;
+                    s.last_file = Some(file.clone());
+                });
+            }
             Ok(done) => {
                 for name in unit.names() {
                     if let Err(e) = self.file_to_done(f, name) {
                         self.note_error(format!("cannot move {name} into {DONE}/: {e}"));
                     }
                 }
-                if let Some((file, scans, sha256)) = done {
+                if let Outcome::Imported(file, scans, sha256) = done {
                     self.with_ingest_status(|s| {
                         s.imported += 1;
                         s.last_file = Some(file.clone());
@@ -1105,9 +1160,7 @@ impl WatchFolder {
         }
     }
 
-    /// Reads, checks and stores one unit. `Ok(Some(..))`: imported now (file, scans, hash);
-    /// `Ok(None)`: an import that committed before a stop (recovering).
-    #[allow(clippy::type_complexity)]
+    /// Reads, checks and stores one unit.
     async fn import_unit(
         &self,
         settings: &IngestSettings,
@@ -1115,7 +1168,7 @@ impl WatchFolder {
         unit: &Unit,
         recovering: bool,
         limits: &[ReadLimit],
-    ) -> Result<Option<(String, Vec<crate::store::ScanId>, String)>, Failure> {
+    ) -> Result<Outcome, Failure> {
         let (hash, scans, textures) = {
             let limits = limits.to_vec();
             let unit = unit.clone();
@@ -1137,23 +1190,11 @@ impl WatchFolder {
                 .and_then(|()| check_name("reference name", s.reference_label()))
                 .map_err(|e| Failure::Rejected(format!("{}: {e}", unit.main)))?;
         }
-        let detail = match &unit.partner {
-            Some(p) => format!(
-                "imported from {} and {p}, instrument software export",
-                unit.main
-            ),
-            None if kind_of(&unit.main).is_some_and(|(k, _)| k == Kind::ScanFile) => {
-                format!("imported from {}, brdfd.scan/1 file", unit.main)
-            }
-            None if kind_of(&unit.main).is_some_and(|(k, _)| k == Kind::XriteXlsx) => {
-                format!("imported from {}", unit.main)
-            }
-            None => format!("imported from {}, instrument software export", unit.main),
-        };
-        let provenance = Provenance {
-            source: Source::Imported,
-            source_detail: Some(detail),
-            ..Provenance::unknown()
+        // The file named once, whatever the door (`pipeline::file_provenance`).
+        let kind = match kind_of(&unit.main).map(|(k, _)| k) {
+            Some(Kind::ScanFile) => super::pipeline::SCAN_FILE,
+            Some(Kind::XriteXlsx) => super::pipeline::XRITE_XLSX,
+            _ => "instrument software export",
         };
         let names: Vec<String> = scans
             .iter()
@@ -1171,14 +1212,14 @@ impl WatchFolder {
         // Each scan's own origin (an instrument export's time and instrument) over the file's.
         let origins: Vec<(Provenance, Option<i64>)> = scans
             .iter()
-            .map(|s| match &s.origin {
-                None => Ok((provenance.clone(), None)),
-                Some(_) => super::pipeline::imported_provenance(
-                    s,
-                    provenance.source_detail.as_deref().unwrap_or("imported"),
-                ),
+            .map(|s| {
+                let (mut p, taken) = file_provenance(s, kind, Some(&unit.main))?;
+                if let (Some(partner), Some(d)) = (&unit.partner, p.source_detail.as_mut()) {
+                    d.push_str(&format!("; SRA readings from {partner}"));
+                }
+                Ok((p, taken))
             })
-            .collect::<Result<_, _>>()
+            .collect::<Result<_, crate::scan::ScanError>>()
             .map_err(|e| Failure::Rejected(format!("{}: {e}", unit.main)))?;
         let textures: Vec<Vec<NewTexture<'_>>> = textures.iter().map(|t| new_textures(t)).collect();
         let imports: Vec<ImportedScan<'_>> = scans
@@ -1212,28 +1253,33 @@ impl WatchFolder {
                     self.ctx.events.send(Event::ScanComplete { scan });
                 }
                 self.queue_ingest_fits(&file).await;
-                Ok(Some((unit.shown(), file.scans, hash)))
+                Ok(Outcome::Imported(unit.shown(), file.scans, hash))
             }
             Ok(FileImport::AlreadyImported(file)) if recovering => {
                 // This run or the last took it and committed; only the move was left.
                 if !file.fits_queued {
                     self.queue_ingest_fits(&file).await;
                 }
-                Ok(None)
+                Ok(Outcome::Committed)
             }
             Ok(FileImport::AlreadyImported(file)) => {
-                let scans: Vec<String> = file.scans.iter().map(|s| s.to_string()).collect();
-                Err(Failure::Rejected(format!(
-                    "already imported: the same content (SHA-256 {hash}) was imported from {} \
-                     at {} as scan{} {}; nothing was imported again",
-                    match &file.partner_name {
-                        Some(p) => format!("{} and {p}", file.file_name),
-                        None => file.file_name.clone(),
+                // Every door's imports of this content, the watch folder's among them.
+                let prior = match self.ctx.store.prior_import(&hash).await {
+                    Ok(Some(p)) => p,
+                    _ => crate::store::PriorImport {
+                        sha256: file.sha256.clone(),
+                        scans: file.scans.clone(),
+                        file_name: Some(match &file.partner_name {
+                            Some(p) => format!("{} and {p}", file.file_name),
+                            None => file.file_name.clone(),
+                        }),
+                        imported_at_ms: file.imported_at_ms,
                     },
-                    formats::rfc3339_utc(file.imported_at_ms / 1000),
-                    if scans.len() == 1 { "" } else { "s" },
-                    scans.join(", ")
-                )))
+                };
+                Ok(Outcome::Repeat(already_imported(&prior)))
+            }
+            Ok(FileImport::ImportedElsewhere(prior)) => {
+                Ok(Outcome::Repeat(already_imported(&prior)))
             }
             Err(StoreError::Database(e)) => Err(Failure::Retry(format!("the store failed: {e}"))),
             Err(e) => Err(Failure::Rejected(format!("{}: {e}", unit.main))),

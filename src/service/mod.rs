@@ -79,7 +79,10 @@ pub use error::ServiceError;
 pub use events::{Event, EventBus, ReadingShown};
 pub use fit_worker::{FitFn, FitJob, default_fit_fn};
 pub use ingest::{IngestSettings, IngestStatus};
-pub use pipeline::{IMPORTED_SUFFIX, check_name, imported_provenance, scan_from_detail};
+pub use pipeline::{
+    FileImported, IMPORTED_SUFFIX, SCAN_FILE, ScanToImport, XRITE_XLSX, already_imported,
+    check_name, file_provenance, imported_provenance, scan_from_detail,
+};
 
 use acquisition::Acquisition;
 use context::Context;
@@ -450,6 +453,29 @@ impl Service {
         pipeline
             .import_scan_as(file, provenance, taken_at_ms, textures)
             .await
+    }
+
+    /// Imports the scans of one file received whole (`POST /scans/import`), in one
+    /// transaction, then fits them: idempotent by content, so a file whose hash (`file`) was
+    /// imported before through any door gives that import and writes nothing, unless `again`.
+    pub async fn import_file(
+        &self,
+        file: crate::store::ImportFile<'_>,
+        scans: &[ScanToImport<'_>],
+        again: bool,
+    ) -> Result<FileImported, ServiceError> {
+        self.inner
+            .pipeline
+            .import_file(Some(file), scans, again)
+            .await
+    }
+
+    /// The file a scan was imported from, when its content hash is known.
+    pub async fn scan_import(
+        &self,
+        scan: ScanId,
+    ) -> Result<Option<crate::store::PriorImport>, ServiceError> {
+        Ok(self.inner.ctx.store.scan_import(scan).await?)
     }
 
     /// Exports a complete scan as a `brdfd.scan/1` scan (with its reference readings).

@@ -19,8 +19,9 @@ use crate::geometry::{Device, MA_T12_COUNT};
 use crate::processing::{self, ProcessingOptions};
 use crate::scan::{DeviceReadings, Scan, ScanError};
 use crate::store::{
-    FitRunId, ImportedScan, InstrumentOrigin, InstrumentProvenance, NewFit, NewReading, NewTexture,
-    Provenance, ReadingValues, ScanDetail, ScanId, ScanState, Source, StoreError,
+    FitRunId, ImportFile, ImportedScan, InstrumentOrigin, InstrumentProvenance, NewFit, NewReading,
+    NewTexture, PriorImport, Provenance, ReadingValues, ScanDetail, ScanId, ScanState, ScansImport,
+    Source, StoreError,
 };
 
 use std::sync::Arc;
@@ -29,6 +30,12 @@ use super::context::Context;
 use super::events::Event;
 use super::fit_worker::FitWorker;
 use super::{RefitRequest, ServiceError};
+
+/// What a `brdfd.scan/1` file is called in the provenance of the scans imported from it.
+pub const SCAN_FILE: &str = "brdfd.scan/1 file";
+
+/// What an X-Rite QC `.xlsx` export is called there (it names itself when it has a name).
+pub const XRITE_XLSX: &str = "X-Rite QC .xlsx export";
 
 /// Appended to the name of a reference set that came with an imported scan; such a set is
 /// never the reference in force for new scans.
@@ -199,12 +206,9 @@ impl Pipeline {
         &self,
         file: &Scan,
     ) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
-        let (mut provenance, taken_at_ms) = imported_provenance(file, "brdfd.scan/1 file")?;
         // A file that says where its readings came from (every scan file brdfd exports does)
         // keeps that account as it is, so that export → import → export gives the same file.
-        if let Some(origin) = file.origin.as_ref().filter(|o| o.source.is_some()) {
-            provenance.source_detail = Some(origin.describe());
-        }
+        let (provenance, taken_at_ms) = file_provenance(file, SCAN_FILE, None)?;
         self.import_scan_as(file, &provenance, taken_at_ms, &[])
             .await
     }
@@ -219,32 +223,87 @@ impl Pipeline {
         taken_at_ms: Option<i64>,
         textures: &[TextureImage],
     ) -> Result<(ScanId, Vec<FitRunId>), ServiceError> {
-        file.validate()?;
-        check_name("sample name", &file.sample)?;
-        check_name("reference name", file.reference_label())?;
+        let one = ScanToImport {
+            scan: file,
+            provenance: provenance.clone(),
+            taken_at_ms,
+            textures,
+        };
+        match self.import_file(None, &[one], false).await? {
+            FileImported::Imported(mut scans) if scans.len() == 1 => Ok(scans.remove(0)),
+            other => Err(ServiceError::BadRequest(format!(
+                "importing one scan gave {other:?}"
+            ))),
+        }
+    }
+
+    /// Imports the scans of one file in one transaction (none is stored unless all are), then
+    /// processes each and queues its fits like a measured scan's. With `file` (the bytes'
+    /// hash and the file's name, which each scan records) the import is idempotent by content:
+    /// a file imported before through any door writes nothing and gives the earlier import,
+    /// unless `again`.
+    pub(super) async fn import_file(
+        &self,
+        file: Option<ImportFile<'_>>,
+        scans: &[ScanToImport<'_>],
+        again: bool,
+    ) -> Result<FileImported, ServiceError> {
+        for s in scans {
+            s.scan.validate()?;
+            check_name("sample name", &s.scan.sample)?;
+            check_name("reference name", s.scan.reference_label())?;
+        }
         let store = &self.ctx.store;
-        let name = format!("{}{IMPORTED_SUFFIX}", file.reference_label());
-        let reference_readings = file.reference.as_ref().map(|r| new_readings(&r.readings));
-        let readings = new_readings(&file.readings);
-        let textures = new_textures(textures);
+        let names: Vec<String> = scans
+            .iter()
+            .map(|s| format!("{}{IMPORTED_SUFFIX}", s.scan.reference_label()))
+            .collect();
+        let readings: Vec<_> = scans
+            .iter()
+            .map(|s| {
+                (
+                    s.scan.reference.as_ref().map(|r| new_readings(&r.readings)),
+                    new_readings(&s.scan.readings),
+                )
+            })
+            .collect();
+        let textures: Vec<Vec<NewTexture<'_>>> =
+            scans.iter().map(|s| new_textures(s.textures)).collect();
+        let imports: Vec<ImportedScan<'_>> = scans
+            .iter()
+            .zip(&names)
+            .zip(&readings)
+            .zip(&textures)
+            .map(|(((s, name), (r, m)), t)| ImportedScan {
+                sample_name: &s.scan.sample,
+                reference_name: name,
+                provenance: &s.provenance,
+                reference_readings: r.as_deref(),
+                readings: m,
+                taken_at_ms: s.taken_at_ms,
+                textures: t,
+            })
+            .collect();
         // One transaction: a failure leaves no half-imported reference or scan behind.
-        let (_reference, scan) = self
+        let ids = match self
             .ctx
-            .timed_store(store.import(&ImportedScan {
-                sample_name: &file.sample,
-                reference_name: &name,
-                provenance,
-                reference_readings: reference_readings.as_deref(),
-                readings: &readings,
-                taken_at_ms,
-                textures: &textures,
-            }))
-            .await?;
-        self.ctx.events.send(Event::ScanComplete { scan });
-        let fits = self
-            .process_and_queue(scan, &RefitRequest::default())
-            .await?;
-        Ok((scan, fits))
+            .timed_store(store.import_scans(file.as_ref(), &imports, again))
+            .await?
+        {
+            ScansImport::Imported(ids) => ids,
+            ScansImport::AlreadyImported(prior) => return Ok(FileImported::Already(prior)),
+        };
+        for &scan in &ids {
+            self.ctx.events.send(Event::ScanComplete { scan });
+        }
+        let mut out = Vec::with_capacity(ids.len());
+        for scan in ids {
+            let fits = self
+                .process_and_queue(scan, &RefitRequest::default())
+                .await?;
+            out.push((scan, fits));
+        }
+        Ok(FileImported::Imported(out))
     }
 
     /// Exports a complete scan as a `brdfd.scan/1` scan (with its reference readings).
@@ -259,6 +318,77 @@ impl Pipeline {
         }
         Ok(scan_from_detail(&detail)?)
     }
+}
+
+/// One scan of a file to import, with what the file says of it.
+#[derive(Debug, Clone)]
+pub struct ScanToImport<'a> {
+    pub scan: &'a Scan,
+    /// Its provenance ([`file_provenance`]).
+    pub provenance: Provenance,
+    /// When the readings were taken, ms since the epoch (else the import time is recorded).
+    pub taken_at_ms: Option<i64>,
+    /// The instrument camera's images of the measurement, kept with the scan.
+    pub textures: &'a [TextureImage],
+}
+
+/// What an import of a file did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FileImported {
+    /// Its scans, in the file's order, each with the fits queued for it.
+    Imported(Vec<(ScanId, Vec<FitRunId>)>),
+    /// The same content was imported before (through any door); nothing was imported.
+    Already(PriorImport),
+}
+
+/// The provenance of a scan imported from a file of `kind` ("brdfd.scan/1 file", "X-Rite QC
+/// .xlsx export", …) named `file_name`: [`imported_provenance`], with `source_detail` naming
+/// the file once, whatever the door. A file that gives its own account of where it came from
+/// keeps it as it is (an instrument export names itself, "X-Rite QC export PAR_1.xlsx; …";
+/// a scan file brdfd exported keeps its account, so that export → import → export gives the
+/// same file), followed by "; KIND FILE" when the account does not name the file; any other
+/// is "KIND FILE", followed by what its `origin` notes.
+pub fn file_provenance(
+    scan: &Scan,
+    kind: &str,
+    file_name: Option<&str>,
+) -> Result<(Provenance, Option<i64>), ScanError> {
+    let named = match file_name {
+        Some(f) => format!("{kind} {f}"),
+        None => kind.to_string(),
+    };
+    let (mut provenance, taken_at_ms) = imported_provenance(scan, &named)?;
+    if let Some(origin) = scan.origin.as_ref().filter(|o| o.source.is_some()) {
+        let mut detail = origin.describe();
+        if let Some(f) = file_name.filter(|f| !detail.contains(f)) {
+            detail.push_str(&format!("; {kind} {f}"));
+        }
+        provenance.source_detail = Some(detail);
+    }
+    Ok((provenance, taken_at_ms))
+}
+
+/// What every door answers a file imported before: "already imported as scan 3 on
+/// 2026-12-04T19:14:14Z from PAR_1.xlsx (the same content, SHA-256 …); nothing was imported
+/// again". The door adds how to import it anyway.
+pub fn already_imported(prior: &PriorImport) -> String {
+    let ids: Vec<String> = prior.scans.iter().map(|s| s.to_string()).collect();
+    let scans = match ids.as_slice() {
+        [one] => format!("scan {one}"),
+        [rest @ .., last] => format!("scans {} and {last}", rest.join(", ")),
+        [] => "no scan".to_string(),
+    };
+    format!(
+        "already imported as {scans} on {}{} (the same content, SHA-256 {}); nothing was \
+         imported again",
+        crate::formats::rfc3339_utc(prior.imported_at_ms.div_euclid(1000)),
+        prior
+            .file_name
+            .as_deref()
+            .map(|f| format!(" from {f}"))
+            .unwrap_or_default(),
+        prior.sha256
+    )
 }
 
 /// An export's texture images as the store takes them.

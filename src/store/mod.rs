@@ -50,7 +50,7 @@ use sqlx::Row;
 
 pub use error::StoreError;
 pub use ids::{FitRunId, InstrumentId, ProcessedId, ReadingId, ReferenceId, SampleId, ScanId};
-pub use ingest::{FileImport, IngestedFile};
+pub use ingest::{FileImport, ImportFile, IngestedFile, PriorImport, ScansImport};
 pub use lineage::begin_incarnation;
 pub use lock::{LockError, StoreLock};
 pub use records::{

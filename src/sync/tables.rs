@@ -247,6 +247,9 @@ mod tests {
         "sync_lineage",
         "ingested_files",
         "ingested_scans",
+        // Each imported scan's file (content hash, name), by which every door recognises a
+        // repeat; the scans' provenance goes with them.
+        "scan_imports",
         // The instrument camera's texture images of imported scans stay on the station; the
         // central database has the scans' readings, fits and evaluations.
         "texture_images",
