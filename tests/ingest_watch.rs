@@ -461,15 +461,24 @@ fn xlsx() -> (PathBuf, &'static str) {
     )
 }
 
-/// `brdfd import FILE --detach` (and `extra`) against the lab's daemon: exit code and stdout.
-fn cli_import(lab: &Lab, file: &Path, extra: &[&str]) -> (Option<i32>, String) {
+/// `brdfd import FILE --detach` (and `extra`) against the lab's daemon (its configuration for
+/// the token, its address as it printed it): exit code and stdout.
+fn cli_import(
+    lab: &Lab,
+    daemon: &ServeChild,
+    file: &Path,
+    extra: &[&str],
+) -> (Option<i32>, String) {
     let config = lab.dir.join("brdfd.toml");
+    let addr = daemon.addr.to_string();
     let mut args = vec![
         "import",
         file.to_str().unwrap(),
         "--detach",
         "--config",
         config.to_str().unwrap(),
+        "--addr",
+        &addr,
     ];
     args.extend_from_slice(extra);
     let out = run_brdfd(&args, None);
@@ -490,12 +499,12 @@ fn a_file_is_imported_once_whatever_the_door_unless_asked_again() {
     let daemon = lab.serve();
     let (path, name) = xlsx();
     // The CLI, twice.
-    let (_, first_out) = cli_import(&lab, &path, &[]);
+    let (_, first_out) = cli_import(&lab, &daemon, &path, &[]);
     assert!(first_out.contains("imported as scan"), "{first_out}");
     let list = scans(&daemon.client);
     assert_eq!(list.len(), 1, "{list:?}");
     let first = list[0]["id"].as_i64().unwrap();
-    let (_, again_out) = cli_import(&lab, &path, &[]);
+    let (_, again_out) = cli_import(&lab, &daemon, &path, &[]);
     assert!(
         again_out.contains(&format!("already imported as scan {first} on ")),
         "{again_out}"
@@ -538,13 +547,13 @@ fn a_file_is_imported_once_whatever_the_door_unless_asked_again() {
     assert!(message.contains("again=true"), "{v}");
     assert_eq!(scans(&daemon.client).len(), 1);
     // --again imports it anyway: a second scan.
-    let (_, forced) = cli_import(&lab, &path, &["--again"]);
+    let (_, forced) = cli_import(&lab, &daemon, &path, &["--again"]);
     assert!(forced.contains("imported as scan"), "{forced}");
     assert!(!forced.contains("already"), "{forced}");
     let list = scans(&daemon.client);
     assert_eq!(list.len(), 2, "{list:?}");
     // Then the repeat names both.
-    let (_, third) = cli_import(&lab, &path, &[]);
+    let (_, third) = cli_import(&lab, &daemon, &path, &[]);
     assert!(third.contains("already imported as scans"), "{third}");
     daemon.stop();
 }
@@ -568,7 +577,7 @@ fn a_file_uploaded_over_http_is_recognised_by_the_cli() {
         shown["scan"]["provenance"]["source_detail"], "brdfd.scan/1 file sky.scan.json",
         "{shown}"
     );
-    let (_, out) = cli_import(&lab, &file, &[]);
+    let (_, out) = cli_import(&lab, &daemon, &file, &[]);
     assert!(
         out.contains(&format!("already imported as scan {first} on ")),
         "{out}"
