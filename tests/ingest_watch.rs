@@ -521,6 +521,11 @@ fn a_file_is_imported_once_whatever_the_door_unless_asked_again() {
     assert_eq!(detail.matches(name).count(), 1, "{detail}");
     assert!(!detail.contains("uploaded"), "{detail}");
     assert!(!detail.starts_with("imported from"), "{detail}");
+    // The camera's images came with it, in the same transaction.
+    let want = brdfd::formats::xrite::read_file(&path, &Default::default()).unwrap()[0]
+        .textures
+        .len();
+    assert_eq!(shown["textures"].as_array().unwrap().len(), want, "{shown}");
     // The watch folder, under another name: done/ with a note, no new scan.
     std::fs::copy(&path, lab.sub("renamed.xlsx")).unwrap();
     wait_for("renamed.xlsx in done/ with its note", || {

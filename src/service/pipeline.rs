@@ -1,7 +1,9 @@
 //! The pipeline from a complete scan to queued fits: processing against the scan's reference
 //! (refused when the reference is older than `[scan] reference_max_age_hours`, unless the
 //! operator allows it), one fit per cost function handed to the fit worker; refits of stored
-//! scans; imports of `brdfd.scan/1` files. Also the one conversion between the store's rows
+//! scans; imports of files (`brdfd.scan/1` files, X-Rite `.xlsx` exports), each file once by
+//! its content ([`already_imported`] says so to every door) and named once in its scans'
+//! provenance ([`file_provenance`]). Also the one conversion between the store's rows
 //! and the scan model ([`scan_from_detail`], [`new_readings`]) that the demo, the exports and
 //! the report use too, and the name rules every sample and reference name passes.
 //!
