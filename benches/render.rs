@@ -47,7 +47,14 @@ fn benches(c: &mut Criterion) {
     let fit = sample.done(CostFunction::Cf2).unwrap();
     let mut group = c.benchmark_group("render");
     group.bench_function("sphere", |b| {
-        b.iter(|| render_sphere(black_box(&fit.params), fit.fresnel, &View::default()))
+        b.iter(|| {
+            render_sphere(
+                black_box(&fit.params),
+                fit.model,
+                fit.fresnel,
+                &View::default(),
+            )
+        })
     });
     group.bench_function("preview_png", |b| {
         b.iter(|| {

@@ -14,7 +14,8 @@ use crate::spectral::{BANDS, Spectrum};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FresnelCosine {
-    /// Schlick on cos θi, as the paper writes Eq. 2 (the default).
+    /// Schlick on cos θi, as the paper writes Eq. 2 (the type's default: what settings stored
+    /// without a Fresnel factor, and the paper's study, were fitted with).
     #[default]
     Incidence,
     /// Schlick on l·h, textbook Schlick. Equal to the paper's at the mirror direction.
@@ -25,7 +26,13 @@ pub enum FresnelCosine {
 }
 
 impl FresnelCosine {
-    /// Every choice, the default first.
+    /// The factor a measured or imported scan is fitted with unless told otherwise (`brdfd fit`,
+    /// `[fit] fresnel`, the Python package): the exact dielectric Fresnel, which predicts
+    /// held-out geometries of real paint and measured goniometric BRDFs best (SCIENCE.md §4.1).
+    /// The type's `Default` stays the paper's Schlick on cos θi (`--preset paper`).
+    pub const MEASURED_DEFAULT: FresnelCosine = FresnelCosine::Exact;
+
+    /// Every choice, the type's default first.
     pub const ALL: [FresnelCosine; 3] = [
         FresnelCosine::Incidence,
         FresnelCosine::LightHalf,
@@ -48,6 +55,30 @@ impl FresnelCosine {
             FresnelCosine::LightHalf => fresnel_schlick(f0_from_ior(ior), g.l_dot_h),
             FresnelCosine::Exact => fresnel_dielectric(g.l_dot_h, ior),
         }
+    }
+}
+
+impl std::fmt::Display for FresnelCosine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for FresnelCosine {
+    type Err = String;
+
+    /// Parses `incidence`, `light-half` or `exact`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        FresnelCosine::ALL
+            .into_iter()
+            .find(|f| f.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| {
+                format!(
+                    "unknown Fresnel factor \"{s}\": expected one of incidence (the paper's \
+                     Schlick on cos θi), light-half (Schlick on l·h) or exact (the dielectric \
+                     Fresnel)"
+                )
+            })
     }
 }
 
@@ -83,6 +114,25 @@ impl ModelKind {
             ModelKind::Paper => "paper",
             ModelKind::OrenNayar => "oren-nayar",
             ModelKind::TwoLobe => "two-lobe",
+        }
+    }
+
+    /// What a renderer export that draws only the paper's form (Mitsuba's `roughconductor` +
+    /// `diffuse`, glTF's metallic-roughness) leaves out of a fit made with this option, with its
+    /// fitted values; `None` for the paper's model.
+    pub fn export_omission(self, extra: &[f64; EXTRA]) -> Option<String> {
+        match self {
+            ModelKind::Paper => None,
+            ModelKind::OrenNayar => Some(format!(
+                "model oren-nayar: its rough diffuse factor (σ = {:.4} rad) is not in this \
+                 file, which draws the Lambertian diffuse kd; brdfd's preview draws it",
+                extra[0]
+            )),
+            ModelKind::TwoLobe => Some(format!(
+                "model two-lobe: its second lobe (ks2 = {:.4}, α2 = {:.4}) is not in this file, \
+                 which draws the first; brdfd's preview draws both",
+                extra[0], extra[1]
+            )),
         }
     }
 
@@ -185,17 +235,27 @@ pub fn oren_nayar_factor(sigma: f64, g: &SpecularGeometry) -> f64 {
 /// Oren & Nayar's factor for any pair of directions (not only in the plane of incidence):
 /// `A + B · max(0, cos(φr − φi)) · sin a · tan b`; equal to [`oren_nayar_factor`] in the plane.
 pub fn oren_nayar_factor_at(sigma: f64, l: Vec3, v: Vec3) -> f64 {
+    let (pl, pv) = (l[0].hypot(l[1]), v[0].hypot(v[1]));
+    let cos_dphi = if pl == 0.0 || pv == 0.0 {
+        0.0
+    } else {
+        (l[0] * v[0] + l[1] * v[1]) / (pl * pv)
+    };
+    oren_nayar_factor_angles(sigma, l[2], v[2], cos_dphi)
+}
+
+/// Oren & Nayar's factor from cos θi, cos θr and cos(φr − φi) (any frame in which they are
+/// measured about the surface normal): what [`oren_nayar_factor_at`] computes from directions.
+pub fn oren_nayar_factor_angles(sigma: f64, cos_i: f64, cos_r: f64, cos_dphi: f64) -> f64 {
     let s2 = sigma * sigma;
     let a = 1.0 - 0.5 * s2 / (s2 + 0.33);
     let b = 0.45 * s2 / (s2 + 0.09);
-    let (pl, pv) = (l[0].hypot(l[1]), v[0].hypot(v[1]));
-    if pl == 0.0 || pv == 0.0 || b == 0.0 {
+    if b == 0.0 || cos_dphi <= 0.0 {
         return a;
     }
-    let cos_dphi = ((l[0] * v[0] + l[1] * v[1]) / (pl * pv)).max(0.0);
-    let (ti, tr) = (l[2].clamp(-1.0, 1.0).acos(), v[2].clamp(-1.0, 1.0).acos());
+    let (ti, tr) = (cos_i.clamp(-1.0, 1.0).acos(), cos_r.clamp(-1.0, 1.0).acos());
     let (alpha, beta) = (ti.max(tr), ti.min(tr));
-    a + b * cos_dphi * alpha.sin() * beta.tan()
+    a + b * cos_dphi.min(1.0) * alpha.sin() * beta.tan()
 }
 
 /// The model of form `kind` for light from `l` seen from `v`, sr⁻¹ per band: what a fit

@@ -33,7 +33,9 @@ use crate::colour::{Xyz, brdf_to_reflectance, reflectance_to_xyz, xyz_to_srgb8};
 use crate::cost::CostFunction;
 use crate::fonts::{font, register_font};
 use crate::geometry::{GEOMETRIES, MA_T12_COUNT, Vec3};
-use crate::model::{FresnelCosine, Params, SpecularGeometry, specular_term};
+use crate::model::{
+    FresnelCosine, ModelKind, Params, SpecularGeometry, oren_nayar_factor_angles, specular_term,
+};
 use crate::spectral::flat;
 use crate::study::SampleStudy;
 
@@ -151,9 +153,18 @@ fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// The radiance factor's XYZ at a normal, for a material whose π·kd and flat-1 XYZ are given.
+/// The part of `x` perpendicular to the unit normal `n`.
+fn tangential(x: Vec3, n: Vec3) -> Vec3 {
+    let c = dot(x, n);
+    [x[0] - c * n[0], x[1] - c * n[1], x[2] - c * n[2]]
+}
+
+/// The radiance factor's XYZ at a normal, for a material whose π·kd and flat-1 XYZ are given,
+/// of the model form `kind` (its diffuse factor and added term at the local angles; the
+/// ambient is reflected by kd alone, as for the paper's model).
 fn shade(
     params: &Params,
+    kind: ModelKind,
     fresnel: FresnelCosine,
     view: &View,
     kd_xyz: Xyz,
@@ -167,10 +178,11 @@ fn shade(
     let mut diffuse = view.ambient;
     let mut lobe = 0.0;
     if cos_i > 0.0 {
-        diffuse += cos_i;
         let s = [l[0] + v[0], l[1] + v[1], l[2] + v[2]];
         let len = dot(s, s).sqrt();
-        if len > 0.0 && cos_r > 0.0 {
+        if len == 0.0 || cos_r <= 0.0 {
+            diffuse += cos_i;
+        } else {
             let h = [s[0] / len, s[1] / len, s[2] / len];
             let g = SpecularGeometry {
                 cos_i,
@@ -182,8 +194,24 @@ fn shade(
                 same_side: dot(l, v) - cos_i * cos_r > 0.0,
             };
             let spec = specular_term(params.ks, params.alpha, params.ior, fresnel, &g);
+            let (factor, added) = match kind {
+                ModelKind::OrenNayar => {
+                    // The azimuth between l and v about the normal, from their tangential parts.
+                    let (lt, vt) = (tangential(l, n), tangential(v, n));
+                    let (pl, pv) = (dot(lt, lt).sqrt(), dot(vt, vt).sqrt());
+                    let cos_dphi = if pl > 0.0 && pv > 0.0 {
+                        dot(lt, vt) / (pl * pv)
+                    } else {
+                        0.0
+                    };
+                    let f = oren_nayar_factor_angles(params.extra[0], cos_i, cos_r, cos_dphi);
+                    (f, 0.0)
+                }
+                _ => kind.shape(&params.extra, params.ior, fresnel, &g),
+            };
+            diffuse += factor * cos_i;
             // Reflectance factor of the lobe (π·f) times the irradiance cosθi.
-            lobe = std::f64::consts::PI * spec * cos_i;
+            lobe = std::f64::consts::PI * (spec + added) * cos_i;
         }
     }
     Xyz {
@@ -193,17 +221,21 @@ fn shade(
     }
 }
 
-/// Renders the material `params` (fitted with `fresnel`) on a sphere.
-pub fn render_sphere(params: &Params, fresnel: FresnelCosine, view: &View) -> SphereImage {
+/// Renders the material `params` (fitted as model form `kind` with `fresnel`) on a sphere.
+pub fn render_sphere(
+    params: &Params,
+    kind: ModelKind,
+    fresnel: FresnelCosine,
+    view: &View,
+) -> SphereImage {
     let kd_xyz = reflectance_to_xyz(&brdf_to_reflectance(&params.kd));
     let white = reflectance_to_xyz(&flat(1.0));
     let mut pixels = Vec::with_capacity((view.size * view.size) as usize);
     for py in 0..view.size {
         for px in 0..view.size {
-            pixels
-                .push(view.normal(px, py).map(|n| {
-                    xyz_to_srgb_unclipped(shade(params, fresnel, view, kd_xyz, white, n))
-                }));
+            pixels.push(view.normal(px, py).map(|n| {
+                xyz_to_srgb_unclipped(shade(params, kind, fresnel, view, kd_xyz, white, n))
+            }));
         }
     }
     SphereImage {
@@ -290,7 +322,7 @@ pub fn preview(sample: &SampleStudy, costs: &[CostFunction]) -> Result<Picture, 
     for &c in costs {
         let s = sample
             .done(c)
-            .map(|d| render_sphere(&d.params, d.fresnel, &view));
+            .map(|d| render_sphere(&d.params, d.model, d.fresnel, &view));
         if let Some(s) = &s {
             let (k, on) = s.clipped();
             clip_total = (clip_total.0 + k, clip_total.1 + on);
@@ -449,9 +481,23 @@ pub(crate) mod tests {
     /// plus ambient, through the full 31-band sum.
     #[test]
     fn pixels_at_the_measurement_geometries_show_the_models_colour() {
-        for fresnel in [FresnelCosine::Incidence, FresnelCosine::LightHalf] {
-            let p = params();
-            let estimated = model::evaluate(&p, fresnel, &SpecularGeometry::all());
+        // Every model form draws its own BRDF: the paper's, Oren–Nayar's rough diffuse and a
+        // second lobe, under each Fresnel factor.
+        let forms = [
+            (ModelKind::Paper, [0.0, 0.0]),
+            (ModelKind::OrenNayar, [0.6, 0.0]),
+            (ModelKind::TwoLobe, [0.4, 0.5]),
+        ];
+        for ((kind, extra), fresnel) in forms.into_iter().flat_map(|f| {
+            [
+                FresnelCosine::Incidence,
+                FresnelCosine::LightHalf,
+                FresnelCosine::Exact,
+            ]
+            .map(move |fr| (f, fr))
+        }) {
+            let p = Params { extra, ..params() };
+            let estimated = model::evaluate_model(&p, kind, fresnel, &SpecularGeometry::all());
             for g in &GEOMETRIES {
                 let (ti, tr) = (g.theta_i_deg.to_radians(), g.theta_r_deg.to_radians());
                 // The normal at (sin θr, 0, cos θr); v = +z is θr toward −x from it. Far side:
@@ -467,7 +513,7 @@ pub(crate) mod tests {
                     light: [tl.sin(), 0.0, tl.cos()],
                     ambient: AMBIENT,
                 };
-                let img = render_sphere(&p, fresnel, &view);
+                let img = render_sphere(&p, kind, fresnel, &view);
                 let n = view.normal(128 + 30, 128).unwrap();
                 assert!((n[2] - tr.cos()).abs() < 1e-12, "{}: normal {n:?}", g.name);
                 let got = img.at(128 + 30, 128).unwrap();
@@ -480,7 +526,7 @@ pub(crate) mod tests {
                     // the difference is rounding only.
                     assert!(
                         (got[c] - want[c]).abs() < 1e-9,
-                        "{} ({fresnel:?}) channel {c}: pixel {} vs model {}",
+                        "{} ({kind}, {fresnel:?}) channel {c}: pixel {} vs model {}",
                         g.name,
                         got[c],
                         want[c]
@@ -493,7 +539,12 @@ pub(crate) mod tests {
 
     #[test]
     fn background_is_grey_and_the_highlight_clips_visibly() {
-        let img = render_sphere(&params(), FresnelCosine::Incidence, &View::default());
+        let img = render_sphere(
+            &params(),
+            ModelKind::Paper,
+            FresnelCosine::Incidence,
+            &View::default(),
+        );
         assert_eq!(img.at(0, 0), None);
         let rgb = img.rgb8();
         assert_eq!(&rgb[0..3], &BACKGROUND);

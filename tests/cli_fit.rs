@@ -227,7 +227,8 @@ fn fit_hold_out_predicts_what_crossval_predicts() {
     assert_eq!(fits.len(), 1);
     assert_eq!(fits[0]["cost"], "m2");
     assert_eq!(fits[0]["model"], "paper");
-    assert_eq!(fits[0]["fresnel"], "incidence");
+    // The default for a measured scan: the exact Fresnel (`--preset measured`).
+    assert_eq!(fits[0]["fresnel"], "exact");
     let all = fits[0]["held_out"].as_array().unwrap();
     assert_eq!(all.len(), 12, "one per MA-T12 geometry");
     // The same prediction as `fit --hold-out`; crossval adds the 95 % L* interval built from
@@ -337,13 +338,20 @@ fn help_lists_subcommands_and_explains_fit_options() {
         "--method",
         "--seed",
         "--specular",
+        "--preset",
         "--fresnel",
         "--model",
+        "--sra",
         "--json",
     ] {
         assert!(text.contains(opt), "fit --help must explain {opt}");
     }
     assert!(text.contains("cube-root"), "{text}");
+    // The help says what the default is and how to get the paper's configuration.
+    assert!(
+        text.contains("measured|paper") && text.contains("[default: measured]"),
+        "{text}"
+    );
 }
 
 #[test]

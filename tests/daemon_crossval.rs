@@ -127,6 +127,9 @@ async fn every_stored_fit_gets_its_held_out_delta_e_shown_beside_its_fitted_one(
             text.contains("how far to trust the estimate off the measured angles"),
             "{text}"
         );
+        // The science choices the fit was made with (these tests' settings: the paper's
+        // Fresnel factor).
+        assert!(text.contains("model paper, Fresnel incidence"), "{text}");
 
         d.service.shutdown().await;
         api.stop(Duration::from_secs(1)).await;

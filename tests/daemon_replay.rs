@@ -39,9 +39,9 @@ fn demo_replays_the_recordings_into_a_local_store_and_runs_twice() {
         .collect();
     assert_eq!(rows.len(), 24, "{out}");
     assert!(out.contains("diffuse") && out.contains("specular"));
-    // Which SRA reading model it ran under, and what its specular ΔE00 means.
+    // Which configuration it ran under, and what its specular ΔE00 means.
     assert!(
-        out.contains("SRA reading model: flat (the paper's"),
+        out.contains("preset: paper (the paper's configuration: Schlick's Fresnel on cos θi"),
         "{out}"
     );
     assert!(

@@ -252,7 +252,7 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
                 radius_px: View::default().radius_px / 4.0,
                 ..View::default()
             };
-            let img = render_sphere(&d.params, d.fresnel, &view);
+            let img = render_sphere(&d.params, d.model, d.fresnel, &view);
             let on: Vec<[f64; 3]> = img.pixels.iter().flatten().copied().collect();
             let mean: [f64; 3] = std::array::from_fn(|c| {
                 on.iter().map(|p| decode(p[c])).sum::<f64>() / on.len() as f64

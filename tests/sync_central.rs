@@ -1069,6 +1069,39 @@ async fn the_central_views_decode_as_the_stations_and_pool_across_stations() {
             let central_fits = fit_rows(sqlx::query_as(CENTRAL_FITS).bind(n).fetch_all(&pg).await);
             assert!(!local_fits.is_empty());
             assert_eq!(local_fits, central_fits, "{n}: fit_results");
+            // fit_configuration: each fit's model, Fresnel factor and SRA model as its
+            // settings say (these stations fit under the paper's Fresnel and SRA model).
+            let local_config: Vec<(i64, String, String, String)> = sqlx::query_as(
+                "SELECT id, COALESCE(json_extract(settings_json, '$.model'), 'paper'),
+                        json_extract(settings_json, '$.fresnel'), sra
+                 FROM fit_runs ORDER BY id",
+            )
+            .fetch_all(&local)
+            .await
+            .unwrap();
+            let central_config: Vec<(i64, String, String, String, String)> = sqlx::query_as(
+                "SELECT fit_run_id, model, fresnel, sra, preset FROM fit_configuration
+                 WHERE station = $1 ORDER BY fit_run_id",
+            )
+            .bind(n)
+            .fetch_all(&pg)
+            .await
+            .unwrap();
+            assert_eq!(
+                local_config,
+                central_config
+                    .iter()
+                    .map(|(id, m, f, s, _)| (*id, m.clone(), f.clone(), s.clone()))
+                    .collect::<Vec<_>>(),
+                "{n}: fit_configuration"
+            );
+            assert!(
+                central_config
+                    .iter()
+                    .all(|c| (c.2.as_str(), c.3.as_str(), c.4.as_str())
+                        == ("incidence", "flat", "paper")),
+                "{central_config:?}"
+            );
             let kd: i64 = sqlx::query_scalar(
                 "SELECT COUNT(kd) FROM kd_values WHERE station = $1 AND kd >= 0",
             )

@@ -12,13 +12,12 @@ use pyo3::prelude::*;
 
 use brdfd::cli::crossval::{CrossvalArgs, crossval_with};
 use brdfd::cli::exchange::{ImportArgs, read_one};
-use brdfd::cli::fit::{FitArgs, fit_with, parse_fresnel};
+use brdfd::cli::fit::{FitArgs, ScienceArgs, fit_with};
 use brdfd::fit::FitReport;
 use brdfd::geometry::{Device, GEOMETRIES, Geometry, by_name};
 use brdfd::model::{self, Params, SpecularGeometry};
 use brdfd::scan::Scan;
 use brdfd::spectral::{BANDS, wavelengths_nm};
-use brdfd::sra_reading::SraModel;
 
 /// An error of the library, with its whole chain of causes, as a Python exception.
 fn value_error(e: anyhow::Error) -> PyErr {
@@ -31,6 +30,30 @@ where
 {
     s.parse()
         .map_err(|e: T::Err| PyValueError::new_err(format!("{what} \"{s}\": {e}")))
+}
+
+/// An optional option: `None` stays `None`, a value is parsed by name.
+fn parse_opt<T: std::str::FromStr>(what: &str, s: Option<&str>) -> PyResult<Option<T>>
+where
+    T::Err: std::fmt::Display,
+{
+    s.map(|s| parse(what, s)).transpose()
+}
+
+/// The science choices of `fit` and `crossval`, as `brdfd fit --preset --model --fresnel --sra`
+/// take them: the preset's (`measured` by default) where one is not given.
+fn science(
+    preset: Option<&str>,
+    model: Option<&str>,
+    fresnel: Option<&str>,
+    sra: Option<&str>,
+) -> PyResult<ScienceArgs> {
+    Ok(ScienceArgs {
+        preset: parse_opt("preset", preset)?.unwrap_or_default(),
+        model: parse_opt("model", model)?,
+        fresnel: parse_opt("Fresnel factor", fresnel)?,
+        sra: parse_opt("SRA model", sra)?,
+    })
 }
 
 /// One scan: a sample and the readings it is normalised by.
@@ -155,7 +178,7 @@ impl PyFitReport {
 #[pyfunction]
 #[pyo3(signature = (scan, cost, method=None, seed=None, bootstrap=0, sra=None, specular=None,
     fresnel=None, observer=None, weighting=None, sra_illuminant=None, sra_observer=None,
-    model=None, hold_out=None))]
+    model=None, hold_out=None, preset=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -173,6 +196,7 @@ fn fit(
     sra_observer: Option<&str>,
     model: Option<&str>,
     hold_out: Option<Vec<String>>,
+    preset: Option<&str>,
 ) -> PyResult<PyFitReport> {
     let args = FitArgs {
         input: scan.source.clone(),
@@ -186,10 +210,7 @@ fn fit(
             .map(|s| parse("specular strategy", s))
             .transpose()?
             .unwrap_or_default(),
-        fresnel: match fresnel {
-            Some(f) => parse_fresnel(f).map_err(PyValueError::new_err)?,
-            None => parse_fresnel("incidence").expect("the default Fresnel cosine"),
-        },
+        science: science(preset, model, fresnel, sra)?,
         observer: observer
             .map(|o| parse("observer", o))
             .transpose()?
@@ -198,20 +219,12 @@ fn fit(
             .map(|w| parse("weighting", w))
             .transpose()?
             .unwrap_or_default(),
-        sra: sra
-            .map(|s| parse("SRA model", s))
-            .transpose()?
-            .unwrap_or(SraModel::MEASURED_DEFAULT),
         sra_illuminant: sra_illuminant
             .map(|s| parse("SRA illuminant", s))
             .transpose()?
             .unwrap_or_default(),
         sra_observer: sra_observer
             .map(|s| parse("SRA observer", s))
-            .transpose()?
-            .unwrap_or_default(),
-        model: model
-            .map(|m| parse("model", m))
             .transpose()?
             .unwrap_or_default(),
         bootstrap,
@@ -228,7 +241,7 @@ fn fit(
 /// three when `None`).
 #[pyfunction]
 #[pyo3(signature = (scan, cost=None, model=None, fresnel=None, method=None, seed=None,
-    sra=None, observer=None, weighting=None))]
+    sra=None, observer=None, weighting=None, preset=None))]
 #[allow(clippy::too_many_arguments)]
 fn crossval(
     py: Python<'_>,
@@ -241,6 +254,7 @@ fn crossval(
     sra: Option<&str>,
     observer: Option<&str>,
     weighting: Option<&str>,
+    preset: Option<&str>,
 ) -> PyResult<String> {
     let args = CrossvalArgs {
         input: scan.source.clone(),
@@ -249,23 +263,12 @@ fn crossval(
             .iter()
             .map(|c| parse("cost function", c))
             .collect::<PyResult<_>>()?,
-        model: model
-            .map(|m| parse("model", m))
-            .transpose()?
-            .unwrap_or_default(),
-        fresnel: match fresnel {
-            Some(f) => parse_fresnel(f).map_err(PyValueError::new_err)?,
-            None => parse_fresnel("incidence").expect("the default Fresnel cosine"),
-        },
+        science: science(preset, model, fresnel, sra)?,
         method: method
             .map(|m| parse("method", m))
             .transpose()?
             .unwrap_or_default(),
         seed: seed.unwrap_or(brdfd::optimise::Settings::default().seed),
-        sra: sra
-            .map(|s| parse("SRA model", s))
-            .transpose()?
-            .unwrap_or(SraModel::MEASURED_DEFAULT),
         observer: observer
             .map(|o| parse("observer", o))
             .transpose()?
@@ -337,7 +340,8 @@ fn evaluate(
             v.len()
         ))
     })?;
-    let fresnel = parse_fresnel(fresnel.unwrap_or("incidence")).map_err(PyValueError::new_err)?;
+    // The paper's factor unless told: a fit's document names the factor it was made with.
+    let fresnel: model::FresnelCosine = parse("Fresnel factor", fresnel.unwrap_or("incidence"))?;
     let kind: model::ModelKind = model
         .unwrap_or("paper")
         .parse()

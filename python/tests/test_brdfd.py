@@ -85,6 +85,25 @@ def test_fit_with_options_and_bootstrap_equals_the_cli():
     assert (iv["kd"][:, 0] <= iv["kd"][:, 1]).all()
 
 
+def test_the_preset_gives_the_clis_defaults_bit_for_bit():
+    scan = brdfd.read_scan(SCAN)
+    # The default, as for the CLI: the measured preset (exact Fresnel, luminance SRA).
+    default = brdfd.fit(scan, cost="cf1", seed=2)
+    assert default.document["fresnel"] == "exact"
+    cli = json.loads(run("fit", "--input", str(SCAN), "--cost", "cf1", "--seed", "2", "--json"))
+    same_bits(without_timing(default.document), without_timing(cli))
+    # The paper's configuration, and one of its choices changed beside it.
+    paper = brdfd.fit(scan, cost="cf1", seed=2, preset="paper")
+    assert paper.document["fresnel"] == "incidence"
+    cli = json.loads(run("fit", "--input", str(SCAN), "--cost", "cf1", "--seed", "2",
+                         "--preset", "paper", "--json"))
+    same_bits(without_timing(paper.document), without_timing(cli))
+    mixed = brdfd.fit(scan, cost="cf1", seed=2, preset="paper", fresnel="exact")
+    assert mixed.document["fresnel"] == "exact"
+    with pytest.raises(ValueError, match="preset"):
+        brdfd.fit(scan, cost="cf1", preset="gloss")
+
+
 def test_a_model_option_equals_the_cli_bit_for_bit():
     scan = brdfd.read_scan(SCAN)
     got = brdfd.fit(scan, cost="cf1", seed=2, model="oren-nayar", fresnel="exact")

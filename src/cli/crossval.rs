@@ -11,13 +11,12 @@ use crate::colour::{Colorimetry, Observer, Weighting};
 use crate::cost::CostFunction;
 use crate::crossval::{CrossValidation, crossval_measured};
 use crate::fit::FitRequest;
-use crate::model::{FresnelCosine, ModelKind};
 use crate::optimise::{Method, Settings};
 use crate::processing::{self, ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
-use crate::sra_reading::{SraModel, SraReading};
+use crate::sra_reading::SraReading;
 
-use super::fit::parse_fresnel;
+use super::fit::ScienceArgs;
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct CrossvalArgs {
@@ -30,14 +29,8 @@ pub struct CrossvalArgs {
     #[arg(long, value_name = "cf1,cf2,m2", value_delimiter = ',')]
     pub cost: Vec<CostFunction>,
 
-    /// The model's form: `paper`, `oren-nayar` or `two-lobe` (as `brdfd fit --model`).
-    #[arg(long, value_name = "paper|oren-nayar|two-lobe", default_value_t = ModelKind::Paper)]
-    pub model: ModelKind,
-
-    /// The lobe's Fresnel factor: `incidence`, `light-half` or `exact` (as `brdfd fit
-    /// --fresnel`).
-    #[arg(long, value_name = "incidence|light-half|exact", default_value = "incidence", value_parser = parse_fresnel)]
-    pub fresnel: FresnelCosine,
+    #[command(flatten)]
+    pub science: ScienceArgs,
 
     /// Optimiser (as `brdfd fit --method`).
     #[arg(long, value_name = "NAME", default_value_t = Method::default())]
@@ -46,11 +39,6 @@ pub struct CrossvalArgs {
     /// Seed of the optimiser's random stream (every fit of the run uses it).
     #[arg(long, value_name = "N", default_value_t = Settings::default().seed)]
     pub seed: u64,
-
-    /// How the SRA readings enter the cost: `luminance` (the default for a measured scan) or
-    /// `flat` (the paper's).
-    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::MEASURED_DEFAULT)]
-    pub sra: SraModel,
 
     /// Standard observer for L*a*b* and ΔE00: `2` or `10` (`10` with `--weighting astm-e308`
     /// is how X-Rite's software computes an export's L*a*b*).
@@ -98,10 +86,10 @@ impl CrossvalArgs {
                 method: self.method,
                 cost,
                 seed: self.seed,
-                fresnel: self.fresnel,
-                model: self.model,
+                fresnel: self.science.fresnel(),
+                model: self.science.model(),
                 sra: SraReading {
-                    model: self.sra,
+                    model: self.science.sra(),
                     ..SraReading::default()
                 },
                 ..Settings::default()

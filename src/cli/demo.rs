@@ -82,8 +82,10 @@ pub async fn run_demo(store: &Store, args: &DemoArgs) -> anyhow::Result<DemoResu
         method: args.method,
         seed: args.seed,
         max_concurrent_fits: jobs,
-        // The paper's SRA model: the demo reproduces the paper.
-        sra: crate::sra_reading::SraModel::Flat,
+        // The paper's configuration (`[fit] preset = "paper"`): the demo reproduces the paper.
+        sra: crate::optimise::Preset::Paper.sra(),
+        fresnel: crate::optimise::Preset::Paper.fresnel(),
+        model: crate::optimise::Preset::Paper.model(),
         // The paper's figures are fits to every reading; no held-out fits.
         crossval: false,
         ..ServiceSettings::default()
@@ -258,9 +260,10 @@ pub fn summary(result: &DemoResult) -> String {
     );
     let _ = writeln!(
         t,
-        "SRA reading model: flat (the paper's: each SRA reading spread into a grey spectrum); \
-         `brdfd serve` fits under [fit] sra = \"luminance\" by default, so the same recording's \
-         ΔE00 differs there (SCIENCE.md §12.2)"
+        "preset: paper (the paper's configuration: Schlick's Fresnel on cos θi, each SRA reading \
+         spread into a grey spectrum); `brdfd serve` fits under [fit] preset = \"measured\" \
+         (exact Fresnel, luminance SRA) by default, so the same recording's ΔE00 differs there \
+         (SCIENCE.md §4.1, §12.2)"
     );
     let _ = writeln!(t, "mean ΔE00 between measured and fitted colour per sample");
     let _ = writeln!(

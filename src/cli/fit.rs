@@ -11,7 +11,7 @@ use crate::crossval::{fit_holding_out, parse_hold_out};
 use crate::fit::{FitReport, FitRequest, fit_scan};
 use crate::geometry::GEOMETRIES;
 use crate::model::{FresnelCosine, ModelKind};
-use crate::optimise::{Method, Settings};
+use crate::optimise::{Method, Preset, Settings};
 use crate::processing::{self, ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::wavelengths_nm;
@@ -47,17 +47,8 @@ pub struct FitArgs {
     #[arg(long, value_name = "ratio|paper-eq9", default_value_t = SpecularStrategy::Ratio)]
     pub specular: SpecularStrategy,
 
-    /// The lobe's Fresnel factor: Schlick on `incidence` (cos θi, as the paper writes Eq. 2) or
-    /// on `light-half` (l·h, textbook Schlick), or `exact` (the exact dielectric Fresnel on l·h,
-    /// what renderers evaluate; a fit with it exports to Mitsuba without approximation).
-    #[arg(long, value_name = "incidence|light-half|exact", default_value = "incidence", value_parser = parse_fresnel)]
-    pub fresnel: FresnelCosine,
-
-    /// The model's form (SCIENCE.md §4.1): `paper` (the paper's Eq. 1, Lambertian diffuse),
-    /// `oren-nayar` (Oren–Nayar's rough diffuse term, one more parameter σ) or `two-lobe` (a
-    /// second GGX lobe, two more parameters). Needs the default method for the options.
-    #[arg(long, value_name = "paper|oren-nayar|two-lobe", default_value_t = ModelKind::Paper)]
-    pub model: ModelKind,
+    #[command(flatten)]
+    pub science: ScienceArgs,
 
     /// Standard observer for L*a*b* and ΔE00: `2` (CIE 1931, the paper's) or `10` (CIE 1964,
     /// what instrument software often uses). Illuminant is always D65.
@@ -69,14 +60,6 @@ pub struct FitArgs {
     /// computes L*a*b* from 10 nm data).
     #[arg(long, value_name = "summation|astm-e308", default_value_t = Weighting::default())]
     pub weighting: Weighting,
-
-    /// How the SRA's one achromatic reading per geometry enters the cost: `luminance` (the
-    /// default for a measured scan: the sample's luminous reflectance Y under CIE illuminant C
-    /// and the 2° V(λ), as ISO 2813 specifies; compared with the model's Y) or `flat` (the
-    /// paper's: a grey spectrum, compared band by band; `brdfd demo` uses it to reproduce the
-    /// paper). SCIENCE.md §5.1, §10.
-    #[arg(long, value_name = "flat|luminance", default_value_t = SraModel::MEASURED_DEFAULT)]
-    pub sra: SraModel,
 
     /// Illuminant of the SRA's luminance (the `luminance` model's cost and the specular |ΔL*|
     /// of every fit): `C` (ISO 2813) or `D65`.
@@ -108,14 +91,56 @@ pub struct FitArgs {
     pub json: bool,
 }
 
-/// Parses a Fresnel choice as the settings and reports spell it.
-pub fn parse_fresnel(s: &str) -> Result<FresnelCosine, String> {
-    FresnelCosine::ALL
-        .into_iter()
-        .find(|f| f.name() == s)
-        .ok_or_else(|| {
-            format!("unknown Fresnel choice \"{s}\"; valid: incidence, light-half, exact")
-        })
+/// The science choices of a fit (`brdfd fit`, `brdfd crossval`): a preset and the three
+/// choices it sets, each of which may be given on its own ([`Preset`]).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ScienceArgs {
+    /// The science defaults: `measured` (the paper's model form with the exact dielectric
+    /// Fresnel and the SRA read as luminance: what predicts real materials best off the measured
+    /// angles, SCIENCE.md §4.1) or `paper` (the paper's configuration: Schlick on cos θi, the
+    /// flat grey SRA reading; what `brdfd demo` and the study report use). `--model`,
+    /// `--fresnel` and `--sra` given beside it win.
+    #[arg(long, value_name = "measured|paper", default_value_t = Preset::default())]
+    pub preset: Preset,
+
+    /// The model's form (SCIENCE.md §4.1): `paper` (the paper's Eq. 1, Lambertian diffuse),
+    /// `oren-nayar` (Oren–Nayar's rough diffuse term, one more parameter σ) or `two-lobe` (a
+    /// second GGX lobe, two more parameters). Needs the default method for the options.
+    /// Default: the preset's (`paper`).
+    #[arg(long, value_name = "paper|oren-nayar|two-lobe")]
+    pub model: Option<ModelKind>,
+
+    /// The lobe's Fresnel factor: `exact` (the exact dielectric Fresnel on l·h, what renderers
+    /// evaluate; exports to Mitsuba without approximation), Schlick on `incidence` (cos θi, as
+    /// the paper writes Eq. 2) or on `light-half` (l·h, textbook Schlick). Default: the
+    /// preset's (`exact` for `measured`, `incidence` for `paper`).
+    #[arg(long, value_name = "exact|incidence|light-half")]
+    pub fresnel: Option<FresnelCosine>,
+
+    /// How the SRA's one achromatic reading per geometry enters the cost: `luminance` (the
+    /// sample's luminous reflectance Y under CIE illuminant C and the 2° V(λ), as ISO 2813
+    /// specifies; compared with the model's Y) or `flat` (the paper's: a grey spectrum,
+    /// compared band by band). SCIENCE.md §5.1, §10. Default: the preset's (`luminance` for
+    /// `measured`, `flat` for `paper`).
+    #[arg(long, value_name = "luminance|flat")]
+    pub sra: Option<SraModel>,
+}
+
+impl ScienceArgs {
+    /// The model form in force: `--model`, else the preset's.
+    pub fn model(&self) -> ModelKind {
+        self.model.unwrap_or(self.preset.model())
+    }
+
+    /// The Fresnel factor in force: `--fresnel`, else the preset's.
+    pub fn fresnel(&self) -> FresnelCosine {
+        self.fresnel.unwrap_or(self.preset.fresnel())
+    }
+
+    /// The SRA reading model in force: `--sra`, else the preset's.
+    pub fn sra(&self) -> SraModel {
+        self.sra.unwrap_or(self.preset.sra())
+    }
 }
 
 impl FitArgs {
@@ -130,10 +155,10 @@ impl FitArgs {
                 method: self.method,
                 cost: self.cost,
                 seed: self.seed,
-                fresnel: self.fresnel,
-                model: self.model,
+                fresnel: self.science.fresnel(),
+                model: self.science.model(),
                 sra: SraReading {
-                    model: self.sra,
+                    model: self.science.sra(),
                     illuminant: self.sra_illuminant,
                     observer: self.sra_observer,
                 },
@@ -376,17 +401,59 @@ mod tests {
     #[test]
     fn fresnel_names_round_trip() {
         for f in FresnelCosine::ALL {
-            assert_eq!(parse_fresnel(parse_name(f)).unwrap(), f);
+            assert_eq!(parse_name(f).parse::<FresnelCosine>().unwrap(), f);
             // Same spelling as the settings' serde form.
             assert_eq!(
                 serde_json::to_string(&f).unwrap(),
                 format!("\"{}\"", parse_name(f))
             );
         }
-        assert!(
-            parse_fresnel("half")
-                .unwrap_err()
-                .contains("valid: incidence, light-half, exact")
+        let e = "half".parse::<FresnelCosine>().unwrap_err();
+        assert!(e.contains("incidence") && e.contains("exact"), "{e}");
+    }
+
+    /// `--preset` sets the three choices; each given beside it wins.
+    #[test]
+    fn the_preset_gives_defaults_and_explicit_choices_win() {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            science: ScienceArgs,
+        }
+        let parse = |args: &[&str]| {
+            let s = Cli::try_parse_from(std::iter::once("t").chain(args.iter().copied()))
+                .unwrap()
+                .science;
+            (s.model(), s.fresnel(), s.sra())
+        };
+        assert_eq!(
+            parse(&[]),
+            (ModelKind::Paper, FresnelCosine::Exact, SraModel::Luminance)
         );
+        assert_eq!(
+            parse(&["--preset", "paper"]),
+            (ModelKind::Paper, FresnelCosine::Incidence, SraModel::Flat)
+        );
+        assert_eq!(
+            parse(&[
+                "--preset",
+                "paper",
+                "--fresnel",
+                "exact",
+                "--sra",
+                "luminance"
+            ]),
+            (ModelKind::Paper, FresnelCosine::Exact, SraModel::Luminance)
+        );
+        assert_eq!(
+            parse(&["--model", "oren-nayar", "--fresnel", "light-half"]),
+            (
+                ModelKind::OrenNayar,
+                FresnelCosine::LightHalf,
+                SraModel::Luminance
+            )
+        );
+        assert!(Cli::try_parse_from(["t", "--preset", "gloss"]).is_err());
     }
 }

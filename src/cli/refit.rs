@@ -23,8 +23,23 @@ pub struct RefitArgs {
     /// Seed; default: the configured one.
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
+    /// The science defaults for `--model`, `--fresnel` and `--sra`: `measured` (exact Fresnel,
+    /// luminance SRA: what predicts real materials best) or `paper` (the paper's
+    /// configuration); default: the configured choices (`[fit]`). Brings a stored scan to
+    /// another configuration; its earlier fits keep theirs.
+    #[arg(long, value_name = "measured|paper")]
+    pub preset: Option<crate::optimise::Preset>,
+    /// The model's form: `paper`, `oren-nayar` or `two-lobe` (the options need the separable
+    /// method); default: the preset's, else the configured one.
+    #[arg(long, value_name = "paper|oren-nayar|two-lobe")]
+    pub model: Option<crate::model::ModelKind>,
+    /// The lobe's Fresnel factor: `exact`, `incidence` (the paper's Schlick on cos θi) or
+    /// `light-half`; default: the preset's, else the configured one.
+    #[arg(long, value_name = "exact|incidence|light-half")]
+    pub fresnel: Option<crate::model::FresnelCosine>,
     /// How the SRA's readings enter the fit: `flat` (the paper's grey spectrum) or `luminance`
-    /// (the model's luminous reflectance; SCIENCE.md §5.1); default: the configured one.
+    /// (the model's luminous reflectance; SCIENCE.md §5.1); default: the preset's, else the
+    /// configured one.
     #[arg(long, value_name = "flat|luminance")]
     pub sra: Option<crate::sra_reading::SraModel>,
     /// Fit even though the scan's reference is older than the configured limit.
@@ -44,7 +59,10 @@ pub fn refit(args: &RefitArgs) -> anyhow::Result<()> {
         cost_functions: args.cost.clone(),
         method: args.method,
         seed: args.seed,
+        preset: args.preset,
         sra: args.sra,
+        model: args.model,
+        fresnel: args.fresnel,
         allow_stale_reference: args.allow_stale_reference,
     };
     let scan = ScanId(args.scan);

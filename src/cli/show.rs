@@ -286,6 +286,20 @@ fn print_fit_extras(fit: &FitDetail) {
     if let Some(cv) = &fit.crossval {
         println!("       {}", held_out_line(cv));
     }
+    // The science choices the fit was made with (settings stored without them: the paper's).
+    let choice = |key: &str, default: &str| {
+        fit.run
+            .settings
+            .get(key)
+            .and_then(|v| v.as_str())
+            .unwrap_or(default)
+            .to_string()
+    };
+    println!(
+        "       model {}, Fresnel {}",
+        choice("model", crate::model::ModelKind::default().name()),
+        choice("fresnel", crate::model::FresnelCosine::default().name())
+    );
     let sra = &fit.sra;
     let delta_l = match &fit.specular_delta_l {
         Some(dl) => format!(

@@ -1,12 +1,13 @@
 //! `[fit]`: which cost functions every complete scan is fitted with, and how (method, seed,
-//! model, SRA model, bootstrap, cross-validation).
+//! preset, model, Fresnel factor, SRA model, bootstrap, cross-validation).
 
 use std::num::NonZeroUsize;
 
 use serde::Deserialize;
 
 use crate::cost::CostFunction;
-use crate::optimise::Method;
+use crate::model::FresnelCosine;
+use crate::optimise::{Method, Preset};
 use crate::processing::SpecularStrategy;
 
 use super::check::{Checker, ConfigError, S};
@@ -22,11 +23,16 @@ pub struct FitConfig {
     pub max_concurrent_fits: NonZeroUsize,
     /// How SRA readings become spectra (SCIENCE.md §3).
     pub specular: SpecularStrategy,
+    /// The science defaults (`measured` or `paper`) that `sra`, `model` and `fresnel` take
+    /// when the file does not set them ([`Preset`]).
+    pub preset: Preset,
     /// How an SRA reading enters the cost: the paper's flat grey spectrum or the luminance
     /// (SCIENCE.md §5.1).
     pub sra: crate::sra_reading::SraModel,
     /// The model's form (SCIENCE.md §4.1): the paper's by default.
     pub model: crate::model::ModelKind,
+    /// The lobe's Fresnel factor (SCIENCE.md §4): the exact dielectric Fresnel by default.
+    pub fresnel: FresnelCosine,
     /// Bootstrap resamples per fit for the parameter intervals (SCIENCE.md §10); 0 turns the
     /// intervals off.
     pub bootstrap: u32,
@@ -42,8 +48,10 @@ impl Default for FitConfig {
             seed: defaults::SEED,
             max_concurrent_fits: NonZeroUsize::MIN,
             specular: SpecularStrategy::default(),
-            sra: defaults::SRA,
-            model: crate::model::ModelKind::Paper,
+            preset: Preset::default(),
+            sra: Preset::default().sra(),
+            model: Preset::default().model(),
+            fresnel: Preset::default().fresnel(),
             bootstrap: defaults::BOOTSTRAP,
             crossval: true,
         }
@@ -55,9 +63,6 @@ impl Default for FitConfig {
 mod defaults {
     pub const SEED: u64 = 1;
     pub const BOOTSTRAP: u32 = 200;
-    /// Measured scans are fitted under the luminance SRA model (SCIENCE.md §10); the paper's
-    /// `flat` stays a setting.
-    pub const SRA: crate::sra_reading::SraModel = crate::sra_reading::SraModel::MEASURED_DEFAULT;
 }
 
 // ---- Stage 1: the section's shape ----------------------------------------------------------
@@ -70,8 +75,10 @@ pub(super) struct RawFit {
     seed: S<u64>,
     max_concurrent_fits: S<u64>,
     specular: S<String>,
+    preset: S<String>,
     sra: S<String>,
     model: S<String>,
+    fresnel: S<String>,
     bootstrap: S<u32>,
     crossval: S<bool>,
 }
@@ -86,6 +93,12 @@ impl Checker<'_> {
             &raw.method,
             Method::default().name().into(),
             |m| m.parse::<Method>().map_err(|e| e.to_string()),
+        )?;
+        let preset = self.value(
+            "fit.preset",
+            &raw.preset,
+            Preset::default().name().into(),
+            |s| s.parse::<Preset>(),
         )?;
         Ok(FitConfig {
             cost_functions: self.value(
@@ -127,24 +140,26 @@ impl Checker<'_> {
                 SpecularStrategy::default().name().into(),
                 |s| s.parse::<SpecularStrategy>().map_err(|e| e.to_string()),
             )?,
-            sra: self.value("fit.sra", &raw.sra, defaults::SRA.name().into(), |s| {
+            preset,
+            sra: self.value("fit.sra", &raw.sra, preset.sra().name().into(), |s| {
                 s.parse::<crate::sra_reading::SraModel>()
                     .map_err(|e| e.to_string())
             })?,
-            model: self.value(
-                "fit.model",
-                &raw.model,
-                crate::model::ModelKind::default().name().into(),
-                |s| {
-                    let m = s.parse::<crate::model::ModelKind>()?;
-                    if m != crate::model::ModelKind::Paper && method == Method::Paper {
-                        return Err(format!(
-                            "model {m} needs the separable method (fit.method = \"separable\")"
-                        ));
-                    }
-                    Ok(m)
-                },
+            fresnel: self.value(
+                "fit.fresnel",
+                &raw.fresnel,
+                preset.fresnel().name().into(),
+                |s| s.parse::<FresnelCosine>(),
             )?,
+            model: self.value("fit.model", &raw.model, preset.model().name().into(), |s| {
+                let m = s.parse::<crate::model::ModelKind>()?;
+                if m != crate::model::ModelKind::Paper && method == Method::Paper {
+                    return Err(format!(
+                        "model {m} needs the separable method (fit.method = \"separable\")"
+                    ));
+                }
+                Ok(m)
+            })?,
             bootstrap: self.value("fit.bootstrap", &raw.bootstrap, defaults::BOOTSTRAP, |n| {
                 if n <= 10_000 {
                     Ok(n)
@@ -223,6 +238,54 @@ mod tests {
         assert_eq!(c.fit.sra, SraModel::Flat);
         let e = parse("[fit]\nsra = \"grey\"\n").unwrap_err().to_string();
         assert!(e.contains("fit.sra") && e.contains("luminance"), "{e}");
+    }
+
+    #[test]
+    fn preset_and_fresnel_settings() {
+        use crate::model::ModelKind;
+        use crate::sra_reading::SraModel;
+        let measured = parse("").unwrap().fit;
+        assert_eq!(measured.preset, Preset::Measured);
+        assert_eq!(measured.fresnel, FresnelCosine::Exact);
+        assert_eq!(measured.sra, SraModel::Luminance);
+        let paper = parse("[fit]\npreset = \"paper\"\n").unwrap().fit;
+        assert_eq!(
+            (paper.model, paper.fresnel, paper.sra),
+            (ModelKind::Paper, FresnelCosine::Incidence, SraModel::Flat)
+        );
+        // A key beside the preset wins over it.
+        let mixed = parse("[fit]\npreset = \"paper\"\nfresnel = \"exact\"\n")
+            .unwrap()
+            .fit;
+        assert_eq!(
+            (mixed.fresnel, mixed.sra),
+            (FresnelCosine::Exact, SraModel::Flat)
+        );
+        // Every fit of the daemon is made with the configured factor.
+        for (config, want) in [
+            (&measured, FresnelCosine::Exact),
+            (&paper, FresnelCosine::Incidence),
+        ] {
+            let c = crate::config::Config {
+                fit: config.clone(),
+                ..Default::default()
+            };
+            for method in [Method::Separable, Method::Paper] {
+                let s = crate::service::ServiceSettings::from_config(&c).fit_settings(
+                    CostFunction::Cf1,
+                    method,
+                    1,
+                );
+                assert_eq!(s.fresnel, want);
+            }
+        }
+        for (text, key, says) in [
+            ("preset = \"gloss\"", "fit.preset", "measured"),
+            ("fresnel = \"schlick\"", "fit.fresnel", "exact"),
+        ] {
+            let e = parse(&format!("[fit]\n{text}\n")).unwrap_err().to_string();
+            assert!(e.contains(key) && e.contains(says), "{e}");
+        }
     }
 
     #[test]

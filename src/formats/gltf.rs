@@ -169,6 +169,9 @@ pub fn document(
             ""
         }
     );
+    if let Some(omitted) = fit.model.export_omission(&p.extra) {
+        let _ = write!(notes, " Also {omitted}.");
+    }
     json!({
         "asset": {
             "version": "2.0",
@@ -191,6 +194,8 @@ pub fn document(
                     "ks": p.ks,
                     "alpha": p.alpha,
                     "ior": p.ior,
+                    "model": fit.model.name(),
+                    "fresnel": fit.fresnel.name(),
                 }
             }
         },

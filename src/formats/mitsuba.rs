@@ -93,6 +93,10 @@ pub fn scene(
             }
         ),
     };
+    let fresnel_note = match fit.model.export_omission(&fit.params.extra) {
+        Some(omitted) => format!("{fresnel_note}.\n     Not exact: {omitted}"),
+        None => fresnel_note,
+    };
     let _ = writeln!(
         t,
         "<!-- {}: sample \"{}\", cost function {cost}, method {method}, Fresnel {}; written {}.\n     {}.\n     Render with a spectral variant: mitsuba -m scalar_spectral this-file.xml (a scene file cannot name its variant; a bare `mitsuba` picks an RGB one).\n     The film holds brdfd's preview values: linear sRGB radiance factor (light irradiance π, so a white diffuser facing it is 1).\n     brdfd's model f = kd + ks·F·D·G/(π cosθi cosθr) as blendbsdf(½ diffuse 2π·kd, ½ roughconductor GGX with specular_reflectance 2·ks·4/π).\n     {}.\n     Readings: {}. -->",
@@ -289,6 +293,22 @@ mod tests {
         let xml = cf1_scene(&s, &exact);
         assert!(xml.contains("Fresnel exact"));
         assert!(xml.contains("so Mitsuba's BSDF is brdfd's model"));
+        assert!(!xml.contains("Not exact"), "{xml}");
+        // A model option's extra term is named as left out, with its fitted values.
+        let rough = DoneFit {
+            model: crate::model::ModelKind::OrenNayar,
+            params: crate::model::Params {
+                extra: [0.25, 0.0],
+                ..exact.params
+            },
+            ..exact.clone()
+        };
+        let xml = cf1_scene(&s, &rough);
+        roxmltree::Document::parse(&xml).unwrap();
+        assert!(
+            xml.contains("Not exact: model oren-nayar: its rough diffuse factor (σ = 0.2500 rad)"),
+            "{xml}"
+        );
         let names: Vec<String> = scenes(
             &crate::study::Study {
                 samples: vec![s.clone()],

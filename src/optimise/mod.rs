@@ -25,9 +25,12 @@
 mod ga;
 mod nelder_mead;
 mod options;
+mod preset;
 mod problem;
 mod separable;
 pub mod synthetic;
+
+pub use preset::Preset;
 
 use std::fmt;
 use std::ops::ControlFlow;

@@ -109,6 +109,8 @@ pub struct ServiceSettings {
     pub sra: crate::sra_reading::SraModel,
     /// The model's form (`[fit] model`); fits with the paper's GA always use the paper's.
     pub model: crate::model::ModelKind,
+    /// The lobe's Fresnel factor (`[fit] fresnel`; a refit may ask for another).
+    pub fresnel: crate::model::FresnelCosine,
     /// The reference tile's calibrated reflectance (`[reference] reflectance`), recorded with
     /// every reference set measured; `None`: results relative to the tile.
     pub reference_reflectance: Option<crate::spectral::Spectrum>,
@@ -141,6 +143,7 @@ impl ServiceSettings {
             specular: config.fit.specular,
             sra: config.fit.sra,
             model: config.fit.model,
+            fresnel: config.fit.fresnel,
             reference_reflectance: config.reference.reflectance,
             shutdown_grace: Duration::from_secs(10),
             sync: config.sync.url.as_ref().map(|url| {
@@ -157,6 +160,39 @@ impl ServiceSettings {
         }
     }
 
+    /// The optimiser settings of one fit asked for by `request`: its choices where it makes
+    /// them, else its preset's, else the configured ones. A model option with the paper's GA is
+    /// refused (the GA fits the paper's model only).
+    pub fn refit_settings(
+        &self,
+        cost: CostFunction,
+        request: &RefitRequest,
+    ) -> Result<Settings, crate::optimise::SettingsError> {
+        let method = request.method.unwrap_or(self.method);
+        let mut s = self.fit_settings(cost, method, request.seed.unwrap_or(self.seed));
+        let preset = request.preset;
+        if let Some(m) = request.sra.or(preset.map(|p| p.sra())) {
+            s.sra = s.sra.with_model(m);
+        }
+        if let Some(f) = request.fresnel.or(preset.map(|p| p.fresnel())) {
+            s.fresnel = f;
+        }
+        match request.model {
+            Some(m) => s.model = m,
+            None => {
+                if let Some(p) = preset {
+                    s.model = if method == Method::Separable {
+                        p.model()
+                    } else {
+                        crate::model::ModelKind::Paper
+                    };
+                }
+            }
+        }
+        s.validate()?;
+        Ok(s)
+    }
+
     /// The optimiser settings of one fit.
     pub fn fit_settings(&self, cost: CostFunction, method: Method, seed: u64) -> Settings {
         Settings {
@@ -170,6 +206,7 @@ impl ServiceSettings {
             } else {
                 crate::model::ModelKind::Paper
             },
+            fresnel: self.fresnel,
             ..Settings::default()
         }
     }
@@ -280,8 +317,17 @@ pub struct RefitRequest {
     pub method: Option<Method>,
     /// Seed; `None` = the configured one.
     pub seed: Option<u64>,
-    /// SRA reading model (`flat` or `luminance`); `None` = the configured one (`[fit] sra`).
+    /// Science defaults (`measured` or `paper`) for `sra`, `model` and `fresnel`; `None` = the
+    /// configured choices (`[fit]`).
+    pub preset: Option<crate::optimise::Preset>,
+    /// SRA reading model (`flat` or `luminance`); `None` = the preset's, else the configured
+    /// one (`[fit] sra`).
     pub sra: Option<crate::sra_reading::SraModel>,
+    /// The model's form; `None` = the preset's, else the configured one (`[fit] model`).
+    pub model: Option<crate::model::ModelKind>,
+    /// The lobe's Fresnel factor; `None` = the preset's, else the configured one
+    /// (`[fit] fresnel`).
+    pub fresnel: Option<crate::model::FresnelCosine>,
     /// Fit even though the scan's reference is older than the configured limit.
     pub allow_stale_reference: bool,
 }

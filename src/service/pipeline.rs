@@ -148,12 +148,13 @@ impl Pipeline {
         };
         let method = request.method.unwrap_or(settings.method);
         let seed = request.seed.unwrap_or(settings.seed);
+        let every = costs
+            .iter()
+            .map(|&cost| settings.refit_settings(cost, request))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| ServiceError::BadRequest(e.to_string()))?;
         let mut ids = Vec::with_capacity(costs.len());
-        for cost in costs {
-            let mut fit_settings = settings.fit_settings(cost, method, seed);
-            if let Some(model) = request.sra {
-                fit_settings.sra = fit_settings.sra.with_model(model);
-            }
+        for (cost, fit_settings) in costs.into_iter().zip(every) {
             let new = NewFit {
                 method: method.name().to_string(),
                 cost_function: cost,

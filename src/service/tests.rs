@@ -214,6 +214,69 @@ async fn a_refit_can_ask_for_the_luminance_sra_model() {
     s.shutdown().await;
 }
 
+/// A refit takes its preset, model and Fresnel factor from the request, else from the
+/// configuration, records them with the fit, and refuses a model option with the paper's GA.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_refit_chooses_the_preset_model_and_fresnel() {
+    use crate::model::{FresnelCosine, ModelKind};
+    use crate::optimise::Preset;
+    use crate::synth::{SynthOptions, paper_samples, synth_scan};
+    let mut config = Config::default();
+    config.fit.cost_functions = vec![CostFunction::Cf1];
+    config.fit.bootstrap = 0;
+    config.fit.crossval = false;
+    let s = service_on(
+        Store::open_in_memory().await.unwrap(),
+        ServiceSettings::from_config(&config),
+        ServiceOptions::default(),
+    )
+    .await;
+    let file = synth_scan(&paper_samples()[1], &SynthOptions::default()).unwrap();
+    let (scan, fits) = s.import_scan(&file).await.unwrap();
+    let paper: RefitRequest = serde_json::from_str(r#"{"preset": "paper"}"#).unwrap();
+    assert_eq!(paper.preset, Some(Preset::Paper));
+    let paper = s.refit(scan, &paper).await.unwrap();
+    let mixed: RefitRequest =
+        serde_json::from_str(r#"{"preset": "paper", "fresnel": "exact", "model": "oren-nayar"}"#)
+            .unwrap();
+    let mixed = s.refit(scan, &mixed).await.unwrap();
+    let refused: RefitRequest =
+        serde_json::from_str(r#"{"method": "paper", "model": "two-lobe"}"#).unwrap();
+    match s.refit(scan, &refused).await {
+        Err(ServiceError::BadRequest(m)) => assert!(m.contains("separable"), "{m}"),
+        other => panic!("a model option with the paper's GA was not refused: {other:?}"),
+    }
+    assert!(
+        s.wait_settled(scan, Duration::from_secs(300))
+            .await
+            .unwrap()
+    );
+    let detail = |id| {
+        let s = &s;
+        async move { s.store().fit_detail(id).await.unwrap() }
+    };
+    // The configured default: exact Fresnel, the luminance SRA model.
+    let d = detail(fits[0]).await;
+    assert_eq!(d.run.settings["fresnel"], FresnelCosine::Exact.name());
+    assert_eq!(d.run.settings["sra"]["model"], "luminance");
+    // The paper's preset: Schlick on cos θi, the flat SRA model (left out of the settings).
+    let d = detail(paper[0]).await;
+    assert_eq!(d.run.settings["fresnel"], FresnelCosine::Incidence.name());
+    assert!(d.run.settings.get("sra").is_none(), "{}", d.run.settings);
+    // A choice beside the preset wins over it.
+    let d = detail(mixed[0]).await;
+    assert_eq!(
+        d.run.status,
+        crate::store::FitStatus::Done,
+        "{:?}",
+        d.run.error
+    );
+    assert_eq!(d.run.settings["fresnel"], FresnelCosine::Exact.name());
+    assert_eq!(d.run.settings["model"], ModelKind::OrenNayar.name());
+    assert!(d.run.settings.get("sra").is_none(), "{}", d.run.settings);
+    s.shutdown().await;
+}
+
 /// A fit runs with the colorimetry it was queued with: one queued under a 10° observer with
 /// ASTM E308 weighting, interrupted by a stop, and run after a start whose configuration says
 /// the paper's 2° summation, is computed and stored under 10° E308.

@@ -110,6 +110,8 @@ pub struct DoneFit {
     pub params: Params,
     /// The Fresnel cosine the model was fitted with.
     pub fresnel: FresnelCosine,
+    /// The model's form the fit was made with (SCIENCE.md §4.1).
+    pub model: model::ModelKind,
     /// The model at the fitted parameters, sr⁻¹, at the 14 geometries.
     pub estimated: [Spectrum; GEOMETRY_COUNT],
     /// ΔE00 between measured and estimated colour.
@@ -154,6 +156,7 @@ impl DoneFit {
         DoneFit {
             params,
             fresnel,
+            model: model::ModelKind::Paper,
             estimated,
             evaluation,
             colorimetry,
@@ -181,6 +184,7 @@ impl DoneFit {
         if kind == model::ModelKind::Paper {
             return self;
         }
+        self.model = kind;
         self.estimated =
             model::evaluate_model(&self.params, kind, self.fresnel, &SpecularGeometry::all());
         self.evaluation = evaluate_with(

@@ -57,7 +57,7 @@ pub fn fast_driver_config() -> DriverConfig {
 }
 
 /// Service settings for tests: the defaults (three cost functions, separable, seed 1), two
-/// fits at once, the paper's flat SRA model (under the luminance default cf2's 200
+/// fits at once, the paper's Fresnel factor and flat SRA model (under the luminance default cf2's 200
 /// full-search bootstrap refits take minutes per scan in a debug build) and no
 /// cross-validation (12 more fits per fit; the tests that check it turn it on). The daemons these
 /// tests start from a configuration file (`serve::write_simulated_config`) run the default.
@@ -65,6 +65,9 @@ pub fn settings() -> ServiceSettings {
     ServiceSettings {
         max_concurrent_fits: 2,
         sra: brdfd::sra_reading::SraModel::Flat,
+        // The simulated instruments replay the paper's model (Schlick on cos θi): fitted with
+        // the same factor, their fits recover the recorded truths.
+        fresnel: brdfd::optimise::Preset::Paper.fresnel(),
         crossval: false,
         ..ServiceSettings::default()
     }

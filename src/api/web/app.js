@@ -935,6 +935,11 @@ function refitForm(scanId, stale) {
     const body = { cost_functions, method: $("refit-method").value };
     const seed = $("refit-seed").value.trim();
     if (seed) body.seed = Number(seed);
+    // Empty choices are left out: the daemon's configured ones apply.
+    for (const k of ["preset", "model", "fresnel"]) {
+      const v = $(`refit-${k}`).value;
+      if (v) body[k] = v;
+    }
     if ($("refit-stale").checked) body.allow_stale_reference = true;
     const answer = await act($("refit-go"), `/scans/${scanId}/refit`, body);
     if (answer) setBanner(`Fits ${answer.fits.join(", ")} queued; this page shows them when they are done (reload).`);
@@ -943,7 +948,17 @@ function refitForm(scanId, stale) {
     h("input", { type: "checkbox", id: `refit-${c}`, checked: true }), h("label", { for: `refit-${c}` }, c)]),
   h("label", { for: "refit-method" }, "method"),
   h("select", { id: "refit-method" }, h("option", { value: "separable" }, "separable"), h("option", { value: "paper" }, "paper (GA)")),
-  h("label", { for: "refit-seed" }, "seed"), h("input", { id: "refit-seed", inputmode: "numeric", size: 6 }),
+  h("label", { for: "refit-seed" }, "seed"), h("input", { id: "refit-seed", inputmode: "numeric", size: 6 })),
+  h("div", { class: "form-row" },
+  h("label", { for: "refit-preset" }, "preset"),
+  h("select", { id: "refit-preset" }, h("option", { value: "" }, "as configured"),
+    h("option", { value: "measured" }, "measured (exact Fresnel)"), h("option", { value: "paper" }, "paper's")),
+  h("label", { for: "refit-model" }, "model"),
+  h("select", { id: "refit-model" }, h("option", { value: "" }, "default"),
+    ["paper", "oren-nayar", "two-lobe"].map((m) => h("option", { value: m }, m))),
+  h("label", { for: "refit-fresnel" }, "Fresnel"),
+  h("select", { id: "refit-fresnel" }, h("option", { value: "" }, "default"),
+    ["exact", "incidence", "light-half"].map((f) => h("option", { value: f }, f))),
   h("input", { type: "checkbox", id: "refit-stale", checked: false }),
   h("label", { for: "refit-stale" }, stale ? "allow the stale reference" : "allow a stale reference"),
   h("button", { type: "submit", id: "refit-go" }, "Refit")));

@@ -20,8 +20,12 @@
 //! trial with the truth, the point fit and every refit's parameters, to study other interval
 //! constructions on the same draws.
 //!
+//! `--fresnel exact|incidence|light-half` is the Fresnel factor of both the synthetic truth and
+//! the fits (the paper's `incidence` by default).
+//!
 //! Run: `cargo run --release -p brdfd-tools --bin coverage [-- --trials 200 --resamples 200
-//! --noise 0.01 --costs cf1,cf2,m2 --sra luminance --threads 2 --first-seed 0 --require 0.9]`
+//! --noise 0.01 --costs cf1,cf2,m2 --sra luminance --fresnel incidence --threads 2
+//! --first-seed 0 --require 0.9]`
 //! (defaults shown, but for `--require`, off by default). SCIENCE.md §12.3 quotes its output.
 
 use std::io::Write;
@@ -30,6 +34,7 @@ use std::time::Instant;
 
 use brdfd::cost::CostFunction;
 use brdfd::fit::{FitRequest, fit_scan};
+use brdfd::model::FresnelCosine;
 use brdfd::optimise::Settings;
 use brdfd::processing::{ProcessingOptions, process};
 use brdfd::scan::Scan;
@@ -66,6 +71,7 @@ fn main() {
     };
     let response: SraResponse = arg(&args, "--sra-response", matched);
     let no_sra = args.iter().any(|a| a == "--no-sra");
+    let fresnel: FresnelCosine = arg(&args, "--fresnel", FresnelCosine::Incidence);
     let first_seed: u64 = arg(&args, "--first-seed", 0);
     let refit = match arg(&args, "--refit", "by-cost".to_string()).as_str() {
         "by-cost" => Refit::ByCost,
@@ -90,7 +96,7 @@ fn main() {
     let se = (0.95 * 0.05 / trials as f64).sqrt();
     println!(
         "coverage of the 95 % bootstrap intervals: {trials} trials (the 8 example samples in turn), \
-         noise σ = {noise} per reading, seeds {first_seed}–{}, {resamples} resamples, {}; sampling error of a coverage near 95 %: ±{:.1} % (1 s.e.)",
+         noise σ = {noise} per reading, seeds {first_seed}–{}, {resamples} resamples, {}, Fresnel {fresnel}; sampling error of a coverage near 95 %: ±{:.1} % (1 s.e.)",
         first_seed + trials - 1,
         if no_sra {
             "MA-T12-only scans (12 geometries, no SRA readings)".to_string()
@@ -117,6 +123,7 @@ fn main() {
                     noise,
                     seed: first_seed + t,
                     sra_response: response,
+                    fresnel,
                     ..Default::default()
                 },
             )
@@ -126,6 +133,7 @@ fn main() {
                 settings: Settings {
                     cost: cf,
                     sra: SraReading::default().with_model(sra),
+                    fresnel,
                     ..Settings::default()
                 },
                 ..FitRequest::default()

@@ -66,13 +66,7 @@ fn main() {
         .split(',')
         .map(|c| c.parse().expect("cost function"))
         .collect();
-    let fresnel = match arg(&args, "--fresnel", String::new()).as_str() {
-        "" => Settings::default().fresnel,
-        name => *FresnelCosine::ALL
-            .iter()
-            .find(|f| f.name() == name)
-            .unwrap_or_else(|| panic!("--fresnel: {name:?} is not incidence, light-half or exact")),
-    };
+    let fresnel: FresnelCosine = arg(&args, "--fresnel", Settings::default().fresnel);
     let mut scans = exports();
     scans.truncate(files);
     let never = AtomicBool::new(false);

@@ -1,0 +1,103 @@
+//! Presets: the science choices of a fit under one name — the model's form, the lobe's Fresnel
+//! factor and how an SRA reading enters the cost (SCIENCE.md §4.1, §5.1).
+//!
+//! [`Preset::Measured`] is what a measured or imported scan is fitted with unless told
+//! otherwise: the choices that predict best off the measured angles (held-out geometries of
+//! the 47 real exports, measured goniometric BRDFs; SCIENCE.md §4.1). [`Preset::Paper`] is the
+//! paper's configuration, which `brdfd demo` and the study report reproduce. A preset gives
+//! defaults only: `--model`, `--fresnel`, `--sra` (or the `[fit]` keys) given beside it win.
+
+use serde::{Deserialize, Serialize};
+
+use crate::model::{FresnelCosine, ModelKind};
+use crate::sra_reading::SraModel;
+
+/// A named set of defaults for the model form, Fresnel factor and SRA reading model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preset {
+    /// The paper's model form with the exact dielectric Fresnel, SRA readings compared as
+    /// luminance: what predicts measured materials best (the default).
+    #[default]
+    Measured,
+    /// The paper's configuration: Schlick on cos θi, the flat grey SRA reading (paper Eq. 1–9).
+    Paper,
+}
+
+impl Preset {
+    /// Every preset, the default first.
+    pub const ALL: [Preset; 2] = [Preset::Measured, Preset::Paper];
+
+    /// The name on the command line and in `[fit] preset`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Preset::Measured => "measured",
+            Preset::Paper => "paper",
+        }
+    }
+
+    /// The model's form: the paper's in both (Oren–Nayar and the second lobe did not predict
+    /// held-out real geometries better; SCIENCE.md §4.1).
+    pub const fn model(self) -> ModelKind {
+        ModelKind::Paper
+    }
+
+    /// The lobe's Fresnel factor.
+    pub const fn fresnel(self) -> FresnelCosine {
+        match self {
+            Preset::Measured => FresnelCosine::MEASURED_DEFAULT,
+            Preset::Paper => FresnelCosine::Incidence,
+        }
+    }
+
+    /// How an SRA reading enters the cost.
+    pub const fn sra(self) -> SraModel {
+        match self {
+            Preset::Measured => SraModel::MEASURED_DEFAULT,
+            Preset::Paper => SraModel::Flat,
+        }
+    }
+}
+
+impl std::fmt::Display for Preset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+
+    /// Parses `measured` or `paper`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Preset::ALL
+            .into_iter()
+            .find(|p| p.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| {
+                format!(
+                    "unknown preset \"{s}\": expected measured (exact Fresnel, luminance SRA: \
+                     what predicts measured materials best) or paper (the paper's configuration)"
+                )
+            })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_the_paper_preset_is_the_types_defaults() {
+        for p in Preset::ALL {
+            assert_eq!(p.name().parse::<Preset>().unwrap(), p);
+            assert_eq!(p.to_string(), p.name());
+        }
+        assert!("gloss".parse::<Preset>().unwrap_err().contains("measured"));
+        // The paper's preset is what settings stored without these choices were fitted with.
+        assert_eq!(Preset::Paper.fresnel(), FresnelCosine::default());
+        assert_eq!(Preset::Paper.sra(), SraModel::default());
+        assert_eq!(Preset::Paper.model(), ModelKind::default());
+        assert_eq!(Preset::Measured.fresnel(), FresnelCosine::Exact);
+        assert_eq!(Preset::Measured.sra(), SraModel::Luminance);
+    }
+}
