@@ -568,3 +568,106 @@ async fn a_stale_reference_is_refused_by_refit_until_allowed() {
     })
     .await;
 }
+
+/// `brdfd refit --all` queues, per chosen scan, only the fits it lacks in the configuration
+/// asked for, follows them to the end, and queues nothing the second time (a run stopped half
+/// way goes on where it was); `--sample` narrows it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn refit_all_brings_every_scan_to_a_configuration_once() {
+    let _serial = serial();
+    bounded(async {
+        let d = start(
+            simulated(&strict_fast()),
+            ServiceSettings {
+                cost_functions: vec![brdfd::cost::CostFunction::Cf1],
+                bootstrap: 0,
+                ..settings()
+            },
+            ServiceOptions::default(),
+        )
+        .await;
+        let (api, client, token_file) = start_api(&d.service, d.dir.path()).await;
+        let addr = api.local_addr().to_string();
+        let run = |args: Vec<&'static str>| cli_blocking(&addr, &token_file, args);
+        ok(&run(vec!["reference"]).await, "reference");
+        ok(
+            &run(vec!["scan", "--sample", "T.Archive one"]).await,
+            "scan 1",
+        );
+        ok(
+            &run(vec!["scan", "--sample", "T.Archive two"]).await,
+            "scan 2",
+        );
+        // The scans were fitted under these tests' settings: the paper's configuration.
+        let out = ok(
+            &run(vec!["refit", "--all", "--preset", "paper"]).await,
+            "refit --all --preset paper",
+        );
+        assert!(
+            out.contains("2 scans: 0 fits queued, 2 scans already had these fits"),
+            "{out}"
+        );
+        let out = ok(
+            &run(vec!["refit", "--all", "--preset", "measured"]).await,
+            "refit --all --preset measured",
+        );
+        assert!(
+            out.contains("2 scans: 2 fits queued, 0 scans already had these fits"),
+            "{out}"
+        );
+        assert!(out.contains("every queued fit has ended"), "{out}");
+        for scan in [1, 2] {
+            let v: Value = client.get(&format!("/scans/{scan}")).unwrap();
+            let fresnels: Vec<(String, String)> = v["fits"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|f| {
+                    (
+                        f["run"]["settings"]["fresnel"].as_str().unwrap().to_owned(),
+                        f["run"]["status"].as_str().unwrap().to_owned(),
+                    )
+                })
+                .collect();
+            assert_eq!(
+                fresnels,
+                [
+                    ("incidence".to_owned(), "done".to_owned()),
+                    ("exact".to_owned(), "done".to_owned())
+                ],
+                "scan {scan}"
+            );
+        }
+        // Again: nothing is missing any more.
+        let out = ok(
+            &run(vec!["refit", "--all", "--preset", "measured", "--json"]).await,
+            "refit --all again",
+        );
+        let v: Value = serde_json::from_str(out.lines().next().unwrap()).unwrap();
+        assert_eq!(v["queued_fits"], json!([]), "{out}");
+        assert_eq!(v["scans_already_current"], 2, "{out}");
+        // Narrowed to one sample, another configuration.
+        let out = ok(
+            &run(vec![
+                "refit",
+                "--all",
+                "--sample",
+                "one",
+                "--fresnel",
+                "light-half",
+                "--detach",
+            ])
+            .await,
+            "refit --all --sample",
+        );
+        assert!(out.contains("1 scans: 1 fits queued"), "{out}");
+        // --all and a scan id do not go together; a scan id or --all is needed.
+        let out = run(vec!["refit", "1", "--all"]).await;
+        assert!(!out.status.success());
+        let out = run(vec!["refit"]).await;
+        assert!(!out.status.success());
+        api.stop(Duration::from_secs(1)).await;
+        d.service.shutdown().await;
+    })
+    .await;
+}

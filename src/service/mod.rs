@@ -330,6 +330,11 @@ pub struct RefitRequest {
     pub fresnel: Option<crate::model::FresnelCosine>,
     /// Fit even though the scan's reference is older than the configured limit.
     pub allow_stale_reference: bool,
+    /// Queue only the cost functions the scan has no fit of in this configuration yet (done,
+    /// queued or running, with the same method, model, Fresnel factor and SRA model): what
+    /// `brdfd refit --all` asks, so that a second run, or one after a stop, queues only what
+    /// the first did not.
+    pub missing_only: bool,
 }
 
 /// The running service's parts, wired once at start.

@@ -21,9 +21,9 @@ use crate::geometry::{Device, MA_T12_COUNT};
 use crate::processing::{self, ProcessingOptions};
 use crate::scan::{DeviceReadings, Scan, ScanError};
 use crate::store::{
-    FitRunId, ImportFile, ImportedScan, InstrumentOrigin, InstrumentProvenance, NewFit, NewReading,
-    NewTexture, PriorImport, Provenance, ReadingValues, ScanDetail, ScanId, ScanState, ScansImport,
-    Source, StoreError,
+    FitRunId, FitStatus, ImportFile, ImportedScan, InstrumentOrigin, InstrumentProvenance, NewFit,
+    NewReading, NewTexture, PriorImport, Provenance, ReadingValues, ScanDetail, ScanId, ScanState,
+    ScansImport, Source, StoreError,
 };
 
 use std::sync::Arc;
@@ -148,13 +148,25 @@ impl Pipeline {
         };
         let method = request.method.unwrap_or(settings.method);
         let seed = request.seed.unwrap_or(settings.seed);
-        let every = costs
+        let mut every = costs
             .iter()
-            .map(|&cost| settings.refit_settings(cost, request))
+            .map(|&cost| settings.refit_settings(cost, request).map(|s| (cost, s)))
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| ServiceError::BadRequest(e.to_string()))?;
-        let mut ids = Vec::with_capacity(costs.len());
-        for (cost, fit_settings) in costs.into_iter().zip(every) {
+        if request.missing_only {
+            let existing = self.ctx.timed_store(store.fits_for_scan(scan)).await?;
+            every.retain(|(_, wanted)| {
+                !existing.iter().any(|run| {
+                    matches!(
+                        run.status,
+                        FitStatus::Done | FitStatus::Queued | FitStatus::Running
+                    ) && serde_json::from_value::<crate::optimise::Settings>(run.settings.clone())
+                        .is_ok_and(|had| same_configuration(&had, wanted))
+                })
+            });
+        }
+        let mut ids = Vec::with_capacity(every.len());
+        for (cost, fit_settings) in every {
             let new = NewFit {
                 method: method.name().to_string(),
                 cost_function: cost,
@@ -182,7 +194,7 @@ impl Pipeline {
         Ok(ids)
     }
 
-    /// Queues fits of a complete scan again (other cost functions, method or seed).
+    /// Queues fits of a complete scan again (other cost functions, method, seed or science).
     pub(super) async fn refit(
         &self,
         scan: ScanId,
@@ -483,4 +495,14 @@ pub(super) fn new_readings(r: &DeviceReadings) -> Vec<NewReading<'static>> {
             raw_frame: &[],
         })
         .collect()
+}
+
+/// Whether two fits' settings are the same configuration for `missing_only`: cost function,
+/// method, model form, Fresnel factor and SRA reading model (not the seed).
+fn same_configuration(a: &crate::optimise::Settings, b: &crate::optimise::Settings) -> bool {
+    a.cost == b.cost
+        && a.method == b.method
+        && a.model == b.model
+        && a.fresnel == b.fresnel
+        && a.sra.model == b.sra.model
 }
