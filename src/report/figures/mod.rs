@@ -767,7 +767,7 @@ mod tests {
             assert_eq!(black, 0, "{}: black swatches drawn", fig.stem);
             let marked = els
                 .iter()
-                .filter(|e| e.tag == "text" && e.text == "not measured")
+                .filter(|e| e.tag == "text" && e.text == "measured")
                 .count();
             assert_eq!(marked, 2, "{}: the two SRA cells of one sample", fig.stem);
             let filled = els

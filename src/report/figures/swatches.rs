@@ -52,11 +52,14 @@ fn not_measured<DB: DrawingBackend>(
         root.draw(&PathElement::new(vec![a, b], grey.stroke_width(1)))?;
         k += 8;
     }
-    root.draw(&Text::new(
-        "not measured",
-        (x0 + w / 2, y0 + h / 2),
-        font(11).pos(Pos::new(HPos::Center, VPos::Center)),
-    ))?;
+    // One label, on two lines so that it fits the cell.
+    for (line, dy) in [("not", -7), ("measured", 7)] {
+        root.draw(&Text::new(
+            line,
+            (x0 + w / 2, y0 + h / 2 + dy),
+            font(12).pos(Pos::new(HPos::Center, VPos::Center)),
+        ))?;
+    }
     root.draw(&Rectangle::new(
         [(x0, y0), (x0 + w, y0 + h)],
         RGBColor(120, 120, 120).stroke_width(1),
