@@ -38,6 +38,7 @@ fn main() {
             method: Method::default(),
             seed: Settings::default().seed,
             jobs: None,
+            bootstrap: 0,
             json: false,
         };
         let started = Instant::now();

@@ -176,6 +176,7 @@ fn main() {
                 method: Method::default(),
                 seed: Settings::default().seed,
                 jobs: Some(1),
+                bootstrap: 0,
                 json: false,
             };
             demos.push(tokio::spawn(async move {

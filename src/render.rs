@@ -32,7 +32,7 @@ use crate::colour::srgb::xyz_to_srgb_unclipped;
 use crate::colour::{Xyz, brdf_to_reflectance, reflectance_to_xyz, xyz_to_srgb8};
 use crate::cost::CostFunction;
 use crate::fonts::{font, register_font};
-use crate::geometry::{GEOMETRIES, MA_T12_COUNT, Vec3};
+use crate::geometry::{MA_T12_COUNT, Vec3};
 use crate::model::{
     FresnelCosine, ModelKind, Params, SpecularGeometry, oren_nayar_factor_angles, specular_term,
 };
@@ -297,8 +297,11 @@ const TOP: u32 = 104;
 const SWATCH_W: u32 = 52;
 
 /// The preview of one sample: a sphere per cost function in `costs` (those without a finished
-/// fit are drawn as a grey box saying why), the 14 measured swatches below, and captions
-/// saying the light, the ambient, the scale (absolute or relative to the tile) and clipping.
+/// fit are drawn as a grey box saying why), the measured swatches below (the 14 geometries, or
+/// the 12 MA-T12 ones of a scan without SRA readings: a geometry not measured is not drawn),
+/// and captions saying the light, the ambient, the scale (the sample's: relative to the tile,
+/// absolute through a calibrated tile, or absolute through the instrument's own calibration)
+/// and clipping.
 pub fn preview(sample: &SampleStudy, costs: &[CostFunction]) -> Result<Picture, RenderError> {
     if costs.is_empty() || !costs.iter().any(|c| sample.done(*c).is_some()) {
         return Err(RenderError::NoFit {
@@ -376,15 +379,16 @@ pub fn preview(sample: &SampleStudy, costs: &[CostFunction]) -> Result<Picture, 
                     .map_err(err)?;
             }
         }
-        // The measured swatches, as in the report's Fig. 4.
+        // The measured swatches, as in the report's Fig. 4: only the geometries the scan
+        // measured (a scan without SRA readings has no specular swatch, never a black one).
         let sy = (TOP + SPHERE_PX + 16) as i32;
         root.draw(&Text::new(
-            "measured colour per geometry (sRGB swatches, D65; white corner: clipped) — diffuse: MA-T12, specular: SRA",
+            swatch_caption(sample),
             (MARGIN as i32, sy),
             font(12),
         ))
         .map_err(err)?;
-        for g in &GEOMETRIES {
+        for g in sample.measured.geometries.iter() {
             let x = (MARGIN
                 + g.index as u32 * (SWATCH_W + 4)
                 + if g.index >= MA_T12_COUNT { GAP } else { 0 }) as i32;
@@ -441,6 +445,15 @@ pub fn preview(sample: &SampleStudy, costs: &[CostFunction]) -> Result<Picture, 
     Ok(Picture { width, height, rgb })
 }
 
+/// The line over a preview's swatches: what they show and which instruments measured them.
+fn swatch_caption(sample: &SampleStudy) -> &'static str {
+    if sample.measured.geometries.has_sra() {
+        "measured colour per geometry (sRGB swatches, D65; white corner: clipped) — diffuse: MA-T12, specular: SRA"
+    } else {
+        "measured colour per geometry (sRGB swatches, D65; white corner: clipped) — diffuse: MA-T12; no SRA readings: the 12 MA-T12 geometries only"
+    }
+}
+
 /// Writes the preview of `sample` as PNG to `path`.
 pub fn write_preview(
     sample: &SampleStudy,
@@ -457,6 +470,7 @@ pub fn write_preview(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::geometry::GEOMETRIES;
     use crate::model::{self, SpecularGeometry};
     use crate::spectral::BANDS;
     use crate::study::{DoneFit, FitState, FitStudy};
@@ -556,8 +570,22 @@ pub(crate) mod tests {
     /// A sample of the synthetic set: cf1 and cf2 "fitted" at the truth and at a broader lobe,
     /// m2 failed.
     pub(crate) fn sample(calibrated: bool) -> SampleStudy {
+        sample_of(calibrated, |_| {})
+    }
+
+    /// [`sample`] of a scan as an instrument's software exports it: no tile reference (the
+    /// instrument's own calibration) and no SRA readings (the 12 MA-T12 geometries).
+    pub(crate) fn exported_sample() -> SampleStudy {
+        sample_of(false, |scan| {
+            scan.reference = None;
+            scan.readings.sra = None;
+        })
+    }
+
+    fn sample_of(calibrated: bool, edit: impl FnOnce(&mut crate::scan::Scan)) -> SampleStudy {
         let truth = &crate::synth::paper_samples()[0];
-        let scan = crate::synth::synth_scan(truth, &Default::default()).unwrap();
+        let mut scan = crate::synth::synth_scan(truth, &Default::default()).unwrap();
+        edit(&mut scan);
         let opts = crate::processing::ProcessingOptions {
             reference_reflectance: calibrated.then_some([0.77; BANDS]),
             ..Default::default()
@@ -622,5 +650,56 @@ pub(crate) mod tests {
         assert_eq!(&png[1..4], b"PNG");
         let e = preview(&s, &[CostFunction::M2]).unwrap_err().to_string();
         assert!(e.contains("has no fit under m2"), "{e}");
+    }
+
+    /// The preview of an instrument-calibrated scan without SRA readings says its scale is the
+    /// instrument's calibration (no tile, no "30 % too bright"), and draws the 12 swatches it
+    /// measured and nothing where the SRA swatches would be: the same preview of a full scan
+    /// draws them there.
+    #[test]
+    fn preview_of_an_exported_scan_says_its_scale_and_draws_only_its_geometries() {
+        let s = exported_sample();
+        assert_eq!(s.scale(), crate::processing::Scale::InstrumentCalibration);
+        let note = s.scale().describe();
+        assert!(note.contains("instrument calibration"), "{note}");
+        assert!(
+            !note.contains("reference tile") && !note.contains("30 %"),
+            "{note}"
+        );
+        assert!(swatch_caption(&s).contains("no SRA readings"));
+        // A scan with its tile keeps the relative scale and its note.
+        assert!(sample(false).scale().describe().contains("30 %"));
+
+        let swatch_rows = |pic: &Picture, g: usize| -> Vec<[u8; 3]> {
+            let x0 = MARGIN + g as u32 * (SWATCH_W + 4) + if g >= MA_T12_COUNT { GAP } else { 0 };
+            let y0 = TOP + SPHERE_PX + 16 + 20;
+            (y0 + 4..y0 + 32)
+                .flat_map(|y| (x0 + 4..x0 + SWATCH_W - 14).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    let i = ((y * pic.width + x) * 3) as usize;
+                    [pic.rgb[i], pic.rgb[i + 1], pic.rgb[i + 2]]
+                })
+                .collect()
+        };
+        let full = preview(&sample(false), &CostFunction::ALL).unwrap();
+        let exported = preview(&s, &CostFunction::ALL).unwrap();
+        for g in 0..14 {
+            let (a, b) = (swatch_rows(&full, g), swatch_rows(&exported, g));
+            assert!(
+                a.iter().all(|p| *p != [255, 255, 255]),
+                "geometry {g} drawn"
+            );
+            if g < MA_T12_COUNT {
+                assert!(
+                    b.iter().all(|p| *p != [255, 255, 255]),
+                    "geometry {g} drawn"
+                );
+            } else {
+                assert!(
+                    b.iter().all(|p| *p == [255, 255, 255]),
+                    "geometry {g} was not measured but is drawn"
+                );
+            }
+        }
     }
 }

@@ -153,6 +153,16 @@ pub struct Health {
 /// `GET /status`: the daemon's state.
 pub type Status = crate::service::Status<DeviceStatus, Operation>;
 
+impl Status {
+    /// Whether the daemon runs with its SRA turned off (`[devices.sra] transport = "off"`):
+    /// references and scans on the 12 MA-T12 geometries only.
+    pub fn sra_off(&self) -> bool {
+        self.devices
+            .iter()
+            .any(|d| d.device.is(Device::Sra) && d.state.is(DeviceState::Off))
+    }
+}
+
 /// What the instruments are doing: a reference or a scan.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]

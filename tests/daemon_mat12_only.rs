@@ -198,8 +198,9 @@ async fn the_store_keeps_an_ma_t12_only_scan_to_its_12_geometries() {
     assert_eq!(s.to_scan().unwrap().readings.sra, None);
 }
 
-/// `brdfd serve` with `[devices.sra] transport = "off"` says so loudly at start, and `status`
-/// shows the SRA off.
+/// `brdfd serve` with `[devices.sra] transport = "off"` says so loudly at start, `status`
+/// shows the SRA off, and the CLI's `status`, `reference` and `show` speak of the MA-T12 and
+/// 12 geometries only.
 #[test]
 fn serve_with_the_sra_off_says_so_and_status_shows_it() {
     let _serial = serial();
@@ -251,6 +252,42 @@ fn serve_with_the_sra_off_says_so_and_status_shows_it() {
     wait_until("the SRA-off banner on stderr", || {
         std::fs::read_to_string(&log).is_ok_and(|e| e.contains("SRA TURNED OFF"))
     });
+    // The CLI speaks of 12 geometries and an SRA that is off, never of "both instruments", an
+    // "SRA false" or an SRA reading model that played no part in the fits.
+    let addr_s = addr.to_string();
+    let token = dir.path().join("brdfd.token");
+    let token_s = token.to_str().unwrap();
+    let cli = |args: &[&str]| {
+        let mut all = args.to_vec();
+        all.extend(["--addr", &addr_s, "--token-file", token_s]);
+        let out = run_brdfd(&all, None);
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "brdfd {args:?}: {text}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        text
+    };
+    let status = cli(&["status"]);
+    assert!(status.contains("SRA off"), "{status}");
+    assert!(!status.contains("SRA false"), "{status}");
+    let reference = cli(&["reference"]);
+    assert!(reference.contains("on the MA-T12 (SRA off"), "{reference}");
+    assert!(!reference.contains("both instruments"), "{reference}");
+    let scan = cli(&["scan", "--sample", "T.Sky blue"]);
+    let id = scan
+        .split_whitespace()
+        .nth(1)
+        .unwrap_or_else(|| panic!("no scan id in {scan}"))
+        .to_string();
+    let show = cli(&["show", &id]);
+    assert!(show.contains("12 of 12 readings"), "{show}");
+    assert!(
+        show.contains("ΔE00 under D65"),
+        "the fits are listed: {show}"
+    );
+    assert!(!show.contains("SRA reading model"), "{show}");
     let _ = child.kill();
     let _ = child.wait();
 }

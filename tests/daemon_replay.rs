@@ -122,6 +122,62 @@ fn demo_replays_the_recordings_into_a_local_store_and_runs_twice() {
     });
 }
 
+/// `brdfd demo --bootstrap N` waits for every fit's bootstrap, so the report on its database
+/// has an interval for each fit and Fig. 8 its error bars; the plain demo says how to get them.
+#[test]
+fn demo_with_a_bootstrap_gives_every_fit_its_intervals_for_the_report() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let plain = brdfd(&["demo", "--dir", "plain"], dir.path());
+    let (out, err) = text(&plain);
+    assert!(plain.status.success(), "{err}");
+    assert!(
+        out.contains("intervals: none (no bootstrap); `brdfd demo --bootstrap 200`"),
+        "{out}"
+    );
+
+    let run = brdfd(&["demo", "--bootstrap", "3", "--dir", "boot"], dir.path());
+    let (out, err) = text(&run);
+    assert!(run.status.success(), "{err}");
+    assert!(
+        out.contains("intervals: every fit bootstrapped with 3 resamples"),
+        "{out}"
+    );
+    block_on(async {
+        let store = Store::open(dir.path().join("boot/brdfd.db")).await.unwrap();
+        let all = store.list_scans(&ScanFilter::default()).await.unwrap();
+        assert_eq!(all.len(), 8);
+        for s in &all {
+            for f in store.fits_for_scan(s.id).await.unwrap() {
+                let d = store.fit_detail(f.id).await.unwrap();
+                let u = d
+                    .uncertainty
+                    .unwrap_or_else(|| panic!("scan {} fit {}: no intervals", s.id, f.id));
+                assert_eq!(u.resamples, 3);
+            }
+        }
+        store.close().await;
+    });
+    let report = brdfd(
+        &[
+            "report",
+            "--all",
+            "--db",
+            "boot/brdfd.db",
+            "--out",
+            "report",
+            "--max-sample-figures",
+            "1",
+        ],
+        dir.path(),
+    );
+    assert!(report.status.success(), "{}", text(&report).1);
+    let md = std::fs::read_to_string(dir.path().join("report/summary.md")).unwrap();
+    assert!(!md.contains("no bootstrap intervals"), "{md}");
+    assert!(!md.contains("(no interval)"), "{md}");
+    assert!(!md.contains("no error bars"), "{md}");
+}
+
 #[test]
 fn record_then_replay_strictly_through_the_whole_daemon() {
     let _serial = serial();

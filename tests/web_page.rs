@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use brdfd::api::{Access, ApiOptions, ApiServer, Token};
 use brdfd::service::{Devices, ReadingShown, Service, ServiceOptions, devices::Simulators};
-use brdfd::store::{ReadingValues, ReferenceId, ScanState, ScanSummary, Store};
+use brdfd::store::{FitStatus, ReadingValues, ReferenceId, ScanState, ScanSummary, Store};
 use drivers::protocol::ReadingValue;
 use drivers::{DriverConfig, Instrument};
 use fantoccini::{Client, ClientBuilder, Locator};
@@ -1025,4 +1025,172 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
     c.close().await.unwrap();
     daemon.stop().await;
     let _ = href;
+}
+
+/// The page of a daemon with its SRA turned off, and of a real X-Rite export, on a phone: the
+/// bench speaks of the MA-T12 alone (the SRA "turned off", its cells "SRA off" after the scan,
+/// the measure buttons usable), the result page of the 12-geometry scan says "all (12)" and
+/// never "SRA: unknown"; the export's page at 390 px does not scroll sideways, its camera
+/// images open at full size on a tap, and a residual's ΔC*, ΔH*, ΔE00 are one tap away.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_sra_off_bench_and_an_imported_scan_read_truthfully_on_a_phone() {
+    let dir = tempfile::tempdir().unwrap();
+    let downloads = tempfile::tempdir().unwrap();
+    let addr: SocketAddr = format!("127.0.0.1:{}", free_port()).parse().unwrap();
+    let devices = Devices::simulated_mat12_only(
+        common::playlist(Instrument::MaT12),
+        &ReplayOptions::lenient().accelerated(),
+    )
+    .unwrap();
+    let daemon = start_daemon(dir.path(), addr, devices).await;
+    let driver = start_chromedriver();
+    let c = browser(&driver, downloads.path()).await;
+    let session_id = c.session_id().await.unwrap().unwrap();
+    let token = std::fs::read_to_string(dir.path().join("brdfd.token")).unwrap();
+    let out = common::run_brdfd_env(
+        &["open", "--addr", &addr.to_string(), "--no-browser"],
+        None,
+        &[("BRDFD_TOKEN", token.trim())],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    c.goto(String::from_utf8(out.stdout).unwrap().trim())
+        .await
+        .unwrap();
+    see(&c, &["the bench"]).await;
+
+    // The SRA is off: said so, no identity awaited, and the bench can still measure.
+    let sra = text_of(&c, Locator::Css("[data-device=sra]")).await;
+    assert!(sra.contains("turned off"), "{sra}");
+    assert!(!sra.contains("no identity yet"), "{sra}");
+    click(&c, "#measure-reference:not([disabled])").await;
+    wait_js(
+        &c,
+        "the 12-geometry reference",
+        "const op = document.getElementById('op'); return op.dataset.state === 'complete' && op.dataset.readings === '12'",
+    )
+    .await;
+    see(&c, &["the reference in force"]).await;
+    scan(&c, "T.Sky blue", &[]).await;
+    wait_js(
+        &c,
+        "the 12-geometry scan and its three fits",
+        "const op = document.getElementById('op'); return op.dataset.state === 'complete' && op.dataset.readings === '12'
+           && document.querySelectorAll('#fits tr[data-status=done]').length === 3",
+    )
+    .await;
+    for g in ["sra-20", "sra-60"] {
+        let cell = text_of(&c, Locator::Css(&format!("#cell-{g} .num"))).await;
+        assert_eq!(cell, "SRA off", "{g} after the scan completed");
+    }
+    shot(&c, "sra-off-bench").await;
+    let scan_id = daemon.scans().await[0].id;
+    open(&c, addr, &format!("/#/scans/{scan_id}"), &[]).await;
+    wait_js(
+        &c,
+        "the SRA-off scan's result",
+        "return document.querySelectorAll('#de-table tbody tr').length === 3",
+    )
+    .await;
+    let head = text_of(&c, Locator::Css("#de-table thead")).await;
+    assert!(
+        head.contains("all (12)") && !head.contains("all (14)"),
+        "{head}"
+    );
+    let body = eval(&c, "return document.body.innerText").await;
+    let body = body.as_str().unwrap();
+    assert!(!body.contains("SRA: unknown"), "{body}");
+    shot(&c, "sra-off-result").await;
+
+    // A real X-Rite export (its camera images, its SHA-256 in the provenance) on a phone.
+    let real_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-mat12");
+    let x = std::fs::read_dir(&real_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "xlsx"))
+        .flat_map(|p| brdfd::formats::xrite::read_file(&p, &Default::default()).unwrap())
+        .find(|x| !x.textures.is_empty())
+        .expect("a shared export with texture images");
+    let (provenance, taken) =
+        brdfd::service::imported_provenance(&x.scan, "uploaded X-Rite QC .xlsx export").unwrap();
+    let (imported, _) = daemon
+        .service
+        .import_scan_as(&x.scan, &provenance, taken, &x.textures)
+        .await
+        .unwrap();
+    // Its fits end after the import; the page is opened once they have.
+    let deadline = Instant::now() + 3 * WAIT;
+    loop {
+        let fits = daemon
+            .service
+            .store()
+            .fits_for_scan(imported)
+            .await
+            .unwrap();
+        if fits.len() == 3 && fits.iter().all(|f| f.status == FitStatus::Done) {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the import's fits did not finish: {:?}",
+            fits.iter().map(|f| (f.id, f.status)).collect::<Vec<_>>()
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    c.set_window_size(390, 900).await.unwrap();
+    open(
+        &c,
+        addr,
+        &format!("/#/scans/{imported}"),
+        &["the camera's images, loaded"],
+    )
+    .await;
+    wait_js(
+        &c,
+        "the import's residuals",
+        "return document.querySelectorAll('#residuals tbody tr').length === 3",
+    )
+    .await;
+    let layout = eval(
+        &c,
+        "return new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() =>
+           done({ inner: window.innerWidth, page: document.documentElement.scrollWidth,
+                  wider: [...document.querySelectorAll('body *')].filter((e) => e.getBoundingClientRect().right > window.innerWidth + 0.5 && !e.closest('.scroll'))
+                    .slice(0, 5).map((e) => `${e.tagName}#${e.id}.${e.className}`) }))))",
+    )
+    .await;
+    let inner = layout["inner"].as_f64().unwrap();
+    assert!(inner <= 390.0, "{layout}");
+    assert!(
+        layout["page"].as_f64().unwrap() <= 390.0 && layout["page"].as_f64().unwrap() <= inner,
+        "the imported scan's page scrolls sideways at 390 px: {layout}"
+    );
+    shot(&c, "imported-phone-390").await;
+    // A camera image opens at its full size.
+    click(&c, "#textures button.enlarge").await;
+    wait_js(
+        &c,
+        "the camera image at full size",
+        "const d = document.getElementById('texture-dialog'); const i = d && d.querySelector('img');
+         return !!d && d.open && !!i && i.complete && i.naturalWidth > 0
+           && i.clientWidth >= Math.min(i.naturalWidth, window.innerWidth * 0.9) - 1
+           && i.clientWidth > document.querySelector('#textures img').clientWidth",
+    )
+    .await;
+    shot(&c, "imported-texture-full-size").await;
+    click(&c, "#texture-dialog button[type=submit]").await;
+    // A residual's other differences, without hovering.
+    click(&c, "#residuals td.res").await;
+    let detail = text_of(&c, Locator::Id("residual-detail")).await;
+    assert!(
+        detail.contains("ΔC*") && detail.contains("ΔH*") && detail.contains("ΔE00"),
+        "{detail}"
+    );
+    let errors = console_errors(&driver, &session_id);
+    assert!(errors.is_empty(), "console errors: {errors:?}");
+    c.close().await.unwrap();
+    daemon.stop().await;
 }

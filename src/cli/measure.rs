@@ -39,13 +39,25 @@ pub fn reference(args: &ReferenceArgs) -> anyhow::Result<()> {
     if args.json {
         println!("{}", tagged("accepted", &v)?);
     } else {
+        // The SRA turned off: the tile is measured on the MA-T12 alone.
+        let sra_off = client.status().is_ok_and(|s| s.sra_off());
         println!(
-            "reference {reference} started: measuring the Munsell N9 tile on both instruments"
+            "reference {reference} started: {}",
+            reference_started(sra_off)
         );
     }
     match events {
         Some(events) => follow_reference(&client, events, reference, args.json),
         None => Ok(()),
+    }
+}
+
+/// What `brdfd reference` says it measures.
+pub(super) fn reference_started(sra_off: bool) -> &'static str {
+    if sra_off {
+        "measuring the Munsell N9 tile on the MA-T12 (SRA off: the 12 MA-T12 geometries)"
+    } else {
+        "measuring the Munsell N9 tile on both instruments"
     }
 }
 

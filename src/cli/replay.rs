@@ -20,7 +20,7 @@ use mock_devices::generate::{is_reference, sample_of};
 use mock_devices::{Mode, ReplayOptions, Script, Timing};
 
 use crate::service::{Devices, Service, ServiceOptions, ServiceSettings};
-use crate::store::{FitDetail, ReferenceId, ReferenceStatus, ScanId, ScanState, Store};
+use crate::store::{FitDetail, FitStatus, ReferenceId, ReferenceStatus, ScanId, ScanState, Store};
 
 #[derive(Debug, clap::Args)]
 pub struct ReplayArgs {
@@ -155,6 +155,8 @@ pub struct ReplayOutcome {
     pub replay_wall: Duration,
     /// From the first request until every fit had ended.
     pub total_wall: Duration,
+    /// How long the wait for the fits' bootstraps took, when waited for.
+    pub bootstrap_wall: Option<Duration>,
 }
 
 /// Settings of a replay run.
@@ -164,10 +166,15 @@ pub struct ReplaySetup {
     pub settings: ServiceSettings,
     /// Longest wait for any one measurement and for the fits at the end.
     pub timeout: Duration,
+    /// Wait, before stopping, until every finished fit has its bootstrap intervals
+    /// (`settings.bootstrap` resamples each); otherwise the service stops once the fits are
+    /// done, and bootstraps still running are dropped.
+    pub wait_for_bootstraps: bool,
 }
 
 /// Runs `objects` through a fresh service on `store` with simulated instruments replaying their
-/// sessions; returns when every scan's fits have ended. The service is shut down at the end
+/// sessions; returns when every scan's fits have ended (and, with
+/// [`ReplaySetup::wait_for_bootstraps`], their bootstraps). The service is shut down at the end
 /// (the store stays open for the caller).
 pub async fn replay_objects(
     store: Store,
@@ -186,7 +193,17 @@ pub async fn replay_objects(
         ServiceOptions::default(),
     )
     .await?;
-    let outcome = drive(&service, objects, setup.timeout).await;
+    let mut outcome = drive(&service, objects, setup.timeout).await;
+    if let Ok(o) = &mut outcome
+        && setup.wait_for_bootstraps
+        && setup.settings.bootstrap > 0
+    {
+        let started = Instant::now();
+        match wait_bootstraps(&service, &o.scans, setup.timeout).await {
+            Ok(()) => o.bootstrap_wall = Some(started.elapsed()),
+            Err(e) => outcome = Err(e),
+        }
+    }
     let timings = service.timings();
     // Keep the store open for the caller: stop the instruments and tasks only.
     let mut problems = Vec::new();
@@ -203,6 +220,51 @@ pub async fn replay_objects(
     Ok((outcome, timings))
 }
 
+/// Waits until every finished fit of `scans` has its bootstrap intervals stored. A bootstrap
+/// that fails stores none (the daemon logs why): once no bootstrap has been pending for a
+/// second, the wait ends with the fits that have them.
+async fn wait_bootstraps(
+    service: &Service,
+    scans: &[(String, ScanId)],
+    timeout: Duration,
+) -> anyhow::Result<()> {
+    let deadline = Instant::now() + timeout;
+    let mut idle_since: Option<Instant> = None;
+    loop {
+        let mut missing = 0;
+        for (_, scan) in scans {
+            for run in service.store().fits_for_scan(*scan).await? {
+                if run.status == FitStatus::Done
+                    && service
+                        .store()
+                        .fit_detail(run.id)
+                        .await?
+                        .uncertainty
+                        .is_none()
+                {
+                    missing += 1;
+                }
+            }
+        }
+        if missing == 0 {
+            return Ok(());
+        }
+        if service.status().await?.bootstraps_pending == 0 {
+            // A fit just stored may not have started its bootstrap yet: wait a little.
+            let since = *idle_since.get_or_insert_with(Instant::now);
+            if since.elapsed() > Duration::from_secs(1) {
+                return Ok(());
+            }
+        } else {
+            idle_since = None;
+        }
+        if Instant::now() >= deadline {
+            bail!("{missing} fit(s) still had no bootstrap intervals after {timeout:?}");
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
 async fn drive(
     service: &Service,
     objects: &[ReplayObject],
@@ -215,6 +277,7 @@ async fn drive(
         problems: Vec::new(),
         replay_wall: Duration::ZERO,
         total_wall: Duration::ZERO,
+        bootstrap_wall: None,
     };
     for object in objects {
         match &object.sample {
@@ -313,6 +376,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
         options: options(args.lenient, args.realtime),
         settings,
         timeout: Duration::from_secs(600),
+        wait_for_bootstraps: false,
     };
     crate::cli::serve::runtime()?.block_on(async {
         let store = match &args.db {

@@ -197,7 +197,7 @@ pub(super) fn print_fits(detail: &ScanView) {
                 .map(|e| format!("  {e}"))
                 .unwrap_or_default()
         );
-        print_fit_extras(fit);
+        print_fit_extras(fit, detail.scan.specular_readings);
     }
     print_lobe_identified(detail);
 }
@@ -263,8 +263,9 @@ fn at_bound(fit: &FitDetail) -> Vec<String> {
 
 /// Under a fit's row: the colorimetry of its ΔE00, once computed the held-out ΔE00 of its
 /// cross-validation, and once the bootstrap has run the 95 % intervals of the lobe parameters
-/// (SCIENCE.md §7.1, §10, §12.5).
-fn print_fit_extras(fit: &FitDetail) {
+/// (SCIENCE.md §7.1, §10, §12.5). The SRA reading model only for a scan with SRA readings
+/// (`specular`): without them it played no part in the fit.
+fn print_fit_extras(fit: &FitDetail, specular: bool) {
     // Where the model misses: measured minus fitted L* at each geometry, in table order.
     if let Some(lab) = fit.lab.as_ref().filter(|l| !l.0.is_empty()) {
         let dl: Vec<String> = lab
@@ -308,10 +309,12 @@ fn print_fit_extras(fit: &FitDetail) {
         ),
         None => String::new(),
     };
-    println!(
-        "       SRA reading model {} (illuminant {}, {}° observer){delta_l}",
-        sra.model, sra.illuminant, sra.observer
-    );
+    if specular {
+        println!(
+            "       SRA reading model {} (illuminant {}, {}° observer){delta_l}",
+            sra.model, sra.illuminant, sra.observer
+        );
+    }
     let bound = at_bound(fit);
     if !bound.is_empty() {
         println!(

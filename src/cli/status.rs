@@ -42,15 +42,14 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
         None => println!("no reference measured yet: run `brdfd reference`"),
     }
     println!(
-        "fits: {} queued, {} running{}; instruments simulated: MA-T12 {}, SRA {}",
+        "fits: {} queued, {} running{}; instruments: {}",
         v.fits_queued,
         v.fits_running,
         match v.crossvals_pending {
             0 => String::new(),
             n => format!(", {n} being cross-validated"),
         },
-        v.simulated.ma_t12,
-        v.simulated.sra
+        instruments_line(&v)
     );
     if let Some(sync) = &v.sync {
         println!(
@@ -105,6 +104,21 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
+/// Each instrument as simulated or real, the SRA "off" when turned off (its 12-geometry
+/// references and scans): "MA-T12 simulated, SRA off".
+pub(super) fn instruments_line(v: &crate::wire::Status) -> String {
+    let kind = |simulated: bool| if simulated { "simulated" } else { "real" };
+    format!(
+        "MA-T12 {}, SRA {}",
+        kind(v.simulated.ma_t12),
+        if v.sra_off() {
+            "off (12 MA-T12 geometries only)"
+        } else {
+            kind(v.simulated.sra)
+        }
+    )
+}
+
 pub fn abort(args: &StatusArgs) -> anyhow::Result<()> {
     let v = args.daemon.client()?.abort()?;
     if args.json {

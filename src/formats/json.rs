@@ -48,7 +48,8 @@ struct SampleDoc<'a> {
     origin: Option<OriginDoc<'a>>,
     scan: serde_json::Value,
     specular_strategy: crate::processing::SpecularStrategy,
-    /// "absolute" (calibrated reference tile) or "relative-to-tile" (SCIENCE.md §3).
+    /// "absolute" (calibrated reference tile), "relative-to-tile" or "instrument-calibration"
+    /// (no tile: the instrument's own calibrated scale; SCIENCE.md §3).
     scale: &'static str,
     /// The tile's calibrated reflectance the readings were normalised with, if any.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -469,6 +469,13 @@ mod tests {
             "No bootstrap intervals: none of the 9 finished fits has them, so there is no table of parameter intervals and Fig. 8 draws no error bars. The store keeps no intervals for them."
         ), "{md}");
         assert!(md.contains("[fit] bootstrap is above 0"), "{md}");
+        // The advice names the commands that give a stored fit intervals.
+        assert!(md.contains("brdfd demo --bootstrap 200"), "{md}");
+        assert!(md.contains("brdfd refit SCAN"), "{md}");
+        assert!(
+            !md.contains("Report again once the bootstraps have run"),
+            "{md}"
+        );
     }
 
     /// Fits without bootstrap intervals beside fits with them are marked, counted and

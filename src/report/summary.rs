@@ -561,10 +561,19 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
     b
 }
 
+/// Which commands stop the daemon before the bootstraps end.
+const STOPS_BEFORE_BOOTSTRAPS: &str =
+    "brdfd replay does once the fits are done, and brdfd demo unless run with --bootstrap N";
+
+/// The commands that give stored fits intervals, as the report advises them.
+pub(crate) const HOW_TO_GET_INTERVALS: &str = "to get intervals, serve this store (brdfd serve --db DB) and refit each scan (brdfd refit SCAN), then report once brdfd status shows no bootstraps pending; for the demo, run brdfd demo --bootstrap 200 --dir NEW (it waits for every fit's intervals) and report on that new database.";
+
 /// Why fits have no bootstrap intervals, as far as the study can tell.
 fn missing_intervals_reason(study: &Study) -> String {
     if study.samples.iter().any(|s| s.origin.is_some()) {
-        "The store keeps no intervals for them. The daemon bootstraps each fit after storing it, one fit at a time, when [fit] bootstrap is above 0 (200 resamples by default; 0 turns them off). A stored fit has none when that setting was 0, when its bootstrap had not finished when the report read the store, or when the daemon stopped first — as brdfd demo and brdfd replay do once the fits are done. Report again once the bootstraps have run.".into()
+        format!(
+            "The store keeps no intervals for them. The daemon bootstraps each fit once, right after storing it, one fit at a time, when [fit] bootstrap is above 0 (200 resamples by default; 0 turns them off). A stored fit has none when that setting was 0, when the daemon stopped before its bootstrap ended ({STOPS_BEFORE_BOOTSTRAPS}), or when the report read the store too early (brdfd status counts the bootstraps pending). A stored fit is not bootstrapped later, a new fit is: {HOW_TO_GET_INTERVALS}"
+        )
     } else {
         "These fits were made in this process without a bootstrap: intervals are computed only when asked for (brdfd fit --bootstrap N).".into()
     }

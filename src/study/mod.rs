@@ -229,9 +229,14 @@ impl FitStudy {
 }
 
 impl SampleStudy {
-    /// Absolute (calibrated tile) or relative to the tile.
+    /// The scale of the sample's reflectances, as its scan says: the instrument's own
+    /// calibration when the scan has no tile reference (an instrument-software export), else
+    /// absolute (calibrated tile) or relative to the tile.
     pub fn scale(&self) -> Scale {
-        Scale::of(self.reference_reflectance.as_ref())
+        match self.scan.reference {
+            None => Scale::InstrumentCalibration,
+            Some(_) => Scale::of(self.reference_reflectance.as_ref()),
+        }
     }
 
     /// The fit under `cost`, if the sample was fitted with it.

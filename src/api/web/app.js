@@ -511,9 +511,24 @@ function renderInstruments() {
     h("div", { class: "device", "data-device": d.device },
       h("p", {}, h("strong", {}, d.instrument), " ",
         h("span", { class: `badge state-${d.state}`, "data-state": d.state }, d.state),
-        d.simulated ? [" ", h("span", { class: "badge sim" }, "SIMULATED")] : null),
-      h("p", { class: "muted" }, d.model ? `${d.model} · serial ${d.serial} · firmware ${d.firmware}` : "no identity yet"),
-      d.state !== "connected" ? h("p", { class: "muted" }, d.detail) : null)));
+        d.simulated && d.state !== "off" ? [" ", h("span", { class: "badge sim" }, "SIMULATED")] : null),
+      // An instrument turned off has no identity to wait for: it is simply not used.
+      d.state === "off"
+        ? h("p", { class: "muted", "data-off": "yes" }, "turned off in the configuration: references and scans use the 12 MA-T12 geometries")
+        : [h("p", { class: "muted" }, d.model ? `${d.model} · serial ${d.serial} · firmware ${d.firmware}` : "no identity yet"),
+          d.state !== "connected" ? h("p", { class: "muted" }, d.detail) : null])));
+  markSraOff();
+}
+
+/** With the SRA turned off, its two cells on the bench say so instead of "waiting". */
+function markSraOff() {
+  const off = geometriesMeasuredNow() === 12;
+  for (const g of ["sra-20", "sra-60"]) {
+    const cell = $(`cell-${g}`);
+    if (!cell || cell.classList.contains("done")) continue;
+    cell.classList.toggle("off", off);
+    cell.querySelector(".num").textContent = off ? "SRA off" : "waiting";
+  }
 }
 
 function renderReference() {
@@ -533,8 +548,8 @@ function renderReference() {
 
 function renderControls() {
   const busy = (status && status.busy) || (live && live.state === "measuring");
-  const ready = status && status.devices.every((d) => d.state === "connected" || d.state === "unknown");
-  const down = status ? status.devices.filter((d) => d.state !== "connected" && d.state !== "unknown").map((d) => d.instrument) : [];
+  const ready = status && status.devices.every((d) => ["connected", "unknown", "off"].includes(d.state));
+  const down = status ? status.devices.filter((d) => !["connected", "unknown", "off"].includes(d.state)).map((d) => d.instrument) : [];
   // Why a button is off, said on the button; nothing once it is on.
   const why = {
     "measure-reference": busy ? "the instruments are busy: wait, or abort" : !ready ? `not connected: ${down.join(", ")}` : "",
@@ -731,6 +746,21 @@ async function download(e) {
   }
 }
 
+/** One camera image of an export: a thumbnail, whole (never cropped), that opens at full
+ * size on a tap or click. */
+function textureFigure(scanId, t) {
+  const src = `/scans/${scanId}/textures/${t.position}.png`;
+  const alt = `the MA-T12 camera's image at ${t.label}`;
+  return h("figure", { "data-label": t.label },
+    h("button", { type: "button", class: "enlarge", "aria-label": `full size: ${alt}`, onclick: () => {
+      const dlg = $("texture-dialog");
+      fill(dlg, h("img", { src, alt }), h("p", { class: "muted" }, t.label),
+        h("form", { method: "dialog" }, h("button", { type: "submit" }, "Close")));
+      dlg.showModal();
+    } }, h("img", { src, alt, loading: "lazy" })),
+    h("figcaption", {}, t.label));
+}
+
 /** One preview: shown at the image's own aspect ratio; a click opens it at full size. */
 function previewFigure(f) {
   const src = `/fits/${f.run.id}/preview.png`;
@@ -818,14 +848,14 @@ async function renderResult(id) {
     residualSection(view.fits),
     view.textures && view.textures.length ? h("section", { "aria-labelledby": "h-tex" },
       h("h3", { id: "h-tex" }, "The instrument camera's images (kept from the export)"),
-      h("div", { class: "textures", id: "textures" }, view.textures.map((t) => h("figure", { "data-label": t.label },
-        h("img", { src: `/scans/${id}/textures/${t.position}.png`, alt: `the MA-T12 camera's image at ${t.label}`, loading: "lazy", width: "120", height: "120" }),
-        h("figcaption", {}, t.label)))))
+      h("p", { class: "muted" }, "Tap or click an image to see it at full size."),
+      h("div", { class: "textures", id: "textures" }, view.textures.map((t) => textureFigure(id, t))),
+      h("dialog", { id: "texture-dialog", "aria-label": "camera image at full size" }))
       : null,
     h("section", { "aria-labelledby": "h-de" },
       h("h3", { id: "h-de" }, "ΔE00 (mean)"),
       fitsDone.length ? h("div", { class: "scroll" }, h("table", { class: "data", id: "de-table" },
-        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "held out (each of the 12 predicted without it)", "specular (2, vs the paper's grey spectrum)", "all (14)", "specular |ΔL*| (SRA model)", ""].map((c) => h("th", { scope: "col" }, c)))),
+        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "held out (each of the 12 predicted without it)", scan.specular_readings === false ? "specular (no SRA readings)" : "specular (2, vs the paper's grey spectrum)", `all (${geometryCount(scan)})`, "specular |ΔL*| (SRA model)", ""].map((c) => h("th", { scope: "col" }, c)))),
         h("tbody", {}, fitsDone.map((f) => h("tr", { "data-cost": f.cost_function },
           h("td", {}, f.cost_function), h("td", {}, f.method), h("td", {}, fmt(f.delta_e00_diffuse)),
           heldOutCell(latestDone.get(f.cost_function)),
@@ -879,7 +909,16 @@ function residualSection(fits) {
     if (!r) return h("td", {}, "—");
     const t = Math.min(1, Math.abs(r.dL) / 3);
     const bg = r.dL >= 0 ? `rgba(207, 34, 46, ${0.45 * t})` : `rgba(9, 105, 218, ${0.45 * t})`;
-    const td = h("td", { title: `ΔL* ${fmt(r.dL, 2)} · ΔC* ${fmt(r.dC, 2)} · ΔH* ${fmt(r.dH, 2)} · ΔE00 ${fmt(r.dE00, 2)}` },
+    const all = `ΔL* ${fmt(r.dL, 2)} · ΔC* ${fmt(r.dC, 2)} · ΔH* ${fmt(r.dH, 2)} · ΔE00 ${fmt(r.dE00, 2)}`;
+    // Hover shows the title; a tap or click (or Enter on the focused cell) writes the same
+    // values under the table, so a touch screen reads them too.
+    const show = (e) => {
+      const row = e.currentTarget.closest("tr");
+      const g = e.currentTarget.dataset.geometry;
+      $("residual-detail").textContent = `${row ? row.querySelector("th").textContent : ""} at ${g}: ${all}`;
+    };
+    const td = h("td", { title: all, tabindex: "0", class: "res", onclick: show,
+      onkeydown: (e) => { if (e.key === "Enter" || e.key === " ") { e.preventDefault(); show(e); } } },
       `${r.dL >= 0 ? "+" : ""}${fmt(r.dL, 2)}`);
     // Through the CSSOM: the page's Content-Security-Policy allows no inline style attribute.
     td.style.background = bg;
@@ -887,12 +926,17 @@ function residualSection(fits) {
   };
   return h("section", { "aria-labelledby": "h-res" },
     h("h3", { id: "h-res" }, "Where the model misses: measured − fitted ΔL* per geometry"),
-    h("p", { class: "muted" }, "Positive (red): the fit is too dark there; negative (blue): too bright. Hover a value for ΔC*, ΔH* and ΔE00."),
+    h("p", { class: "muted" }, "Positive (red): the fit is too dark there; negative (blue): too bright. Tap, click or hover a value for ΔC*, ΔH* and ΔE00."),
     h("div", { class: "scroll" }, h("table", { class: "data residuals", id: "residuals" },
       h("thead", {}, h("tr", {}, h("th", { scope: "col" }, "fit"), geometries.map((g) => h("th", { scope: "col" }, g)))),
       h("tbody", {}, done.map((f) => h("tr", { "data-cost": f.run.cost_function },
         h("th", { scope: "row" }, `${f.run.cost_function} (fit ${f.run.id})`),
-        geometries.map((g) => cell(f.lab[g] && f.lab[g].residual))))))));
+        geometries.map((g) => {
+          const td = cell(f.lab[g] && f.lab[g].residual);
+          td.dataset.geometry = g;
+          return td;
+        })))))),
+    h("p", { id: "residual-detail", class: "muted", "aria-live": "polite" }, "Tap a value for its ΔL*, ΔC*, ΔH* and ΔE00."));
 }
 
 function swatchRow(label, swatches, de) {

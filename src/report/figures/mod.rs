@@ -186,11 +186,28 @@ fn figure_list(study: &Study) -> Vec<Figure> {
     // Fig. 5 and 6: a legend row of 22 px per sample beside the plot.
     let lines_h = 720.max(110 + 22 * n);
     let names: Vec<&str> = study.samples.iter().map(|s| s.name.as_str()).collect();
+    // Scans without SRA readings: their SRA cells say "not measured".
+    let no_sra: Vec<&str> = study
+        .samples
+        .iter()
+        .filter(|s| !s.measured.geometries.has_sra())
+        .map(|s| s.name.as_str())
+        .collect();
+    let unmeasured = if no_sra.is_empty() {
+        String::new()
+    } else if no_sra.len() == study.samples.len() {
+        " No scan has SRA readings: the 12 MA-T12 geometries only.".to_string()
+    } else {
+        format!(
+            " Hatched cells marked \"not measured\": the SRA geometries of scans without SRA readings ({}).",
+            no_sra.join(", ")
+        )
+    };
     let mut out = vec![
         Figure {
             stem: "fig04-measured-swatches".into(),
             caption: format!(
-                "Fig. 4. Measured colour of each sample at the 12 diffuse (MA-T12) and 2 specular (SRA) geometries, as sRGB swatches (CIE D65, 2° observer). Swatches marked with a white triangle are clipped: outside the sRGB gamut, typically brighter than white at the specular geometries. SRA readings processed with the {strat} strategy. Measured data: no fit, no cost function."
+                "Fig. 4. Measured colour of each sample at the 12 diffuse (MA-T12) and 2 specular (SRA) geometries, as sRGB swatches (CIE D65, 2° observer). Swatches marked with a white triangle are clipped: outside the sRGB gamut, typically brighter than white at the specular geometries. SRA readings processed with the {strat} strategy.{unmeasured} Measured data: no fit, no cost function."
             ),
             kind: Kind::MeasuredSwatches,
             size: (1280, swatch_h),
@@ -222,7 +239,7 @@ fn figure_list(study: &Study) -> Vec<Figure> {
         out.push(Figure {
             stem: format!("fig07-swatches-{c}"),
             caption: format!(
-                "Fig. 7 ({c}). Measured (upper half) vs estimated (lower half) colour per sample and geometry, sRGB swatches (D65, 2°); estimates of the model fitted with cost function {c}, method {}. White triangles mark clipped swatches.",
+                "Fig. 7 ({c}). Measured (upper half) vs estimated (lower half) colour per sample and geometry, sRGB swatches (D65, 2°); estimates of the model fitted with cost function {c}, method {}. White triangles mark clipped swatches.{unmeasured}",
                 study.method_of(c)
             ),
             kind: Kind::EstimatedSwatches(c),
@@ -717,5 +734,52 @@ mod tests {
         let blue = by_name.get("T.Sky blue").unwrap().0.clone();
         let [r, _, b] = [1, 3, 5].map(|i| u8::from_str_radix(&blue[i..i + 2], 16).unwrap());
         assert!(b > r + 40, "T.Sky blue is drawn {blue}");
+    }
+
+    /// A scan without SRA readings (an instrument export) has its SRA cells drawn as "not
+    /// measured" in Fig. 4 and every Fig. 7, never as the black of a zero reading; the other
+    /// samples keep their SRA swatches.
+    #[test]
+    fn swatch_figures_mark_unmeasured_geometries_instead_of_drawing_black() {
+        let mut study = study_from_truth(3, None);
+        let s = &mut study.samples[0];
+        s.scan.readings.sra = None;
+        s.scan.reference = None;
+        s.measured = crate::processing::process(&s.scan, &Default::default()).unwrap();
+        assert!(!s.measured.geometries.has_sra());
+        let analysis = Analysis::of(&study);
+        let dir = tempfile::tempdir().unwrap();
+        let mut drawn = 0;
+        for fig in figures(&study) {
+            if !matches!(
+                fig.kind,
+                Kind::MeasuredSwatches | Kind::EstimatedSwatches(_)
+            ) {
+                continue;
+            }
+            drawn += 1;
+            let [_, svg] = render(&fig, &study, &analysis, dir.path()).unwrap();
+            let els = svg_elements(&svg);
+            let black = els
+                .iter()
+                .filter(|e| e.tag == "rect" && e.get("fill") == "#000000")
+                .count();
+            assert_eq!(black, 0, "{}: black swatches drawn", fig.stem);
+            let marked = els
+                .iter()
+                .filter(|e| e.tag == "text" && e.text == "measured")
+                .count();
+            assert_eq!(marked, 2, "{}: the two SRA cells of one sample", fig.stem);
+            let filled = els
+                .iter()
+                .filter(|e| e.tag == "rect" && e.get("fill") == hex(swatches_not_measured()))
+                .count();
+            assert_eq!(filled, 2, "{}", fig.stem);
+        }
+        assert!(drawn >= 2, "Fig. 4 and Fig. 7 drawn: {drawn}");
+    }
+
+    fn swatches_not_measured() -> RGBColor {
+        super::swatches::NOT_MEASURED
     }
 }

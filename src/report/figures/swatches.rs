@@ -1,4 +1,7 @@
-//! Fig. 4 and 7: measured (and estimated) colour per sample and geometry as sRGB swatches.
+//! Fig. 4 and 7: measured (and estimated) colour per sample and geometry as sRGB swatches. A
+//! geometry a sample's scan did not measure (the SRA's, for a scan without SRA readings) is a
+//! hatched "not measured" cell, never a swatch; the SRA columns are left out when no sample
+//! has them.
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -6,7 +9,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::cost::CostFunction;
 use crate::fonts::font;
-use crate::geometry::{GEOMETRIES, MA_T12_COUNT};
+use crate::geometry::{GeometrySet, MA_T12_COUNT};
 use crate::study::Study;
 
 use super::style::srgb;
@@ -25,6 +28,46 @@ fn clip_mark<DB: DrawingBackend>(
         BLACK.stroke_width(1),
     ))
 }
+
+/// A cell of a geometry the sample's scan did not measure: pale grey, hatched, labelled.
+fn not_measured<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    x0: i32,
+    y0: i32,
+    w: i32,
+    h: i32,
+) -> DrawResult<DB> {
+    let grey = RGBColor(150, 150, 150);
+    root.draw(&Rectangle::new(
+        [(x0, y0), (x0 + w, y0 + h)],
+        NOT_MEASURED.filled(),
+    ))?;
+    // Diagonal hatching, clipped to the cell.
+    let mut k = -h;
+    while k < w {
+        let (a, b) = (
+            (x0 + k.max(0), y0 + (k.max(0) - k)),
+            (x0 + (k + h).min(w), y0 + ((k + h).min(w) - k)),
+        );
+        root.draw(&PathElement::new(vec![a, b], grey.stroke_width(1)))?;
+        k += 8;
+    }
+    // One label, on two lines so that it fits the cell.
+    for (line, dy) in [("not", -7), ("measured", 7)] {
+        root.draw(&Text::new(
+            line,
+            (x0 + w / 2, y0 + h / 2 + dy),
+            font(12).pos(Pos::new(HPos::Center, VPos::Center)),
+        ))?;
+    }
+    root.draw(&Rectangle::new(
+        [(x0, y0), (x0 + w, y0 + h)],
+        RGBColor(120, 120, 120).stroke_width(1),
+    ))
+}
+
+/// The fill of a "not measured" cell.
+pub(super) const NOT_MEASURED: RGBColor = RGBColor(236, 236, 236);
 
 pub(super) fn swatches<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
@@ -49,12 +92,23 @@ pub(super) fn swatches<DB: DrawingBackend>(
         (left, 52),
         font(15),
     ))?;
-    root.draw(&Text::new(
-        "specular: SRA",
-        (x_of(MA_T12_COUNT), 52),
-        font(15),
-    ))?;
-    for g in &GEOMETRIES {
+    // The SRA columns only when some sample has SRA readings; a sample without them shows
+    // "not measured" there, never a swatch.
+    let columns = if study
+        .samples
+        .iter()
+        .any(|s| s.measured.geometries.has_sra())
+    {
+        root.draw(&Text::new(
+            "specular: SRA",
+            (x_of(MA_T12_COUNT), 52),
+            font(15),
+        ))?;
+        GeometrySet::ALL
+    } else {
+        GeometrySet::MA_T12
+    };
+    for g in columns.iter() {
         root.draw(&Text::new(
             g.name,
             (x_of(g.index) + w / 2, top - 14),
@@ -69,8 +123,12 @@ pub(super) fn swatches<DB: DrawingBackend>(
             font(16).pos(Pos::new(HPos::Right, VPos::Center)),
         ))?;
         let estimated = cost.map(|c| s.done(c).map(|d| d.estimated));
-        for g in &GEOMETRIES {
+        for g in columns.iter() {
             let x0 = x_of(g.index);
+            if !s.measured.geometries.contains(g.index) {
+                not_measured(root, x0, y0, w, h)?;
+                continue;
+            }
             let (m, m_clip) = srgb(&s.measured.values[g.index]);
             match estimated {
                 None => {
