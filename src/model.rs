@@ -58,29 +58,12 @@ impl FresnelCosine {
     }
 }
 
-impl std::fmt::Display for FresnelCosine {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for FresnelCosine {
-    type Err = String;
-
-    /// Parses `incidence`, `light-half` or `exact`.
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        FresnelCosine::ALL
-            .into_iter()
-            .find(|f| f.name().eq_ignore_ascii_case(s.trim()))
-            .ok_or_else(|| {
-                format!(
-                    "unknown Fresnel factor \"{s}\": expected one of incidence (the paper's \
-                     Schlick on cos θi), light-half (Schlick on l·h) or exact (the dielectric \
-                     Fresnel)"
-                )
-            })
-    }
-}
+crate::names::choice_by_name!(
+    FresnelCosine,
+    "Fresnel factor",
+    "one of incidence (the paper's Schlick on cos θi), light-half (Schlick on l·h) or exact (the \
+     dielectric Fresnel)"
+);
 
 /// The model's form (`[fit] model`, `brdfd fit --model`, SCIENCE.md §4.1): the paper's
 /// (the default), or the paper's with one change that the real scans' residuals point to.
@@ -184,25 +167,7 @@ impl ModelKind {
     }
 }
 
-impl std::fmt::Display for ModelKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for ModelKind {
-    type Err = String;
-
-    /// Parses `paper`, `oren-nayar` or `two-lobe`.
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        ModelKind::ALL
-            .into_iter()
-            .find(|m| m.name().eq_ignore_ascii_case(s.trim()))
-            .ok_or_else(|| {
-                format!("unknown model \"{s}\": expected one of paper, oren-nayar, two-lobe")
-            })
-    }
-}
+crate::names::choice_by_name!(ModelKind, "model", "one of paper, oren-nayar, two-lobe");
 
 /// Oren–Nayar roughness bounds, radians: 0 (Lambert) to 1 (57°, where A and B are within
 /// 25 % and 8 % of their limits).

@@ -59,28 +59,12 @@ impl Preset {
     }
 }
 
-impl std::fmt::Display for Preset {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for Preset {
-    type Err = String;
-
-    /// Parses `measured` or `paper`.
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Preset::ALL
-            .into_iter()
-            .find(|p| p.name().eq_ignore_ascii_case(s.trim()))
-            .ok_or_else(|| {
-                format!(
-                    "unknown preset \"{s}\": expected measured (exact Fresnel, luminance SRA: \
-                     what predicts measured materials best) or paper (the paper's configuration)"
-                )
-            })
-    }
-}
+crate::names::choice_by_name!(
+    Preset,
+    "preset",
+    "measured (exact Fresnel, luminance SRA: what predicts measured materials best) or paper \
+     (the paper's configuration)"
+);
 
 #[cfg(test)]
 mod tests {
