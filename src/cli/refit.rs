@@ -158,20 +158,25 @@ fn refit_all(args: &RefitArgs) -> anyhow::Result<()> {
     chosen.reverse();
     let request = request(args);
     let tty = std::io::stderr().is_terminal() && !args.json;
-    let bar = ProgressBar::with_draw_target(
-        Some(chosen.len() as u64),
-        if tty {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        },
-    );
-    bar.set_style(
-        ProgressStyle::with_template("{prefix:<12} [{bar:30}] {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-    );
-    bar.set_prefix("scans");
+    // A bar on the terminal only (never in --json or a pipe).
+    let new_bar = |len: usize, prefix: &'static str| {
+        let bar = ProgressBar::with_draw_target(
+            Some(len as u64),
+            if tty {
+                ProgressDrawTarget::stderr()
+            } else {
+                ProgressDrawTarget::hidden()
+            },
+        );
+        bar.set_style(
+            ProgressStyle::with_template("{prefix:<12} [{bar:30}] {pos}/{len} {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
+        bar.set_prefix(prefix);
+        bar
+    };
+    let bar = new_bar(chosen.len(), "scans");
     let (mut queued, mut current, mut refused) = (Vec::new(), 0usize, Vec::new());
     for (scan, sample) in &chosen {
         bar.set_message(super::operator::terminal_safe(sample));
@@ -221,20 +226,7 @@ fn refit_all(args: &RefitArgs) -> anyhow::Result<()> {
     }
     if !args.detach && !queued.is_empty() {
         // The daemon's queue, followed until it is empty (these fits, and any others).
-        let wait = ProgressBar::with_draw_target(
-            Some(queued.len() as u64),
-            if tty {
-                ProgressDrawTarget::stderr()
-            } else {
-                ProgressDrawTarget::hidden()
-            },
-        );
-        wait.set_style(
-            ProgressStyle::with_template("{prefix:<12} [{bar:30}] {pos}/{len} {msg}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar())
-                .progress_chars("=> "),
-        );
-        wait.set_prefix("fits");
+        let wait = new_bar(queued.len(), "fits");
         loop {
             let s = client.status()?;
             let left = (s.fits_queued + s.fits_running).min(queued.len());
