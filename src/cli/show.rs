@@ -286,6 +286,9 @@ fn print_fit_extras(fit: &FitDetail) {
     if let Some(cv) = &fit.crossval {
         println!("       {}", held_out_line(cv));
     }
+    if let Some(reach) = &fit.reach {
+        println!("       reach: {}", super::fit::reach_line(reach));
+    }
     let sra = &fit.sra;
     let delta_l = match &fit.specular_delta_l {
         Some(dl) => format!(

@@ -28,6 +28,11 @@ What it does, per file:
      (the 45as45 reading everywhere). RGB files go through one spectral upsampling, measured
      and predicted alike.
 
+The oracle of each form minimises the mean ΔE00 over every direction, starting from the best
+of the fits of that form, a least-squares fit and Lambert: no prediction of its form does
+better. `reach` is the verdict a scan of the material would be given from its readings alone
+(SCIENCE.md §12.7), to hold against the prediction.
+
 A prediction close to the oracle means the 14 readings pin down what the model can hold; an
 oracle far above 1 means the material is out of the model's reach, however it is measured.
 
@@ -127,14 +132,16 @@ pub fn table(r: &Report) -> String {
     for o in &r.oracles {
         let _ = writeln!(
             t,
-            "{:<4} {:<10} {:<10} {:<10} {:>8} | {:>17}{}",
+            "{:<4} {:<10} {:<10} {:<10} {:>8} | {:>17}{}  (from {}: {:.2})",
             "orcl",
             o.model.name(),
             o.fresnel.name(),
             "all dirs",
             "",
             "",
-            cells(&o.prediction)
+            cells(&o.prediction),
+            o.start,
+            o.start_mean
         );
     }
     let _ = writeln!(
@@ -148,6 +155,9 @@ pub fn table(r: &Report) -> String {
         "",
         cells(&r.lambert.prediction)
     );
+    if let Some(reach) = &r.reach {
+        let _ = writeln!(t, "reach            {}", super::fit::reach_line(reach));
+    }
     let _ = writeln!(t, "({:.0} ms)\n", r.wall_ms);
     t
 }
