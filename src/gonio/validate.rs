@@ -34,7 +34,7 @@ use crate::fit::{FitRequest, ParamsDocument, fit_measured};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, GeometrySet, MA_T12_COUNT, Vec3};
 use crate::model::{
     Bounds, EXTRA, FresnelCosine, ModelKind, OREN_NAYAR_SIGMA, Params, SpecularGeometry,
-    evaluate_at, oren_nayar_factor_at, specular_term,
+    evaluate_at, oren_nayar_coefficients, oren_nayar_geometry_at, specular_term,
 };
 use crate::optimise::{Settings, nelder_mead};
 use crate::processing::MeasuredBrdf;
@@ -214,6 +214,8 @@ pub struct FitResult {
     pub fit_delta_e00_mean: f64,
     pub params: ParamsDocument,
     pub prediction: Prediction,
+    /// Wall-clock time of the fit, ms.
+    pub wall_ms: f64,
     /// The reach verdict this fit gives the material from its readings alone
     /// ([`crate::reach`]): what a scan of it would be told, to hold against `prediction`.
     pub reach: Option<Reach>,
@@ -232,6 +234,8 @@ pub struct Oracle {
     pub start_mean: f64,
     /// Mean-ΔE00 evaluations the polish made.
     pub evaluations: u32,
+    /// Wall-clock time of this oracle, ms.
+    pub wall_ms: f64,
     #[serde(flatten)]
     pub prediction: Prediction,
 }
@@ -388,7 +392,8 @@ pub fn readings(
 /// The least-squares start of the oracle (module text): kd (31 bands) and ks by weighted linear
 /// least squares, weights `1/ȳ²` (relative error), for each (α, μ[, σ]) of a grid refined once
 /// around its best.
-fn least_squares(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) -> Params {
+fn least_squares(problem: &OracleProblem) -> Params {
+    let (targets, kind, fresnel) = (problem.targets, problem.kind, problem.fresnel);
     let bounds = Bounds::default();
     let w: Vec<f64> = targets
         .iter()
@@ -398,7 +403,7 @@ fn least_squares(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) ->
         })
         .collect();
     let sigmas: Vec<f64> = if kind == ModelKind::OrenNayar {
-        (0..=5).map(|k| k as f64 * 0.2).collect()
+        vec![0.0, 0.5, 1.0]
     } else {
         vec![0.0]
     };
@@ -410,11 +415,16 @@ fn least_squares(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) ->
         let (mut sa, mut sb, mut sc, mut q) = (0.0, 0.0, 0.0, 0.0);
         let mut pl = [0.0; BANDS];
         let mut av = Vec::with_capacity(targets.len());
-        for (t, &wt) in targets.iter().zip(&w) {
-            let g = SpecularGeometry::from_directions(t.wi, t.wo);
-            let s = specular_term(1.0, alpha, ior, fresnel, &g);
+        let (on_a, on_b) = oren_nayar_coefficients(sigma);
+        for (((t, &wt), g), on) in targets
+            .iter()
+            .zip(&w)
+            .zip(&problem.geometry)
+            .zip(&problem.oren_nayar)
+        {
+            let s = specular_term(1.0, alpha, ior, fresnel, g);
             let a = if kind == ModelKind::OrenNayar {
-                oren_nayar_factor_at(sigma, t.wi, t.wo)
+                on_a + on_b * on
             } else {
                 1.0
             };
@@ -477,7 +487,7 @@ fn least_squares(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) ->
                 let a = (a0 * ratio.powf(i as f64 / 4.0)).clamp(bounds.alpha.0, bounds.alpha.1);
                 let n = (n0 + 0.195 * j as f64 / 4.0).clamp(bounds.ior.0, bounds.ior.1);
                 let s = if kind == ModelKind::OrenNayar {
-                    (s0 + 0.1 * k as f64 / 2.0).clamp(0.0, 1.0)
+                    (s0 + 0.25 * k as f64 / 2.0).clamp(0.0, 1.0)
                 } else if k != 0 {
                     continue;
                 } else {
@@ -519,10 +529,10 @@ pub struct OracleFit {
 const ORACLE_COLOUR_RANGE: f64 = 0.25;
 
 /// Most mean-ΔE00 evaluations of one Nelder–Mead run of the oracle's polish.
-const ORACLE_RUN_EVALUATIONS: u32 = 700;
+const ORACLE_RUN_EVALUATIONS: u32 = 500;
 
 /// Most Nelder–Mead runs of the polish (each restarts from the best so far with a smaller step).
-const ORACLE_RUNS: usize = 4;
+const ORACLE_RUNS: usize = 3;
 
 /// The oracle's objective: mean ΔE00 over the targets of the model form `kind` with any
 /// parameters. The model's colour at a target is `π (a·XYZ(kd) + s·XYZ(1))`, `a` the diffuse
@@ -531,6 +541,8 @@ const ORACLE_RUNS: usize = 4;
 struct OracleProblem<'a> {
     targets: &'a [Target],
     geometry: Vec<SpecularGeometry>,
+    /// Oren–Nayar's directional part per target ([`oren_nayar_geometry_at`]).
+    oren_nayar: Vec<f64>,
     colorimetry: Colorimetry,
     white: Xyz,
     kind: ModelKind,
@@ -578,6 +590,10 @@ impl<'a> OracleProblem<'a> {
                 .iter()
                 .map(|t| SpecularGeometry::from_directions(t.wi, t.wo))
                 .collect(),
+            oren_nayar: targets
+                .iter()
+                .map(|t| oren_nayar_geometry_at(t.wi, t.wo))
+                .collect(),
             colorimetry,
             white,
             kind,
@@ -592,8 +608,14 @@ impl<'a> OracleProblem<'a> {
         let pi = std::f64::consts::PI;
         let xd = self.colorimetry.reflectance_to_xyz(&p.kd.map(|k| pi * k));
         let w = self.white;
+        let (on_a, on_b) = oren_nayar_coefficients(p.extra[0]);
         let mut sum = 0.0;
-        for (t, g) in self.targets.iter().zip(&self.geometry) {
+        for ((t, g), on) in self
+            .targets
+            .iter()
+            .zip(&self.geometry)
+            .zip(&self.oren_nayar)
+        {
             let lab = if g.cos_i <= 0.0 || g.cos_r <= 0.0 {
                 xyz_to_lab(
                     Xyz {
@@ -606,7 +628,7 @@ impl<'a> OracleProblem<'a> {
             } else {
                 let s = pi * specular_term(p.ks, p.alpha, p.ior, self.fresnel, g);
                 let a = if self.kind == ModelKind::OrenNayar {
-                    oren_nayar_factor_at(p.extra[0], t.wi, t.wo)
+                    on_a + on_b * on
                 } else {
                     1.0
                 };
@@ -682,8 +704,8 @@ impl<'a> OracleProblem<'a> {
                 &nelder_mead::Options {
                     initial_step: step,
                     max_evaluations: ORACLE_RUN_EVALUATIONS,
-                    x_tolerance: 1e-6,
-                    f_tolerance: 1e-6,
+                    x_tolerance: 1e-4,
+                    f_tolerance: 1e-5,
                 },
             );
             evaluations += count;
@@ -727,7 +749,7 @@ pub fn oracle(
     let mut candidates = starts.to_vec();
     candidates.push(OracleStart {
         label: "least squares".into(),
-        params: least_squares(targets, kind, fresnel),
+        params: least_squares(&problem),
     });
     let (start, f_start) = candidates
         .iter()
@@ -821,10 +843,12 @@ pub fn validate_with(
             fit_delta_e00_mean: report.evaluation.diffuse.mean,
             params: ParamsDocument::new(&p, v.model),
             prediction,
+            wall_ms: report.outcome.wall_ms,
             reach: crate::reach::of_report(&report),
         });
     }
     let mut oracles = Vec::new();
+    let mut oracle_params: Vec<(ModelKind, FresnelCosine, Params)> = Vec::new();
     for &(model, fresnel) in opts.oracle_forms {
         let mut starts: Vec<OracleStart> = fitted
             .iter()
@@ -853,8 +877,38 @@ pub fn validate_with(
                 extra: [0.0; EXTRA],
             },
         });
+        // A form that holds another (Oren–Nayar with σ = 0 is the paper's model) starts from
+        // that form's fits and oracle too.
+        if model == ModelKind::OrenNayar {
+            starts.extend(
+                fitted
+                    .iter()
+                    .filter(|(v, _)| v.model == ModelKind::Paper && v.fresnel == fresnel)
+                    .map(|(v, p)| OracleStart {
+                        label: format!("{} paper fit", v.cost.name()),
+                        params: Params {
+                            extra: [0.0; EXTRA],
+                            ..*p
+                        },
+                    }),
+            );
+            starts.extend(
+                oracle_params
+                    .iter()
+                    .filter(|(m, f, _)| *m == ModelKind::Paper && *f == fresnel)
+                    .map(|(_, _, p)| OracleStart {
+                        label: "paper oracle".into(),
+                        params: Params {
+                            extra: [0.0; EXTRA],
+                            ..*p
+                        },
+                    }),
+            );
+        }
+        let started = Instant::now();
         let o = oracle(&targets, colorimetry, model, fresnel, &starts);
         let p = o.params;
+        oracle_params.push((model, fresnel, p));
         let prediction = predict(&targets, colorimetry, &|t| {
             evaluate_at(&p, model, fresnel, t.wi, t.wo)
         });
@@ -865,6 +919,7 @@ pub fn validate_with(
             start: o.start,
             start_mean: o.start_mean,
             evaluations: o.evaluations,
+            wall_ms: started.elapsed().as_secs_f64() * 1e3,
             prediction,
         });
     }
