@@ -20,7 +20,8 @@ What it does, per file:
      (illuminant C, 2°). ASTM directions are scattered: the instrument geometries are
      interpolated between them, and the interpolation's own leave-one-out error is reported.
   3. Fits the readings under cf1, cf2 and m2, each with the paper's model (the default),
-     exact Fresnel, Oren–Nayar, and from the 12 MA-T12 readings alone.
+     exact Fresnel and Oren–Nayar, and with the paper's model from the 12 MA-T12 readings
+     alone under either Fresnel factor.
   4. Predicts every measured direction (ASTM) or a grid (RGL: θi 0–75°, θr 5–80°, φ 0–180°,
      every 5°/5°/15°) and reports ΔE00 (D65/10°, ASTM E308): mean, median, p95, near-specular
      (half vector within 10° of the normal) and the rest; beside the oracle (the same model

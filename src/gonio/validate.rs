@@ -284,8 +284,9 @@ pub struct Report {
     /// The oracle of every model form the fits use.
     pub oracles: Vec<Oracle>,
     pub lambert: Lambert,
-    /// The reach verdict of the first fit to all 14 readings with exact Fresnel (else of the
-    /// first fit): what a scan of this material would be told.
+    /// The reach verdict of the cf2 fit to all 14 readings with exact Fresnel (the verdict's
+    /// calibration; else the first such fit of another cost, else the first fit): what a scan
+    /// of this material would be told.
     pub reach: Option<Reach>,
     pub wall_ms: f64,
 }
@@ -955,9 +956,13 @@ pub fn validate_with(
         Measurement::Rgl(_) => None,
     };
     let near_specular_directions = targets.iter().filter(|t| t.near).count();
+    let exact_all =
+        |f: &&FitResult| f.fresnel == FresnelCosine::Exact && f.readings == "ma-t12+sra";
     let reach = fits
         .iter()
-        .find(|f| f.fresnel == FresnelCosine::Exact && f.readings == "ma-t12+sra")
+        .filter(exact_all)
+        .find(|f| f.cost == CostFunction::Cf2)
+        .or(fits.iter().find(exact_all))
         .or(fits.first())
         .and_then(|f| f.reach.clone());
     Ok(Report {
