@@ -68,6 +68,9 @@ fn metallic(
     }
 }
 
+/// A generated material: name, colour (r, g, b) and two lobes `(ks, α)`.
+type Generated = (&'static str, [f64; 3], (f64, f64), (f64, f64));
+
 fn main() {
     let mut materials: Vec<(String, Measurement)> = Vec::new();
     for path in std::env::args().skip(1) {
@@ -78,7 +81,7 @@ fn main() {
             .map_or(path.clone(), |n| n.to_string_lossy().into_owned());
         materials.push((name, m));
     }
-    let generated: [(&str, [f64; 3], (f64, f64), (f64, f64)); 4] = [
+    let generated: [Generated; 4] = [
         (
             "generated satin",
             [0.12, 0.05, 0.03],
@@ -111,7 +114,7 @@ fn main() {
             Measurement::Astm(AstmFile::sampled(name, "generated", &f)),
         ));
     }
-    let metallics: [(&str, [f64; 3], (f64, f64), (f64, f64)); 2] = [
+    let metallics: [Generated; 2] = [
         (
             "generated blue metallic",
             [0.1, 0.3, 0.9],

@@ -7,7 +7,7 @@
 //! is read, never stored:
 //! - the **specular excess**: the brightest reading's luminance above the diffuse one (45as45,
 //!   0°/45°), as a reflectance factor (the white diffuser is 1). Matt and medium-gloss paints
-//!   stay within a few units; glossy coatings put their mirror peak at tens to hundreds, a lobe
+//!   stay within a few units; glossy coatings put their mirror peak hundreds above, a peak
 //!   the paper's one GGX lobe cannot follow from 14 readings;
 //! - the fit's own ΔE00 at the MA-T12 geometries: a material the model cannot even fit;
 //! - the held-out ΔE00 (`brdfd crossval`, `fit --hold-out`), when there is one: each reading

@@ -17,7 +17,7 @@
 
 use std::fmt::Write as _;
 
-use super::{Channels, GonioError, direction};
+use super::{Channels, GonioError, Steps, direction};
 use crate::geometry::Vec3;
 
 const FORMAT: &str = "ASTM E1392";
@@ -27,7 +27,7 @@ pub const MAX_POINTS: usize = 2_000_000;
 
 /// The directions of [`AstmFile::sampled`], degrees `(first, last, step)`: θi 10–70°, θs 0–80°,
 /// φs 0–180° (0 the light's side, 180 the mirror side), 7 × 17 × 13 = 1,547 pairs.
-pub const SAMPLED_GRID: ((f64, f64, f64), (f64, f64, f64), (f64, f64, f64)) =
+pub const SAMPLED_GRID: (Steps, Steps, Steps) =
     ((10.0, 70.0, 10.0), (0.0, 80.0, 5.0), (0.0, 180.0, 15.0));
 
 /// How many nearest measured pairs the interpolation weighs.
@@ -293,7 +293,7 @@ impl AstmFile {
                 ..p
             });
         };
-        let steps = |(a, b, s): (f64, f64, f64)| {
+        let steps = |(a, b, s): Steps| {
             (0..=((b - a) / s).round() as usize).map(move |k| (a + s * k as f64).to_radians())
         };
         let (ti, ts, ps) = SAMPLED_GRID;

@@ -27,7 +27,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::{Channels, Measurement, RGB_UPSAMPLING, direction};
+use super::{Channels, Measurement, RGB_UPSAMPLING, Steps, direction};
 use crate::colour::{Colorimetry, Lab, Observer, Weighting, Xyz, ciede2000, xyz_to_lab};
 use crate::cost::CostFunction;
 use crate::fit::{FitRequest, ParamsDocument, fit_measured};
@@ -49,7 +49,7 @@ pub const NEAR_SPECULAR_DEG: f64 = 10.0;
 pub const LAMBERT_GEOMETRY: &str = "45as45";
 
 /// The RGL prediction grid, degrees: θi 0–75 every 5, θr 5–80 every 5, φ 0–180 every 15.
-pub const RGL_GRID: ((f64, f64, f64), (f64, f64, f64), (f64, f64, f64)) =
+pub const RGL_GRID: (Steps, Steps, Steps) =
     ((0.0, 75.0, 5.0), (5.0, 80.0, 5.0), (0.0, 180.0, 15.0));
 
 /// What a validation runs with.
@@ -1010,6 +1010,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn the_colour_basis_moves_one_tristimulus_value_each() {
         let c = Options::default().colorimetry;
         let p = OracleProblem::new(&[], c, ModelKind::Paper, FresnelCosine::Exact);
