@@ -50,7 +50,8 @@ pub struct ValidateArgs {
     pub cost: Vec<crate::cost::CostFunction>,
 
     /// Print one JSON object per file, one per line (material, format, readings with the
-    /// file's raw values, fits with their predictions, oracle, lambert, …) instead of tables.
+    /// file's raw values, fits with their predictions and reach verdicts, oracle, lambert,
+    /// reach, …) instead of tables.
     #[arg(long)]
     pub json: bool,
 }
