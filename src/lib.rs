@@ -20,6 +20,8 @@
 //! - [`gonio`]: measured goniometric BRDFs (ASTM E1392, RGL `.bsdf`) and `brdfd validate`:
 //!   the handheld estimate against them.
 //! - [`fit`]: one scan → processing → optimiser → ΔE00 evaluation, and the fit report (JSON).
+//! - [`reach`]: whether a scan's material is in the model's reach, from its readings and fit,
+//!   with the prediction error to expect (calibrated with `brdfd validate`).
 //! - [`study`]: the study model (per sample: scan, measured BRDF, one fit per cost function) and
 //!   its loader from a store; what reports, exports and previews are built from.
 //! - [`report`]: study reports: the paper's figures 4–12 and Fig. 13 (PNG, SVG), statistics, HTML/Markdown.
@@ -58,6 +60,7 @@ pub mod model;
 pub mod names;
 pub mod optimise;
 pub mod processing;
+pub mod reach;
 pub mod render;
 pub mod report;
 pub mod safe_fs;

@@ -223,6 +223,27 @@ pub fn oren_nayar_factor_angles(sigma: f64, cos_i: f64, cos_r: f64, cos_dphi: f6
     a + b * cos_dphi.min(1.0) * alpha.sin() * beta.tan()
 }
 
+/// Oren & Nayar's factor split into what depends on σ and what on the directions:
+/// [`oren_nayar_factor_at`] is `a + b · g` with `(a, b)` these coefficients and `g`
+/// [`oren_nayar_geometry_at`], equal up to rounding. For evaluating one pair of directions at
+/// many σ (the oracle of `brdfd validate`).
+pub fn oren_nayar_coefficients(sigma: f64) -> (f64, f64) {
+    let s2 = sigma * sigma;
+    (1.0 - 0.5 * s2 / (s2 + 0.33), 0.45 * s2 / (s2 + 0.09))
+}
+
+/// The directions' part of [`oren_nayar_factor_at`]: `max(0, cos(φr − φi)) · sin a · tan b`.
+pub fn oren_nayar_geometry_at(l: Vec3, v: Vec3) -> f64 {
+    let (pl, pv) = (l[0].hypot(l[1]), v[0].hypot(v[1]));
+    if pl == 0.0 || pv == 0.0 {
+        return 0.0;
+    }
+    let cos_dphi = ((l[0] * v[0] + l[1] * v[1]) / (pl * pv)).max(0.0);
+    let (ti, tr) = (l[2].clamp(-1.0, 1.0).acos(), v[2].clamp(-1.0, 1.0).acos());
+    let (alpha, beta) = (ti.max(tr), ti.min(tr));
+    cos_dphi * alpha.sin() * beta.tan()
+}
+
 /// The model of form `kind` for light from `l` seen from `v`, sr⁻¹ per band: what a fit
 /// predicts at a direction pair outside the 14 geometries (`brdfd validate`).
 pub fn evaluate_at(

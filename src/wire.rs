@@ -461,6 +461,12 @@ pub struct FitDetail {
     pub specular_delta_l: Option<SpecularDeltaL>,
     /// Measured and fitted L*a*b* per geometry, for a done fit.
     pub lab: Option<LabPerGeometry>,
+    /// Whether the material is in the model's reach, with the prediction error to expect
+    /// (SCIENCE.md §12.7): derived when the fit is read, from its measured L*, its ΔE00 and
+    /// its cross-validation; absent before the fit is done and from a daemon that does not
+    /// derive it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reach: Option<crate::reach::Reach>,
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -73,6 +73,15 @@ fn fit_json_has_every_contract_key() {
     }
     assert!(v["evaluations"].as_u64().unwrap() > 0);
     assert!(v["delta_e00_mean"].as_f64().unwrap() >= 0.0);
+    // The reach verdict after the contract's keys (SCIENCE.md §12.7).
+    let reach = &v["reach"];
+    assert!(
+        ["in-reach", "marginal", "out-of-reach"].contains(&reach["verdict"].as_str().unwrap()),
+        "{reach}"
+    );
+    assert_eq!(reach["expected_delta_e00"].as_array().unwrap().len(), 2);
+    assert!(reach["evidence"]["specular_excess"].as_f64().unwrap() >= 0.0);
+    assert!(!reach["reasons"].as_array().unwrap().is_empty());
 }
 
 #[test]
@@ -130,6 +139,7 @@ fn fit_table_is_readable() {
         "specular paper-eq9",
         "45as110",
         "ΔE00 mean",
+        "reach            ",
     ] {
         assert!(text.contains(needle), "missing {needle:?} in\n{text}");
     }

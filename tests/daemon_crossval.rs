@@ -130,6 +130,16 @@ async fn every_stored_fit_gets_its_held_out_delta_e_shown_beside_its_fitted_one(
         // The science choices the fit was made with (these tests' settings: the paper's
         // Fresnel factor).
         assert!(text.contains("model paper, Fresnel incidence"), "{text}");
+        // The reach verdict, derived from what is stored, with the held-out ΔE00 among its
+        // evidence (SCIENCE.md §12.7).
+        let reach = &v["fits"][0]["reach"];
+        assert_eq!(
+            reach["evidence"]["held_out_delta_e00"].as_f64(),
+            Some(cv.held_out_mean),
+            "{reach}"
+        );
+        assert!(reach["verdict"].is_string(), "{reach}");
+        assert!(text.contains("       reach: "), "{text}");
 
         d.service.shutdown().await;
         api.stop(Duration::from_secs(1)).await;

@@ -10,6 +10,7 @@ use brdfd::gonio::rgl::{self, WriteOptions};
 use brdfd::gonio::validate::{Options, Report, Variant, validate_with};
 use brdfd::gonio::{Channels, Measurement};
 use brdfd::model::{EXTRA, FresnelCosine, ModelKind, Params, evaluate_at};
+use brdfd::reach::Verdict;
 use brdfd::spectral::{BANDS, wavelengths_nm};
 
 mod common;
@@ -99,6 +100,29 @@ fn run(m: &Measurement) -> Report {
     validate_with(m, &opts, &[cf2(ModelKind::Paper, FresnelCosine::Incidence)]).unwrap()
 }
 
+/// The oracle of a form is never worse than a prediction of that form, nor than Lambert.
+fn assert_oracle_is_a_limit(r: &Report) {
+    for o in &r.oracles {
+        for f in r
+            .fits
+            .iter()
+            .filter(|f| f.model == o.model && f.fresnel == o.fresnel)
+        {
+            assert!(
+                o.prediction.mean <= f.prediction.mean,
+                "oracle {:?} {:?} {} above the {} {} fit's {}",
+                o.model,
+                o.fresnel,
+                o.prediction.mean,
+                f.cost.name(),
+                f.readings,
+                f.prediction.mean
+            );
+        }
+        assert!(o.prediction.mean <= r.lambert.prediction.mean);
+    }
+}
+
 #[test]
 fn astm_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
     let file = astm("own model", &own_model);
@@ -112,8 +136,10 @@ fn astm_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
     for (a, b) in r.readings["45as45"].raw.iter().zip(&want) {
         assert!((a - b).abs() < 1e-8, "{a} vs {b}");
     }
+    // The fit with the paper's Fresnel, the form the file was made with (not the default of
+    // measured scans, which is the exact Fresnel).
     let fit = &r.fits[0];
-    assert!(fit.default);
+    assert!(!fit.default);
     assert!(
         fit.fit_delta_e00_mean < 0.05,
         "fit {}",
@@ -124,11 +150,13 @@ fn astm_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
         "prediction {:?}",
         fit.prediction
     );
+    // The oracle is the model's limit: on the model's own BRDF, about 0.
     assert!(
-        r.oracle.prediction.mean < 0.3,
+        r.oracle.prediction.mean < 0.05,
         "oracle {:?}",
         r.oracle.prediction
     );
+    assert_oracle_is_a_limit(&r);
     assert!(
         r.lambert.prediction.mean > 1.0,
         "lambert {:?}",
@@ -140,6 +168,7 @@ fn astm_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
 
     let hard = astm("two lobes", &out_of_reach);
     let h = run(&Measurement::parse(hard.write().as_bytes()).unwrap());
+    assert_oracle_is_a_limit(&h);
     let p = &h.fits[0].prediction;
     assert!(p.mean > 1.0, "out of reach predicted {p:?}");
     assert!(
@@ -191,6 +220,8 @@ fn rgl_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
         h.fits[0].prediction
     );
     assert!(h.oracle.prediction.mean > 0.5, "{:?}", h.oracle.prediction);
+    assert_oracle_is_a_limit(&r);
+    assert_oracle_is_a_limit(&h);
     // The JSON form of a report: the contract's keys (the command prints exactly this).
     let doc = serde_json::to_value(&r).unwrap();
     assert_eq!(doc["format"], "rgl-bsdf");
@@ -200,6 +231,105 @@ fn rgl_of_brdfd_model_is_recovered_and_a_second_lobe_is_not() {
     );
     assert!(doc["fits"][0]["prediction"]["p95"].is_number());
     assert!(doc["oracle"]["mean"].is_number() && doc["lambert"]["mean"].is_number());
+    assert!(doc["oracle"]["start"].is_string());
+    assert!(doc["fits"][0]["reach"]["verdict"].is_string());
+    assert!(doc["reach"]["expected_delta_e00"].is_array());
+}
+
+/// On a file of a form the model cannot represent, the oracle of every form stays at or below
+/// every prediction of its form: cf2 and m2, 14 readings and the MA-T12's 12, both Fresnel
+/// factors, and Lambert.
+#[test]
+fn the_oracle_is_never_worse_than_a_prediction_of_its_form() {
+    let m = Measurement::parse(astm("two lobes", &out_of_reach).write().as_bytes()).unwrap();
+    const FORMS: [(ModelKind, FresnelCosine); 2] = [
+        (ModelKind::Paper, FresnelCosine::Incidence),
+        (ModelKind::Paper, FresnelCosine::Exact),
+    ];
+    let mut variants = Vec::new();
+    for cost in [CostFunction::Cf2, CostFunction::M2] {
+        for (model, fresnel) in FORMS {
+            for geometries in [GeometrySet::ALL, GeometrySet::MA_T12] {
+                variants.push(Variant {
+                    cost,
+                    model,
+                    fresnel,
+                    geometries,
+                });
+            }
+        }
+    }
+    let opts = Options {
+        oracle_forms: &FORMS,
+        ..Options::default()
+    };
+    let r = validate_with(&m, &opts, &variants).unwrap();
+    assert_eq!(r.oracles.len(), 2);
+    assert_oracle_is_a_limit(&r);
+    // And it is a polish, not a pick: below its own start.
+    for o in &r.oracles {
+        eprintln!(
+            "oracle {:?}: {:.3} from {} ({:.3}), {} evaluations",
+            o.fresnel, o.prediction.mean, o.start, o.start_mean, o.evaluations
+        );
+        assert!(o.prediction.mean < o.start_mean, "{o:?}");
+    }
+}
+
+/// A clear coat over a coloured base: a sharp lobe and a haze lobe, what glossy paints are.
+fn glossy_coat(wi: Vec3, wo: Vec3) -> Vec<f64> {
+    let lobe = |ks: f64, alpha: f64| {
+        let p = Params {
+            kd: [0.0; BANDS],
+            ks,
+            alpha,
+            ior: 1.5,
+            extra: [0.0; EXTRA],
+        };
+        evaluate_at(&p, ModelKind::Paper, FresnelCosine::Exact, wi, wo)[0]
+    };
+    let spec = lobe(3.0, 0.02) + lobe(0.3, 0.2);
+    truth().kd.iter().map(|k| k + spec).collect()
+}
+
+/// A matt material: the model's diffuse term and a broad, weak lobe.
+fn matt(wi: Vec3, wo: Vec3) -> Vec<f64> {
+    let p = Params {
+        ks: 0.05,
+        alpha: 0.6,
+        ..truth()
+    };
+    evaluate_at(&p, ModelKind::Paper, FresnelCosine::Exact, wi, wo).to_vec()
+}
+
+/// The reach verdict of a scan's fit: a matt material is in reach, a glossy two-lobe coat is
+/// not, and the coat's prediction misses where the verdict says, near the mirror direction.
+#[test]
+fn reach_tells_a_matt_material_from_a_glossy_coat() {
+    let exact = [cf2(ModelKind::Paper, FresnelCosine::Exact)];
+    let opts = Options {
+        oracle_forms: &[(ModelKind::Paper, FresnelCosine::Exact)],
+        ..Options::default()
+    };
+    let verdict = |f: &dyn Fn(Vec3, Vec3) -> Vec<f64>, name: &str| {
+        let m = Measurement::Astm(AstmFile::sampled(name, "test", f));
+        validate_with(&m, &opts, &exact).unwrap()
+    };
+    let m = verdict(&matt, "matt");
+    let reach = m.reach.as_ref().unwrap();
+    assert_eq!(reach.verdict, Verdict::InReach, "{reach:?}");
+    let matt_near = m.fits[0].prediction.near_specular_mean.unwrap();
+    let g = verdict(&glossy_coat, "glossy coat");
+    let reach = g.reach.as_ref().unwrap();
+    assert_eq!(reach.verdict, Verdict::OutOfReach, "{reach:?}");
+    assert!(reach.evidence.peak_geometry.starts_with("sra-"));
+    // Where the verdict says the error is: near the mirror direction, beyond the matt one's.
+    let near = g.fits[0].prediction.near_specular_mean.unwrap();
+    assert!(
+        near > matt_near && near > g.fits[0].prediction.rest_mean.unwrap(),
+        "glossy near-specular {near}, matt {matt_near}, {:?}",
+        g.fits[0].prediction
+    );
 }
 
 /// The command refuses a malformed file with the line and field named, before any fit.

@@ -292,7 +292,9 @@ const PAGE_STATES: &[(&str, &str)] = &[
     ),
     (
         "the result view",
-        "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')",
+        "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')
+           && document.querySelectorAll('#de-table td.reach').length === 3
+           && [...document.querySelectorAll('#de-table td.reach')].every((td) => ['in-reach', 'marginal', 'out-of-reach'].includes(td.dataset.reach) && /expect ΔE00 \\d/.test(td.textContent))",
     ),
     (
         "measured and fitted swatches",

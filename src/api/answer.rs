@@ -52,6 +52,25 @@ impl From<crate::store::ReferenceDetail> for wire::ReferenceDetail<crate::store:
 impl From<crate::store::FitDetail> for wire::FitDetail {
     fn from(d: crate::store::FitDetail) -> Self {
         let run = d.run;
+        // The reach verdict from what is stored (SCIENCE.md §12.7): measured L*, the MA-T12
+        // ΔE00, the held-out ΔE00 once cross-validated, the Fresnel factor of the settings.
+        let reach = match (&d.lab, &d.evaluation) {
+            (Some(lab), Some(e)) => {
+                let fresnel = run
+                    .settings
+                    .get("fresnel")
+                    .and_then(|f| serde_json::from_value(f.clone()).ok())
+                    .unwrap_or_default();
+                crate::reach::Evidence::of(
+                    lab,
+                    e.diffuse.mean,
+                    d.crossval.as_ref().map(|c| c.held_out_mean),
+                    fresnel,
+                )
+                .map(|ev| crate::reach::assess(&ev))
+            }
+            _ => None,
+        };
         wire::FitDetail {
             run: wire::FitRun {
                 id: run.id,
@@ -92,6 +111,7 @@ impl From<crate::store::FitDetail> for wire::FitDetail {
             sra: d.sra,
             specular_delta_l: d.specular_delta_l,
             lab: d.lab,
+            reach,
         }
     }
 }

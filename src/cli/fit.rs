@@ -175,12 +175,42 @@ impl FitArgs {
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let scan = Scan::read_file(&args.input)?;
     let report = fit_with(&scan, args)?;
+    let reach = crate::reach::of_report(&report);
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        /// The fit document with the reach verdict after its keys.
+        #[derive(serde::Serialize)]
+        struct WithReach<'a> {
+            #[serde(flatten)]
+            fit: &'a FitReport,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            reach: Option<crate::reach::Reach>,
+        }
+        let doc = WithReach {
+            fit: &report,
+            reach,
+        };
+        println!("{}", serde_json::to_string(&doc)?);
     } else {
         print!("{}", table(&report));
+        if let Some(reach) = &reach {
+            println!("reach            {}", reach_line(reach));
+        }
     }
     Ok(())
+}
+
+/// A reach verdict in one line: the verdict, the ΔE00 to expect over the hemisphere and why
+/// (SCIENCE.md §12.7).
+pub fn reach_line(reach: &crate::reach::Reach) -> String {
+    let [lo, hi] = reach.expected_delta_e00;
+    let [nlo, nhi] = reach.expected_near_specular_delta_e00;
+    format!(
+        "{}: expect ΔE00 {lo:.1}–{hi:.1} over the hemisphere, {nlo:.1}–{nhi:.1} near the mirror \
+         direction; {} (calibrated on {})",
+        reach.verdict,
+        reach.reasons.join("; "),
+        reach.calibration
+    )
 }
 
 /// The fit `brdfd fit` makes of `scan` with these options (`args.input` names it in errors),

@@ -301,6 +301,9 @@ fn print_fit_extras(fit: &FitDetail, specular: bool) {
         choice("model", crate::model::ModelKind::default().name()),
         choice("fresnel", crate::model::FresnelCosine::default().name())
     );
+    if let Some(reach) = &fit.reach {
+        println!("       reach: {}", super::fit::reach_line(reach));
+    }
     let sra = &fit.sra;
     let delta_l = match &fit.specular_delta_l {
         Some(dl) => format!(

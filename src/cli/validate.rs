@@ -19,14 +19,21 @@ What it does, per file:
      reflectance factor π·f at its 12 geometries, the SRA's luminance Y at sra-20 and sra-60
      (illuminant C, 2°). ASTM directions are scattered: the instrument geometries are
      interpolated between them, and the interpolation's own leave-one-out error is reported.
-  3. Fits the readings under cf1, cf2 and m2, each with the paper's model (the default),
-     exact Fresnel, Oren–Nayar, and from the 12 MA-T12 readings alone.
+  3. Fits the readings under cf1, cf2 and m2, each with the paper's model under the paper's
+     Schlick Fresnel and under the exact Fresnel (the default of measured scans), and with
+     Oren–Nayar, and with the paper's model from the 12 MA-T12 readings alone under either
+     Fresnel factor.
   4. Predicts every measured direction (ASTM) or a grid (RGL: θi 0–75°, θr 5–80°, φ 0–180°,
      every 5°/5°/15°) and reports ΔE00 (D65/10°, ASTM E308): mean, median, p95, near-specular
      (half vector within 10° of the normal) and the rest; beside the oracle (the same model
      form fitted to every direction: the best the model can do) and the Lambert baseline
      (the 45as45 reading everywhere). RGB files go through one spectral upsampling, measured
      and predicted alike.
+
+The oracle of each form minimises the mean ΔE00 over every direction, starting from the best
+of the fits of that form, a least-squares fit and Lambert: no prediction of its form does
+better. `reach` is the verdict a scan of the material would be given from its readings alone
+(SCIENCE.md §12.7), to hold against the prediction.
 
 A prediction close to the oracle means the 14 readings pin down what the model can hold; an
 oracle far above 1 means the material is out of the model's reach, however it is measured.
@@ -44,7 +51,8 @@ pub struct ValidateArgs {
     pub cost: Vec<crate::cost::CostFunction>,
 
     /// Print one JSON object per file, one per line (material, format, readings with the
-    /// file's raw values, fits with their predictions, oracle, lambert, …) instead of tables.
+    /// file's raw values, fits with their predictions and reach verdicts, oracle, lambert,
+    /// reach, …) instead of tables.
     #[arg(long)]
     pub json: bool,
 }
@@ -127,14 +135,16 @@ pub fn table(r: &Report) -> String {
     for o in &r.oracles {
         let _ = writeln!(
             t,
-            "{:<4} {:<10} {:<10} {:<10} {:>8} | {:>17}{}",
+            "{:<4} {:<10} {:<10} {:<10} {:>8} | {:>17}{}  (from {}: {:.2})",
             "orcl",
             o.model.name(),
             o.fresnel.name(),
             "all dirs",
             "",
             "",
-            cells(&o.prediction)
+            cells(&o.prediction),
+            o.start,
+            o.start_mean
         );
     }
     let _ = writeln!(
@@ -148,6 +158,9 @@ pub fn table(r: &Report) -> String {
         "",
         cells(&r.lambert.prediction)
     );
+    if let Some(reach) = &r.reach {
+        let _ = writeln!(t, "reach            {}", super::fit::reach_line(reach));
+    }
     let _ = writeln!(t, "({:.0} ms)\n", r.wall_ms);
     t
 }

@@ -17,13 +17,18 @@
 
 use std::fmt::Write as _;
 
-use super::{Channels, GonioError, direction};
+use super::{Channels, GonioError, Steps, direction};
 use crate::geometry::Vec3;
 
 const FORMAT: &str = "ASTM E1392";
 
 /// The most directions a file may have.
 pub const MAX_POINTS: usize = 2_000_000;
+
+/// The directions of [`AstmFile::sampled`], degrees `(first, last, step)`: θi 10–70°, θs 0–80°,
+/// φs 0–180° (0 the light's side, 180 the mirror side), 7 × 17 × 13 = 1,547 pairs.
+pub const SAMPLED_GRID: (Steps, Steps, Steps) =
+    ((10.0, 70.0, 10.0), (0.0, 80.0, 5.0), (0.0, 180.0, 15.0));
 
 /// How many nearest measured pairs the interpolation weighs.
 pub const NEIGHBOURS: usize = 6;
@@ -266,6 +271,57 @@ impl AstmFile {
             points,
             canonical,
         }
+    }
+
+    /// A spectral file (brdfd's 31 bands) of the BRDF `f` (light `wi`, view `wo` → sr⁻¹ per
+    /// band) sampled on [`SAMPLED_GRID`] and at the 14 instrument geometries: what the project
+    /// generates to validate against known materials.
+    pub fn sampled(
+        sample_name: &str,
+        sample_type: &str,
+        f: &dyn Fn(Vec3, Vec3) -> Vec<f64>,
+    ) -> AstmFile {
+        let mut points = Vec::new();
+        let mut push = |angles: [f64; 4]| {
+            let p = Point {
+                angles,
+                values: vec![],
+            };
+            let (wi, wo) = p.directions();
+            points.push(Point {
+                values: f(wi, wo),
+                ..p
+            });
+        };
+        let steps = |(a, b, s): Steps| {
+            (0..=((b - a) / s).round() as usize).map(move |k| (a + s * k as f64).to_radians())
+        };
+        let (ti, ts, ps) = SAMPLED_GRID;
+        for t_i in steps(ti) {
+            for t_s in steps(ts) {
+                for p_s in steps(ps) {
+                    push([t_i, 0.0, t_s, p_s]);
+                }
+            }
+        }
+        for g in &crate::geometry::GEOMETRIES {
+            push([
+                g.theta_i_deg.to_radians(),
+                0.0,
+                g.theta_r_deg.to_radians(),
+                g.phi_r_deg.to_radians(),
+            ]);
+        }
+        let nm = crate::spectral::wavelengths_nm()
+            .iter()
+            .map(|&n| f64::from(n))
+            .collect();
+        AstmFile::new(
+            sample_name.into(),
+            sample_type.into(),
+            Channels::Spectral(nm),
+            points,
+        )
     }
 
     /// The file's text.

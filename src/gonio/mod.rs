@@ -20,6 +20,9 @@ pub mod validate;
 use crate::geometry::Vec3;
 use crate::spectral::{Spectrum, wavelengths_nm};
 
+/// A range of angles, degrees: `(first, last, step)`.
+pub type Steps = (f64, f64, f64);
+
 /// The largest goniometric file brdfd reads, bytes (the shared RGL files are 0.7 MB).
 pub const MAX_FILE_BYTES: usize = 256 << 20;
 

@@ -12,9 +12,14 @@
 //!   ΔE00 against the measured BRDF, both as reflectance factor `π·f`, under
 //!   [`Options::colorimetry`] (D65/10°, ASTM E308). Near-specular: half vector within
 //!   [`NEAR_SPECULAR_DEG`] of the normal.
-//! - Oracle: kd (31 bands) and ks by weighted linear least squares for each (α, μ[, σ]) of a
-//!   grid refined once around its best, weights `1/ȳ²` (relative error), over all prediction
-//!   directions.
+//! - Oracle: the same model form fitted to every prediction direction, minimising the
+//!   prediction metric itself, the mean ΔE00 over the directions ([`oracle`]): the limit of
+//!   the form, apart from what the readings pin down. Nelder–Mead in kd's XYZ (kd moves by the
+//!   least-norm spectrum that changes its tristimulus values; only they reach ΔE00), ks, α, μ
+//!   [and σ], started from the best of: the report's fits of the same form, a weighted
+//!   least-squares fit over every direction (kd and ks linear for each (α, μ[, σ]) of a
+//!   grid refined once, weights `1/ȳ²`) and the Lambert baseline. So the oracle is never worse
+//!   than any prediction of its form in the same report, nor than Lambert.
 
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
@@ -22,17 +27,18 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::{Channels, Measurement, RGB_UPSAMPLING, direction};
-use crate::colour::{Colorimetry, Lab, Observer, Weighting, ciede2000};
+use super::{Channels, Measurement, RGB_UPSAMPLING, Steps, direction};
+use crate::colour::{Colorimetry, Lab, Observer, Weighting, Xyz, ciede2000, xyz_to_lab};
 use crate::cost::CostFunction;
 use crate::fit::{FitRequest, ParamsDocument, fit_measured};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, GeometrySet, MA_T12_COUNT, Vec3};
 use crate::model::{
-    Bounds, EXTRA, FresnelCosine, ModelKind, Params, SpecularGeometry, evaluate_at,
-    oren_nayar_factor_at, specular_term,
+    Bounds, EXTRA, FresnelCosine, ModelKind, OREN_NAYAR_SIGMA, Params, SpecularGeometry,
+    evaluate_at, oren_nayar_coefficients, oren_nayar_geometry_at, specular_term,
 };
-use crate::optimise::Settings;
+use crate::optimise::{Settings, nelder_mead};
 use crate::processing::MeasuredBrdf;
+use crate::reach::Reach;
 use crate::spectral::{BANDS, Spectrum};
 use crate::sra_reading::{SraReading, luminance_with};
 
@@ -43,7 +49,7 @@ pub const NEAR_SPECULAR_DEG: f64 = 10.0;
 pub const LAMBERT_GEOMETRY: &str = "45as45";
 
 /// The RGL prediction grid, degrees: θi 0–75 every 5, θr 5–80 every 5, φ 0–180 every 15.
-pub const RGL_GRID: ((f64, f64, f64), (f64, f64, f64), (f64, f64, f64)) =
+pub const RGL_GRID: (Steps, Steps, Steps) =
     ((0.0, 75.0, 5.0), (5.0, 80.0, 5.0), (0.0, 180.0, 15.0));
 
 /// What a validation runs with.
@@ -91,16 +97,18 @@ pub struct Variant {
 }
 
 impl Variant {
-    /// The paper's model and Fresnel factor on all 14 readings.
+    /// What a measured scan is fitted with by default (`--preset measured`: the paper's model
+    /// form with the exact Fresnel) on all 14 readings.
     pub fn is_default(&self) -> bool {
-        self.model == ModelKind::Paper
-            && self.fresnel == FresnelCosine::Incidence
+        self.model == crate::optimise::Preset::Measured.model()
+            && self.fresnel == crate::optimise::Preset::Measured.fresnel()
             && self.geometries == GeometrySet::ALL
     }
 }
 
-/// Every fit `brdfd validate` makes: per cost function the paper's default, exact Fresnel,
-/// Oren–Nayar, and the default from the 12 MA-T12 readings alone.
+/// Every fit `brdfd validate` makes: per cost function the paper's model with the paper's
+/// Schlick on cos θi and with the exact Fresnel (the default of measured scans), Oren–Nayar, and
+/// the paper's model with either Fresnel factor from the 12 MA-T12 readings alone.
 pub fn variants() -> Vec<Variant> {
     variants_of(&CostFunction::ALL)
 }
@@ -122,6 +130,7 @@ pub fn variants_of(costs: &[CostFunction]) -> Vec<Variant> {
                 FresnelCosine::Incidence,
                 GeometrySet::MA_T12,
             ),
+            (ModelKind::Paper, FresnelCosine::Exact, GeometrySet::MA_T12),
         ] {
             out.push(Variant {
                 cost,
@@ -206,6 +215,11 @@ pub struct FitResult {
     pub fit_delta_e00_mean: f64,
     pub params: ParamsDocument,
     pub prediction: Prediction,
+    /// Wall-clock time of the fit, ms.
+    pub wall_ms: f64,
+    /// The reach verdict this fit gives the material from its readings alone
+    /// ([`crate::reach`]): what a scan of it would be told, to hold against `prediction`.
+    pub reach: Option<Reach>,
 }
 
 /// The oracle of one model form: fitted to every prediction direction.
@@ -214,6 +228,15 @@ pub struct Oracle {
     pub model: ModelKind,
     pub fresnel: FresnelCosine,
     pub params: ParamsDocument,
+    /// What the polish started from: the best by mean ΔE00 of this form's fits in the
+    /// report, the least-squares fit over every direction and the Lambert baseline.
+    pub start: String,
+    /// Mean ΔE00 at that start.
+    pub start_mean: f64,
+    /// Mean-ΔE00 evaluations the polish made.
+    pub evaluations: u32,
+    /// Wall-clock time of this oracle, ms.
+    pub wall_ms: f64,
     #[serde(flatten)]
     pub prediction: Prediction,
 }
@@ -262,6 +285,10 @@ pub struct Report {
     /// The oracle of every model form the fits use.
     pub oracles: Vec<Oracle>,
     pub lambert: Lambert,
+    /// The reach verdict of the cf2 fit to all 14 readings with exact Fresnel (the verdict's
+    /// calibration; else the first such fit of another cost, else the first fit): what a scan
+    /// of this material would be told.
+    pub reach: Option<Reach>,
     pub wall_ms: f64,
 }
 
@@ -364,8 +391,11 @@ pub fn readings(
     (MeasuredBrdf::full(values), docs)
 }
 
-/// Fits the model form `kind` to every target (the oracle; module text).
-pub fn oracle(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) -> Params {
+/// The least-squares start of the oracle (module text): kd (31 bands) and ks by weighted linear
+/// least squares, weights `1/ȳ²` (relative error), for each (α, μ[, σ]) of a grid refined once
+/// around its best.
+fn least_squares(problem: &OracleProblem) -> Params {
+    let (targets, kind, fresnel) = (problem.targets, problem.kind, problem.fresnel);
     let bounds = Bounds::default();
     let w: Vec<f64> = targets
         .iter()
@@ -375,7 +405,7 @@ pub fn oracle(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) -> Pa
         })
         .collect();
     let sigmas: Vec<f64> = if kind == ModelKind::OrenNayar {
-        (0..=5).map(|k| k as f64 * 0.2).collect()
+        vec![0.0, 0.5, 1.0]
     } else {
         vec![0.0]
     };
@@ -387,11 +417,16 @@ pub fn oracle(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) -> Pa
         let (mut sa, mut sb, mut sc, mut q) = (0.0, 0.0, 0.0, 0.0);
         let mut pl = [0.0; BANDS];
         let mut av = Vec::with_capacity(targets.len());
-        for (t, &wt) in targets.iter().zip(&w) {
-            let g = SpecularGeometry::from_directions(t.wi, t.wo);
-            let s = specular_term(1.0, alpha, ior, fresnel, &g);
+        let (on_a, on_b) = oren_nayar_coefficients(sigma);
+        for (((t, &wt), g), on) in targets
+            .iter()
+            .zip(&w)
+            .zip(&problem.geometry)
+            .zip(&problem.oren_nayar)
+        {
+            let s = specular_term(1.0, alpha, ior, fresnel, g);
             let a = if kind == ModelKind::OrenNayar {
-                oren_nayar_factor_at(sigma, t.wi, t.wo)
+                on_a + on_b * on
             } else {
                 1.0
             };
@@ -454,7 +489,7 @@ pub fn oracle(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) -> Pa
                 let a = (a0 * ratio.powf(i as f64 / 4.0)).clamp(bounds.alpha.0, bounds.alpha.1);
                 let n = (n0 + 0.195 * j as f64 / 4.0).clamp(bounds.ior.0, bounds.ior.1);
                 let s = if kind == ModelKind::OrenNayar {
-                    (s0 + 0.1 * k as f64 / 2.0).clamp(0.0, 1.0)
+                    (s0 + 0.25 * k as f64 / 2.0).clamp(0.0, 1.0)
                 } else if k != 0 {
                     continue;
                 } else {
@@ -468,6 +503,283 @@ pub fn oracle(targets: &[Target], kind: ModelKind, fresnel: FresnelCosine) -> Pa
         }
     }
     best.1.expect("the grid is not empty")
+}
+
+/// What the oracle's polish may start from: a fit of the same form, the least-squares fit over
+/// every direction, or the Lambert baseline.
+#[derive(Debug, Clone)]
+pub struct OracleStart {
+    /// What it is, as the report names it (`cf2 fit, ma-t12+sra`, `least squares`, `lambert`).
+    pub label: String,
+    pub params: Params,
+}
+
+/// The oracle of one model form (module text): where it started and what it reached.
+#[derive(Debug, Clone)]
+pub struct OracleFit {
+    pub params: Params,
+    /// The start the polish began from (the best of the starts by mean ΔE00).
+    pub start: String,
+    /// Mean ΔE00 at that start, before the polish.
+    pub start_mean: f64,
+    /// Mean-ΔE00 evaluations the polish made.
+    pub evaluations: u32,
+}
+
+/// The colour half-width of the oracle's kd search, in tristimulus values relative to the
+/// white (the search moves kd's X, Y, Z by at most this much from the start, per polish run).
+const ORACLE_COLOUR_RANGE: f64 = 0.25;
+
+/// Most mean-ΔE00 evaluations of one Nelder–Mead run of the oracle's polish.
+const ORACLE_RUN_EVALUATIONS: u32 = 500;
+
+/// Most Nelder–Mead runs of the polish (each restarts from the best so far with a smaller step).
+const ORACLE_RUNS: usize = 3;
+
+/// The oracle's objective: mean ΔE00 over the targets of the model form `kind` with any
+/// parameters. The model's colour at a target is `π (a·XYZ(kd) + s·XYZ(1))`, `a` the diffuse
+/// factor (1, or Oren–Nayar's) and `s` the grey lobe: tristimulus values are linear in the
+/// spectrum, so kd enters only through its own XYZ, computed once per evaluation.
+struct OracleProblem<'a> {
+    targets: &'a [Target],
+    geometry: Vec<SpecularGeometry>,
+    /// Oren–Nayar's directional part per target ([`oren_nayar_geometry_at`]).
+    oren_nayar: Vec<f64>,
+    colorimetry: Colorimetry,
+    white: Xyz,
+    kind: ModelKind,
+    fresnel: FresnelCosine,
+    bounds: Bounds,
+    /// Per XYZ coordinate, the least-norm reflectance spectrum that moves that coordinate
+    /// (relative to the white) by 1 and leaves the other two: how the polish moves kd.
+    colour_basis: [Spectrum; 3],
+}
+
+impl<'a> OracleProblem<'a> {
+    fn new(
+        targets: &'a [Target],
+        colorimetry: Colorimetry,
+        kind: ModelKind,
+        fresnel: FresnelCosine,
+    ) -> Self {
+        let white = colorimetry.white_point();
+        // M (3 × 31): band b's contribution to X/Xw, Y/Yw, Z/Zw.
+        let m: [Spectrum; 3] = {
+            let per_band: Vec<Xyz> = (0..BANDS)
+                .map(|b| {
+                    let mut e = [0.0; BANDS];
+                    e[b] = 1.0;
+                    colorimetry.reflectance_to_xyz(&e)
+                })
+                .collect();
+            [
+                std::array::from_fn(|b| per_band[b].x / white.x),
+                std::array::from_fn(|b| per_band[b].y / white.y),
+                std::array::from_fn(|b| per_band[b].z / white.z),
+            ]
+        };
+        let gram: [[f64; 3]; 3] = std::array::from_fn(|i| {
+            std::array::from_fn(|j| (0..BANDS).map(|b| m[i][b] * m[j][b]).sum())
+        });
+        let inv = invert3(gram);
+        // Mᵀ (M Mᵀ)⁻¹ e_j.
+        let colour_basis = std::array::from_fn(|j| {
+            std::array::from_fn(|b| (0..3).map(|i| m[i][b] * inv[i][j]).sum())
+        });
+        OracleProblem {
+            targets,
+            geometry: targets
+                .iter()
+                .map(|t| SpecularGeometry::from_directions(t.wi, t.wo))
+                .collect(),
+            oren_nayar: targets
+                .iter()
+                .map(|t| oren_nayar_geometry_at(t.wi, t.wo))
+                .collect(),
+            colorimetry,
+            white,
+            kind,
+            fresnel,
+            bounds: Bounds::default(),
+            colour_basis,
+        }
+    }
+
+    /// Mean ΔE00 over the targets: what [`predict`] reports as `mean`, computed through XYZ.
+    fn mean_delta_e00(&self, p: &Params) -> f64 {
+        let pi = std::f64::consts::PI;
+        let xd = self.colorimetry.reflectance_to_xyz(&p.kd.map(|k| pi * k));
+        let w = self.white;
+        let (on_a, on_b) = oren_nayar_coefficients(p.extra[0]);
+        let mut sum = 0.0;
+        for ((t, g), on) in self
+            .targets
+            .iter()
+            .zip(&self.geometry)
+            .zip(&self.oren_nayar)
+        {
+            let lab = if g.cos_i <= 0.0 || g.cos_r <= 0.0 {
+                xyz_to_lab(
+                    Xyz {
+                        x: 0.0,
+                        y: 0.0,
+                        z: 0.0,
+                    },
+                    w,
+                )
+            } else {
+                let s = pi * specular_term(p.ks, p.alpha, p.ior, self.fresnel, g);
+                let a = if self.kind == ModelKind::OrenNayar {
+                    on_a + on_b * on
+                } else {
+                    1.0
+                };
+                xyz_to_lab(
+                    Xyz {
+                        x: a * xd.x + s * w.x,
+                        y: a * xd.y + s * w.y,
+                        z: a * xd.z + s * w.z,
+                    },
+                    w,
+                )
+            };
+            sum += ciede2000(t.lab, lab);
+        }
+        sum / self.targets.len().max(1) as f64
+    }
+
+    /// The unit-cube coordinates of `p` relative to the kd it starts from (colour offsets 0).
+    fn coordinates<const D: usize>(&self, p: &Params) -> [f64; D] {
+        let b = &self.bounds;
+        let mut u = [0.5; D];
+        u[3] = (p.ks / b.ks.1).clamp(0.0, 1.0).cbrt();
+        u[4] =
+            ((p.alpha.ln() - b.alpha.0.ln()) / (b.alpha.1.ln() - b.alpha.0.ln())).clamp(0.0, 1.0);
+        u[5] = ((p.ior - b.ior.0) / (b.ior.1 - b.ior.0)).clamp(0.0, 1.0);
+        if D > 6 {
+            u[6] = ((p.extra[0] - OREN_NAYAR_SIGMA.0) / (OREN_NAYAR_SIGMA.1 - OREN_NAYAR_SIGMA.0))
+                .clamp(0.0, 1.0);
+        }
+        u
+    }
+
+    /// The parameters at unit-cube coordinates `u` around the diffuse spectrum `kd0`.
+    fn params_at<const D: usize>(&self, kd0: &Spectrum, u: &[f64; D]) -> Params {
+        let b = &self.bounds;
+        let c: [f64; 3] = std::array::from_fn(|j| (u[j] - 0.5) * 2.0 * ORACLE_COLOUR_RANGE);
+        let kd = std::array::from_fn(|k| {
+            let d: f64 = (0..3).map(|j| c[j] * self.colour_basis[j][k]).sum();
+            (kd0[k] + d / std::f64::consts::PI).clamp(b.kd.0, b.kd.1)
+        });
+        let mut extra = [0.0; EXTRA];
+        if D > 6 {
+            extra[0] = OREN_NAYAR_SIGMA.0 + u[6] * (OREN_NAYAR_SIGMA.1 - OREN_NAYAR_SIGMA.0);
+        }
+        Params {
+            kd,
+            ks: b.ks.1 * u[3].powi(3),
+            alpha: (b.alpha.0.ln() + u[4] * (b.alpha.1.ln() - b.alpha.0.ln())).exp(),
+            ior: b.ior.0 + u[5] * (b.ior.1 - b.ior.0),
+            extra,
+        }
+    }
+
+    /// Nelder–Mead runs from `start`, each from the best so far with a smaller step, until a
+    /// run gains less than 0.001 ΔE00: the best parameters, their mean ΔE00, evaluations.
+    fn polish<const D: usize>(&self, start: &Params, f_start: f64) -> (Params, f64, u32) {
+        let (mut best, mut f_best, mut evaluations) = (*start, f_start, 0u32);
+        let mut step = 0.1;
+        for _ in 0..ORACLE_RUNS {
+            let kd0 = best.kd;
+            let x0 = self.coordinates::<D>(&best);
+            // The coordinates of `best` map back to it but for rounding: its cost there.
+            let p0 = self.params_at(&kd0, &x0);
+            let f0 = self.mean_delta_e00(&p0);
+            let mut count = 1u32;
+            let out = nelder_mead::minimise(
+                &mut |u: &[f64; D]| {
+                    count += 1;
+                    self.mean_delta_e00(&self.params_at(&kd0, u))
+                },
+                x0,
+                f0,
+                &nelder_mead::Options {
+                    initial_step: step,
+                    max_evaluations: ORACLE_RUN_EVALUATIONS,
+                    x_tolerance: 1e-4,
+                    f_tolerance: 1e-5,
+                },
+            );
+            evaluations += count;
+            let gain = f_best - out.f;
+            if out.f < f_best {
+                best = self.params_at(&kd0, &out.x);
+                f_best = out.f;
+            }
+            if gain < 1e-3 {
+                break;
+            }
+            step *= 0.5;
+        }
+        (best, f_best, evaluations)
+    }
+}
+
+/// The inverse of a 3 × 3 matrix (the colour basis's Gram matrix, well conditioned).
+fn invert3(a: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let c = |i: usize, j: usize| {
+        let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
+        let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
+        a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]
+    };
+    let det = a[0][0] * c(0, 0) + a[0][1] * c(0, 1) + a[0][2] * c(0, 2);
+    std::array::from_fn(|i| std::array::from_fn(|j| c(j, i) / det))
+}
+
+/// The oracle of the model form (`kind`, `fresnel`) on `targets` (module text): the mean
+/// ΔE00 over every direction minimised from the best of `starts` and of the least-squares fit.
+/// Never worse than any start: the polish keeps the best point it has seen, and the result
+/// is checked against the best start by [`predict`] itself.
+pub fn oracle(
+    targets: &[Target],
+    colorimetry: Colorimetry,
+    kind: ModelKind,
+    fresnel: FresnelCosine,
+    starts: &[OracleStart],
+) -> OracleFit {
+    let problem = OracleProblem::new(targets, colorimetry, kind, fresnel);
+    let mut candidates = starts.to_vec();
+    candidates.push(OracleStart {
+        label: "least squares".into(),
+        params: least_squares(&problem),
+    });
+    let (start, f_start) = candidates
+        .iter()
+        .map(|c| (c, problem.mean_delta_e00(&c.params)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("the least-squares start at least");
+    let (params, _, evaluations) = if kind == ModelKind::OrenNayar {
+        problem.polish::<7>(&start.params, f_start)
+    } else {
+        problem.polish::<6>(&start.params, f_start)
+    };
+    let mean = |p: &Params| {
+        predict(targets, colorimetry, &|t| {
+            evaluate_at(p, kind, fresnel, t.wi, t.wo)
+        })
+        .mean
+    };
+    let start_mean = mean(&start.params);
+    OracleFit {
+        params: if mean(&params) <= start_mean {
+            params
+        } else {
+            start.params
+        },
+        start: start.label.clone(),
+        start_mean,
+        evaluations,
+    }
 }
 
 /// Validates the handheld estimate against one measurement, with every fit of [`variants`].
@@ -485,7 +797,12 @@ pub fn validate_with(
     let colorimetry = opts.colorimetry;
     let (targets, prediction_set) = targets(m, colorimetry);
     let (measured, reading_docs) = readings(m, opts.sra);
+    let lambert_f = {
+        let g = crate::geometry::by_name(LAMBERT_GEOMETRY).expect("a table geometry");
+        measured.values[g.index]
+    };
     let mut fits = Vec::new();
+    let mut fitted: Vec<(Variant, Params)> = Vec::new();
     for &v in variants {
         let request = FitRequest {
             settings: Settings {
@@ -511,6 +828,7 @@ pub fn validate_with(
             &mut |_| ControlFlow::Continue(()),
         )?;
         let p = report.outcome.params;
+        fitted.push((v, p));
         let prediction = predict(&targets, colorimetry, &|t| {
             evaluate_at(&p, v.model, v.fresnel, t.wi, t.wo)
         });
@@ -527,11 +845,72 @@ pub fn validate_with(
             fit_delta_e00_mean: report.evaluation.diffuse.mean,
             params: ParamsDocument::new(&p, v.model),
             prediction,
+            wall_ms: report.outcome.wall_ms,
+            reach: crate::reach::of_report(&report),
         });
     }
     let mut oracles = Vec::new();
+    let mut oracle_params: Vec<(ModelKind, FresnelCosine, Params)> = Vec::new();
     for &(model, fresnel) in opts.oracle_forms {
-        let p = oracle(&targets, model, fresnel);
+        let mut starts: Vec<OracleStart> = fitted
+            .iter()
+            .filter(|(v, _)| v.model == model && v.fresnel == fresnel)
+            .map(|(v, p)| OracleStart {
+                label: format!(
+                    "{} fit, {}",
+                    v.cost.name(),
+                    if v.geometries == GeometrySet::ALL {
+                        "ma-t12+sra"
+                    } else {
+                        "ma-t12"
+                    }
+                ),
+                params: *p,
+            })
+            .collect();
+        // The Lambert baseline is the form with no lobe (and σ = 0).
+        starts.push(OracleStart {
+            label: "lambert".into(),
+            params: Params {
+                kd: lambert_f,
+                ks: 0.0,
+                alpha: 0.1,
+                ior: 1.5,
+                extra: [0.0; EXTRA],
+            },
+        });
+        // A form that holds another (Oren–Nayar with σ = 0 is the paper's model) starts from
+        // that form's fits and oracle too.
+        if model == ModelKind::OrenNayar {
+            starts.extend(
+                fitted
+                    .iter()
+                    .filter(|(v, _)| v.model == ModelKind::Paper && v.fresnel == fresnel)
+                    .map(|(v, p)| OracleStart {
+                        label: format!("{} paper fit", v.cost.name()),
+                        params: Params {
+                            extra: [0.0; EXTRA],
+                            ..*p
+                        },
+                    }),
+            );
+            starts.extend(
+                oracle_params
+                    .iter()
+                    .filter(|(m, f, _)| *m == ModelKind::Paper && *f == fresnel)
+                    .map(|(_, _, p)| OracleStart {
+                        label: "paper oracle".into(),
+                        params: Params {
+                            extra: [0.0; EXTRA],
+                            ..*p
+                        },
+                    }),
+            );
+        }
+        let started = Instant::now();
+        let o = oracle(&targets, colorimetry, model, fresnel, &starts);
+        let p = o.params;
+        oracle_params.push((model, fresnel, p));
         let prediction = predict(&targets, colorimetry, &|t| {
             evaluate_at(&p, model, fresnel, t.wi, t.wo)
         });
@@ -539,13 +918,13 @@ pub fn validate_with(
             model,
             fresnel,
             params: ParamsDocument::new(&p, model),
+            start: o.start,
+            start_mean: o.start_mean,
+            evaluations: o.evaluations,
+            wall_ms: started.elapsed().as_secs_f64() * 1e3,
             prediction,
         });
     }
-    let lambert_f = {
-        let g = crate::geometry::by_name(LAMBERT_GEOMETRY).expect("a table geometry");
-        measured.values[g.index]
-    };
     let lambert = Lambert {
         geometry: LAMBERT_GEOMETRY,
         prediction: predict(&targets, colorimetry, &|_| lambert_f),
@@ -578,6 +957,15 @@ pub fn validate_with(
         Measurement::Rgl(_) => None,
     };
     let near_specular_directions = targets.iter().filter(|t| t.near).count();
+    let exact_all =
+        |f: &&FitResult| f.fresnel == FresnelCosine::Exact && f.readings == "ma-t12+sra";
+    let reach = fits
+        .iter()
+        .filter(exact_all)
+        .find(|f| f.cost == CostFunction::Cf2)
+        .or(fits.iter().find(exact_all))
+        .or(fits.first())
+        .and_then(|f| f.reach.clone());
     Ok(Report {
         material: m.material().to_string(),
         file: None,
@@ -601,6 +989,7 @@ pub fn validate_with(
             .expect("at least one oracle form (Options::oracle_forms)"),
         oracles,
         lambert,
+        reach,
         wall_ms: start.elapsed().as_secs_f64() * 1e3,
     })
 }
@@ -622,9 +1011,93 @@ mod tests {
     }
 
     #[test]
-    fn twelve_variants_one_default_per_cost() {
+    #[allow(clippy::needless_range_loop)]
+    fn the_colour_basis_moves_one_tristimulus_value_each() {
+        let c = Options::default().colorimetry;
+        let p = OracleProblem::new(&[], c, ModelKind::Paper, FresnelCosine::Exact);
+        let w = c.white_point();
+        for (j, basis) in p.colour_basis.iter().enumerate() {
+            let xyz = c.reflectance_to_xyz(basis);
+            let rel = [xyz.x / w.x, xyz.y / w.y, xyz.z / w.z];
+            for (i, v) in rel.iter().enumerate() {
+                let want = if i == j { 1.0 } else { 0.0 };
+                assert!((v - want).abs() < 1e-9, "basis {j}: {rel:?}");
+            }
+        }
+        let a = [[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]];
+        let inv = invert3(a);
+        for i in 0..3 {
+            for j in 0..3 {
+                let v: f64 = (0..3).map(|k| a[i][k] * inv[k][j]).sum();
+                assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn the_oracle_objective_is_the_reported_mean() {
+        let c = Options::default().colorimetry;
+        let p = Params {
+            kd: std::array::from_fn(|b| 0.05 + 0.004 * b as f64),
+            ks: 0.4,
+            alpha: 0.2,
+            ior: 1.6,
+            extra: [0.3, 0.0],
+        };
+        let truth = Params {
+            ks: 0.2,
+            alpha: 0.1,
+            ..p
+        };
+        let targets: Vec<Target> = (0..40)
+            .map(|k| {
+                let wi = direction((5.0 + 1.7 * k as f64).to_radians(), 0.0);
+                let wo = direction(
+                    (70.0 - 1.5 * k as f64).to_radians(),
+                    (9.0 * k as f64).to_radians(),
+                );
+                let f = evaluate_at(&truth, ModelKind::OrenNayar, FresnelCosine::Exact, wi, wo);
+                Target {
+                    wi,
+                    wo,
+                    measured: f,
+                    lab: c.reflectance_to_lab(&f.map(|x| std::f64::consts::PI * x)),
+                    near: false,
+                }
+            })
+            .collect();
+        for kind in [ModelKind::Paper, ModelKind::OrenNayar] {
+            let problem = OracleProblem::new(&targets, c, kind, FresnelCosine::Exact);
+            let want = predict(&targets, c, &|t| {
+                evaluate_at(&p, kind, FresnelCosine::Exact, t.wi, t.wo)
+            })
+            .mean;
+            let got = problem.mean_delta_e00(&p);
+            assert!(
+                (got - want).abs() < 1e-9 * want,
+                "{kind:?}: {got} vs {want}"
+            );
+            // The coordinates of a point map back to it.
+            let back = if kind == ModelKind::OrenNayar {
+                problem.params_at(&p.kd, &problem.coordinates::<7>(&p))
+            } else {
+                problem.params_at(&p.kd, &problem.coordinates::<6>(&p))
+            };
+            assert!((back.ks - p.ks).abs() < 1e-12 && (back.alpha - p.alpha).abs() < 1e-12);
+            assert!((back.ior - p.ior).abs() < 1e-12 && back.kd == p.kd);
+        }
+    }
+
+    #[test]
+    fn fifteen_variants_one_default_per_cost() {
         let v = variants();
-        assert_eq!(v.len(), 12);
+        assert_eq!(v.len(), 15);
         assert_eq!(v.iter().filter(|v| v.is_default()).count(), 3);
+        // The default is what a measured scan is fitted with: the exact Fresnel, 14 readings.
+        assert!(
+            v.iter()
+                .filter(|v| v.is_default())
+                .all(|v| v.fresnel == FresnelCosine::Exact && v.geometries == GeometrySet::ALL)
+        );
     }
 }

@@ -23,7 +23,7 @@
 #![allow(clippy::needless_range_loop)]
 
 mod ga;
-mod nelder_mead;
+pub(crate) mod nelder_mead;
 mod options;
 mod preset;
 mod problem;

@@ -533,6 +533,18 @@ mod tests {
             md.contains("Held-out ΔE00: how far to trust each estimate off the measured angles"),
             "{md}"
         );
+        // Every finished fit's reach verdict, with the held-out ΔE00 among its evidence.
+        assert!(
+            md.contains("| sample | cf1 reach | cf1 expected ΔE00 |"),
+            "{md}"
+        );
+        let reach_rows = md
+            .lines()
+            .filter(|l| {
+                l.contains("in reach |") || l.contains("marginal |") || l.contains("out of reach |")
+            })
+            .count();
+        assert_eq!(reach_rows, 2, "{md}");
         assert!(
             md.contains("| sample | cf1 fitted (MA-T12) | cf1 held out | cf1 worst held out |"),
             "{md}"

@@ -182,6 +182,61 @@ fn held_out_blocks(study: &Study, costs: &[CostFunction]) -> Vec<Block> {
     b
 }
 
+/// The reach verdict of a sample's finished fit (SCIENCE.md §12.7): from its readings' L*, its
+/// MA-T12 ΔE00 and its held-out ΔE00 once computed, as `brdfd show` derives it.
+fn reach_of(s: &SampleStudy, d: &crate::study::DoneFit) -> Option<crate::reach::Reach> {
+    let lab = crate::fit::LabPerGeometry::of(
+        &s.measured,
+        &d.estimated,
+        d.colorimetry,
+        &std::array::from_fn(|g| d.evaluation.at(g).unwrap_or(f64::NAN)),
+    );
+    let e = crate::reach::Evidence::of(
+        &lab,
+        d.evaluation.diffuse.mean,
+        d.crossval.as_ref().map(|c| c.held_out_mean),
+        d.fresnel,
+    )?;
+    Some(crate::reach::assess(&e))
+}
+
+/// Whether each sample is in the model's reach, per cost function (SCIENCE.md §12.7).
+fn reach_blocks(study: &Study, costs: &[CostFunction]) -> Vec<Block> {
+    let done = study
+        .samples
+        .iter()
+        .flat_map(|s| s.fits.iter())
+        .any(|f| f.done().is_some());
+    if !done {
+        return Vec::new();
+    }
+    vec![
+        Block::Heading("In the model's reach? What to expect over the hemisphere".into()),
+        per_sample_table(
+            study,
+            costs,
+            &["reach", "expected ΔE00"],
+            format!(
+                "Reach verdict per sample and fit (SCIENCE.md §12.7): in reach (matt and medium-gloss materials), marginal, or out of reach (glossy: the model's one lobe cannot follow the specular peak), told from the readings alone (how far the brightest reading stands above the 45as45 one, the fit's ΔE00 at the MA-T12 geometries, its held-out ΔE00 once computed), with the prediction ΔE00 over the hemisphere to expect; calibrated on {}.",
+                crate::reach::CALIBRATION.source
+            ),
+            |row, s, c| match s.fit(c).and_then(|f| f.done()) {
+                Some(d) => match reach_of(s, d) {
+                    Some(r) => row.extend([
+                        r.verdict.to_string(),
+                        format!(
+                            "{:.1}–{:.1}",
+                            r.expected_delta_e00[0], r.expected_delta_e00[1]
+                        ),
+                    ]),
+                    None => row.extend(["no 45as45 reading".into(), "".into()]),
+                },
+                None => row.extend(["no finished fit".into(), "".into()]),
+            },
+        ),
+    ]
+}
+
 fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> {
     let costs = &analysis.cost_functions;
     let cost_list = costs
@@ -330,6 +385,7 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
         },
     ));
     b.extend(held_out_blocks(study, costs));
+    b.extend(reach_blocks(study, costs));
     b.push(Block::Heading(
         "Mean ΔE00 per cost function, 95 % confidence interval".into(),
     ));

@@ -855,12 +855,13 @@ async function renderResult(id) {
     h("section", { "aria-labelledby": "h-de" },
       h("h3", { id: "h-de" }, "ΔE00 (mean)"),
       fitsDone.length ? h("div", { class: "scroll" }, h("table", { class: "data", id: "de-table" },
-        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "held out (each of the 12 predicted without it)", scan.specular_readings === false ? "specular (no SRA readings)" : "specular (2, vs the paper's grey spectrum)", `all (${geometryCount(scan)})`, "specular |ΔL*| (SRA model)", ""].map((c) => h("th", { scope: "col" }, c)))),
+        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "held out (each of the 12 predicted without it)", scan.specular_readings === false ? "specular (no SRA readings)" : "specular (2, vs the paper's grey spectrum)", `all (${geometryCount(scan)})`, "specular |ΔL*| (SRA model)", "in the model's reach?", ""].map((c) => h("th", { scope: "col" }, c)))),
         h("tbody", {}, fitsDone.map((f) => h("tr", { "data-cost": f.cost_function },
           h("td", {}, f.cost_function), h("td", {}, f.method), h("td", {}, fmt(f.delta_e00_diffuse)),
           heldOutCell(latestDone.get(f.cost_function)),
           h("td", {}, f.delta_e00_specular === null ? "no specular readings" : fmt(f.delta_e00_specular)), h("td", {}, fmt(f.delta_e00_all)),
           h("td", {}, deltaL(latestDone.get(f.cost_function))),
+          reachCell(latestDone.get(f.cost_function)),
           h("td", { class: f === best ? "best" : "" }, f === best ? "★ best" : ""))))))
         : h("p", { id: "not-fitted" }, notFitted),
       fitsDone.length ? h("p", { class: "muted" }, "Held out: each MA-T12 geometry predicted by a fit to the others (leave-one-geometry-out), mean ΔE00 — how far to trust the estimate at angles that were not measured. The diffuse figure beside it is the fit to every reading, which says less about other angles.") : null),
@@ -953,6 +954,19 @@ function heldOutCell(d) {
   if (!cv) return h("td", { class: "held-out" }, d ? "not computed (yet)" : "—");
   const worst = cv.held_out.reduce((a, b) => (b.delta_e00 > a.delta_e00 ? b : a));
   return h("td", { class: "held-out", "data-held-out": fmt(cv.held_out_mean), title: `worst: ${worst.geometry} ${fmt(worst.delta_e00)}` }, fmt(cv.held_out_mean));
+}
+
+/** A fit's reach verdict (SCIENCE.md §12.7): whether the model can represent the material, the
+ * prediction ΔE00 to expect over the hemisphere, and why on hover. */
+function reachCell(d) {
+  const r = d && d.reach;
+  if (!r) return h("td", { class: "reach" }, "—");
+  const [lo, hi] = r.expected_delta_e00;
+  const [nlo, nhi] = r.expected_near_specular_delta_e00;
+  const words = { "in-reach": "in reach", marginal: "marginal", "out-of-reach": "out of reach" }[r.verdict] || r.verdict;
+  return h("td", { class: "reach", "data-reach": r.verdict,
+    title: `${r.reasons.join("; ")}. Near the mirror direction: ΔE00 ${fmt(nlo, 1)}–${fmt(nhi, 1)}. Calibrated on ${r.calibration}.` },
+  `${words}: expect ΔE00 ${fmt(lo, 1)}–${fmt(hi, 1)}`);
 }
 
 function paramRow(f) {
