@@ -7,12 +7,15 @@
 //! - [`model`]: the spectral Cook–Torrance/GGX model.
 //! - [`processing`]: device readings → measured BRDF against the N9 reference.
 //! - [`cost`]: the paper's three cost functions (cf1, cf2, m2) of a model against a measurement.
-//! - [`optimise`]: fits the 34 model parameters: the paper's GA and the default separable search.
+//! - [`optimise`]: fits the 34 model parameters: the paper's GA and the default separable search;
+//!   the presets (`measured`, `paper`) of the fit's science choices.
 //! - [`colour`]: spectra → CIE XYZ/CIELAB (D65, 2°), CIEDE2000, 8-bit sRGB swatches.
 //! - [`evaluation`]: ΔE00 between measured and estimated BRDF per geometry, with summaries.
 //! - [`stats`]: study statistics: mean ΔE00 with 95 % t interval, exact sign test; the one
 //!   standard normal draw the noise and the bootstrap share.
-//! - [`uncertainty`]: parameter intervals of a fit by a parametric bootstrap (SCIENCE.md §10).
+//! - [`uncertainty`]: parameter intervals of a fit by a parametric bootstrap widened by a
+//!   leave-one-geometry-out jackknife, and their calibration (SCIENCE.md §10).
+//! - [`crossval`]: leave-one-geometry-out cross-validation of a fit (`brdfd crossval`).
 //!
 //! Scans and fits (pure, synchronous; file I/O only at the edges):
 //! - [`scan`]: the `brdfd.scan/1` scan file, read and written with every field checked.
@@ -28,7 +31,7 @@
 //! - [`formats`]: exchange formats: CGATS.17, CxF3, CSV, JSON exports; instrument-software imports.
 //! - [`render`]: spectral sphere previews of fitted materials (PNG).
 //! - [`fonts`]: the embedded typeface of every figure and preview.
-//! - [`names`]: file-name slugs of sample names.
+//! - [`names`]: file-name slugs of sample names; the names of the fit's choices.
 //! - [`safe_fs`]: every file written outside the store: no links followed, never onto the store.
 //!
 //! Command line:
