@@ -149,9 +149,9 @@ struct PyFitReport {
 
 #[pymethods]
 impl PyFitReport {
-    /// The fit document, exactly as `brdfd fit --json` prints it.
+    /// The fit document, exactly as `brdfd fit --json` prints it (its reach verdict included).
     fn to_json(&self) -> PyResult<String> {
-        serde_json::to_string(&self.report).map_err(|e| value_error(e.into()))
+        brdfd::cli::fit::fit_document_json(&self.report).map_err(|e| value_error(e.into()))
     }
 
     /// The measured BRDF (sr⁻¹), one 31-band list per geometry in table order; `None` where

@@ -172,27 +172,30 @@ impl FitArgs {
     }
 }
 
+/// The fit document `brdfd fit --json` prints (and the Python package's `FitReport.to_json`):
+/// the report with its reach verdict after its keys.
+pub fn fit_document_json(report: &FitReport) -> serde_json::Result<String> {
+    #[derive(serde::Serialize)]
+    struct WithReach<'a> {
+        #[serde(flatten)]
+        fit: &'a FitReport,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        reach: Option<crate::reach::Reach>,
+    }
+    serde_json::to_string(&WithReach {
+        fit: report,
+        reach: crate::reach::of_report(report),
+    })
+}
+
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let scan = Scan::read_file(&args.input)?;
     let report = fit_with(&scan, args)?;
-    let reach = crate::reach::of_report(&report);
     if args.json {
-        /// The fit document with the reach verdict after its keys.
-        #[derive(serde::Serialize)]
-        struct WithReach<'a> {
-            #[serde(flatten)]
-            fit: &'a FitReport,
-            #[serde(skip_serializing_if = "Option::is_none")]
-            reach: Option<crate::reach::Reach>,
-        }
-        let doc = WithReach {
-            fit: &report,
-            reach,
-        };
-        println!("{}", serde_json::to_string(&doc)?);
+        println!("{}", fit_document_json(&report)?);
     } else {
         print!("{}", table(&report));
-        if let Some(reach) = &reach {
+        if let Some(reach) = &crate::reach::of_report(&report) {
             println!("reach            {}", reach_line(reach));
         }
     }
