@@ -142,6 +142,7 @@ fn main() {
             model: ModelKind::Paper,
             fresnel,
             geometries: GeometrySet::ALL,
+            sra_weight: brdfd::sra_reading::SraWeight::Paper,
         })
         .collect();
     let opts = Options {

@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT, GeometrySet, MA_T12_COUNT};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, Spectrum};
-use crate::sra_reading::{SraModel, SraReading, luminance_with};
+use crate::sra_reading::{SraModel, SraReading, SraWeight, luminance_with};
 
 /// Number of (geometry, band) terms in the cost of a full scan: 14 · 31.
 pub const TERMS: usize = GEOMETRY_COUNT * BANDS;
@@ -104,11 +104,42 @@ pub fn weights() -> [f64; GEOMETRY_COUNT] {
     std::array::from_fn(|g| GEOMETRIES[g].cos_theta_i())
 }
 
-/// The cost of a model BRDF `model` (sr⁻¹, [`GEOMETRIES`] order) against `measured`.
+/// The weights of `measured`'s geometries in a cost under `weight` (SCIENCE.md §5.2): the
+/// cosine weights, with the SRA geometries' scaled by [`SraWeight::scale`] of the scan's mean
+/// weighted readings (band mean) at its measured MA-T12 and SRA geometries. The paper's
+/// weighting is [`weights`] itself.
+pub fn weights_for(weight: SraWeight, measured: &MeasuredBrdf) -> [f64; GEOMETRY_COUNT] {
+    let w = weights();
+    if weight.is_paper() || !measured.geometries.has_sra() {
+        return w;
+    }
+    let level = |range: std::ops::Range<usize>| {
+        let (mut sum, mut n) = (0.0, 0.0);
+        for g in range.filter(|&g| measured.geometries.contains(g)) {
+            sum += w[g] * measured.values[g].iter().sum::<f64>() / BANDS as f64;
+            n += 1.0;
+        }
+        if n > 0.0 { sum / n } else { 0.0 }
+    };
+    let scale = weight.scale(level(0..MA_T12_COUNT), level(MA_T12_COUNT..GEOMETRY_COUNT));
+    std::array::from_fn(|g| if g < MA_T12_COUNT { w[g] } else { w[g] * scale })
+}
+
+/// The cost of a model BRDF `model` (sr⁻¹, [`GEOMETRIES`] order) against `measured`, every
+/// geometry weighted by cos θi (the paper's weighting).
 ///
 /// Non-finite inputs give a non-finite cost; the optimiser rejects such scans before fitting.
 pub fn cost(cf: CostFunction, measured: &MeasuredBrdf, model: &[Spectrum; GEOMETRY_COUNT]) -> f64 {
-    let w = weights();
+    cost_weighted(cf, measured, model, &weights())
+}
+
+/// [`cost`] with the geometries weighted by `w`.
+fn cost_weighted(
+    cf: CostFunction,
+    measured: &MeasuredBrdf,
+    model: &[Spectrum; GEOMETRY_COUNT],
+    w: &[f64; GEOMETRY_COUNT],
+) -> f64 {
     let mut sum = 0.0;
     for g in 0..GEOMETRY_COUNT {
         if !measured.geometries.contains(g) {
@@ -141,20 +172,21 @@ fn term(cf: CostFunction, m: f64, a: f64) -> f64 {
     }
 }
 
-/// The cost of `model` against `measured` under the SRA reading model `sra`: [`cost`] itself
-/// for the paper's flat model; for `luminance`, the 12 × 31 MA-T12 terms as in [`cost`] and at
-/// each SRA geometry the term of the luminance residual, `BANDS · φ(w·Y(M), w·Y(A))` with `Y`
-/// under the instrument's illuminant and observer. N = 434 either way.
+/// The cost of `model` against `measured` under the SRA reading model `sra`, its geometries
+/// weighted as `sra.weight` says ([`weights_for`]): for the paper's flat model the terms of
+/// [`cost`]; for `luminance`, the 12 × 31 MA-T12 terms as in [`cost`] and at each SRA geometry
+/// the term of the luminance residual, `BANDS · φ(w·Y(M), w·Y(A))` with `Y` under the
+/// instrument's illuminant and observer. N = 434 either way.
 pub fn cost_with(
     cf: CostFunction,
     sra: SraReading,
     measured: &MeasuredBrdf,
     model: &[Spectrum; GEOMETRY_COUNT],
 ) -> f64 {
+    let w = weights_for(sra.weight, measured);
     if sra.model == SraModel::Flat {
-        return cost(cf, measured, model);
+        return cost_weighted(cf, measured, model, &w);
     }
-    let w = weights();
     let c = sra.weights();
     let mut sum = 0.0;
     for g in 0..MA_T12_COUNT {

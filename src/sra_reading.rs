@@ -118,8 +118,70 @@ impl FromStr for SraIlluminant {
     }
 }
 
-/// The SRA reading model of a fit and the instrument's illuminant and observer. The default is
-/// the paper's flat model (the illuminant and observer then only serve the |ΔL*| evaluation).
+/// How much the SRA's readings weigh in the cost beside the MA-T12's (`brdfd fit
+/// --sra-weight`, `[fit] sra_weight`; SCIENCE.md §5.2).
+///
+/// The paper weighs every geometry by cos θi alone, so a glossy sample's specular readings,
+/// tens to thousands of times its diffuse ones, carry residuals as many times larger: under cf1
+/// and m2 a lobe that cannot follow them exactly pulls the whole fit, the diffuse colour
+/// included, towards them. [`SraWeight::Balanced`] measures each instrument's residuals against
+/// its own readings' level instead: when the SRA geometries' mean weighted reading `S` is above
+/// the MA-T12's `D`, their weights are scaled by `D / S` ([`SraWeight::scale`]), so that a
+/// relative miss at an SRA geometry costs what the same relative miss costs at an MA-T12 one.
+/// A scan whose SRA readings are at or below its diffuse level is weighed as the paper does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SraWeight {
+    /// Every geometry by cos θi (paper Eq. 6–8): the type's default, what settings stored
+    /// without a weight were fitted with.
+    #[default]
+    Paper,
+    /// The SRA geometries' weights scaled down to the MA-T12 readings' level when theirs is
+    /// above it.
+    Balanced,
+}
+
+impl SraWeight {
+    /// Both, the type's default first.
+    pub const ALL: [SraWeight; 2] = [SraWeight::Paper, SraWeight::Balanced];
+
+    /// The name on the command line, in settings and in reports.
+    pub const fn name(self) -> &'static str {
+        match self {
+            SraWeight::Paper => "paper",
+            SraWeight::Balanced => "balanced",
+        }
+    }
+
+    /// True for the paper's weighting (settings leave it out).
+    pub fn is_paper(&self) -> bool {
+        *self == SraWeight::Paper
+    }
+
+    /// The factor the SRA geometries' cosine weights are multiplied by, for a scan whose
+    /// measured MA-T12 geometries have the mean weighted reading `diffuse_level` and whose SRA
+    /// geometries `sra_level` (`w·` the band mean, sr⁻¹): 1 under the paper's weighting, or
+    /// when the SRA level is not above the MA-T12 one (or either is not positive).
+    pub fn scale(self, diffuse_level: f64, sra_level: f64) -> f64 {
+        match self {
+            SraWeight::Balanced if sra_level > diffuse_level && diffuse_level > 0.0 => {
+                diffuse_level / sra_level
+            }
+            _ => 1.0,
+        }
+    }
+}
+
+crate::names::choice_by_name!(
+    SraWeight,
+    "SRA weight",
+    "paper (every geometry by cos θi, as the paper) or balanced (the SRA readings weighed at \
+     the MA-T12 readings' level)"
+);
+
+/// The SRA reading model of a fit, the instrument's illuminant and observer, and the SRA
+/// readings' weight in the cost. The default is the paper's flat model and weights (the
+/// illuminant and observer then only serve the |ΔL*| evaluation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SraReading {
@@ -129,15 +191,23 @@ pub struct SraReading {
     pub illuminant: SraIlluminant,
     #[serde(default)]
     pub observer: Observer,
+    /// Left out of the serialised settings when it is the paper's, so that they read as
+    /// before the option existed.
+    #[serde(default, skip_serializing_if = "SraWeight::is_paper")]
+    pub weight: SraWeight,
 }
 
 impl fmt::Display for SraReading {
-    /// e.g. `flat`, `luminance (C/2°)`.
+    /// e.g. `flat`, `luminance (C/2°)`, `luminance (C/2°), balanced`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self.model {
-            SraModel::Flat => f.write_str("flat"),
-            SraModel::Luminance => write!(f, "luminance ({}/{}°)", self.illuminant, self.observer),
+            SraModel::Flat => f.write_str("flat")?,
+            SraModel::Luminance => write!(f, "luminance ({}/{}°)", self.illuminant, self.observer)?,
         }
+        if !self.weight.is_paper() {
+            write!(f, ", {}", self.weight)?;
+        }
+        Ok(())
     }
 }
 
@@ -147,6 +217,7 @@ impl SraReading {
         model: SraModel::Flat,
         illuminant: SraIlluminant::C,
         observer: Observer::Cie1931TwoDegree,
+        weight: SraWeight::Paper,
     };
 
     /// The luminance model with the default instrument (ISO 2813: illuminant C, 2° V(λ)).
@@ -154,6 +225,7 @@ impl SraReading {
         model: SraModel::Luminance,
         illuminant: SraIlluminant::C,
         observer: Observer::Cie1931TwoDegree,
+        weight: SraWeight::Paper,
     };
 
     /// The default (the paper's flat model, default instrument): settings leave it out.
@@ -164,6 +236,11 @@ impl SraReading {
     /// `self` with another model, the same instrument.
     pub fn with_model(self, model: SraModel) -> SraReading {
         SraReading { model, ..self }
+    }
+
+    /// `self` with another weight in the cost.
+    pub fn with_weight(self, weight: SraWeight) -> SraReading {
+        SraReading { weight, ..self }
     }
 
     /// The normalised luminance weights `c_b = S(λ_b) ȳ(λ_b) / Σ S ȳ` at the band centres

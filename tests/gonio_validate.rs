@@ -12,6 +12,7 @@ use brdfd::gonio::{Channels, Measurement};
 use brdfd::model::{EXTRA, FresnelCosine, ModelKind, Params, evaluate_at};
 use brdfd::reach::Verdict;
 use brdfd::spectral::{BANDS, wavelengths_nm};
+use brdfd::sra_reading::SraWeight;
 
 mod common;
 
@@ -89,6 +90,7 @@ fn cf2(model: ModelKind, fresnel: FresnelCosine) -> Variant {
         model,
         fresnel,
         geometries: GeometrySet::ALL,
+        sra_weight: SraWeight::Paper,
     }
 }
 
@@ -255,6 +257,7 @@ fn the_oracle_is_never_worse_than_a_prediction_of_its_form() {
                     model,
                     fresnel,
                     geometries,
+                    sra_weight: SraWeight::Paper,
                 });
             }
         }
@@ -329,6 +332,76 @@ fn reach_tells_a_matt_material_from_a_glossy_coat() {
         near > matt_near && near > g.fits[0].prediction.rest_mean.unwrap(),
         "glossy near-specular {near}, matt {matt_near}, {:?}",
         g.fits[0].prediction
+    );
+}
+
+/// A clear coat whose mirror peak is far sharper than its haze, over an orange base: the SRA
+/// reads it hundreds of times above the diffuse level.
+fn sharp_coat(wi: Vec3, wo: Vec3) -> Vec<f64> {
+    let lobe = |ks: f64, alpha: f64| {
+        let p = Params {
+            kd: [0.0; BANDS],
+            ks,
+            alpha,
+            ior: 1.5,
+            extra: [0.0; EXTRA],
+        };
+        evaluate_at(&p, ModelKind::Paper, FresnelCosine::Exact, wi, wo)[0]
+    };
+    let spec = lobe(1.0, 0.004) + lobe(0.8, 0.35);
+    (0..BANDS)
+        .map(|b| match b {
+            0..=9 => 0.05,
+            10..=19 => 0.1,
+            _ => 0.3,
+        } + spec)
+        .collect()
+}
+
+/// Under cf1 with the paper's Fresnel, a lobe that cannot follow SRA readings hundreds above
+/// the diffuse level drags the diffuse colour after them when every geometry weighs by cos θi
+/// alone; weighed at the MA-T12 readings' level (`balanced`), the same fit keeps it.
+#[test]
+fn balanced_sra_weights_keep_cf1_from_losing_the_diffuse_colour() {
+    let m = Measurement::Astm(AstmFile::sampled("sharp coat", "test", &sharp_coat));
+    let exact_cf1 = |fresnel, sra_weight| Variant {
+        cost: CostFunction::Cf1,
+        model: ModelKind::Paper,
+        fresnel,
+        geometries: GeometrySet::ALL,
+        sra_weight,
+    };
+    let opts = Options {
+        oracle_forms: &[(ModelKind::Paper, FresnelCosine::Exact)],
+        ..Options::default()
+    };
+    let r = validate_with(
+        &m,
+        &opts,
+        &[
+            exact_cf1(FresnelCosine::Incidence, SraWeight::Paper),
+            exact_cf1(FresnelCosine::Incidence, SraWeight::Balanced),
+        ],
+    )
+    .unwrap();
+    let sra = r.readings["sra-60"].reading[0];
+    let diffuse = r.readings["45as45"].reading.iter().sum::<f64>() / BANDS as f64;
+    assert!(sra > 100.0 * diffuse, "SRA {sra}, diffuse {diffuse}");
+    let (paper, balanced) = (&r.fits[0], &r.fits[1]);
+    assert_eq!(
+        (paper.sra_weight, balanced.sra_weight),
+        (SraWeight::Paper, SraWeight::Balanced)
+    );
+    assert!(
+        paper.fit_delta_e00_mean > 10.0,
+        "the paper's weights lose the diffuse colour: fit ΔE00 {}",
+        paper.fit_delta_e00_mean
+    );
+    assert!(
+        balanced.fit_delta_e00_mean < 2.0 && balanced.prediction.mean < 3.0,
+        "balanced: fit ΔE00 {}, prediction {}",
+        balanced.fit_delta_e00_mean,
+        balanced.prediction.mean
     );
 }
 

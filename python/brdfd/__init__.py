@@ -191,13 +191,16 @@ def fit(
     model: Optional[str] = None,
     hold_out: Optional[Sequence[str]] = None,
     preset: Optional[str] = None,
+    sra_weight: Optional[str] = None,
 ) -> FitResult:
     """Fits a scan as ``brdfd fit`` does with the same options (``cost``: cf1, cf2, m2;
     ``method``: the default or "paper"; ``bootstrap``: resamples for 95 % intervals, 0 skips
     them; ``preset``: "measured" (the default: exact Fresnel, luminance SRA) or "paper" (the
     paper's configuration: Schlick on cos θi, flat SRA), whose choices ``model`` ("paper",
     "oren-nayar" or "two-lobe"), ``fresnel`` ("exact", "incidence" or "light-half") and ``sra``
-    ("luminance" or "flat") override one by one;
+    ("luminance" or "flat") and ``sra_weight`` ("balanced" or "paper": how much the SRA
+    readings weigh beside the MA-T12's; the measured preset balances them under cf1 and m2)
+    override one by one;
     ``hold_out``: MA-T12 geometries left out of the fit and predicted, as ``brdfd fit
     --hold-out``: their predictions are ``document["held_out"]``).  Runs without holding the
     GIL."""
@@ -206,6 +209,7 @@ def fit(
         observer=observer, weighting=weighting, sra_illuminant=sra_illuminant,
         sra_observer=sra_observer, model=model,
         hold_out=None if hold_out is None else list(hold_out), preset=preset,
+        sra_weight=sra_weight,
     )
     text = report.to_json()
     doc = json.loads(text)
@@ -249,18 +253,20 @@ def crossval(
     observer: Optional[str] = None,
     weighting: Optional[str] = None,
     preset: Optional[str] = None,
+    sra_weight: Optional[str] = None,
 ) -> Dict[str, Any]:
     """Leave-one-geometry-out cross-validation as ``brdfd crossval --json`` makes it with the
     same options: each MA-T12 geometry held out of the fit in turn and predicted. ``cost``: one
-    cost function or several (all three when ``None``); ``preset``, ``model``, ``fresnel`` and
-    ``sra`` as in :func:`fit`. Returns that JSON object as Python
+    cost function or several (all three when ``None``); ``preset``, ``model``, ``fresnel``,
+    ``sra`` and ``sra_weight`` as in :func:`fit`. Returns that JSON object as Python
     values: ``{"sample", "reference", "fits": [{"cost", "model", "fresnel", "fitted_mean",
     "held_out_mean", "held_out": [{"geometry", "delta_e00", "measured_lab",
     "predicted_lab", "predicted_l_interval"}, …]}, …]}`` (the last the 95 % interval of the
     held-out L*).  Runs without holding the GIL."""
     costs = [cost] if isinstance(cost, str) else (None if cost is None else list(cost))
     text = _native.crossval(scan, costs, model=model, fresnel=fresnel, method=method, seed=seed,
-                            sra=sra, observer=observer, weighting=weighting, preset=preset)
+                            sra=sra, observer=observer, weighting=weighting, preset=preset,
+                            sra_weight=sra_weight)
     return json.loads(text)
 
 

@@ -40,19 +40,21 @@ where
     s.map(|s| parse(what, s)).transpose()
 }
 
-/// The science choices of `fit` and `crossval`, as `brdfd fit --preset --model --fresnel --sra`
-/// take them: the preset's (`measured` by default) where one is not given.
+/// The science choices of `fit` and `crossval`, as `brdfd fit --preset --model --fresnel --sra
+/// --sra-weight` take them: the preset's (`measured` by default) where one is not given.
 fn science(
     preset: Option<&str>,
     model: Option<&str>,
     fresnel: Option<&str>,
     sra: Option<&str>,
+    sra_weight: Option<&str>,
 ) -> PyResult<ScienceArgs> {
     Ok(ScienceArgs {
         preset: parse_opt("preset", preset)?.unwrap_or_default(),
         model: parse_opt("model", model)?,
         fresnel: parse_opt("Fresnel factor", fresnel)?,
         sra: parse_opt("SRA model", sra)?,
+        sra_weight: parse_opt("SRA weight", sra_weight)?,
     })
 }
 
@@ -178,7 +180,7 @@ impl PyFitReport {
 #[pyfunction]
 #[pyo3(signature = (scan, cost, method=None, seed=None, bootstrap=0, sra=None, specular=None,
     fresnel=None, observer=None, weighting=None, sra_illuminant=None, sra_observer=None,
-    model=None, hold_out=None, preset=None))]
+    model=None, hold_out=None, preset=None, sra_weight=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -197,6 +199,7 @@ fn fit(
     model: Option<&str>,
     hold_out: Option<Vec<String>>,
     preset: Option<&str>,
+    sra_weight: Option<&str>,
 ) -> PyResult<PyFitReport> {
     let args = FitArgs {
         input: scan.source.clone(),
@@ -210,7 +213,7 @@ fn fit(
             .map(|s| parse("specular strategy", s))
             .transpose()?
             .unwrap_or_default(),
-        science: science(preset, model, fresnel, sra)?,
+        science: science(preset, model, fresnel, sra, sra_weight)?,
         observer: observer
             .map(|o| parse("observer", o))
             .transpose()?
@@ -241,7 +244,7 @@ fn fit(
 /// three when `None`).
 #[pyfunction]
 #[pyo3(signature = (scan, cost=None, model=None, fresnel=None, method=None, seed=None,
-    sra=None, observer=None, weighting=None, preset=None))]
+    sra=None, observer=None, weighting=None, preset=None, sra_weight=None))]
 #[allow(clippy::too_many_arguments)]
 fn crossval(
     py: Python<'_>,
@@ -255,6 +258,7 @@ fn crossval(
     observer: Option<&str>,
     weighting: Option<&str>,
     preset: Option<&str>,
+    sra_weight: Option<&str>,
 ) -> PyResult<String> {
     let args = CrossvalArgs {
         input: scan.source.clone(),
@@ -263,7 +267,7 @@ fn crossval(
             .iter()
             .map(|c| parse("cost function", c))
             .collect::<PyResult<_>>()?,
-        science: science(preset, model, fresnel, sra)?,
+        science: science(preset, model, fresnel, sra, sra_weight)?,
         method: method
             .map(|m| parse("method", m))
             .transpose()?

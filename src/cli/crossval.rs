@@ -90,6 +90,7 @@ impl CrossvalArgs {
                 model: self.science.model(),
                 sra: SraReading {
                     model: self.science.sra(),
+                    weight: self.science.sra_weight(cost),
                     ..SraReading::default()
                 },
                 ..Settings::default()

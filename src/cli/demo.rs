@@ -101,6 +101,7 @@ pub async fn run_demo(store: &Store, args: &DemoArgs) -> anyhow::Result<DemoResu
         sra: crate::optimise::Preset::Paper.sra(),
         fresnel: crate::optimise::Preset::Paper.fresnel(),
         model: crate::optimise::Preset::Paper.model(),
+        preset: crate::optimise::Preset::Paper,
         // The paper's figures are fits to every reading; no held-out fits.
         crossval: false,
         // Intervals only when asked for, and then every one of them (waited for below).

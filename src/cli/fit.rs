@@ -15,7 +15,7 @@ use crate::optimise::{Method, Preset, Settings};
 use crate::processing::{self, ProcessingOptions, SpecularStrategy};
 use crate::scan::Scan;
 use crate::spectral::wavelengths_nm;
-use crate::sra_reading::{SraIlluminant, SraModel, SraReading};
+use crate::sra_reading::{SraIlluminant, SraModel, SraReading, SraWeight};
 use crate::uncertainty::BootstrapOptions;
 use std::sync::atomic::AtomicBool;
 
@@ -124,6 +124,15 @@ pub struct ScienceArgs {
     /// `measured`, `flat` for `paper`).
     #[arg(long, value_name = "luminance|flat")]
     pub sra: Option<SraModel>,
+
+    /// How much the SRA readings weigh in the cost beside the MA-T12's (SCIENCE.md §5.2):
+    /// `balanced` (when a glossy sample's specular readings are above its diffuse ones, their
+    /// weights are scaled down to the diffuse level, so that bright readings the model cannot
+    /// follow do not pull the diffuse colour away) or `paper` (every geometry by cos θi).
+    /// Default: the preset's (`balanced` for cf1 and m2 and `paper` for cf2 under `measured`;
+    /// `paper` under `paper`).
+    #[arg(long, value_name = "balanced|paper")]
+    pub sra_weight: Option<SraWeight>,
 }
 
 impl ScienceArgs {
@@ -140,6 +149,11 @@ impl ScienceArgs {
     /// The SRA reading model in force: `--sra`, else the preset's.
     pub fn sra(&self) -> SraModel {
         self.sra.unwrap_or(self.preset.sra())
+    }
+
+    /// The SRA readings' weight in cost function `cost`: `--sra-weight`, else the preset's.
+    pub fn sra_weight(&self, cost: CostFunction) -> SraWeight {
+        self.sra_weight.unwrap_or(self.preset.sra_weight(cost))
     }
 }
 
@@ -161,6 +175,7 @@ impl FitArgs {
                     model: self.science.sra(),
                     illuminant: self.sra_illuminant,
                     observer: self.sra_observer,
+                    weight: self.science.sra_weight(self.cost),
                 },
                 ..Settings::default()
             },

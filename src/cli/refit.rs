@@ -44,7 +44,7 @@ pub struct RefitArgs {
     /// Seed; default: the configured one.
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
-    /// The science defaults for `--model`, `--fresnel` and `--sra`: `measured` (exact Fresnel,
+    /// The science defaults for `--model`, `--fresnel`, `--sra` and `--sra-weight`: `measured` (exact Fresnel,
     /// luminance SRA: what predicts real materials best) or `paper` (the paper's
     /// configuration); default: the configured choices (`[fit]`). Brings a stored scan to
     /// another configuration; its earlier fits keep theirs.
@@ -63,6 +63,11 @@ pub struct RefitArgs {
     /// configured one.
     #[arg(long, value_name = "flat|luminance")]
     pub sra: Option<crate::sra_reading::SraModel>,
+    /// How much the SRA readings weigh in the cost: `balanced` (scaled down to the MA-T12
+    /// readings' level when above it) or `paper` (every geometry by cos θi; SCIENCE.md §5.2);
+    /// default: the preset's for each cost function, else the configured one.
+    #[arg(long, value_name = "balanced|paper")]
+    pub sra_weight: Option<crate::sra_reading::SraWeight>,
     /// Fit even though the scan's reference is older than the configured limit.
     #[arg(long)]
     pub allow_stale_reference: bool,
@@ -87,6 +92,7 @@ fn request(args: &RefitArgs) -> RefitRequest {
         seed: args.seed,
         preset: args.preset,
         sra: args.sra,
+        sra_weight: args.sra_weight,
         model: args.model,
         fresnel: args.fresnel,
         allow_stale_reference: args.allow_stale_reference,

@@ -115,17 +115,23 @@ pub fn table(r: &Report) -> String {
     }
     let _ = writeln!(
         t,
-        "\n{:<4} {:<10} {:<10} {:<10} {:>8} | prediction ΔE00:  mean median    p95  n-spec   rest",
+        "\n{:<4} {:<10} {:<10} {:<19} {:>8} | prediction ΔE00:  mean median    p95  n-spec   rest",
         "cost", "model", "fresnel", "readings", "fit ΔE00"
     );
     for f in &r.fits {
+        // The SRA readings' weight, where it is not the paper's (SCIENCE.md §5.2).
+        let readings = if f.sra_weight.is_paper() {
+            f.readings.to_string()
+        } else {
+            format!("{} {}", f.readings, f.sra_weight)
+        };
         let _ = writeln!(
             t,
-            "{:<4} {:<10} {:<10} {:<10} {:8.2} | {:>17}{}{}",
+            "{:<4} {:<10} {:<10} {:<19} {:8.2} | {:>17}{}{}",
             f.cost.name(),
             f.model.name(),
             f.fresnel.name(),
-            f.readings,
+            readings,
             f.fit_delta_e00_mean,
             "",
             cells(&f.prediction),
@@ -135,7 +141,7 @@ pub fn table(r: &Report) -> String {
     for o in &r.oracles {
         let _ = writeln!(
             t,
-            "{:<4} {:<10} {:<10} {:<10} {:>8} | {:>17}{}  (from {}: {:.2})",
+            "{:<4} {:<10} {:<10} {:<19} {:>8} | {:>17}{}  (from {}: {:.2})",
             "orcl",
             o.model.name(),
             o.fresnel.name(),
@@ -149,7 +155,7 @@ pub fn table(r: &Report) -> String {
     }
     let _ = writeln!(
         t,
-        "{:<4} {:<10} {:<10} {:<10} {:>8} | {:>17}{}",
+        "{:<4} {:<10} {:<10} {:<19} {:>8} | {:>17}{}",
         "lamb",
         "lambert",
         "",

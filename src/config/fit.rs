@@ -29,6 +29,9 @@ pub struct FitConfig {
     /// How an SRA reading enters the cost: the paper's flat grey spectrum or the luminance
     /// (SCIENCE.md §5.1).
     pub sra: crate::sra_reading::SraModel,
+    /// How much the SRA readings weigh in every cost function (SCIENCE.md §5.2); `None`: the
+    /// preset's, which depends on the cost function ([`Preset::sra_weight`]).
+    pub sra_weight: Option<crate::sra_reading::SraWeight>,
     /// The model's form (SCIENCE.md §4.1): the paper's by default.
     pub model: crate::model::ModelKind,
     /// The lobe's Fresnel factor (SCIENCE.md §4): the exact dielectric Fresnel by default.
@@ -50,6 +53,7 @@ impl Default for FitConfig {
             specular: SpecularStrategy::default(),
             preset: Preset::default(),
             sra: Preset::default().sra(),
+            sra_weight: None,
             model: Preset::default().model(),
             fresnel: Preset::default().fresnel(),
             bootstrap: defaults::BOOTSTRAP,
@@ -77,6 +81,7 @@ pub(super) struct RawFit {
     specular: S<String>,
     preset: S<String>,
     sra: S<String>,
+    sra_weight: S<String>,
     model: S<String>,
     fresnel: S<String>,
     bootstrap: S<u32>,
@@ -145,6 +150,15 @@ impl Checker<'_> {
                 s.parse::<crate::sra_reading::SraModel>()
                     .map_err(|e| e.to_string())
             })?,
+            sra_weight: match &raw.sra_weight {
+                None => None,
+                Some(_) => Some(self.value(
+                    "fit.sra_weight",
+                    &raw.sra_weight,
+                    String::new(),
+                    |s| s.parse::<crate::sra_reading::SraWeight>(),
+                )?),
+            },
             fresnel: self.value(
                 "fit.fresnel",
                 &raw.fresnel,
@@ -238,6 +252,17 @@ mod tests {
         assert_eq!(c.fit.sra, SraModel::Flat);
         let e = parse("[fit]\nsra = \"grey\"\n").unwrap_err().to_string();
         assert!(e.contains("fit.sra") && e.contains("luminance"), "{e}");
+        use crate::sra_reading::SraWeight;
+        assert_eq!(parse("").unwrap().fit.sra_weight, None);
+        let c = parse("[fit]\nsra_weight = \"paper\"\n").unwrap();
+        assert_eq!(c.fit.sra_weight, Some(SraWeight::Paper));
+        let e = parse("[fit]\nsra_weight = \"even\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("fit.sra_weight") && e.contains("balanced"),
+            "{e}"
+        );
     }
 
     #[test]

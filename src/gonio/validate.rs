@@ -40,7 +40,7 @@ use crate::optimise::{Settings, nelder_mead};
 use crate::processing::MeasuredBrdf;
 use crate::reach::Reach;
 use crate::spectral::{BANDS, Spectrum};
-use crate::sra_reading::{SraReading, luminance_with};
+use crate::sra_reading::{SraReading, SraWeight, luminance_with};
 
 /// Half-vector angle below which a direction counts as near-specular, degrees.
 pub const NEAR_SPECULAR_DEG: f64 = 10.0;
@@ -94,21 +94,28 @@ pub struct Variant {
     pub fresnel: FresnelCosine,
     /// All 14 readings, or the 12 MA-T12 ones alone.
     pub geometries: GeometrySet,
+    /// The SRA readings' weight in the cost (SCIENCE.md §5.2).
+    pub sra_weight: SraWeight,
 }
 
 impl Variant {
     /// What a measured scan is fitted with by default (`--preset measured`: the paper's model
-    /// form with the exact Fresnel) on all 14 readings.
+    /// form with the exact Fresnel and the preset's SRA weight) on all 14 readings.
     pub fn is_default(&self) -> bool {
-        self.model == crate::optimise::Preset::Measured.model()
-            && self.fresnel == crate::optimise::Preset::Measured.fresnel()
+        let measured = crate::optimise::Preset::Measured;
+        self.model == measured.model()
+            && self.fresnel == measured.fresnel()
+            && self.sra_weight == measured.sra_weight(self.cost)
             && self.geometries == GeometrySet::ALL
     }
 }
 
 /// Every fit `brdfd validate` makes: per cost function the paper's model with the paper's
 /// Schlick on cos θi and with the exact Fresnel (the default of measured scans), Oren–Nayar, and
-/// the paper's model with either Fresnel factor from the 12 MA-T12 readings alone.
+/// the paper's model with either Fresnel factor from the 12 MA-T12 readings alone. The exact
+/// Fresnel fits weigh the SRA readings as the measured preset does for the cost function, the
+/// others as the paper; where the measured preset balances them (cf1, m2), the exact Fresnel
+/// fit with the paper's weights is made too.
 pub fn variants() -> Vec<Variant> {
     variants_of(&CostFunction::ALL)
 }
@@ -132,12 +139,28 @@ pub fn variants_of(costs: &[CostFunction]) -> Vec<Variant> {
             ),
             (ModelKind::Paper, FresnelCosine::Exact, GeometrySet::MA_T12),
         ] {
+            let measured = crate::optimise::Preset::Measured;
+            let sra_weight = if fresnel == measured.fresnel() {
+                measured.sra_weight(cost)
+            } else {
+                SraWeight::Paper
+            };
             out.push(Variant {
                 cost,
                 model,
                 fresnel,
                 geometries,
+                sra_weight,
             });
+            if sra_weight != SraWeight::Paper && geometries == GeometrySet::ALL {
+                out.push(Variant {
+                    cost,
+                    model,
+                    fresnel,
+                    geometries,
+                    sra_weight: SraWeight::Paper,
+                });
+            }
         }
     }
     out
@@ -208,7 +231,9 @@ pub struct FitResult {
     pub fresnel: FresnelCosine,
     /// `ma-t12+sra` (all 14) or `ma-t12` (the 12 MA-T12 readings alone).
     pub readings: &'static str,
-    /// The paper's model and Fresnel factor on all 14 readings.
+    /// The SRA readings' weight in the cost (`paper` or `balanced`).
+    pub sra_weight: SraWeight,
+    /// What a measured scan is fitted with by default ([`Variant::is_default`]).
     pub default: bool,
     /// Mean ΔE00 at the MA-T12 geometries fitted (the spectral readings; the SRA's are
     /// achromatic and have no colour to compare).
@@ -809,7 +834,7 @@ pub fn validate_with(
                 cost: v.cost,
                 model: v.model,
                 fresnel: v.fresnel,
-                sra: opts.sra,
+                sra: opts.sra.with_weight(v.sra_weight),
                 seed: opts.seed,
                 ..Settings::default()
             },
@@ -841,6 +866,7 @@ pub fn validate_with(
             } else {
                 "ma-t12"
             },
+            sra_weight: v.sra_weight,
             default: v.is_default(),
             fit_delta_e00_mean: report.evaluation.diffuse.mean,
             params: ParamsDocument::new(&p, v.model),
@@ -1089,15 +1115,27 @@ mod tests {
     }
 
     #[test]
-    fn fifteen_variants_one_default_per_cost() {
+    fn seventeen_variants_one_default_per_cost() {
         let v = variants();
-        assert_eq!(v.len(), 15);
+        assert_eq!(v.len(), 17);
         assert_eq!(v.iter().filter(|v| v.is_default()).count(), 3);
-        // The default is what a measured scan is fitted with: the exact Fresnel, 14 readings.
-        assert!(
-            v.iter()
-                .filter(|v| v.is_default())
-                .all(|v| v.fresnel == FresnelCosine::Exact && v.geometries == GeometrySet::ALL)
-        );
+        // The default is what a measured scan is fitted with: the exact Fresnel, 14 readings,
+        // the measured preset's SRA weight; beside it under cf1 and m2 the paper's weights.
+        for d in v.iter().filter(|v| v.is_default()) {
+            assert!(d.fresnel == FresnelCosine::Exact && d.geometries == GeometrySet::ALL);
+            assert_eq!(
+                d.sra_weight,
+                crate::optimise::Preset::Measured.sra_weight(d.cost)
+            );
+        }
+        let paper_weighted_exact = v
+            .iter()
+            .filter(|v| {
+                v.fresnel == FresnelCosine::Exact
+                    && v.geometries == GeometrySet::ALL
+                    && v.sra_weight == SraWeight::Paper
+            })
+            .count();
+        assert_eq!(paper_weighted_exact, 3);
     }
 }

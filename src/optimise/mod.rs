@@ -44,7 +44,7 @@ use crate::geometry::{GEOMETRIES, GEOMETRY_COUNT};
 use crate::model::{Bounds, FresnelCosine, ModelKind, Params, SpecularGeometry, evaluate_model};
 use crate::processing::MeasuredBrdf;
 use crate::spectral::{BANDS, wavelengths_nm};
-use crate::sra_reading::SraReading;
+use crate::sra_reading::{SraModel, SraReading};
 
 use problem::Problem;
 
@@ -495,7 +495,9 @@ pub fn fit_with_observer(
     settings.validate()?;
     check_input(measured, settings.cost)?;
     let run = if settings.model == ModelKind::Paper {
-        let flat = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds);
+        // The flat SRA terms under the fit's weights: the L1 stepping stone's problem.
+        let flat = Problem::new(measured, settings.cost, settings.fresnel, settings.bounds)
+            .with_sra(measured, settings.sra.with_model(SraModel::Flat));
         let problem = flat.clone().with_sra(measured, settings.sra);
         match settings.method {
             Method::Paper => ga::run(&problem, &settings.paper, settings.seed, observer)?,

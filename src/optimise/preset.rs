@@ -1,5 +1,6 @@
 //! Presets: the science choices of a fit under one name — the model's form, the lobe's Fresnel
-//! factor and how an SRA reading enters the cost (SCIENCE.md §4.1, §5.1).
+//! factor, how an SRA reading enters the cost and how much it weighs there (SCIENCE.md §4.1,
+//! §5.1, §5.2).
 //!
 //! [`Preset::Measured`] is what a measured or imported scan is fitted with unless told
 //! otherwise: the choices that predict best off the measured angles (held-out geometries of
@@ -9,15 +10,17 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::cost::CostFunction;
 use crate::model::{FresnelCosine, ModelKind};
-use crate::sra_reading::SraModel;
+use crate::sra_reading::{SraModel, SraWeight};
 
-/// A named set of defaults for the model form, Fresnel factor and SRA reading model.
+/// A named set of defaults for the model form, Fresnel factor, SRA reading model and weight.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Preset {
     /// The paper's model form with the exact dielectric Fresnel, SRA readings compared as
-    /// luminance: what predicts measured materials best (the default).
+    /// luminance and weighed at the MA-T12 readings' level under cf1 and m2: what predicts
+    /// measured materials best (the default).
     #[default]
     Measured,
     /// The paper's configuration: Schlick on cos θi, the flat grey SRA reading (paper Eq. 1–9).
@@ -57,6 +60,18 @@ impl Preset {
             Preset::Paper => SraModel::Flat,
         }
     }
+
+    /// The SRA readings' weight in cost function `cost` (SCIENCE.md §5.2): balanced for cf1 and
+    /// m2 under `measured` (their squared and logarithmic residuals let bright specular
+    /// readings pull the diffuse colour away; balancing them predicted the measured
+    /// goniometric materials better), the paper's for cf2 (its cube root keeps a bright reading
+    /// from dominating; balancing predicted no better) and under `paper`.
+    pub const fn sra_weight(self, cost: CostFunction) -> SraWeight {
+        match (self, cost) {
+            (Preset::Measured, CostFunction::Cf1 | CostFunction::M2) => SraWeight::Balanced,
+            _ => SraWeight::Paper,
+        }
+    }
 }
 
 crate::names::choice_by_name!(
@@ -83,5 +98,20 @@ mod tests {
         assert_eq!(Preset::Paper.model(), ModelKind::default());
         assert_eq!(Preset::Measured.fresnel(), FresnelCosine::Exact);
         assert_eq!(Preset::Measured.sra(), SraModel::Luminance);
+        for cost in CostFunction::ALL {
+            assert_eq!(Preset::Paper.sra_weight(cost), SraWeight::default());
+        }
+        assert_eq!(
+            Preset::Measured.sra_weight(CostFunction::Cf1),
+            SraWeight::Balanced
+        );
+        assert_eq!(
+            Preset::Measured.sra_weight(CostFunction::M2),
+            SraWeight::Balanced
+        );
+        assert_eq!(
+            Preset::Measured.sra_weight(CostFunction::Cf2),
+            SraWeight::Paper
+        );
     }
 }

@@ -30,7 +30,7 @@
 // closest to the equations.
 #![allow(clippy::needless_range_loop)]
 
-use crate::cost::{CostFunction, terms, weights};
+use crate::cost::{CostFunction, terms, weights, weights_for};
 use crate::geometry::GEOMETRY_COUNT as G;
 use crate::geometry::{MA_T12_COUNT, SRA_COUNT};
 use crate::model::{Bounds, FresnelCosine, SpecularGeometry, specular_term};
@@ -300,7 +300,11 @@ impl Lum {
 
 /// The cosine weights of the geometries `measured` has, 0 at the others.
 fn masked_weights(measured: &MeasuredBrdf) -> [f64; G] {
-    let w = weights();
+    masked(measured, weights())
+}
+
+/// The weights `w` of the geometries `measured` has, 0 at the others.
+fn masked(measured: &MeasuredBrdf, w: [f64; G]) -> [f64; G] {
     std::array::from_fn(|g| {
         if measured.geometries.contains(g) {
             w[g]
@@ -344,26 +348,33 @@ impl Problem {
         p
     }
 
-    /// The same problem under the SRA reading model `sra` (SCIENCE.md §5.1). The paper's flat
-    /// model leaves it as it is. The luminance model takes the SRA geometries out of the
-    /// per-band arrays (their weight there becomes 0, so every per-band solve runs over the 12
-    /// MA-T12 geometries only) and adds their luminance residuals, counted 31 times each, to
-    /// every cost ([`Lum`]).
+    /// The same problem under the SRA reading model `sra` (SCIENCE.md §5.1) and its weight in
+    /// the cost (§5.2: the SRA geometries' weights scaled by [`weights_for`]). The paper's flat
+    /// model with the paper's weights leaves it as it is. The luminance model takes the SRA
+    /// geometries out of the per-band arrays (their weight there becomes 0, so every per-band
+    /// solve runs over the 12 MA-T12 geometries only) and adds their luminance residuals,
+    /// counted 31 times each, to every cost ([`Lum`]).
     pub fn with_sra(self, measured: &MeasuredBrdf, sra: SraReading) -> Self {
-        // Without SRA readings there are no SRA terms to read any way.
-        if sra.model == SraModel::Flat || !measured.geometries.has_sra() {
+        // Without SRA readings there are no SRA terms to read or weigh any way.
+        if !measured.geometries.has_sra() || (sra.model == SraModel::Flat && sra.weight.is_paper())
+        {
             return self;
         }
         let shape = self.shape;
+        let base = masked(measured, weights_for(sra.weight, measured));
         let transformed;
         let (measured, w) = match &shape {
-            None => (measured, masked_weights(measured)),
+            None => (measured, base),
             Some(sh) => {
                 transformed = sh.transform(measured);
-                let w = masked_weights(measured);
-                (&transformed, std::array::from_fn(|g| w[g] * sh.a[g]))
+                (&transformed, std::array::from_fn(|g| base[g] * sh.a[g]))
             }
         };
+        if sra.model == SraModel::Flat {
+            let mut p = Self::build(measured, self.cf, self.fresnel, self.bounds, w, None);
+            p.shape = shape;
+            return p;
+        }
         let spectral: [f64; G] = std::array::from_fn(|g| if g < MA_T12_COUNT { w[g] } else { 0.0 });
         let c = sra.weights();
         let ws: [f64; SRA_COUNT] = std::array::from_fn(|k| w[MA_T12_COUNT + k]);

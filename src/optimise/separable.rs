@@ -225,8 +225,8 @@ fn surrogate_chain(cf: CostFunction) -> &'static [Criterion] {
     }
 }
 
-/// The separable method on `problem`. `flat` is the same scan under the paper's flat SRA
-/// terms (`problem` itself when that is its model): the weighted L1 stage of cf2's
+/// The separable method on `problem`. `flat` is the same scan under the flat SRA terms, with
+/// the same weights (`problem` itself when that is its model): the weighted L1 stage of cf2's
 /// continuation runs on it (see the module doc).
 pub(super) fn run(
     problem: &Problem,

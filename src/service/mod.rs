@@ -107,6 +107,12 @@ pub struct ServiceSettings {
     pub specular: SpecularStrategy,
     /// How an SRA reading enters the cost (`[fit] sra`; a refit may ask for another).
     pub sra: crate::sra_reading::SraModel,
+    /// The science defaults (`[fit] preset`): the SRA weight of each cost function when
+    /// `sra_weight` is not set.
+    pub preset: crate::optimise::Preset,
+    /// How much the SRA readings weigh in the cost (`[fit] sra_weight`); `None`: the preset's
+    /// for each cost function.
+    pub sra_weight: Option<crate::sra_reading::SraWeight>,
     /// The model's form (`[fit] model`); fits with the paper's GA always use the paper's.
     pub model: crate::model::ModelKind,
     /// The lobe's Fresnel factor (`[fit] fresnel`; a refit may ask for another).
@@ -142,6 +148,8 @@ impl ServiceSettings {
             max_concurrent_fits: config.fit.max_concurrent_fits.get(),
             specular: config.fit.specular,
             sra: config.fit.sra,
+            preset: config.fit.preset,
+            sra_weight: config.fit.sra_weight,
             model: config.fit.model,
             fresnel: config.fit.fresnel,
             reference_reflectance: config.reference.reflectance,
@@ -174,6 +182,9 @@ impl ServiceSettings {
         if let Some(m) = request.sra.or(preset.map(|p| p.sra())) {
             s.sra = s.sra.with_model(m);
         }
+        if let Some(w) = request.sra_weight.or(preset.map(|p| p.sra_weight(cost))) {
+            s.sra = s.sra.with_weight(w);
+        }
         if let Some(f) = request.fresnel.or(preset.map(|p| p.fresnel())) {
             s.fresnel = f;
         }
@@ -199,7 +210,9 @@ impl ServiceSettings {
             method,
             cost,
             seed,
-            sra: crate::sra_reading::SraReading::default().with_model(self.sra),
+            sra: crate::sra_reading::SraReading::default()
+                .with_model(self.sra)
+                .with_weight(self.sra_weight.unwrap_or(self.preset.sra_weight(cost))),
             // The settings record the model each fit used: the paper GA fits only the paper's.
             model: if method == Method::Separable {
                 self.model
@@ -317,12 +330,15 @@ pub struct RefitRequest {
     pub method: Option<Method>,
     /// Seed; `None` = the configured one.
     pub seed: Option<u64>,
-    /// Science defaults (`measured` or `paper`) for `sra`, `model` and `fresnel`; `None` = the
-    /// configured choices (`[fit]`).
+    /// Science defaults (`measured` or `paper`) for `sra`, `sra_weight`, `model` and `fresnel`;
+    /// `None` = the configured choices (`[fit]`).
     pub preset: Option<crate::optimise::Preset>,
     /// SRA reading model (`flat` or `luminance`); `None` = the preset's, else the configured
     /// one (`[fit] sra`).
     pub sra: Option<crate::sra_reading::SraModel>,
+    /// The SRA readings' weight in the cost (`paper` or `balanced`); `None` = the preset's for
+    /// each cost function, else the configured one (`[fit] sra_weight`).
+    pub sra_weight: Option<crate::sra_reading::SraWeight>,
     /// The model's form; `None` = the preset's, else the configured one (`[fit] model`).
     pub model: Option<crate::model::ModelKind>,
     /// The lobe's Fresnel factor; `None` = the preset's, else the configured one
@@ -331,7 +347,7 @@ pub struct RefitRequest {
     /// Fit even though the scan's reference is older than the configured limit.
     pub allow_stale_reference: bool,
     /// Queue only the cost functions the scan has no fit of in this configuration yet (done,
-    /// queued or running, with the same method, model, Fresnel factor and SRA model): what
+    /// queued or running, with the same method, model, Fresnel factor, SRA model and weight): what
     /// `brdfd refit --all` asks, so that a second run, or one after a stop, queues only what
     /// the first did not.
     pub missing_only: bool,

@@ -498,11 +498,12 @@ pub(super) fn new_readings(r: &DeviceReadings) -> Vec<NewReading<'static>> {
 }
 
 /// Whether two fits' settings are the same configuration for `missing_only`: cost function,
-/// method, model form, Fresnel factor and SRA reading model (not the seed).
+/// method, model form, Fresnel factor, SRA reading model and weight (not the seed).
 fn same_configuration(a: &crate::optimise::Settings, b: &crate::optimise::Settings) -> bool {
     a.cost == b.cost
         && a.method == b.method
         && a.model == b.model
         && a.fresnel == b.fresnel
         && a.sra.model == b.sra.model
+        && a.sra.weight == b.sra.weight
 }

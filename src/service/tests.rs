@@ -159,11 +159,38 @@ fn settings_follow_the_configuration() {
         (f.cost, f.method, f.seed),
         (CostFunction::Cf1, Method::Paper, 4)
     );
-    // Measured scans are fitted under the luminance SRA model unless configured otherwise.
-    assert_eq!(f.sra, crate::sra_reading::SraReading::LUMINANCE);
+    // Measured scans are fitted under the luminance SRA model unless configured otherwise, the
+    // SRA readings balanced under cf1 and m2 and weighed as the paper does under cf2.
+    use crate::sra_reading::{SraReading, SraWeight};
+    let balanced = SraReading::LUMINANCE.with_weight(SraWeight::Balanced);
+    assert_eq!(f.sra, balanced);
+    let f = s.fit_settings(CostFunction::Cf2, Method::Separable, 4);
+    assert_eq!(f.sra, SraReading::LUMINANCE);
     config.fit.sra = crate::sra_reading::SraModel::Flat;
+    let f = ServiceSettings::from_config(&config).fit_settings(CostFunction::Cf2, Method::Paper, 4);
+    assert_eq!(f.sra, SraReading::FLAT);
+    // `[fit] sra_weight` holds for every cost function; the paper preset weighs as the paper.
+    config.fit.sra_weight = Some(SraWeight::Paper);
+    let f = ServiceSettings::from_config(&config).fit_settings(CostFunction::M2, Method::Paper, 4);
+    assert_eq!(f.sra, SraReading::FLAT);
+    config.fit.sra_weight = None;
+    config.fit.preset = crate::optimise::Preset::Paper;
     let f = ServiceSettings::from_config(&config).fit_settings(CostFunction::Cf1, Method::Paper, 4);
-    assert_eq!(f.sra, crate::sra_reading::SraReading::FLAT);
+    assert_eq!(f.sra.weight, SraWeight::Paper);
+    // A refit asking for the measured preset gets its weight per cost function.
+    let request = RefitRequest {
+        preset: Some(crate::optimise::Preset::Measured),
+        ..RefitRequest::default()
+    };
+    let s = ServiceSettings::from_config(&config);
+    assert_eq!(
+        s.refit_settings(CostFunction::M2, &request).unwrap().sra,
+        balanced
+    );
+    assert_eq!(
+        s.refit_settings(CostFunction::Cf2, &request).unwrap().sra,
+        SraReading::LUMINANCE
+    );
 }
 
 /// A refit may ask for the luminance SRA model (`POST /scans/{id}/refit` `{"sra": …}`) on a
@@ -197,7 +224,9 @@ async fn a_refit_can_ask_for_the_luminance_sra_model() {
             .await
             .unwrap()
     );
-    let flat = s.store().fit_detail(fits[0]).await.unwrap();
+    // The cf2 fit (cf1's and m2's balance the SRA readings, SCIENCE.md §5.2).
+    let flat = s.store().fit_detail(fits[1]).await.unwrap();
+    assert_eq!(flat.run.cost_function, CostFunction::Cf2);
     assert_eq!(flat.sra, SraReading::FLAT);
     assert!(flat.run.settings.get("sra").is_none());
     let d = s.store().fit_detail(refit[0]).await.unwrap();

@@ -57,7 +57,7 @@ pub fn fast_driver_config() -> DriverConfig {
 }
 
 /// Service settings for tests: the defaults (three cost functions, separable, seed 1), two
-/// fits at once, the paper's Fresnel factor and flat SRA model (under the luminance default cf2's 200
+/// fits at once, the paper's Fresnel factor, flat SRA model and SRA weights (under the luminance default cf2's 200
 /// full-search bootstrap refits take minutes per scan in a debug build) and no
 /// cross-validation (12 more fits per fit; the tests that check it turn it on). The daemons these
 /// tests start from a configuration file (`serve::write_simulated_config`) run the default.
@@ -68,6 +68,8 @@ pub fn settings() -> ServiceSettings {
         // The simulated instruments replay the paper's model (Schlick on cos θi): fitted with
         // the same factor, their fits recover the recorded truths.
         fresnel: brdfd::optimise::Preset::Paper.fresnel(),
+        // And the paper's weights of the SRA readings in every cost function.
+        preset: brdfd::optimise::Preset::Paper,
         crossval: false,
         ..ServiceSettings::default()
     }

@@ -21,7 +21,10 @@
 //! constructions on the same draws.
 //!
 //! `--fresnel exact|incidence|light-half` is the Fresnel factor of both the synthetic truth and
-//! the fits (the paper's `incidence` by default).
+//! the fits (the paper's `incidence` by default). `--sra-weight paper|balanced` weighs the SRA
+//! readings in every cost function (SCIENCE.md §5.2); by default each cost function is fitted
+//! with the measured preset's weight under `--sra luminance` (balanced for cf1 and m2) and the
+//! paper's under `--sra flat`, what the daemon does under each preset.
 //!
 //! Run: `cargo run --release -p brdfd-tools --bin coverage [-- --trials 200 --resamples 200
 //! --noise 0.01 --costs cf1,cf2,m2 --sra luminance --fresnel incidence --threads 2
@@ -35,11 +38,11 @@ use std::time::Instant;
 use brdfd::cost::CostFunction;
 use brdfd::fit::{FitRequest, fit_scan};
 use brdfd::model::FresnelCosine;
-use brdfd::optimise::Settings;
+use brdfd::optimise::{Preset, Settings};
 use brdfd::processing::{ProcessingOptions, process};
 use brdfd::scan::Scan;
 use brdfd::spectral::BANDS;
-use brdfd::sra_reading::{SraModel, SraReading};
+use brdfd::sra_reading::{SraModel, SraReading, SraWeight};
 use brdfd::synth::{SraResponse, SynthOptions, paper_samples, synth_scan};
 use brdfd::uncertainty::{BootstrapOptions, Refit, Uncertainty, draw};
 use brdfd_tools::shared::arg;
@@ -72,6 +75,17 @@ fn main() {
     let response: SraResponse = arg(&args, "--sra-response", matched);
     let no_sra = args.iter().any(|a| a == "--no-sra");
     let fresnel: FresnelCosine = arg(&args, "--fresnel", FresnelCosine::Incidence);
+    let sra_weight: Option<SraWeight> = args
+        .iter()
+        .position(|a| a == "--sra-weight")
+        .and_then(|i| args.get(i + 1))
+        .map(|v| v.parse().unwrap_or_else(|e| panic!("--sra-weight: {e}")));
+    let weight_of = |cf: CostFunction| {
+        sra_weight.unwrap_or(match sra {
+            SraModel::Luminance => Preset::Measured.sra_weight(cf),
+            SraModel::Flat => SraWeight::Paper,
+        })
+    };
     let first_seed: u64 = arg(&args, "--first-seed", 0);
     let refit = match arg(&args, "--refit", "by-cost".to_string()).as_str() {
         "by-cost" => Refit::ByCost,
@@ -132,7 +146,9 @@ fn main() {
             let request = FitRequest {
                 settings: Settings {
                     cost: cf,
-                    sra: SraReading::default().with_model(sra),
+                    sra: SraReading::default()
+                        .with_model(sra)
+                        .with_weight(weight_of(cf)),
                     fresnel,
                     ..Settings::default()
                 },
