@@ -1,4 +1,7 @@
-//! Property tests: mutated copies of a real export are read or refused, never a panic.
+//! Property tests: mutated copies of a real export (cell values, deleted and duplicated rows,
+//! flipped bytes, a cut archive, and the structure the import budget bounds: the sheets'
+//! declared dimension and far cells, the image anchors' positions and number, the shared
+//! strings' length and declared count) are read or refused, never a panic.
 
 use std::sync::LazyLock;
 
@@ -30,6 +33,26 @@ const PARTS: [&str; 6] = [
     "xl/workbook.xml",
     "xl/drawings/drawing1.xml",
 ];
+
+/// The sheet parts of [`PARTS`], by index; its shared strings and drawing.
+const SHEETS: [usize; 3] = [0, 1, 2];
+const STRINGS: usize = 3;
+const DRAWING: usize = 5;
+
+/// What a mutated dimension says.
+const REFS: [&str; 8] = [
+    "A1",
+    "A1:AH40",
+    "A1:XFD1048576",
+    "B2:A1",
+    "",
+    "ZZZZ99999999999",
+    "A0:$A$0",
+    "1:4",
+];
+
+/// What a mutated anchor position or shared-string count says.
+const NUMBERS: [&str; 8] = ["0", "1", "7", "1048575", "4294967295", "-1", "x", ""];
 
 /// What goes into an edited value.
 const PIECES: [&str; 16] = [
@@ -65,6 +88,18 @@ enum Edit {
     Truncate(u16),
     /// Flip a byte of the archive.
     FlipArchive(usize, u8),
+    /// Set the declared dimension (`<dimension ref>`) of a sheet part.
+    Dimension(usize, String),
+    /// Add a cell at (1-based row, column) to a sheet part.
+    Cell(usize, u64, u64),
+    /// Move the k-th image anchor of the drawing to (0-based row, column), as written.
+    Anchor(usize, String, String),
+    /// Repeat the k-th image anchor of the drawing n more times.
+    Anchors(usize, usize),
+    /// Make the k-th shared string n bytes long.
+    LongString(usize, usize),
+    /// Set the shared strings' declared count.
+    StringCount(String),
 }
 
 fn edit() -> impl Strategy<Value = Edit> {
@@ -78,6 +113,26 @@ fn edit() -> impl Strategy<Value = Edit> {
         1 => (part, any::<usize>(), 1..=255u8).prop_map(|(p, i, x)| Edit::Flip(p, i, x)),
         1 => (0..1000u16).prop_map(Edit::Truncate),
         1 => (any::<usize>(), 1..=255u8).prop_map(|(i, x)| Edit::FlipArchive(i, x)),
+        1 => (proptest::sample::select(&SHEETS[..]), proptest::sample::select(&REFS[..]))
+            .prop_map(|(p, r)| Edit::Dimension(p, r.to_string())),
+        1 => (
+            proptest::sample::select(&SHEETS[..]),
+            prop_oneof![1..=2_000u64, 1..=1_048_576u64],
+            prop_oneof![1..=40u64, 1..=16_384u64],
+        )
+            .prop_map(|(p, r, c)| Edit::Cell(p, r, c)),
+        1 => (
+            any::<usize>(),
+            proptest::sample::select(&NUMBERS[..]),
+            proptest::sample::select(&NUMBERS[..]),
+        )
+            .prop_map(|(k, r, c)| Edit::Anchor(k, r.to_string(), c.to_string())),
+        1 => (any::<usize>(), prop_oneof![1..=10usize, 50..=100usize])
+            .prop_map(|(k, n)| Edit::Anchors(k, n)),
+        1 => (any::<usize>(), prop_oneof![0..=10usize, 4_090..=4_100usize, 5_000..=20_000usize])
+            .prop_map(|(k, n)| Edit::LongString(k, n)),
+        1 => proptest::sample::select(&NUMBERS[..])
+            .prop_map(|n| Edit::StringCount(n.to_string())),
     ]
 }
 
@@ -157,6 +212,73 @@ fn apply(edits: &[Edit]) -> Vec<u8> {
                 let n = parts[i].1.len();
                 parts[i].1[at % n] ^= x;
             }
+            Edit::Dimension(p, r) => {
+                let i = get(&mut parts, *p);
+                let x = &parts[i].1;
+                let Some(&(s, end)) = elements(x, b"<dimension ", b"/>").first() else {
+                    continue;
+                };
+                let new = format!("<dimension ref=\"{r}\"/>");
+                parts[i].1 = [&x[..s], new.as_bytes(), &x[end..]].concat();
+            }
+            Edit::Cell(p, r, c) => {
+                let i = get(&mut parts, *p);
+                let x = &parts[i].1;
+                let Some(at) = find(x, b"</sheetData>") else {
+                    continue;
+                };
+                let cell = format!(
+                    "<row r=\"{r}\"><c r=\"{}\"><v>1</v></c></row>",
+                    super::cells::cell_name_u64(*r, *c)
+                );
+                parts[i].1 = [&x[..at], cell.as_bytes(), &x[at..]].concat();
+            }
+            Edit::Anchor(k, row, col) => {
+                let i = get(&mut parts, DRAWING);
+                let x = &parts[i].1;
+                let spots = elements(x, b"<xdr:from>", b"</xdr:from>");
+                if spots.is_empty() {
+                    continue;
+                }
+                let (s, end) = spots[k % spots.len()];
+                let from = format!(
+                    "<xdr:from><xdr:col>{col}</xdr:col><xdr:colOff>0</xdr:colOff>\
+                     <xdr:row>{row}</xdr:row><xdr:rowOff>0</xdr:rowOff></xdr:from>"
+                );
+                parts[i].1 = [&x[..s], from.as_bytes(), &x[end..]].concat();
+            }
+            Edit::Anchors(k, n) => {
+                let i = get(&mut parts, DRAWING);
+                let x = &parts[i].1;
+                let spots = elements(x, b"<xdr:oneCellAnchor>", b"</xdr:oneCellAnchor>");
+                if spots.is_empty() {
+                    continue;
+                }
+                let (s, end) = spots[k % spots.len()];
+                parts[i].1 = [&x[..end], &x[s..end].repeat(*n), &x[end..]].concat();
+            }
+            Edit::LongString(k, n) => {
+                let i = get(&mut parts, STRINGS);
+                let x = &parts[i].1;
+                let spots = elements(x, b"<t>", b"</t>");
+                if spots.is_empty() {
+                    continue;
+                }
+                let (s, end) = spots[k % spots.len()];
+                let text = "N".repeat(*n);
+                parts[i].1 = [&x[..s + 3], text.as_bytes(), &x[end - 4..]].concat();
+            }
+            Edit::StringCount(n) => {
+                let i = get(&mut parts, STRINGS);
+                let x = &parts[i].1;
+                let Some(at) = find(x, b"uniqueCount=\"").map(|at| at + 13) else {
+                    continue;
+                };
+                let Some(len) = x[at..].iter().position(|&b| b == b'"') else {
+                    continue;
+                };
+                parts[i].1 = [&x[..at], n.as_bytes(), &x[at + len..]].concat();
+            }
             e => archive_edits.push(e.clone()),
         }
     }
@@ -214,6 +336,32 @@ fn the_base_reads() {
             .unwrap()
             .flagged
             .is_empty()
+    );
+}
+
+/// Each structural edit is live: on its own it breaks the limit it aims at.
+#[test]
+fn the_structural_edits_reach_the_limits() {
+    let refused = |e: Edit, want: &str| {
+        let err = read(&apply(std::slice::from_ref(&e)), "m.xlsx")
+            .expect_err(want)
+            .to_string();
+        assert!(err.contains(want), "{e:?}: {err}");
+    };
+    refused(
+        Edit::Dimension(1, "A1:XFD1048576".into()),
+        "declared dimension of 1048576 rows × 16384 columns",
+    );
+    refused(Edit::Cell(0, 1_048_576, 16_384), "to cell XFD1048576");
+    refused(Edit::Anchors(2, 60), "(67 image anchors)");
+    refused(
+        Edit::Anchor(0, "1048575".into(), "1".into()),
+        "cell A1048576: empty, but an image is anchored in B1048576",
+    );
+    refused(Edit::LongString(3, 5_000), "shared string 3: 5007 bytes");
+    refused(
+        Edit::StringCount("4294967295".into()),
+        "4294967295 strings is beyond",
     );
 }
 
