@@ -422,6 +422,39 @@ fn attack_files_are_refused_by_the_watch_folder_and_http_and_the_daemon_stays_up
             a.name
         );
     }
+    // A file whose name holds an escape sequence (one that would clear the screen): the
+    // refusal names it, and `brdfd status` prints its last error with the escape shown, not
+    // sent to the terminal.
+    let name = "esc\u{1b}[2J.xlsx";
+    std::fs::write(inbox.join(name), &attacks()[0].bytes).unwrap();
+    let reason = inbox.join("failed").join(format!("{name}.error.txt"));
+    wait_for("the escaped name in failed/", || reason.exists());
+    wait_for("its refusal as the last error", || {
+        client.get("/status").unwrap()["ingest"]["last_error"]
+            .as_str()
+            .is_some_and(|e| e.contains(name))
+    });
+    let config = dir.join("brdfd.toml");
+    let addr = daemon.addr.to_string();
+    let out = common::run_brdfd(
+        &[
+            "status",
+            "--config",
+            config.to_str().unwrap(),
+            "--addr",
+            &addr,
+        ],
+        None,
+    );
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("last error: esc\\u{1b}[2J.xlsx: ")
+            && stdout.contains("sheet \"Spectral Data\"")
+            && !stdout.contains('\u{1b}'),
+        "{stdout:?}"
+    );
+    assert_eq!(scans(), 0);
     assert!(
         daemon.child.try_wait().unwrap().is_none(),
         "the daemon ended"

@@ -91,8 +91,8 @@ fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
             println!(
                 "{} ({}) imported as scan {scan}: reference instrument calibration, no specular \
                  readings; L*a*b* as the file's within ΔE00 {:.1e}",
-                args.file.display(),
-                x.scan.sample,
+                terminal_safe(&args.file.display().to_string()),
+                terminal_safe(&x.scan.sample),
                 x.check.largest
             );
         }
@@ -153,7 +153,7 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
         let ids: Vec<i64> = fits.iter().map(|f| f.0).collect();
         println!(
             "{} imported as scan {scan}; fits {ids:?} queued",
-            args.file.display()
+            terminal_safe(&args.file.display().to_string())
         );
     }
     if let Some(events) = events {
