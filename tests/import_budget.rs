@@ -304,6 +304,20 @@ fn says(door: &str, name: &str, message: &str, want: &[&str]) {
     }
 }
 
+/// Fails unless `peak` (KiB of resident memory) is under 256 MiB above `base` (the
+/// `base_is` memory); prints both.
+fn within_budget(door: &str, name: &str, peak: i64, base: i64, base_is: &str) {
+    println!(
+        "{name} through {door}: peak {} MiB, {} MiB {base_is}",
+        peak >> 10,
+        base >> 10
+    );
+    assert!(
+        peak - base < 256 << 10,
+        "{name} through {door}: peak {peak} KiB against {base} KiB {base_is}"
+    );
+}
+
 #[test]
 fn attack_files_are_refused_by_the_cli_within_the_budget() {
     let dir = tempfile::tempdir().unwrap();
@@ -327,17 +341,7 @@ fn attack_files_are_refused_by_the_cli_within_the_budget() {
         assert_eq!(code, Some(1), "{}: {err}", a.name);
         says("the CLI", a.name, &err, a.want);
         says("the CLI", a.name, &err, a.cli_want);
-        println!(
-            "CLI {}: peak {} MiB ({} MiB for a genuine export)",
-            a.name,
-            peak >> 10,
-            baseline >> 10
-        );
-        assert!(
-            peak - baseline < 256 << 10,
-            "{}: peak {peak} KiB against {baseline} KiB for a genuine export",
-            a.name
-        );
+        within_budget("the CLI", a.name, peak, baseline, "a genuine export's");
     }
 }
 
@@ -410,17 +414,7 @@ fn attack_files_are_refused_by_the_watch_folder_and_http_and_the_daemon_stays_up
         });
         assert_eq!(scans(), 0, "{} stored a scan", a.name);
         let peak = memory_kib(pid, "VmHWM");
-        println!(
-            "daemon {}: peak {} MiB ({} MiB idle)",
-            a.name,
-            peak >> 10,
-            idle >> 10
-        );
-        assert!(
-            peak - idle < 256 << 10,
-            "{}: the daemon's peak {peak} KiB against {idle} KiB idle",
-            a.name
-        );
+        within_budget("the daemon", a.name, peak, idle, "idle");
     }
     // A file whose name holds an escape sequence (one that would clear the screen): the
     // refusal names it, and `brdfd status` prints its last error with the escape shown, not
