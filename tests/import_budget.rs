@@ -352,6 +352,29 @@ fn attack_files_are_refused_by_the_cli_within_the_budget() {
         says("the CLI", name, &err, cli_want);
         within_budget("the CLI", name, peak, baseline, "a genuine export's");
     }
+
+    // `brdfd import` reads a scan file within the same file size, refusing a larger one
+    // unread, before it looks for a daemon.
+    let big = dir.path().join("big.scan.json");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(40 << 20)
+        .unwrap();
+    let o = common::run_brdfd(
+        &["import", big.to_str().unwrap(), "--addr", "127.0.0.1:9"],
+        None,
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    says(
+        "brdfd import",
+        "big.scan.json",
+        &err,
+        &[
+            "big.scan.json: the whole file: 41943040 bytes is beyond the import limit \"file \
+             size\"",
+        ],
+    );
 }
 
 /// `VmHWM` (peak resident memory) or `VmRSS` of process `pid`, in KiB.

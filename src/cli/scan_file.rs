@@ -116,8 +116,10 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     if is_xlsx {
         return import_xlsx(args);
     }
-    let text = std::fs::read_to_string(&args.file)
-        .with_context(|| format!("cannot read {}", args.file.display()))?;
+    // Within the import budget's file size, as every door reads (a larger file is refused
+    // unread).
+    let text =
+        crate::formats::read_text_within(&args.file, &crate::formats::budget::Budget::default())?;
     // Checked here too, so a bad file is named with its path before anything is sent.
     if let Err(e) = crate::scan::Scan::from_json(text.as_bytes()) {
         use crate::scan::ScanError;
