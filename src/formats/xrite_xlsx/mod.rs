@@ -61,7 +61,6 @@ mod cells;
 mod colorimetry;
 mod images;
 mod markup;
-#[cfg(test)]
 mod proptests;
 
 /// The sheet of L*a*b* values.

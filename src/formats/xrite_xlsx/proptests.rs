@@ -3,6 +3,8 @@
 //! declared dimension and far cells, the image anchors' positions and number, the shared
 //! strings' length and declared count) are read or refused, never a panic.
 
+#![cfg(test)]
+
 use std::sync::LazyLock;
 
 use super::tests::{bytes, read, rezip, unzip};
