@@ -1158,7 +1158,12 @@ impl WatchFolder {
                 self.with_ingest_status(|s| {
                     s.rejected += 1;
                     s.last_file = Some(file.clone());
-                    s.last_error = Some(format!("{file}: {reason}"));
+                    // The reason names the file already when a reader refused it.
+                    s.last_error = Some(if reason.starts_with(&format!("{file}: ")) {
+                        reason.clone()
+                    } else {
+                        format!("{file}: {reason}")
+                    });
                 });
                 self.ctx.events.send(Event::FileRejected { file, reason });
             }
