@@ -432,12 +432,16 @@ fn attack_files_are_refused_by_the_watch_folder_and_http_and_the_daemon_stays_up
         let why = std::fs::read_to_string(&reason).unwrap();
         says("the watch folder", a.name, &why, a.want);
         // HTTP: refused, naming the limit.
+        // HTTP: refused with 400 (GUIDE.md, Security), naming the limit.
         if a.http {
             let e = client
                 .post_bytes(&format!("/scans/import?file={}", a.name), &a.bytes)
-                .expect_err(a.name)
-                .to_string();
-            says("POST /scans/import", a.name, &e, a.want);
+                .expect_err(a.name);
+            let brdfd::client::ClientError::Refused { status, .. } = &e else {
+                panic!("{}: {e}", a.name);
+            };
+            assert_eq!(*status, 400, "{}: {e}", a.name);
+            says("POST /scans/import", a.name, &e.to_string(), a.want);
         }
         // Still up (serving `status`), every refusal counted (the count follows the move to
         // failed/), nothing stored.
