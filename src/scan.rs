@@ -232,6 +232,18 @@ pub enum ScanError {
          {MAX_REFLECTANCE_FACTOR}); the value is corrupt"
     )]
     Unphysical { field: String, value: f64 },
+    #[error(
+        "{field}: reading {value:e} is {ratio:e} times the reference tile's {reference:e} \
+         ({reference_field}); no reflectance factor is above {MAX_REFLECTANCE_FACTOR} times a \
+         diffuse tile's, so one of the two values is corrupt"
+    )]
+    BeyondReference {
+        field: String,
+        value: f64,
+        reference_field: String,
+        reference: f64,
+        ratio: f64,
+    },
     #[error("{field}: expected an object of readings or \"{expected}\", got \"{found}\"")]
     UnknownTag {
         field: &'static str,
@@ -292,6 +304,16 @@ pub fn physical_reflectance_factor(value: f64) -> bool {
     value.is_finite() && value <= MAX_REFLECTANCE_FACTOR
 }
 
+/// Whether a sample's reading `sample` can be one, against the reference tile's `reference` at
+/// the same geometry (and band): the processed value is their ratio times the tile's
+/// reflectance (at most 1), so a ratio above [`MAX_REFLECTANCE_FACTOR`] is beyond any
+/// reflectance factor. This bounds the SRA's readings, which are in the device's own unit,
+/// and a tile reading so small that the ratio overflows what the fit can use; the one check
+/// of a reading against its tile every reader applies.
+pub fn physical_against_reference(sample: f64, reference: f64) -> bool {
+    sample / reference <= MAX_REFLECTANCE_FACTOR
+}
+
 fn check_value(role: Role, field: impl FnOnce() -> String, value: f64) -> Result<(), ScanError> {
     if !value.is_finite() {
         return Err(ScanError::NonFinite {
@@ -313,6 +335,33 @@ fn check_value(role: Role, field: impl FnOnce() -> String, value: f64) -> Result
 }
 
 impl DeviceReadings {
+    /// The first of these sample readings beyond [`physical_against_reference`] against
+    /// `tile`'s, as (geometry, band for the MA-T12, value, the tile's value).
+    pub fn beyond_reference(
+        &self,
+        tile: &DeviceReadings,
+    ) -> Option<(&'static Geometry, Option<usize>, f64, f64)> {
+        for geo in &GEOMETRIES {
+            match geo.device {
+                Device::MaT12 => {
+                    let (s, w) = (&self.ma_t12[geo.index], &tile.ma_t12[geo.index]);
+                    if let Some(b) = (0..BANDS).find(|&b| !physical_against_reference(s[b], w[b])) {
+                        return Some((geo, Some(b), s[b], w[b]));
+                    }
+                }
+                Device::Sra => {
+                    if let (Some(s), Some(w)) = (&self.sra, &tile.sra) {
+                        let k = geo.index - MA_T12_COUNT;
+                        if !physical_against_reference(s[k], w[k]) {
+                            return Some((geo, None, s[k], w[k]));
+                        }
+                    }
+                }
+            }
+        }
+        None
+    }
+
     fn validate(&self, role: Role) -> Result<(), ScanError> {
         for geo in &GEOMETRIES {
             match geo.device {
@@ -361,7 +410,24 @@ impl Scan {
         if let Some(origin) = &self.origin {
             origin.measured_at_ms()?;
         }
-        self.readings.validate(Role::Sample)
+        self.readings.validate(Role::Sample)?;
+        if let Some(reference) = &self.reference
+            && let Some((geo, band, value, tile)) =
+                self.readings.beyond_reference(&reference.readings)
+        {
+            let field = |role| match band {
+                Some(b) => band_field(role, geo, b),
+                None => geometry_field(role, geo),
+            };
+            return Err(ScanError::BeyondReference {
+                field: field(Role::Sample),
+                value,
+                reference_field: field(Role::Reference),
+                reference: tile,
+                ratio: value / tile,
+            });
+        }
+        Ok(())
     }
 
     /// Parses and checks a `brdfd.scan/1` document.
@@ -870,6 +936,36 @@ mod tests {
         }
     }
 
+    #[test]
+    fn readings_beyond_any_reflectance_factor_against_the_tile_are_refused_naming_both() {
+        // An SRA reading of 1e308 (the device's unit: only the tile's bounds it).
+        let mut s = example();
+        s.readings.sra = Some([1e308, 7.9]);
+        let e = s.validate().unwrap_err().to_string();
+        assert!(
+            e.starts_with("readings.sra.sra-20: reading 1e308 is inf times")
+                && e.contains("(reference.sra.sra-20)")
+                && e.contains("above 10000 times"),
+            "{e}"
+        );
+        // Hundreds of times the tile's, as near the specular direction of a glossy sample.
+        s.readings.sra = Some([0.245 * 400.0, 0.25 * 900.0]);
+        s.validate().unwrap();
+        // A tile reading so small that the MA-T12's ratio overflows what the fit can use.
+        let mut s = example();
+        s.reference.as_mut().unwrap().readings.ma_t12[2][5] = 1e-300;
+        let e = s.validate().unwrap_err().to_string();
+        assert!(
+            e.starts_with("readings.ma_t12.15as-15[5] (450 nm): reading 3.25e-1 is 3.25e299")
+                && e.contains("(reference.ma_t12.15as-15[5] (450 nm))"),
+            "{e}"
+        );
+        // At the bound itself: accepted.
+        let mut s = example();
+        s.readings.sra = Some([0.245 * MAX_REFLECTANCE_FACTOR, 7.9]);
+        s.validate().unwrap();
+    }
+
     fn example_value() -> serde_json::Value {
         serde_json::from_str(&example().to_json_pretty().unwrap()).unwrap()
     }
@@ -902,15 +998,17 @@ mod tests {
     fn round_trips_awkward_floats_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let mut scan = example();
-        for s in scan
-            .readings
-            .ma_t12
-            .iter_mut()
-            .chain(scan.reference.as_mut().unwrap().readings.ma_t12.iter_mut())
-        {
+        for s in scan.readings.ma_t12.iter_mut() {
             for v in s.iter_mut() {
                 // Full-precision mantissas over many decades, plus subnormal-ish extremes.
                 *v = rng.random::<f64>() * 10f64.powi(rng.random_range(-12..4)) + f64::MIN_POSITIVE;
+            }
+        }
+        // The tile's: full-precision mantissas within a tile's range, so that every sample
+        // reading stays a reflectance factor against it.
+        for s in scan.reference.as_mut().unwrap().readings.ma_t12.iter_mut() {
+            for v in s.iter_mut() {
+                *v = 0.5 + 0.5 * rng.random::<f64>();
             }
         }
         scan.readings.sra = Some([0.1 + 0.2, 1e-300]);

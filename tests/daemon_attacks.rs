@@ -653,7 +653,13 @@ fn a_link_in_the_watch_folder_never_redirects_a_note_a_move_or_a_read() {
     let note = std::fs::read_to_string(inbox.join("failed/h.cxf.error.txt")).unwrap();
     assert!(note.contains("hard link"), "{note}");
     let note = std::fs::read_to_string(inbox.join("failed/big.scan.json.error.txt")).unwrap();
-    assert!(note.contains("max_file_mib"), "{note}");
+    assert!(
+        note.contains(
+            "big.scan.json: the whole file: 2097152 bytes is beyond the import limit \"file \
+             size\" of 1048576 bytes"
+        ) && note.contains("ingest.max_file_mib"),
+        "{note}"
+    );
     assert!(outside.exists());
     // 4. done/ swapped for a link while running: nothing is moved through it.
     let elsewhere = dir.join("elsewhere");

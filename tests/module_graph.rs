@@ -31,12 +31,15 @@ fn files_of(src: &Path, module: &str) -> Vec<PathBuf> {
 }
 
 /// The code of a file that production builds compile: up to its `#[cfg(test)] mod tests`
-/// block, without comments. `tests.rs` files hold only tests.
+/// block, without comments. `tests.rs` files and files marked `#![cfg(test)]` hold only tests.
 fn production_lines(path: &Path) -> Vec<(usize, String)> {
     if path.file_name().is_some_and(|n| n == "tests.rs") {
         return Vec::new();
     }
     let text = std::fs::read_to_string(path).unwrap();
+    if text.lines().any(|l| l.trim() == "#![cfg(test)]") {
+        return Vec::new();
+    }
     let mut out = Vec::new();
     let mut lines = text.lines().enumerate().peekable();
     while let Some((i, line)) = lines.next() {

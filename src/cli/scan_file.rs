@@ -91,8 +91,8 @@ fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
             println!(
                 "{} ({}) imported as scan {scan}: reference instrument calibration, no specular \
                  readings; L*a*b* as the file's within ΔE00 {:.1e}",
-                args.file.display(),
-                x.scan.sample,
+                terminal_safe(&args.file.display().to_string()),
+                terminal_safe(&x.scan.sample),
                 x.check.largest
             );
         }
@@ -116,8 +116,10 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
     if is_xlsx {
         return import_xlsx(args);
     }
-    let text = std::fs::read_to_string(&args.file)
-        .with_context(|| format!("cannot read {}", args.file.display()))?;
+    // Within the import budget's file size, as every door reads (a larger file is refused
+    // unread).
+    let text =
+        crate::formats::read_text_within(&args.file, &crate::formats::budget::Budget::default())?;
     // Checked here too, so a bad file is named with its path before anything is sent.
     if let Err(e) = crate::scan::Scan::from_json(text.as_bytes()) {
         use crate::scan::ScanError;
@@ -153,7 +155,7 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
         let ids: Vec<i64> = fits.iter().map(|f| f.0).collect();
         println!(
             "{} imported as scan {scan}; fits {ids:?} queued",
-            args.file.display()
+            terminal_safe(&args.file.display().to_string())
         );
     }
     if let Some(events) = events {

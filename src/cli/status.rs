@@ -60,9 +60,12 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
             sync.rows_forwarded,
             match &sync.last_error {
                 Some(e) if sync.refused => {
-                    format!("; REFUSED, nothing of this store is forwarded: {e}")
+                    format!(
+                        "; REFUSED, nothing of this store is forwarded: {}",
+                        terminal_safe(e)
+                    )
                 }
-                Some(e) => format!("; last error: {e}"),
+                Some(e) => format!("; last error: {}", terminal_safe(e)),
                 None => String::new(),
             }
         );
@@ -80,7 +83,7 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
     if let Some(ingest) = &v.ingest {
         println!(
             "watch folder {}: {} imported, {} rejected since start{}, {} waiting{}",
-            ingest.dir,
+            terminal_safe(&ingest.dir),
             ingest.imported,
             ingest.rejected,
             match ingest.already_imported {
@@ -88,8 +91,9 @@ pub fn status(args: &StatusArgs) -> anyhow::Result<()> {
                 n => format!(", {n} imported before (moved to done/ with a note)"),
             },
             ingest.waiting,
+            // The last error names a file of the folder, whatever characters its name holds.
             match &ingest.last_error {
-                Some(e) => format!("; last error: {e}"),
+                Some(e) => format!("; last error: {}", terminal_safe(e)),
                 None => String::new(),
             }
         );

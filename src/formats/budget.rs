@@ -28,7 +28,7 @@ pub enum Limit {
     /// Uncompressed bytes of one markup part of an `.xlsx` that the reader holds whole (the
     /// shared strings, the workbook, a drawing, a relationships part).
     MarkupBytes,
-    /// Bytes of one text (a shared string or an inline cell text).
+    /// Bytes of one shared string (an inline cell text is bounded by its sheet part's size).
     TextBytes,
     /// Entries a shared-strings part declares (`uniqueCount`) or holds.
     SharedStrings,

@@ -475,6 +475,22 @@ mod tests {
             e.contains("at 45as45 at 430 nm: 0: a reference reading must be positive"),
             "{e}"
         );
+        // A reference reading so small that the sample's is beyond any reflectance factor
+        // against it: refused at the sample's line.
+        cells[24] = "1e-300".into();
+        lines[r] = cells.join("\t");
+        let s = lines
+            .iter()
+            .position(|l| l.contains("\"reading\"") && l.contains("\"45as45\""))
+            .unwrap();
+        let e = err(&lines.join("\n"));
+        assert!(
+            e.starts_with(&format!(
+                "m.txt:{}: SPECTRAL_NM430: sample \"T.Freesia pink\" at 45as45 at 430 nm: ",
+                s + 1
+            )) && e.contains("times the reference tile \"Munsell N9\"'s 1e-300"),
+            "{e}"
+        );
         // Structure.
         assert!(err("").contains("m.txt:1: file: empty"));
         let e = err(&good.replace("END_DATA\n", ""));

@@ -385,6 +385,29 @@ pub fn assemble(
             &format!("reference \"{tile}\" for sample \"{name}\""),
             true,
         )?;
+        // The readings against the tile's, naming the sample's line: what `Scan::validate`
+        // checks, with the place in the file.
+        if let Some((geo, band, value, tile_value)) = readings.beyond_reference(&ref_readings) {
+            let (_, at, fields) = samples[&name].values[geo.index]
+                .as_ref()
+                .expect("every geometry was read");
+            let at_band = band
+                .map(|b| format!(" at {} nm", crate::spectral::wavelengths_nm()[b]))
+                .unwrap_or_default();
+            return Err(FormatError::invalid(
+                &at.file,
+                at.line,
+                field_name(fields, band),
+                format!(
+                    "sample \"{name}\" at {}{at_band}: {value:e} is {:e} times the reference \
+                     tile \"{tile}\"'s {tile_value:e}; no reflectance factor is above {} times \
+                     a diffuse tile's, so one of the two values is corrupt",
+                    geo.name,
+                    value / tile_value,
+                    crate::scan::MAX_REFLECTANCE_FACTOR
+                ),
+            ));
+        }
         let scan = Scan {
             sample: name.clone(),
             reference: Some(Reference {

@@ -69,6 +69,7 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use tokio::sync::Semaphore;
 
+use crate::formats::budget::{Budget, Limit};
 use crate::formats::xrite_xlsx::TextureImage;
 use crate::formats::{self, Format, ImportOptions};
 use crate::safe_fs::{Dir, EntryKind, FsError, Replace};
@@ -412,11 +413,12 @@ enum Outcome {
 type UnitContent = (String, Vec<Scan>, Vec<Vec<TextureImage>>);
 
 /// How much of a file in `.importing/` is read: the bytes held for it in the import budget
-/// (its size when they were held), within `[ingest] max_file_mib`.
+/// (its size when they were held), within the import budget's file size
+/// (`[ingest] max_file_mib`).
 #[derive(Debug, Clone, Copy)]
 struct ReadLimit {
     bytes: u64,
-    max_file: u64,
+    budget: Budget,
 }
 
 /// Each file of `unit` (in `dir`, where it is now): how much of it is read, its size now at
@@ -431,7 +433,7 @@ fn read_limits(
         .map(|name| match dir.entry(name) {
             Ok(Some(e)) => Ok(ReadLimit {
                 bytes: e.size.min(settings.budget.max_file_bytes),
-                max_file: settings.budget.max_file_bytes,
+                budget: settings.budget,
             }),
             Ok(None) => Err(format!("{name} is gone from the watch folder")),
             Err(e) => Err(format!("{name}: {e}")),
@@ -450,16 +452,19 @@ struct Held {
 /// Reads `name` from `dir`, no further than `limit`.
 fn read_held(dir: &Dir, name: &str, limit: ReadLimit) -> Result<Vec<u8>, String> {
     dir.read_bounded(name, limit.bytes).map_err(|e| match e {
-        FsError::TooLarge { size, .. } if size > limit.max_file => format!(
-            "{name} is {size} bytes, over the watch folder's limit of {} MiB ([ingest] \
-             max_file_mib); nothing was read",
-            limit.max_file >> 20
-        ),
-        FsError::TooLarge { size, .. } => format!(
-            "{name} grew to {size} bytes while it was being imported (it was {} bytes when \
-             taken): something still writes to it; drop it again once it is written",
-            limit.bytes
-        ),
+        FsError::TooLarge { size, .. } => {
+            match limit
+                .budget
+                .check(Limit::FileBytes, name, "the whole file", size)
+            {
+                Err(over) => format!("{over} (nothing of it was read)"),
+                Ok(()) => format!(
+                    "{name} grew to {size} bytes while it was being imported (it was {} bytes \
+                     when taken): something still writes to it; drop it again once it is written",
+                    limit.bytes
+                ),
+            }
+        }
         e => format!("{name}: {e}"),
     })
 }
@@ -1153,7 +1158,12 @@ impl WatchFolder {
                 self.with_ingest_status(|s| {
                     s.rejected += 1;
                     s.last_file = Some(file.clone());
-                    s.last_error = Some(format!("{file}: {reason}"));
+                    // The reason names the file already when a reader refused it.
+                    s.last_error = Some(if reason.starts_with(&format!("{file}: ")) {
+                        reason.clone()
+                    } else {
+                        format!("{file}: {reason}")
+                    });
                 });
                 self.ctx.events.send(Event::FileRejected { file, reason });
             }
