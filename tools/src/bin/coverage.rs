@@ -115,7 +115,14 @@ fn main() {
         if no_sra {
             "MA-T12-only scans (12 geometries, no SRA readings)".to_string()
         } else {
-            format!("SRA model {sra}, simulated SRA reads the {response}")
+            let weights: Vec<String> = costs
+                .iter()
+                .map(|&cf| format!("{cf} {}", weight_of(cf)))
+                .collect();
+            format!(
+                "SRA model {sra}, simulated SRA reads the {response}, SRA weight {}",
+                weights.join(", ")
+            )
         },
         100.0 * se
     );
