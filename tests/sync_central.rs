@@ -1102,6 +1102,15 @@ async fn the_central_views_decode_as_the_stations_and_pool_across_stations() {
                         == ("incidence", "flat", "paper")),
                 "{central_config:?}"
             );
+            // And the paper's weights of the SRA readings (settings without a weight).
+            let weights: Vec<String> = sqlx::query_scalar(
+                "SELECT DISTINCT sra_weight FROM fit_configuration WHERE station = $1",
+            )
+            .bind(n)
+            .fetch_all(&pg)
+            .await
+            .unwrap();
+            assert_eq!(weights, ["paper"], "{n}: fit_configuration.sra_weight");
             let kd: i64 = sqlx::query_scalar(
                 "SELECT COUNT(kd) FROM kd_values WHERE station = $1 AND kd >= 0",
             )

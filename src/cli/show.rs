@@ -313,8 +313,14 @@ fn print_fit_extras(fit: &FitDetail, specular: bool) {
         None => String::new(),
     };
     if specular {
+        // The SRA readings' weight in the cost, where it is not the paper's (SCIENCE.md §5.2).
+        let weight = if sra.weight.is_paper() {
+            String::new()
+        } else {
+            format!(", {} weight", sra.weight)
+        };
         println!(
-            "       SRA reading model {} (illuminant {}, {}° observer){delta_l}",
+            "       SRA reading model {} (illuminant {}, {}° observer{weight}){delta_l}",
             sra.model, sra.illuminant, sra.observer
         );
     }

@@ -896,7 +896,8 @@ async function renderResult(id) {
 /** A fit's specular |ΔL*| and its SRA reading model (SCIENCE.md §5.1, §7.2). */
 function deltaL(fit) {
   if (!fit || !fit.specular_delta_l) return "—";
-  return `${fmt(fit.specular_delta_l.mean, 3)} (${fit.sra ? fit.sra.model : "flat"})`;
+  const sra = fit.sra ? fit.sra.model + (fit.sra.weight && fit.sra.weight !== "paper" ? `, ${fit.sra.weight}` : "") : "flat";
+  return `${fmt(fit.specular_delta_l.mean, 3)} (${sra})`;
 }
 
 /** Where the model misses: measured minus fitted ΔL* (and ΔC*, ΔH*, ΔE00 on hover) per
