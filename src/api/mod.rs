@@ -13,7 +13,7 @@
 //! | `GET /scans/{id}/export` | the scan as `brdfd.scan/1` | 200 |
 //! | `GET /scans/{id}/textures/{n}.png` | the instrument camera's image `n` kept with an imported scan (listed in the scan's `textures`) | 200 `image/png` |
 //! | `POST /scans/import?file=NAME&again=true` (a `brdfd.scan/1` body, or an X-Rite QC `.xlsx` export; both parameters optional) | import its scans, fit them; the same bytes imported before (through any door) are not imported again unless `again=true` | 201 `{"scan", "fits"}` (an `.xlsx`: `"scans"` and `"colorimetry_checks"` too); 200 `{"scan", "scans", "fits": [], "already_imported": {"message", …}}` for a repeat |
-//! | `POST /scans/{id}/refit` [`RefitRequest`] (`preset`, `model`, `fresnel`, `sra`, `missing_only`) | queue fits again | 202 `{"fits": [id]}` |
+//! | `POST /scans/{id}/refit` [`RefitRequest`] (`preset`, `model`, `fresnel`, `sra`, `sra_weight`, `missing_only`) | queue fits again | 202 `{"fits": [id]}` |
 //! | `POST /abort` | stop the reference or scan in progress | 200 `{"aborted": …}` |
 //! | `GET /fits/{id}` | a fit run and its evaluation | 200 |
 //! | `POST /fits/{id}/cancel` | cancel a queued or running fit | 202 |

@@ -949,12 +949,14 @@ function swatchRow(label, swatches, de) {
     de ? h("div", {}, `ΔE ${fmt(de[i])}`) : null)));
 }
 
-/** A fit's mean held-out ΔE00 (its cross-validation, once computed), the worst geometry on hover. */
+/** A fit's mean held-out ΔE00 (its cross-validation, once computed) and, under it, the worst
+ * geometry: readable without hover, on a phone too. */
 function heldOutCell(d) {
   const cv = d && d.crossval;
   if (!cv) return h("td", { class: "held-out" }, d ? "not computed (yet)" : "—");
   const worst = cv.held_out.reduce((a, b) => (b.delta_e00 > a.delta_e00 ? b : a));
-  return h("td", { class: "held-out", "data-held-out": fmt(cv.held_out_mean), title: `worst: ${worst.geometry} ${fmt(worst.delta_e00)}` }, fmt(cv.held_out_mean));
+  return h("td", { class: "held-out", "data-held-out": fmt(cv.held_out_mean) }, fmt(cv.held_out_mean),
+    h("div", { class: "muted held-out-worst" }, `worst ${worst.geometry} ${fmt(worst.delta_e00)}`));
 }
 
 /** A fit's reach verdict (SCIENCE.md §12.7): whether the model can represent the material, the
