@@ -1,9 +1,10 @@
 //! What the study binaries share with brdfd's examples (`examples/common` compiles this same
-//! file): a `--name value` option read off the command line, and the example scans of
-//! `tests/data/` read and processed as the CLI does. Only `std` and brdfd's library, so that it
+//! file): a `--name value` option read off the command line, the example scans of
+//! `tests/data/` and the real MA-T12 exports of `tests/data/real-mat12/` read and processed as
+//! the CLI does. Only `std` and brdfd's library, so that it
 //! builds in both packages.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
 use brdfd::scan::Scan;
@@ -52,4 +53,30 @@ pub fn example_scans(dir: &Path) -> Vec<ExampleScan> {
             }
         })
         .collect()
+}
+
+/// The real MA-T12 exports (X-Rite's QC `.xlsx` files) under `root` (`tests/data/real-mat12`):
+/// `root`'s own files, then those of `root/more`, each folder in file-name order; every
+/// measurement a file holds, as (sample name, measured BRDF processed with the default
+/// options: 12 geometries, normalised by the instrument's own calibration).
+pub fn real_exports(root: &Path) -> Vec<(String, MeasuredBrdf)> {
+    let list = |dir: &Path| -> Vec<PathBuf> {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+            .unwrap_or_else(|e| panic!("{} should hold the real exports: {e}", dir.display()))
+            .map(|e| e.expect("readable entry").path())
+            .filter(|p| p.extension().is_some_and(|e| e == "xlsx"))
+            .collect();
+        v.sort();
+        v
+    };
+    let mut out = Vec::new();
+    for path in list(root).into_iter().chain(list(&root.join("more"))) {
+        for x in brdfd::formats::xrite::read_file(&path, &Default::default())
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        {
+            let m = process(&x.scan, &ProcessingOptions::default()).expect("real scans process");
+            out.push((x.scan.sample.clone(), m));
+        }
+    }
+    out
 }

@@ -14,7 +14,7 @@
 //! Run: `cargo run --release -p brdfd-tools --bin heldout [-- --files 47 --costs cf1,cf2,m2
 //! --bootstrap 0 --require 0]` (defaults shown). SCIENCE.md §10 quotes its output.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -23,33 +23,14 @@ use brdfd::cost::CostFunction;
 use brdfd::geometry::GEOMETRIES;
 use brdfd::model::{FresnelCosine, Params};
 use brdfd::optimise::Settings;
-use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
+use brdfd::processing::MeasuredBrdf;
 use brdfd::uncertainty::jackknife::{Jackknife, hull, jackknife};
 use brdfd::uncertainty::{BootstrapOptions, Interval, PointFit, Uncertainty, draw};
-use brdfd_tools::shared::arg;
+use brdfd_tools::shared::{arg, real_exports};
 
 /// The real exports, in file-name order: `real-mat12/` first, then `more/`.
 fn exports() -> Vec<(String, MeasuredBrdf)> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/real-mat12");
-    let list = |dir: &Path| -> Vec<PathBuf> {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
-            .expect("tests/data/real-mat12 holds the real exports")
-            .map(|e| e.expect("readable entry").path())
-            .filter(|p| p.extension().is_some_and(|e| e == "xlsx"))
-            .collect();
-        v.sort();
-        v
-    };
-    let mut out = Vec::new();
-    for path in list(&root).into_iter().chain(list(&root.join("more"))) {
-        for x in brdfd::formats::xrite::read_file(&path, &Default::default())
-            .expect("the real exports read")
-        {
-            let m = process(&x.scan, &ProcessingOptions::default()).expect("real scans process");
-            out.push((x.scan.sample.clone(), m));
-        }
-    }
-    out
+    real_exports(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/real-mat12"))
 }
 
 fn inside(v: f64, [lo, hi]: Interval) -> bool {

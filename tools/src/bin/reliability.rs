@@ -3,23 +3,33 @@
 //!
 //! Over every synthetic scan — the 16 example scans in `tests/data/` (eight paper-style samples,
 //! noise-free and with 1 % noise, processed as the CLI does) and the optimiser's own 6
-//! ColorChecker cases (noise-free and 1 % noise) — and the six real MA-T12 measurements in
-//! `tests/data/real-mat12/` (X-Rite's exports: 12 geometries, normalised by the instrument's
-//! own calibration, with the misfit real paint leaves) × 3 cost functions × N seeds, fits with both methods and takes the best cost any run found
-//! as the reference. Checks that the default (separable) method ends within 1 % of it every
-//! time (or at an exact fit, residuals at rounding, where the model describes a noise-free scan
-//! exactly), and counts how often the paper GA does not. Exits non-zero on any separable miss.
+//! ColorChecker cases (noise-free and 1 % noise) — and the 47 real MA-T12 measurements in
+//! `tests/data/real-mat12/` and `more/` (X-Rite's exports: 12 geometries, normalised by the
+//! instrument's own calibration, with the misfit real paint leaves) × 3 cost functions × N
+//! seeds, fits with both methods and takes the best cost any run found as the reference. Checks
+//! that the default (separable) method ends within 1 % of it every time (or at an exact fit,
+//! residuals at rounding, where the model describes a noise-free scan exactly), and counts how
+//! often the paper GA does not. Exits non-zero on any separable miss.
 //!
 //! Run: `cargo run --release -p brdfd-tools --bin reliability [-- OPTIONS]`. The default is the full
-//! comparison. Options, for quicker looks while working on the optimiser:
+//! comparison under the paper's configuration. Options, for quicker looks while working on the
+//! optimiser and for the other configurations a fit can have:
 //! - `--seeds N`: seeds per scan and cost function (default 10).
 //! - `--scans all|examples|cases|real|luminance`: the example scans of `tests/data/`, the
-//!   optimiser's own cases, the real measurements, all three (default), or the paper's eight
+//!   optimiser's own cases, the 47 real measurements, all three (default), or the paper's eight
 //!   samples on a simulated bench whose SRA reads the luminance (noise-free and 1 %; the scans
 //!   to judge `--sra luminance` on, since the example scans' SRA reads the band mean).
+//! - `--files N`: only the first N real exports in file-name order (the six of `real-mat12/`,
+//!   then `more/`; default all 47).
 //! - `--costs cf1,cf2,m2`: the cost functions to fit (default all three).
-//! - `--sra flat|luminance`: the SRA reading model every fit uses (default `flat`, the
-//!   paper's); the real scans have no SRA readings, so it changes only the synthetic ones.
+//! - `--preset paper|measured`: the model form, Fresnel factor and SRA reading model of every
+//!   fit, as `brdfd fit --preset` gives them (default `paper`: the paper's model, Schlick on
+//!   cos θi, the flat SRA reading; `measured` is the exact Fresnel and the luminance SRA model).
+//! - `--fresnel incidence|light-half|exact`, `--model paper|oren-nayar|two-lobe`,
+//!   `--sra flat|luminance`: one choice instead of the preset's, as with `brdfd fit`. The real
+//!   scans have no SRA readings, so `--sra` changes only the synthetic ones; a model option
+//!   needs `--only-separable` (the paper GA fits the paper's model only). The synthetic scans
+//!   are made with the paper's model and Schlick on cos θi whatever the fits use.
 //! - `--samples N`, `--starts N`: the separable method's design size and design starts per
 //!   stage (defaults 64 and 4), to see what a change of the method's budget would buy.
 //! - `--only-separable`: skip the paper GA (≈ 95 % of the run time); the reference is then the
@@ -30,11 +40,11 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use brdfd::cost::CostFunction;
-use brdfd::model::FresnelCosine;
-use brdfd::optimise::{Method, SeparableSettings, Settings, fit, synthetic};
+use brdfd::model::{FresnelCosine, ModelKind};
+use brdfd::optimise::{Method, Preset, SeparableSettings, Settings, fit, synthetic};
 use brdfd::processing::{MeasuredBrdf, ProcessingOptions, process};
 use brdfd::sra_reading::{SraModel, SraReading};
-use brdfd_tools::shared::example_scans;
+use brdfd_tools::shared::{example_scans, real_exports};
 
 /// Which scans to fit.
 #[derive(Clone, Copy, PartialEq)]
@@ -47,13 +57,13 @@ enum Which {
 }
 
 /// Every scan the harness fits: (label, noise, measured BRDF).
-fn scans(which: Which) -> Vec<(String, f64, MeasuredBrdf)> {
+fn scans(which: Which, files: usize) -> Vec<(String, f64, MeasuredBrdf)> {
     let mut out = Vec::new();
     if which == Which::Cases {
         return cases(out);
     }
     if which == Which::Real {
-        return real(out);
+        return real(out, files);
     }
     if which == Which::Luminance {
         return luminance(out);
@@ -66,26 +76,19 @@ fn scans(which: Which) -> Vec<(String, f64, MeasuredBrdf)> {
     if which == Which::Examples {
         return out;
     }
-    real(cases(out))
+    real(cases(out), files)
 }
 
-/// Appends the real MA-T12 measurements (X-Rite's `.xlsx` exports), labelled `real:NAME`.
-fn real(mut out: Vec<(String, f64, MeasuredBrdf)>) -> Vec<(String, f64, MeasuredBrdf)> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/real-mat12");
-    let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .expect("tests/data/real-mat12 holds the real exports")
-        .map(|e| e.expect("readable entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "xlsx"))
-        .collect();
-    files.sort();
-    for path in files {
-        for x in brdfd::formats::xrite::read_file(&path, &Default::default())
-            .expect("the real exports read")
-        {
-            let m = process(&x.scan, &ProcessingOptions::default()).expect("real scans process");
-            // Noise unknown: the real residual is the point.
-            out.push((format!("real:{}", x.scan.sample), f64::NAN, m));
-        }
+/// Appends the first `files` of the 47 real MA-T12 measurements (X-Rite's `.xlsx` exports in
+/// `tests/data/real-mat12/`, then `more/`), labelled `real:NAME`.
+fn real(
+    mut out: Vec<(String, f64, MeasuredBrdf)>,
+    files: usize,
+) -> Vec<(String, f64, MeasuredBrdf)> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/real-mat12");
+    for (sample, m) in real_exports(&root).into_iter().take(files) {
+        // Noise unknown: the real residual is the point.
+        out.push((format!("real:{sample}"), f64::NAN, m));
     }
     out
 }
@@ -152,8 +155,12 @@ fn missed(cf: CostFunction, cost: f64, best: f64) -> bool {
 struct Options {
     seeds: u64,
     which: Which,
+    /// How many of the real exports to fit (`--files`), in file-name order.
+    files: usize,
     costs: Vec<CostFunction>,
-    sra: SraReading,
+    /// The science choices of every fit (`--preset`, `--fresnel`, `--model`, `--sra`): the
+    /// settings every fit starts from.
+    base: Settings,
     only_separable: bool,
     /// The separable method's settings for every fit (`--samples`, `--starts`).
     separable: SeparableSettings,
@@ -163,11 +170,15 @@ fn options() -> Result<Options, String> {
     let mut o = Options {
         seeds: 10,
         which: Which::All,
+        files: usize::MAX,
         costs: CostFunction::ALL.to_vec(),
-        sra: SraReading::FLAT,
+        base: Settings::default(),
         only_separable: false,
         separable: SeparableSettings::default(),
     };
+    // The preset gives the defaults; --fresnel, --model and --sra beside it win, in any order.
+    let mut preset = Preset::Paper;
+    let (mut fresnel, mut model, mut sra) = (None, None, None);
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
@@ -175,6 +186,12 @@ fn options() -> Result<Options, String> {
                 o.seeds = match args.next().and_then(|s| s.parse().ok()) {
                     Some(n) if n > 0 => n,
                     _ => return Err("--seeds needs a positive integer".into()),
+                }
+            }
+            "--files" => {
+                o.files = match args.next().and_then(|s| s.parse().ok()) {
+                    Some(n) if n > 0 => n,
+                    _ => return Err("--files needs a positive integer".into()),
                 }
             }
             "--scans" => {
@@ -201,13 +218,36 @@ fn options() -> Result<Options, String> {
                     })
                     .collect::<Result<_, _>>()?;
             }
-            "--sra" => {
-                let model: SraModel = args
+            "--preset" => {
+                preset = args
                     .next()
                     .unwrap_or_default()
                     .parse()
-                    .map_err(|e| format!("--sra: {e}"))?;
-                o.sra = SraReading::default().with_model(model);
+                    .map_err(|e| format!("--preset: {e}"))?;
+            }
+            "--fresnel" => {
+                fresnel = Some(
+                    args.next()
+                        .unwrap_or_default()
+                        .parse::<FresnelCosine>()
+                        .map_err(|e| format!("--fresnel: {e}"))?,
+                );
+            }
+            "--model" => {
+                model = Some(
+                    args.next()
+                        .unwrap_or_default()
+                        .parse::<ModelKind>()
+                        .map_err(|e| format!("--model: {e}"))?,
+                );
+            }
+            "--sra" => {
+                sra = Some(
+                    args.next()
+                        .unwrap_or_default()
+                        .parse::<SraModel>()
+                        .map_err(|e| format!("--sra: {e}"))?,
+                );
             }
             "--only-separable" => o.only_separable = true,
             "--samples" | "--starts" => {
@@ -223,22 +263,32 @@ fn options() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown option {other}; expected --seeds N, --scans all|examples|cases|real|luminance, \
-                     --costs cf1,cf2,m2, --sra flat|luminance, --only-separable, --samples N, --starts N"
+                    "unknown option {other}; expected --seeds N, --scans all|examples|cases|real|luminance, --files N, \
+                     --costs cf1,cf2,m2, --preset paper|measured, --fresnel incidence|light-half|exact, \
+                     --model paper|oren-nayar|two-lobe, --sra flat|luminance, --only-separable, \
+                     --samples N, --starts N"
                 ));
             }
         }
+    }
+    o.base.fresnel = fresnel.unwrap_or(preset.fresnel());
+    o.base.model = model.unwrap_or(preset.model());
+    o.base.sra = SraReading::default().with_model(sra.unwrap_or(preset.sra()));
+    if o.base.model != ModelKind::Paper && !o.only_separable {
+        return Err(format!(
+            "--model {} needs --only-separable: the paper GA fits the paper's model only",
+            o.base.model
+        ));
     }
     Ok(o)
 }
 
 /// The generous separable fit that stands in for the paper GA's runs in `--only-separable`.
-fn reference_settings(cf: CostFunction, sra: SraReading) -> Settings {
+fn reference_settings(cf: CostFunction, base: &Settings) -> Settings {
     let mut s = Settings {
         cost: cf,
         seed: 1 << 40,
-        sra,
-        ..Settings::default()
+        ..*base
     };
     s.separable.samples *= 8;
     s.separable.starts *= 4;
@@ -249,8 +299,9 @@ fn main() -> ExitCode {
     let Options {
         seeds,
         which,
+        files,
         costs,
-        sra,
+        base,
         only_separable,
         separable,
     } = match options() {
@@ -266,6 +317,12 @@ fn main() -> ExitCode {
         &Method::ALL
     };
 
+    println!(
+        "fits under: model {}, Fresnel {}, SRA reading {}",
+        base.model,
+        base.fresnel,
+        base.sra.model.name()
+    );
     let started = Instant::now();
     let (mut runs, mut separable_misses, mut paper_misses) = (0u32, 0u32, 0u32);
     let (mut separable_ms, mut paper_ms) = (0.0, 0.0);
@@ -288,7 +345,7 @@ fn main() -> ExitCode {
         .iter()
         .flat_map(|&cf| [(cf, false, Vec::new(), 0), (cf, true, Vec::new(), 0)])
         .collect();
-    let scans = scans(which);
+    let scans = scans(which, files);
     for (label, noise, m) in &scans {
         {
             for &cf in &costs {
@@ -297,7 +354,7 @@ fn main() -> ExitCode {
                 if only_separable {
                     // Stands in for the paper's runs as a reference; not counted as a fit.
                     let out =
-                        fit(m, &reference_settings(cf, sra)).expect("synthetic scans are valid");
+                        fit(m, &reference_settings(cf, &base)).expect("synthetic scans are valid");
                     paper.push(out.cost);
                 }
                 for seed in 0..seeds {
@@ -306,9 +363,8 @@ fn main() -> ExitCode {
                             cost: cf,
                             method,
                             seed,
-                            sra,
                             separable,
-                            ..Settings::default()
+                            ..base
                         };
                         let out = fit(m, &s).expect("synthetic scans are valid");
                         match method {
