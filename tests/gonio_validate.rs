@@ -279,9 +279,10 @@ fn the_oracle_is_never_worse_than_a_prediction_of_its_form() {
     }
 }
 
-/// A clear coat over a coloured base: a sharp lobe and a haze lobe, what glossy paints are.
-fn glossy_coat(wi: Vec3, wo: Vec3) -> Vec<f64> {
-    let lobe = |ks: f64, alpha: f64| {
+/// A clear coat over the diffuse spectrum `kd`: a sharp lobe and a haze lobe `(ks, α)` of a
+/// coat of index 1.5, what glossy paints are.
+fn coat(kd: &[f64], sharp: (f64, f64), haze: (f64, f64), wi: Vec3, wo: Vec3) -> Vec<f64> {
+    let lobe = |(ks, alpha): (f64, f64)| {
         let p = Params {
             kd: [0.0; BANDS],
             ks,
@@ -291,8 +292,13 @@ fn glossy_coat(wi: Vec3, wo: Vec3) -> Vec<f64> {
         };
         evaluate_at(&p, ModelKind::Paper, FresnelCosine::Exact, wi, wo)[0]
     };
-    let spec = lobe(3.0, 0.02) + lobe(0.3, 0.2);
-    truth().kd.iter().map(|k| k + spec).collect()
+    let spec = lobe(sharp) + lobe(haze);
+    kd.iter().map(|k| k + spec).collect()
+}
+
+/// A clear coat over a coloured base.
+fn glossy_coat(wi: Vec3, wo: Vec3) -> Vec<f64> {
+    coat(&truth().kd, (3.0, 0.02), (0.3, 0.2), wi, wo)
 }
 
 /// A matt material: the model's diffuse term and a broad, weak lobe.
@@ -338,24 +344,12 @@ fn reach_tells_a_matt_material_from_a_glossy_coat() {
 /// A clear coat whose mirror peak is far sharper than its haze, over an orange base: the SRA
 /// reads it hundreds of times above the diffuse level.
 fn sharp_coat(wi: Vec3, wo: Vec3) -> Vec<f64> {
-    let lobe = |ks: f64, alpha: f64| {
-        let p = Params {
-            kd: [0.0; BANDS],
-            ks,
-            alpha,
-            ior: 1.5,
-            extra: [0.0; EXTRA],
-        };
-        evaluate_at(&p, ModelKind::Paper, FresnelCosine::Exact, wi, wo)[0]
-    };
-    let spec = lobe(1.0, 0.004) + lobe(0.8, 0.35);
-    (0..BANDS)
-        .map(|b| match b {
-            0..=9 => 0.05,
-            10..=19 => 0.1,
-            _ => 0.3,
-        } + spec)
-        .collect()
+    let orange: [f64; BANDS] = std::array::from_fn(|b| match b {
+        0..=9 => 0.05,
+        10..=19 => 0.1,
+        _ => 0.3,
+    });
+    coat(&orange, (1.0, 0.004), (0.8, 0.35), wi, wo)
 }
 
 /// Under cf1 with the paper's Fresnel, a lobe that cannot follow SRA readings hundreds above

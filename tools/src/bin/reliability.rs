@@ -161,6 +161,8 @@ struct Options {
     /// The science choices of every fit (`--preset`, `--fresnel`, `--model`, `--sra`): the
     /// settings every fit starts from.
     base: Settings,
+    /// The preset: each cost function's SRA weight is its (SCIENCE.md §5.2).
+    preset: Preset,
     only_separable: bool,
     /// The separable method's settings for every fit (`--samples`, `--starts`).
     separable: SeparableSettings,
@@ -173,6 +175,7 @@ fn options() -> Result<Options, String> {
         files: usize::MAX,
         costs: CostFunction::ALL.to_vec(),
         base: Settings::default(),
+        preset: Preset::Paper,
         only_separable: false,
         separable: SeparableSettings::default(),
     };
@@ -274,6 +277,7 @@ fn options() -> Result<Options, String> {
     o.base.fresnel = fresnel.unwrap_or(preset.fresnel());
     o.base.model = model.unwrap_or(preset.model());
     o.base.sra = SraReading::default().with_model(sra.unwrap_or(preset.sra()));
+    o.preset = preset;
     if o.base.model != ModelKind::Paper && !o.only_separable {
         return Err(format!(
             "--model {} needs --only-separable: the paper GA fits the paper's model only",
@@ -302,6 +306,7 @@ fn main() -> ExitCode {
         files,
         costs,
         base,
+        preset,
         only_separable,
         separable,
     } = match options() {
@@ -317,11 +322,16 @@ fn main() -> ExitCode {
         &Method::ALL
     };
 
+    let weights: Vec<String> = costs
+        .iter()
+        .map(|&cf| format!("{cf} {}", preset.sra_weight(cf)))
+        .collect();
     println!(
-        "fits under: model {}, Fresnel {}, SRA reading {}",
+        "fits under: model {}, Fresnel {}, SRA reading {}, SRA weight {}",
         base.model,
         base.fresnel,
-        base.sra.model.name()
+        base.sra.model.name(),
+        weights.join(", ")
     );
     let started = Instant::now();
     let (mut runs, mut separable_misses, mut paper_misses) = (0u32, 0u32, 0u32);
@@ -349,6 +359,11 @@ fn main() -> ExitCode {
     for (label, noise, m) in &scans {
         {
             for &cf in &costs {
+                // The preset's SRA weight for this cost function.
+                let base = Settings {
+                    sra: base.sra.with_weight(preset.sra_weight(cf)),
+                    ..base
+                };
                 let mut sep = Vec::new();
                 let mut paper = Vec::new();
                 if only_separable {
