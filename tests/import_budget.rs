@@ -133,7 +133,8 @@ fn first_anchor(x: &str) -> &str {
     &x[s..s + x[s..].find(close).unwrap() + close.len()]
 }
 
-/// The attack files of the table that fit in a test (each a few MB at most).
+/// The attack files that fit in a test (each a few MB at most), each aimed at a limit of the
+/// import budget or at a reader's value checks.
 fn attacks() -> Vec<Attack> {
     // One cell at the far end of a sheet: a dense grid of 2^34 cells.
     let far = edited(SPECTRAL, |x| {
