@@ -592,6 +592,61 @@ fn a_file_uploaded_over_http_is_recognised_by_the_cli() {
     daemon.stop();
 }
 
+/// An X-Rite export and the scan file `brdfd import-format` converts it to are one
+/// measurement: whichever is imported second is recognised as imported (its scan file names
+/// the export's SHA-256 among its origin notes), unless asked again.
+#[test]
+fn an_export_and_its_conversion_are_imported_once() {
+    let _serial = serial();
+    let lab = Lab::new(100, 600_000);
+    let daemon = lab.serve();
+    let (path, name) = xlsx();
+    let converted = lab.dir.join("converted");
+    let out = run_brdfd(
+        &[
+            "import-format",
+            path.to_str().unwrap(),
+            "--out",
+            converted.to_str().unwrap(),
+        ],
+        None,
+    );
+    assert!(out.status.success(), "{out:?}");
+    let json: Vec<PathBuf> = std::fs::read_dir(&converted)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().ends_with(".scan.json"))
+        .collect();
+    assert_eq!(json.len(), 1, "{json:?}");
+    // The conversion first, then the export itself: the export is recognised.
+    let (_, first_out) = cli_import(&lab, &daemon, &json[0], &[]);
+    assert!(first_out.contains("imported as scan"), "{first_out}");
+    let first = scans(&daemon.client)[0]["id"].as_i64().unwrap();
+    let (_, again) = cli_import(&lab, &daemon, &path, &[]);
+    assert!(
+        again.contains(&format!("already imported as scan {first} on ")),
+        "{again}"
+    );
+    assert_eq!(scans(&daemon.client).len(), 1);
+    // Asked again, the export is imported; then a repeat of the export names both scans of
+    // the measurement, the conversion's and its own.
+    let (_, forced) = cli_import(&lab, &daemon, &path, &["--again"]);
+    assert!(forced.contains("imported as scan"), "{forced}");
+    let list = scans(&daemon.client);
+    assert_eq!(list.len(), 2, "{list:?}");
+    let (_, repeat) = cli_import(&lab, &daemon, &path, &[]);
+    assert!(repeat.contains("already imported as scans"), "{repeat}");
+    // The watch folder knows the export after its conversion too.
+    std::fs::copy(&path, lab.sub(name)).unwrap();
+    wait_for("the export in done/ with its note", || {
+        lab.names("done").len() == 2
+    });
+    let note = std::fs::read_to_string(lab.sub(&format!("done/{name}.note.txt"))).unwrap();
+    assert!(note.contains("already imported as scans"), "{note}");
+    assert_eq!(scans(&daemon.client).len(), 2);
+    daemon.stop();
+}
+
 /// `n` distinct scans: the examples under numbered sample names.
 fn many_scans(n: usize) -> Vec<Scan> {
     let names = [

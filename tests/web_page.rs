@@ -213,9 +213,21 @@ async fn eval(c: &Client, script: &str) -> Value {
     c.execute(script, vec![]).await.unwrap()
 }
 
-/// The text of the element `locator` finds.
+/// The text of the element `locator` finds. The page re-renders a view when news arrives, so
+/// an element found may be replaced before its text is read: it is then found again.
 async fn text_of(c: &Client, locator: Locator<'_>) -> String {
-    c.find(locator).await.unwrap().text().await.unwrap()
+    for _ in 0..20 {
+        match c.find(locator).await.unwrap().text().await {
+            Ok(text) => return text,
+            Err(fantoccini::error::CmdError::Standard(e))
+                if e.error == fantoccini::error::ErrorStatus::StaleElementReference =>
+            {
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+            Err(e) => panic!("reading the text of {locator:?}: {e}"),
+        }
+    }
+    panic!("the element {locator:?} was replaced 20 times while its text was read")
 }
 
 /// Polls a script until it returns true.

@@ -6,7 +6,10 @@
 //! the SHA-256 of the bytes, the file name, when; [`Store::import_scans`] (`brdfd import`,
 //! `POST /scans/import`) and [`Store::import_file`] (the watch folder) look the hash up inside
 //! their write transaction, so the same bytes through any door give their scans once unless
-//! asked again ([`PriorImport`]). The watch folder also keeps its own record of each dropped
+//! asked again ([`PriorImport`]). An instrument export's SHA-256 is also in its scans'
+//! provenance (`…; sha256 HEX; …`), and in that of a scan file converted from it (`brdfd
+//! import-format`, among its origin notes): the lookup takes both ways, so an export and its
+//! conversion are one measurement, whichever comes second. The watch folder also keeps its own record of each dropped
 //! file (`ingested_files`, `migrations/0012_ingest.sql`), which its crash recovery and the
 //! queueing of its fits read.
 
@@ -110,6 +113,9 @@ impl Store {
         if let Some(prior) = prior_by_hash(&mut tx, sha256).await? {
             return Ok(FileImport::ImportedElsewhere(prior));
         }
+        if let Some(prior) = prior_of_sources(&mut tx, scans).await? {
+            return Ok(FileImport::ImportedElsewhere(prior));
+        }
         let now = now_ms();
         let shown = match partner_name {
             Some(p) => format!("{file_name} and {p}"),
@@ -184,9 +190,13 @@ impl Store {
         // Inside the write transaction: no other writer can record the same hash meanwhile.
         if let Some(f) = file
             && !again
-            && let Some(prior) = prior_by_hash(&mut tx, f.sha256).await?
         {
-            return Ok(ScansImport::AlreadyImported(prior));
+            if let Some(prior) = prior_by_hash(&mut tx, f.sha256).await? {
+                return Ok(ScansImport::AlreadyImported(prior));
+            }
+            if let Some(prior) = prior_of_sources(&mut tx, scans).await? {
+                return Ok(ScansImport::AlreadyImported(prior));
+            }
         }
         let now = now_ms();
         let mut ids = Vec::with_capacity(scans.len());
@@ -281,14 +291,49 @@ async fn record_import(
 }
 
 /// Every import of the content with this hash: its scans, and the first one's file and time.
+/// The SHA-256 of the instrument export a scan's provenance names (`…; sha256 HEX; …`, what an
+/// X-Rite export's import, and a scan file converted from one by `brdfd import-format`, record
+/// of the export), if it names one.
+fn source_sha256(detail: &str) -> Option<&str> {
+    let at = detail.find("sha256 ")? + "sha256 ".len();
+    let hex = detail.get(at..at + 64)?;
+    hex.bytes().all(|b| b.is_ascii_hexdigit()).then_some(hex)
+}
+
+/// An earlier import of the instrument export one of `scans` was converted from (its
+/// provenance names the export's hash): the same measurement, through another file.
+async fn prior_of_sources(
+    conn: &mut sqlx::SqliteConnection,
+    scans: &[ImportedScan<'_>],
+) -> Result<Option<PriorImport>, StoreError> {
+    for s in scans {
+        if let Some(hash) = s
+            .provenance
+            .source_detail
+            .as_deref()
+            .and_then(source_sha256)
+            && let Some(prior) = prior_by_hash(conn, hash).await?
+        {
+            return Ok(Some(prior));
+        }
+    }
+    Ok(None)
+}
+
+/// The imports of the content with this hash: the scans imported from a file with these bytes,
+/// and the imported scans whose provenance names it as the export they came from (a scan
+/// file converted from the export, or the export itself when a conversion was imported first).
 async fn prior_by_hash(
     conn: &mut sqlx::SqliteConnection,
     sha256: &str,
 ) -> Result<Option<PriorImport>, StoreError> {
     let sha256 = sha256.to_ascii_lowercase();
     let rows: Vec<(i64, Option<String>, i64)> = sqlx::query_as(
-        "SELECT scan_id, file_name, imported_at_ms FROM scan_imports WHERE sha256 = $1
-         ORDER BY imported_at_ms, scan_id",
+        "SELECT s.id, i.file_name, COALESCE(i.imported_at_ms, s.requested_at_ms) AS at_ms
+         FROM scans s LEFT JOIN scan_imports i ON i.scan_id = s.id
+         WHERE i.sha256 = $1
+            OR (s.source = 'imported' AND instr(s.source_detail, 'sha256 ' || $1) > 0)
+         ORDER BY at_ms, s.id",
     )
     .bind(&sha256)
     .fetch_all(&mut *conn)
@@ -340,6 +385,18 @@ mod tests {
     use super::*;
     use crate::geometry::Device;
     use crate::store::{NewReading, Provenance, ReadingValues, Source};
+
+    #[test]
+    fn the_export_hash_a_provenance_names_is_read_whole_or_not_at_all() {
+        let hex = "ab".repeat(32);
+        let detail = format!("X-Rite QC export PAR_1.xlsx; job J; sha256 {hex}; standard S");
+        assert_eq!(source_sha256(&detail), Some(hex.as_str()));
+        assert_eq!(source_sha256(&format!("sha256 {hex}")), Some(hex.as_str()));
+        // Too short, or not hex: no hash.
+        assert_eq!(source_sha256(&format!("sha256 {}", &hex[..63])), None);
+        assert_eq!(source_sha256(&format!("sha256 {}zz", &hex[..62])), None);
+        assert_eq!(source_sha256("brdfd.scan/1 file a.scan.json"), None);
+    }
 
     fn readings() -> Vec<NewReading<'static>> {
         crate::geometry::ma_t12()
