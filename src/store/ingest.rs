@@ -113,7 +113,7 @@ impl Store {
         if let Some(prior) = prior_by_hash(&mut tx, sha256).await? {
             return Ok(FileImport::ImportedElsewhere(prior));
         }
-        if let Some(prior) = prior_of_sources(&mut tx, scans).await? {
+        if let Some(prior) = prior_of_sources(&mut tx, scans, sha256).await? {
             return Ok(FileImport::ImportedElsewhere(prior));
         }
         let now = now_ms();
@@ -194,7 +194,7 @@ impl Store {
             if let Some(prior) = prior_by_hash(&mut tx, f.sha256).await? {
                 return Ok(ScansImport::AlreadyImported(prior));
             }
-            if let Some(prior) = prior_of_sources(&mut tx, scans).await? {
+            if let Some(prior) = prior_of_sources(&mut tx, scans, f.sha256).await? {
                 return Ok(ScansImport::AlreadyImported(prior));
             }
         }
@@ -301,19 +301,28 @@ fn source_sha256(detail: &str) -> Option<&str> {
 }
 
 /// An earlier import of the instrument export one of `scans` was converted from (its
-/// provenance names the export's hash): the same measurement, through another file.
+/// provenance names the export's hash): the same measurement, through another file. The
+/// file's own hash `looked_up` (an export's import names itself) is not looked up again.
 async fn prior_of_sources(
     conn: &mut sqlx::SqliteConnection,
     scans: &[ImportedScan<'_>],
+    looked_up: &str,
 ) -> Result<Option<PriorImport>, StoreError> {
-    for s in scans {
-        if let Some(hash) = s
-            .provenance
-            .source_detail
-            .as_deref()
-            .and_then(source_sha256)
-            && let Some(prior) = prior_by_hash(conn, hash).await?
-        {
+    let mut hashes: Vec<&str> = scans
+        .iter()
+        .filter_map(|s| {
+            s.provenance
+                .source_detail
+                .as_deref()
+                .and_then(source_sha256)
+        })
+        .filter(|h| !h.eq_ignore_ascii_case(looked_up))
+        .collect();
+    // The scans of one export name the same hash: one lookup each.
+    hashes.sort_unstable();
+    hashes.dedup();
+    for hash in hashes {
+        if let Some(prior) = prior_by_hash(conn, hash).await? {
             return Ok(Some(prior));
         }
     }
