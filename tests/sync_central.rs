@@ -785,31 +785,19 @@ async fn a_bench_moved_to_a_new_pc_takes_its_station_id_over_by_retiring_the_old
 
         let retire =
             |archive: &str| brdfd_sync(&new, &db.url, "bench-r", &["--retire-old", archive]);
-        // Retiring while the old store still forwards is refused, and changes nothing.
+        // Retiring reads no clock: it goes through at once, even though the old PC still
+        // runs, keeps the old store's rows as the archive and gives the station id to the new
+        // PC's store, which sends all it holds. When the old store last forwarded is told.
         let out = retire("bench-r-old-pc");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(6), "{err}");
-        assert!(err.contains("stop that daemon first"), "{err}");
-        assert_same(&old, &db.url, "bench-r").await;
-        assert_eq!(central_rows(&db.url, "bench-r-old-pc").await, 0);
-
-        // The old PC is stopped; once it has fallen silent, retiring keeps its rows as the
-        // archive and gives the station id to the new PC's store, which sends all it holds.
-        stop_station(&store, &service).await;
-        let deadline = std::time::Instant::now() + Duration::from_secs(30);
-        let out = loop {
-            let out = retire("bench-r-old-pc");
-            let err = String::from_utf8_lossy(&out.stderr).to_string();
-            if out.status.success() || !err.contains("stop that daemon first") {
-                break out;
-            }
-            assert!(std::time::Instant::now() < deadline, "{err}");
-            tokio::time::sleep(Duration::from_millis(500)).await;
-        };
         assert_ran(&out);
         let stdout = String::from_utf8_lossy(&out.stdout);
         assert!(
             stdout.contains("are now station bench-r-old-pc"),
+            "{stdout}"
+        );
+        assert!(
+            stdout.contains("the old store last forwarded")
+                && stdout.contains("refused from its next forward on"),
             "{stdout}"
         );
         assert_same(&new, &db.url, "bench-r").await;
@@ -823,6 +811,14 @@ async fn a_bench_moved_to_a_new_pc_takes_its_station_id_over_by_retiring_the_old
         .unwrap();
         assert_eq!(from.as_deref(), Some("bench-r"));
         pool.close().await;
+        // The old PC, still running, scans again: refused from that forward on, and its new
+        // scan is mixed in nowhere.
+        let archived = central_rows(&db.url, "bench-r-old-pc").await;
+        scan_and_settle(&service, samples(4)[3]).await;
+        refused(&service).await;
+        stop_station(&store, &service).await;
+        assert_eq!(central_rows(&db.url, "bench-r-old-pc").await, archived);
+        assert_same(&new, &db.url, "bench-r").await;
         // Retiring again to the same archive id is refused: it is taken.
         let out = retire("bench-r-old-pc");
         assert_eq!(out.status.code(), Some(6));

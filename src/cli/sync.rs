@@ -91,7 +91,9 @@ pub struct SyncArgs {
     pub config: Option<PathBuf>,
 
     /// NDJSON on stdout: `{"type":"start","station","store","central"}`, one
-    /// `{"type":"verify","tables":[…],"cursor"}` with --verify, one
+    /// `{"type":"verify","tables":[…],"cursor"}` with --verify (and, with `"automatic":
+    /// true`, for each comparison the one-shot ran by itself because the central database
+    /// was behind what the store had pruned), one
     /// `{"type":"batch","entries","rows":{table: n},"cursor"}` per batch, and
     /// `{"type":"drained","rows","seconds"}` when nothing is pending.
     #[arg(long)]
@@ -168,6 +170,8 @@ pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
             if args.verify {
                 forwarder.request_verify();
             }
+            // Errors, refusals and the comparisons after a restore are logged on stderr.
+            crate::cli::serve::init_logging(crate::config::LogLevel::Info, json);
             let stop = async {
                 let _ = tokio::signal::ctrl_c().await;
             };
@@ -202,6 +206,25 @@ pub fn run(args: &SyncArgs) -> anyhow::Result<()> {
             }
         }
         let sent = forwarder.drain(&mut print).await?;
+        // The central database was behind what this store had pruned (restored from a
+        // backup): the forwarder compared and re-sent by itself before the batches.
+        for report in forwarder.take_automatic_verifies() {
+            extra += report.extra();
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({
+                        "type": "verify", "automatic": true, "tables": report.tables,
+                        "cursor": report.cursor,
+                    })
+                );
+            } else {
+                println!(
+                    "the central database was behind what this store had already pruned \
+                     (restored from a backup?); {report}"
+                );
+            }
+        }
         if json {
             println!(
                 "{}",
@@ -278,6 +301,7 @@ async fn retire_old(
                 serde_json::json!({
                     "type": "retired", "station": station, "archive": archive,
                     "host": retired.host, "rows": rows,
+                    "old_store_last_seen_seconds": retired.last_seen_seconds,
                 })
             );
         } else {
@@ -287,6 +311,13 @@ async fn retire_old(
                 retired.total_rows(),
                 retired.host
             );
+            if let Some(seconds) = retired.last_seen_seconds {
+                println!(
+                    "the old store last forwarded {seconds:.0} s ago; if it still runs it is \
+                     refused from its next forward on (stop it, or give it a station of its own \
+                     with --adopt)"
+                );
+            }
         }
         let started = Instant::now();
         let mut forwarder = Forwarder::for_store(&store, options).await?;

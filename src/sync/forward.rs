@@ -183,6 +183,9 @@ pub struct Forwarder {
     /// The central database is behind entries this store already deleted (it was restored
     /// from a backup): compare and re-send ([`Forwarder::verify`]) before the next batch.
     pub(super) needs_verify: bool,
+    /// The comparisons the forwarder ran by itself (`needs_verify`) since the caller last took
+    /// them ([`Forwarder::take_automatic_verifies`]): a one-shot sync prints them.
+    automatic_verifies: Vec<crate::sync::verify::VerifyReport>,
     /// When an idle forwarder last looked at the central cursor.
     last_look: std::time::Instant,
     /// The last refusal recorded in the central database, so a retry does not repeat it.
@@ -264,6 +267,7 @@ impl Forwarder {
             cursor: None,
             acknowledged: 0,
             needs_verify: false,
+            automatic_verifies: Vec::new(),
             last_look: std::time::Instant::now(),
             last_refusal: None,
             recent_lags: std::collections::VecDeque::with_capacity(LAG_WINDOW),
@@ -313,6 +317,12 @@ impl Forwarder {
     }
 
     /// The status, shared: it changes as the forwarder runs.
+    /// The comparisons this forwarder ran by itself since the last call (the central database
+    /// was behind what the store had pruned), oldest first.
+    pub fn take_automatic_verifies(&mut self) -> Vec<crate::sync::verify::VerifyReport> {
+        std::mem::take(&mut self.automatic_verifies)
+    }
+
     pub fn status(&self) -> Arc<Mutex<SyncStatus>> {
         self.status.clone()
     }
@@ -477,6 +487,7 @@ impl Forwarder {
             } else {
                 tracing::info!(station = %self.options.station, "compared the store with the central database: {report}");
             }
+            self.automatic_verifies.push(report);
         }
         let cursor = self.cursor.expect("ensure_ready sets it");
         let Batch {

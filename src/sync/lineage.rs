@@ -39,8 +39,15 @@
 //!   next batch records the head, so an upgraded station goes on from its cursor without a
 //!   full resend.
 //!
-//! Of two copies that both go on, the first to forward after the split keeps the station; the
-//! other is refused from then on, whichever order they are synced in.
+//! Which of two copies that both go on keeps the station is told by the files too (station
+//! migration 0021, [`crate::store::lineage`]): an incarnation that began in another file than
+//! the incarnation before it, while that one was never closed, is marked [`Incarnation::copied`]
+//! — a copy of a running store, whose original may be going on — and once it has written
+//! entries the station's history does not hold it is refused: the copy, never the original,
+//! whichever order they are synced in. Of two copies of a store that was closed cleanly (a
+//! bench moved to a new PC), the first to forward after the split keeps the station and the
+//! other is refused from then on. A store that crashed and was then moved to another file looks
+//! like a live copy and is refused as one; `--retire-old` gives it the station back.
 
 use sha2::{Digest, Sha256};
 use sqlx::{Row, SqlitePool};

@@ -6,14 +6,19 @@
 //! rows are the old store's, and the copy's rows under the same keys would mix with them.
 //! There are two ways out: `--adopt NEW_ID` makes the copy a station of its own, and
 //! [`retire`] keeps the station id for the copy. Retiring, in one central transaction:
-//! 1. refuses while the old store still forwards (its heartbeat is recent): stop it first;
-//!    and refuses an archive id already in use;
+//! 1. refuses an archive id already in use, and a station that is itself an archive;
 //! 2. moves every central row of the station, the lab's sample identities and its
 //!    incarnations to `ARCHIVE_ID`, a station row of its own marked `retired_from` — nothing
 //!    is deleted, and the archive stays queryable like any station;
 //! 3. starts the station afresh for this store: its store id, cursor 0, and this store's
 //!    incarnation as the station's, so the old store (which never had that incarnation) is
 //!    refused if it is ever started again.
+//!
+//! Nothing here reads a clock to decide: when the old store was last seen forwarding is
+//! reported ([`Retired::last_seen_seconds`]) as information only. An old store that still
+//! runs is refused from its next forward on, because its incarnation is no longer the
+//! station's; the retirement takes the station row `FOR UPDATE`, so a forward in flight
+//! either commits before it (and its rows move to the archive) or is refused after it.
 //!
 //! The copy then sends everything it holds (its comparison with the central database finds
 //! all of it missing), and the central database ends with the copy under the station id and
@@ -25,18 +30,16 @@ use super::SyncError;
 use super::central::Central;
 use super::tables::TABLES;
 
-/// How long after the old store was last seen forwarding retiring it is refused: an operator's
-/// safeguard against retiring a store that still runs (the identity rule itself reads no
-/// clock, src/sync/lineage.rs).
-const LIVE: std::time::Duration = std::time::Duration::from_secs(5);
-
 /// What [`retire`] moved.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Retired {
     /// Central rows moved to the archive, per table (tables with none left out).
     pub rows: Vec<(&'static str, u64)>,
     /// The old store's host, as it registered.
     pub host: String,
+    /// Seconds since the old store last forwarded (its heartbeat), if it ever did: told to
+    /// the operator, never used to decide.
+    pub last_seen_seconds: Option<f64>,
 }
 
 impl Retired {
@@ -99,14 +102,6 @@ pub async fn retire(
     if taken {
         return Err(refused(format!(
             "station id \"{archive}\" is already in use; choose another archive id"
-        )));
-    }
-    if let Some(seconds) = silent
-        && seconds < LIVE.as_secs_f64()
-    {
-        return Err(refused(format!(
-            "its store on host {host} forwarded {seconds:.0} s ago; stop that daemon first \
-             (retire only a store that no longer runs)"
         )));
     }
     // The archive's station row: the old one as it was. Its store id is marked so that no
@@ -187,5 +182,9 @@ pub async fn retire(
         .await
         .map_err(err)?;
     tx.commit().await.map_err(err)?;
-    Ok(Retired { rows, host })
+    Ok(Retired {
+        rows,
+        host,
+        last_seen_seconds: silent,
+    })
 }
