@@ -467,6 +467,11 @@ pub struct FitDetail {
     /// derive it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reach: Option<crate::reach::Reach>,
+    /// The done fit's parameters at a bound of the range it was fitted within (`"ks"`,
+    /// `"alpha"`, `"ior"`, `"kd"`), from its parameters and its settings' bounds, whether or
+    /// not intervals were computed: a parameter there is not identified.
+    #[serde(default)]
+    pub at_bound: Vec<String>,
 }
 
 // ---------------------------------------------------------------------------------------------

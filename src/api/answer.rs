@@ -71,7 +71,21 @@ impl From<crate::store::FitDetail> for wire::FitDetail {
             }
             _ => None,
         };
+        let at_bound = run
+            .result
+            .as_ref()
+            .and_then(|r| serde_json::from_value::<crate::model::Params>(r.params.clone()).ok())
+            .map(|p| {
+                let bounds = run
+                    .settings
+                    .get("bounds")
+                    .and_then(|b| serde_json::from_value(b.clone()).ok())
+                    .unwrap_or_default();
+                crate::uncertainty::jackknife::at_bound(&p, &bounds)
+            })
+            .unwrap_or_default();
         wire::FitDetail {
+            at_bound,
             run: wire::FitRun {
                 id: run.id,
                 scan: run.scan,

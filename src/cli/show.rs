@@ -246,6 +246,9 @@ fn print_lobe_identified(detail: &ScanView) {
 /// bounds), as the intervals record them or else from its parameters; empty when none or not
 /// done.
 fn at_bound(fit: &FitDetail) -> Vec<String> {
+    if !fit.at_bound.is_empty() {
+        return fit.at_bound.clone();
+    }
     if let Some(u) = fit.uncertainty.as_ref().filter(|u| u.misfit.is_some()) {
         return u.at_bound.clone();
     }

@@ -435,41 +435,70 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
                 "No bootstrap intervals: none of the {} finished fits has them, so there is no table of parameter intervals and Fig. 8 draws no error bars. {why}",
                 done.len()
             )));
+            let bounded: Vec<String> = done
+                .iter()
+                .filter(|(_, _, d)| !d.at_bound.is_empty())
+                .map(|(name, f, d)| format!("{name} {}: {}", f.cost, d.at_bound.join(", ")))
+                .collect();
+            if !bounded.is_empty() {
+                b.push(Block::Para(format!(
+                    "At a bound of the range searched, so not identified by the readings (an interval there would not be a 95 % interval either): {}.",
+                    bounded.join("; ")
+                )));
+            }
         } else {
             let rows = done
                 .iter()
                 .map(|(name, f, d)| {
                     let p = &d.params;
                     let mut row = vec![name.to_string(), f.cost.to_string()];
+                    // A parameter at a bound of its range is flagged whether or not it has an
+                    // interval: there it is not identified.
+                    let mut bound = d.at_bound.clone();
+                    if let Some(u) = &d.uncertainty {
+                        bound.extend(u.at_bound.iter().filter(|n| !d.at_bound.contains(n)).cloned());
+                    }
+                    let flag = |name: &str| {
+                        if bound.iter().any(|b| b == name) {
+                            " (at bound)"
+                        } else {
+                            ""
+                        }
+                    };
                     match &d.uncertainty {
                         Some(u) => {
-                            let cell = |v: f64, iv: [f64; 2]| {
-                                format!("{v:.4} [{:.4}, {:.4}]", iv[0], iv[1])
+                            let cell = |v: f64, iv: [f64; 2], name: &str| {
+                                format!("{v:.4} [{:.4}, {:.4}]{}", iv[0], iv[1], flag(name))
                             };
                             row.extend([
-                                cell(p.ks, u.ks),
-                                cell(p.alpha, u.alpha),
-                                cell(p.ior, u.ior),
-                                cell(d.evaluation.all.mean, u.delta_e00_mean),
+                                cell(p.ks, u.ks, "ks"),
+                                cell(p.alpha, u.alpha, "alpha"),
+                                cell(p.ior, u.ior, "ior"),
+                                cell(d.evaluation.all.mean, u.delta_e00_mean, ""),
                                 u.resamples.to_string(),
-                                match (u.calibrated, u.at_bound.is_empty()) {
+                                match (u.calibrated && bound.is_empty(), bound.is_empty()) {
                                     (true, _) => "yes".to_string(),
                                     (false, true) => "no".to_string(),
                                     (false, false) => {
-                                        format!("no ({} at a bound)", u.at_bound.join(", "))
+                                        format!("no ({} at a bound)", bound.join(", "))
                                     }
                                 },
                             ]);
                         }
                         None => {
-                            let cell = |v: f64| format!("{v:.4} (no interval)");
+                            let cell =
+                                |v: f64, name: &str| format!("{v:.4} (no interval){}", flag(name));
                             row.extend([
-                                cell(p.ks),
-                                cell(p.alpha),
-                                cell(p.ior),
-                                cell(d.evaluation.all.mean),
+                                cell(p.ks, "ks"),
+                                cell(p.alpha, "alpha"),
+                                cell(p.ior, "ior"),
+                                cell(d.evaluation.all.mean, ""),
                                 "none".into(),
-                                "—".into(),
+                                if bound.is_empty() {
+                                    "—".into()
+                                } else {
+                                    format!("no ({} at a bound)", bound.join(", "))
+                                },
                             ]);
                         }
                     }
@@ -825,5 +854,29 @@ mod tests {
             "{md}"
         );
         assert!(!md.contains("recording replayed again and"), "{md}");
+    }
+
+    /// A fit at a bound of its range (μ = 3, the top of the default range) is flagged with no
+    /// intervals computed, and one inside its range is not.
+    #[test]
+    fn a_parameter_at_its_bound_is_flagged_without_intervals() {
+        let study = crate::study::Study::from_truth(2, |i, _, mut p| {
+            if i == 0 {
+                p.ior = crate::model::Bounds::default().ior.1;
+            } else {
+                p.ior = 1.7;
+            }
+            Ok(p)
+        });
+        let first = &study.samples[0];
+        let d = first.fits[0].done().unwrap();
+        assert_eq!(d.at_bound, ["ior"], "{:?}", d.params);
+        assert!(study.samples[1].fits[0].done().unwrap().at_bound.is_empty());
+        let md = markdown(&study, &Analysis::of(&study), &[]);
+        assert!(
+            md.contains(&format!("{} cf1: ior", first.name)),
+            "{md}"
+        );
+        assert!(!md.contains(&format!("{} cf1: ior", study.samples[1].name)), "{md}");
     }
 }

@@ -113,6 +113,12 @@ fn fit_state_with(
                         .unwrap_or_default(),
                 )
                 .with_sra(measured, sra)
+                .with_bounds(
+                    &run.settings
+                        .get("bounds")
+                        .and_then(|v| serde_json::from_value(v.clone()).ok())
+                        .unwrap_or_default(),
+                )
                 .with_crossval(extras.crossval.clone()),
             ))
         }

@@ -128,6 +128,9 @@ pub struct DoneFit {
     /// The fit's leave-one-geometry-out cross-validation, when it was computed (SCIENCE.md
     /// §12.5): each MA-T12 geometry predicted by a fit without it.
     pub crossval: Option<crate::crossval::CrossValidation>,
+    /// The parameters at a bound of the range the fit searched (`"ks"`, `"alpha"`, `"ior"`,
+    /// `"kd"`): not identified there, whether or not intervals were computed.
+    pub at_bound: Vec<String>,
 }
 
 impl DoneFit {
@@ -153,7 +156,9 @@ impl DoneFit {
             measured.geometries,
         );
         let sra = SraReading::default();
+        let at_bound = crate::uncertainty::jackknife::at_bound(&params, &model::Bounds::default());
         DoneFit {
+            at_bound,
             params,
             fresnel,
             model: model::ModelKind::Paper,
@@ -168,6 +173,13 @@ impl DoneFit {
                 .then(|| specular_delta_l(&measured.values, &estimated, sra)),
             crossval: None,
         }
+    }
+
+    /// The same fit judged against the bounds it was fitted within (its settings' bounds;
+    /// [`DoneFit::from_params_with`] assumes the defaults).
+    pub fn with_bounds(mut self, bounds: &model::Bounds) -> DoneFit {
+        self.at_bound = crate::uncertainty::jackknife::at_bound(&self.params, bounds);
+        self
     }
 
     /// The same fit with its stored cross-validation.
@@ -451,7 +463,8 @@ impl Study {
                                 r.uncertainty.clone(),
                             )
                             .with_model(&r.measured, r.request.settings.model)
-                            .with_sra(&r.measured, r.request.settings.sra),
+                            .with_sra(&r.measured, r.request.settings.sra)
+                            .with_bounds(&r.request.settings.bounds),
                         )),
                     })
                     .collect();

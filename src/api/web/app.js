@@ -979,8 +979,10 @@ function paramRow(f) {
   // Intervals whose coverage was not measured to hold are marked, with the reason as a tooltip.
   const rated = u && u.calibrated ? "" : " (not 95 %)";
   // A parameter at a bound of its range is not identified there: flagged beside its interval.
-  const bound = (name) => (u && (u.at_bound || []).includes(name) ? " (at bound)" : "");
-  const iv = (v, range, name) => (range ? `${fmt(v, 3)} [${fmt(range[0], 3)}, ${fmt(range[1], 3)}]${rated}${bound(name)}` : `${fmt(v, 3)}${p && f.run.status === "done" ? " (interval not computed yet)" : ""}`);
+  // From the fit's own bounds (`at_bound`), whether or not the intervals are computed.
+  const bounded = new Set([...(f.at_bound || []), ...((u && u.at_bound) || [])]);
+  const bound = (name) => (bounded.has(name) ? " (at bound)" : "");
+  const iv = (v, range, name) => (range ? `${fmt(v, 3)} [${fmt(range[0], 3)}, ${fmt(range[1], 3)}]${rated}${bound(name)}` : `${fmt(v, 3)}${bound(name)}${p && f.run.status === "done" ? " (interval not computed yet)" : ""}`);
   return h("tr", { "data-fit": f.run.id, "data-calibrated": u ? String(Boolean(u.calibrated)) : null, title: u && !u.calibrated ? u.note || "" : null },
     h("td", {}, h("a", { href: `/fits/${f.run.id}` }, String(f.run.id))),
     h("td", {}, f.run.cost_function), h("td", {}, f.run.status, f.run.error ? `: ${f.run.error}` : ""),
