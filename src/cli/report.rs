@@ -94,7 +94,9 @@ impl StoreSelection {
     /// Loads the selected scans and their fits from the store.
     pub fn load(&self) -> anyhow::Result<Study> {
         if let Some(url) = self.central_url() {
-            return load_central_study(url, self.station.as_deref(), &self.selection());
+            let selection = self.selection();
+            let study = load_central_study(url, self.station.as_deref(), &selection)?;
+            return pool_real_study(study, &selection, self.include_simulated);
         }
         if self.station.is_some() {
             bail!("--station only applies to a central database (--db postgres://…)");
@@ -216,6 +218,52 @@ fn pool_real(scans: &[crate::store::ScanSummary], include_simulated: bool) -> Op
         list_ids(&ids(&simulated))
     );
     Some(ids(&real).into_iter().map(ScanId).collect())
+}
+
+/// The central database's study held to the same rule as a store's (`--all` pools the real
+/// scans only when it holds both kinds; chosen scans that mix them are refused), with the
+/// samples named as the report names them (`T.Sky blue [bench-2]`).
+fn pool_real_study(
+    mut study: Study,
+    selection: &Selection,
+    include_simulated: bool,
+) -> anyhow::Result<Study> {
+    let simulated = |s: &crate::study::SampleStudy| {
+        s.origin
+            .as_ref()
+            .is_some_and(|o| o.provenance.simulated())
+    };
+    let (sim, real): (Vec<_>, Vec<_>) = study.samples.iter().partition(|s| simulated(s));
+    if include_simulated || sim.is_empty() || real.is_empty() {
+        return Ok(study);
+    }
+    let names = |v: &[&crate::study::SampleStudy]| {
+        let shown: Vec<&str> = v.iter().take(8).map(|s| s.name.as_str()).collect();
+        let more = v.len().saturating_sub(8);
+        if more > 0 {
+            format!("{} and {more} more", shown.join(", "))
+        } else {
+            shown.join(", ")
+        }
+    };
+    if matches!(selection, Selection::Scans(_)) {
+        bail!(
+            "the selection mixes scans from simulated instruments ({}) with scans from real ones \
+             ({}); select one kind, or pass --include-simulated to study them together",
+            names(&sim),
+            names(&real)
+        );
+    }
+    eprintln!(
+        "pooling the {} real scans ({}) only; left out {} scans from simulated instruments \
+         ({}): pass --include-simulated to pool them too",
+        real.len(),
+        names(&real),
+        sim.len(),
+        names(&sim)
+    );
+    study.samples.retain(|s| !simulated(s));
+    Ok(study)
 }
 
 fn list_ids(ids: &[i64]) -> String {
@@ -426,5 +474,43 @@ mod tests {
         assert!(e.contains("real ones (scan 2, scan 3)"), "{e}");
         assert!(e.contains("--include-simulated"), "{e}");
         assert!(check_provenance_mix(&mixed, true).is_ok());
+    }
+
+    /// A central study of real and simulated scans pools the real ones under `--all`, and
+    /// refuses chosen scans that mix them, as a store's does.
+    #[test]
+    fn a_central_study_does_not_mix_real_and_simulated_scans() {
+        let mut study = crate::study::tests::study_from_truth(3, None);
+        // Sample 0 real (an import), 1 and 2 replayed on simulated instruments.
+        let real = study.samples[0].clone();
+        study = crate::study::tests::simulated(study, &["", "rec-a", "rec-b"]);
+        study.samples[0] = crate::study::SampleStudy {
+            origin: Some(crate::study::Origin {
+                station: None,
+                measured_at_ms: 0,
+                provenance: Provenance {
+                    ma_t12: InstrumentProvenance {
+                        simulated: Some(false),
+                        origin: crate::store::InstrumentOrigin::Imported,
+                        ..InstrumentProvenance::unknown()
+                    },
+                    sra: InstrumentProvenance::unknown(),
+                    source: Source::Imported,
+                    ..Provenance::unknown()
+                },
+            }),
+            ..real
+        };
+        assert!(study.samples[0].origin.as_ref().unwrap().provenance.real());
+        let pooled = pool_real_study(study.clone(), &Selection::All, false).unwrap();
+        assert_eq!(pooled.samples.len(), 1);
+        assert_eq!(pooled.samples[0].name, study.samples[0].name);
+        let all = pool_real_study(study.clone(), &Selection::All, true).unwrap();
+        assert_eq!(all.samples.len(), 3);
+        let chosen = Selection::Scans(vec![ScanId(1), ScanId(2)]);
+        let e = pool_real_study(study.clone(), &chosen, false).unwrap_err().to_string();
+        assert!(e.contains("mixes scans from simulated instruments"), "{e}");
+        assert!(e.contains("--include-simulated"), "{e}");
+        assert!(pool_real_study(study, &chosen, true).is_ok());
     }
 }
