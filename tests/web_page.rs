@@ -1014,6 +1014,30 @@ async fn an_operator_scans_watches_and_judges_a_sample_in_a_real_browser() {
         .import_scan_as(&x.scan, &provenance, taken, &x.textures)
         .await
         .unwrap();
+    // A report of the real import and a simulated scan together is refused unless asked for,
+    // as `brdfd report` refuses it.
+    let simulated_scan = daemon
+        .scans()
+        .await
+        .iter()
+        .find(|s| s.provenance.simulated())
+        .expect("a scan on the simulated instruments")
+        .id;
+    let report = |query: String| {
+        ureq::get(&format!("http://{addr}/report.html?{query}"))
+            .header("Authorization", &format!("Bearer {}", token.trim()))
+            .call()
+    };
+    match report(format!("scans={simulated_scan},{imported}")) {
+        Err(ureq::Error::StatusCode(400)) => {}
+        other => panic!("a mixed report was not refused: {other:?}"),
+    }
+    assert!(
+        report(format!(
+            "scans={simulated_scan},{imported}&include_simulated=true"
+        ))
+        .is_ok()
+    );
     let imported_path = format!("/#/scans/{imported}");
     open(&c, addr, &imported_path, &["the camera's images, loaded"]).await;
     let labels = eval(

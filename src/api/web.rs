@@ -11,7 +11,7 @@
 //! | `GET /session` | whether signed in; the session's CSRF value and expiry, for the page's script | nothing |
 //! | `POST /session/logout` | ends the session | the cookie |
 //! | `GET /scans/{id}/export/{format}` | the scan (and its fits) as CGATS, CxF3, CSV or JSON | token or cookie |
-//! | `GET /report.html?scans=1,2` | the study report of those scans, figures inlined | token or cookie |
+//! | `GET /report.html?scans=1,2[&include_simulated=true]` | the study report of those scans, figures inlined; scans from simulated and real instruments together refused unless `include_simulated` | token or cookie |
 //! | `GET /scans/{id}/swatches` | measured and fitted colour per geometry ([`wire::Swatches`]) | token or cookie |
 //! | `GET /scans/{id}/readings` | the scan's stored readings as the bench shows them (colour of a spectrum, an SRA value), also for a scan that was aborted or failed | token or cookie |
 //! | `GET /bench` | what the bench shows: the operation in progress, or the last scan measured, with its readings and fits so far ([`wire::Bench`]) | token or cookie |
@@ -479,6 +479,9 @@ async fn bench(State(s): State<Service>) -> Response {
 #[derive(Debug, Deserialize)]
 struct ReportQuery {
     scans: String,
+    /// Study scans from simulated instruments together with real ones (refused by default).
+    #[serde(default)]
+    include_simulated: bool,
 }
 
 /// `GET /report.html?scans=1,2`: the study report of those scans as one HTML file, its
@@ -506,9 +509,16 @@ async fn report_html(
             ids.len()
         ));
     }
-    let study = match crate::study::load::from_store(s.store(), &Selection::Scans(ids)).await {
+    let selection = Selection::Scans(ids);
+    let study = match crate::study::load::from_store(s.store(), &selection).await {
         Ok(study) => study,
         Err(e) => return load_refusal(e),
+    };
+    // Real and simulated scans are not pooled unless asked for, as in `brdfd report`.
+    let study = match crate::cli::report::pool_real_study(study, &selection, q.include_simulated)
+    {
+        Ok(study) => study,
+        Err(e) => return bad(format!("{e} (include_simulated=true in the query)")),
     };
     let drawn = tokio::task::spawn_blocking(move || -> Result<String, String> {
         let dir = std::env::temp_dir().join(format!(

@@ -223,7 +223,7 @@ fn pool_real(scans: &[crate::store::ScanSummary], include_simulated: bool) -> Op
 /// The central database's study held to the same rule as a store's (`--all` pools the real
 /// scans only when it holds both kinds; chosen scans that mix them are refused), with the
 /// samples named as the report names them (`T.Sky blue [bench-2]`).
-fn pool_real_study(
+pub fn pool_real_study(
     mut study: Study,
     selection: &Selection,
     include_simulated: bool,
