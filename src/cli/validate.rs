@@ -40,7 +40,8 @@ oracle far above 1 means the material is out of the model's reach, however it is
 
 Examples:
   brdfd validate krylon_blue.astm
-  brdfd validate --json *.astm *.bsdf > validation.jsonl")]
+  brdfd validate --json *.astm *.bsdf > validation.jsonl
+  brdfd validate --cost cf2 --figures figures/ krylon_blue.astm")]
 pub struct ValidateArgs {
     /// Measured BRDF files: ASTM E1392 (.astm) or RGL tensor files (.bsdf).
     #[arg(value_name = "FILE", required = true)]
@@ -55,6 +56,13 @@ pub struct ValidateArgs {
     /// reach, …) instead of tables.
     #[arg(long)]
     pub json: bool,
+
+    /// Also draw, per file, the prediction error of the default configuration's fit (exact
+    /// Fresnel, all 14 readings; cf2's, or the first cost function's without cf2) over the
+    /// hemisphere per incidence (`MATERIAL-hemisphere.svg`) and its measured against predicted L* in the
+    /// plane of incidence (`MATERIAL-in-plane.svg`) into DIR (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub figures: Option<PathBuf>,
 }
 
 pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
@@ -74,6 +82,14 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
             println!("{}", serde_json::to_string(&report)?);
         } else {
             print!("{}", table(&report));
+        }
+        if let Some(dir) = &args.figures {
+            let drawn = crate::gonio::figures::write(&report, dir)
+                .map_err(anyhow::Error::msg)
+                .with_context(|| format!("drawing the figures of {}", path.display()))?;
+            for p in drawn {
+                eprintln!("wrote {}", p.display());
+            }
         }
     }
     Ok(())

@@ -14,6 +14,7 @@
 //! [`upsample_rgb`]).
 
 pub mod astm;
+pub mod figures;
 pub mod rgl;
 pub mod validate;
 

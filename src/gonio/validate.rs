@@ -315,6 +315,51 @@ pub struct Report {
     /// of this material would be told.
     pub reach: Option<Reach>,
     pub wall_ms: f64,
+    /// Every predicted direction under the default configuration's fit (cf2's when cf2 was
+    /// run, else the first cost function's), for `brdfd validate --figures`; not in the JSON.
+    #[serde(skip)]
+    pub directions_of_default: Vec<DirectionError>,
+    /// The cost function of that fit.
+    #[serde(skip)]
+    pub figures_cost: Option<CostFunction>,
+}
+
+/// One predicted direction of the default fit: where it is, and how the prediction did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectionError {
+    /// Incidence θi, degrees.
+    pub theta_i_deg: f64,
+    /// View θr, degrees.
+    pub theta_r_deg: f64,
+    /// Azimuth of the view from the plane of incidence, degrees in [0, 180]: 180 is the
+    /// mirror side (the specular direction), 0 the side the light comes from.
+    pub phi_deg: f64,
+    pub delta_e00: f64,
+    pub measured_l: f64,
+    pub predicted_l: f64,
+}
+
+impl DirectionError {
+    fn of(t: &Target, predicted: Lab) -> DirectionError {
+        let theta = |w: Vec3| w[2].clamp(-1.0, 1.0).acos().to_degrees();
+        let azimuth = |w: Vec3| w[1].atan2(w[0]).to_degrees();
+        let mut phi = (azimuth(t.wo) - azimuth(t.wi)).rem_euclid(360.0);
+        if phi > 180.0 {
+            phi = 360.0 - phi;
+        }
+        // A view along the normal has no azimuth: put it in the plane.
+        if t.wo[0].hypot(t.wo[1]) < 1e-9 {
+            phi = 180.0;
+        }
+        DirectionError {
+            theta_i_deg: theta(t.wi),
+            theta_r_deg: theta(t.wo),
+            phi_deg: phi,
+            delta_e00: ciede2000(t.lab, predicted),
+            measured_l: t.lab.l,
+            predicted_l: predicted.l,
+        }
+    }
 }
 
 /// A direction pair to predict and its measured colour.
@@ -828,6 +873,8 @@ pub fn validate_with(
     };
     let mut fits = Vec::new();
     let mut fitted: Vec<(Variant, Params)> = Vec::new();
+    let mut directions_of_default = Vec::new();
+    let mut figures_cost = None;
     for &v in variants {
         let request = FitRequest {
             settings: Settings {
@@ -854,6 +901,21 @@ pub fn validate_with(
         )?;
         let p = report.outcome.params;
         fitted.push((v, p));
+        if v.is_default()
+            && (figures_cost.is_none()
+                || (v.cost == CostFunction::Cf2 && figures_cost != Some(CostFunction::Cf2)))
+        {
+            figures_cost = Some(v.cost);
+            directions_of_default = targets
+                .iter()
+                .map(|t| {
+                    let f = evaluate_at(&p, v.model, v.fresnel, t.wi, t.wo);
+                    let lab = colorimetry
+                        .reflectance_to_lab(&f.map(|x| std::f64::consts::PI * x));
+                    DirectionError::of(t, lab)
+                })
+                .collect();
+        }
         let prediction = predict(&targets, colorimetry, &|t| {
             evaluate_at(&p, v.model, v.fresnel, t.wi, t.wo)
         });
@@ -1017,6 +1079,8 @@ pub fn validate_with(
         lambert,
         reach,
         wall_ms: start.elapsed().as_secs_f64() * 1e3,
+        directions_of_default,
+        figures_cost,
     })
 }
 
