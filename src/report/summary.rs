@@ -519,6 +519,13 @@ fn blocks(study: &Study, analysis: &Analysis, figures: &[Figure]) -> Vec<Block> 
                     done.len()
                 )));
             }
+            let unidentified = lobe_not_identified(study);
+            if !unidentified.is_empty() {
+                b.push(Block::Para(format!(
+                    "Lobe not identified: cf1's and cf2's intervals of the same scan do not overlap on {}. There the readings do not fix the lobe, and neither interval is the parameter's: read the held-out ΔE00 instead.",
+                    unidentified.join("; ")
+                )));
+            }
         }
     }
     // Where, when and by which instruments each stored scan was measured.
@@ -654,6 +661,28 @@ const STOPS_BEFORE_BOOTSTRAPS: &str =
 pub(crate) const HOW_TO_GET_INTERVALS: &str = "to get intervals, serve this store (brdfd serve --db DB) and refit each scan (brdfd refit SCAN), then report once brdfd status shows no bootstraps pending; for the demo, run brdfd demo --bootstrap 200 --dir NEW (it waits for every fit's intervals) and report on that new database.";
 
 /// Why fits have no bootstrap intervals, as far as the study can tell.
+/// The samples whose cf1 and cf2 intervals are disjoint on a lobe parameter, as
+/// `NAME (ks, alpha)`: the lobe is not identified there (SCIENCE.md §10).
+fn lobe_not_identified(study: &Study) -> Vec<String> {
+    study
+        .samples
+        .iter()
+        .filter_map(|s| {
+            let of = |cost: CostFunction| {
+                s.fits
+                    .iter()
+                    .filter(|f| f.cost == cost)
+                    .find_map(|f| f.done().and_then(|d| d.uncertainty.as_ref()))
+            };
+            let apart = crate::uncertainty::jackknife::disjoint(
+                of(CostFunction::Cf1)?,
+                of(CostFunction::Cf2)?,
+            );
+            (!apart.is_empty()).then(|| format!("{} ({})", s.name, apart.join(", ")))
+        })
+        .collect()
+}
+
 fn missing_intervals_reason(study: &Study) -> String {
     if study.samples.iter().any(|s| s.origin.is_some()) {
         format!(
@@ -878,5 +907,52 @@ mod tests {
             "{md}"
         );
         assert!(!md.contains(&format!("{} cf1: ior", study.samples[1].name)), "{md}");
+    }
+
+    /// Where cf1's and cf2's intervals of a scan do not overlap, the report says the lobe is
+    /// not identified, naming the sample and the parameters; where they overlap, it does not.
+    #[test]
+    fn disjoint_cf1_and_cf2_intervals_are_called_a_lobe_not_identified() {
+        let mut study = crate::study::tests::study_from_truth(2, None);
+        let interval = |ks: [f64; 2]| crate::uncertainty::Uncertainty {
+            method: "test".into(),
+            resamples: 200,
+            noise: 0.01,
+            seed: 1,
+            percentile_level: 0.95,
+            ks,
+            alpha: [0.1, 0.3],
+            ior: [1.4, 1.6],
+            kd: vec![[0.0, 1.0]; crate::spectral::BANDS],
+            delta_e00_mean: [0.5, 1.0],
+            delta_e00_diffuse_mean: [0.5, 1.0],
+            delta_e00_specular_mean: None,
+            calibrated: true,
+            note: None,
+            at_bound: Vec::new(),
+            misfit: None,
+        };
+        for (i, s) in study.samples.iter_mut().enumerate() {
+            for f in &mut s.fits {
+                let ks = match (f.cost, i) {
+                    (CostFunction::Cf2, 0) => [0.5, 0.6],
+                    _ => [0.1, 0.55],
+                };
+                if let FitState::Done(d) = &mut f.state {
+                    d.uncertainty = Some(interval(if f.cost == CostFunction::Cf1 && i == 0 {
+                        [0.1, 0.2]
+                    } else {
+                        ks
+                    }));
+                }
+            }
+        }
+        let md = markdown(&study, &Analysis::of(&study), &[]);
+        let first = &study.samples[0].name;
+        assert!(
+            md.contains(&format!("Lobe not identified: cf1's and cf2's intervals of the same scan do not overlap on {first} (ks).")),
+            "{md}"
+        );
+        assert!(!md.contains(&format!("{} (ks)", study.samples[1].name)), "{md}");
     }
 }

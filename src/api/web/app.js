@@ -870,7 +870,8 @@ async function renderResult(id) {
       h("p", { class: "muted" }, "Brackets hold the 95 % interval of each parameter (bootstrap, SCIENCE.md §10), once computed; ks and kd in sr⁻¹, α (roughness) and μ (index of refraction) without unit."),
       h("div", { class: "scroll" }, h("table", { class: "data", id: "params" },
         h("thead", {}, h("tr", {}, ["fit", "cost function", "status", "ks [95 % interval]", "α [95 % interval]", "μ [95 % interval]", "kd at 450 / 550 / 650 nm"].map((c) => h("th", { scope: "col" }, c)))),
-        h("tbody", {}, [...latest.values()].map((f) => paramRow(f)))))) : null,
+        h("tbody", {}, [...latest.values()].map((f) => paramRow(f))))),
+      lobeNote([...latest.values()])) : null,
     fitsDone.length ? h("section", { class: "previews", "aria-labelledby": "h-prev" },
       h("h3", { id: "h-prev" }, "Previews"),
       h("div", { class: "preview-row" }, [...latest.values()].filter((f) => f.run.status === "done").map(previewFigure)),
@@ -970,6 +971,24 @@ function reachCell(d) {
   return h("td", { class: "reach", "data-reach": r.verdict,
     title: `${r.reasons.join("; ")}. Near the mirror direction: ΔE00 ${fmt(nlo, 1)}–${fmt(nhi, 1)}. Calibrated on ${r.calibration}.` },
   `${words}: expect ΔE00 ${fmt(lo, 1)}–${fmt(hi, 1)}`);
+}
+
+/** Where the cf1 and cf2 fits' intervals do not overlap, the lobe is not identified by the
+ * readings (SCIENCE.md §10): said under the parameters, naming them; nothing otherwise. */
+function lobeNote(fits) {
+  const of = (cost) => fits.find((f) => f.run.cost_function === cost && f.uncertainty);
+  const a = of("cf1");
+  const b = of("cf2");
+  if (!a || !b) return null;
+  const names = { ks: "ks", alpha: "α", ior: "μ" };
+  const apart = Object.keys(names).filter((k) => {
+    const x = a.uncertainty[k];
+    const y = b.uncertainty[k];
+    return x && y && (x[1] < y[0] || y[1] < x[0]);
+  });
+  if (!apart.length) return null;
+  return h("p", { id: "lobe-not-identified", class: "warning" },
+    `Lobe not identified: the cf1 and cf2 intervals do not overlap on ${apart.map((k) => names[k]).join(", ")}. The readings do not fix the lobe; read neither interval as the parameter's, and trust the held-out ΔE00 instead.`);
 }
 
 function paramRow(f) {
