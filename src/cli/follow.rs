@@ -222,7 +222,7 @@ impl Follower<'_> {
                 let specular = if delta_e00_specular_mean.is_nan() {
                     "none: no specular readings".to_string()
                 } else {
-                    format!("{delta_e00_specular_mean:.3}")
+                    format!("{delta_e00_specular_mean:.3} vs the paper's grey spectrum")
                 };
                 let text = format!(
                     "fit {fit} ({}) done: mean ΔE00 {delta_e00_mean:.3} (diffuse \

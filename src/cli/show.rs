@@ -199,6 +199,13 @@ pub(super) fn print_fits(detail: &ScanView) {
         );
         print_fit_extras(fit, detail.scan.specular_readings);
     }
+    if detail.scan.specular_readings {
+        println!(
+            "specular: ΔE00 at sra-20 and sra-60 against the grey spectrum the SRA reading is \
+             spread into (the paper's metric, not a colour measured there); the |ΔL*| under each \
+             fit's SRA reading model is the luminance check"
+        );
+    }
     print_lobe_identified(detail);
 }
 

@@ -616,7 +616,7 @@ function renderFits() {
   if (!live || live.kind !== "scan" || live.fits.size === 0) { t.replaceChildren(); return; }
   const rows = [...live.fits.values()].sort((a, b) => a.fit - b.fit);
   t.replaceChildren(
-    h("thead", {}, h("tr", {}, ["fit", "cost function", "status", "progress / fit time", "ΔE00 diffuse (mean)", "ΔE00 specular (mean)", "ΔE00 all (mean)"].map((c) => h("th", { scope: "col" }, c)))),
+    h("thead", {}, h("tr", {}, ["fit", "cost function", "status", "progress / fit time", "ΔE00 diffuse (mean)", "ΔE00 specular (mean, vs the paper's grey spectrum)", "ΔE00 all (mean)"].map((c) => h("th", { scope: "col" }, c)))),
     h("tbody", {}, rows.map((f) => h("tr", { "data-fit": f.fit, "data-status": f.status, "data-cost": f.cost || "" },
       h("td", {}, String(f.fit)), h("td", {}, f.cost || "?"), h("td", {}, f.status, f.error ? `: ${f.error}` : ""),
       h("td", {}, f.status === "running" && f.total
@@ -855,7 +855,7 @@ async function renderResult(id) {
     h("section", { "aria-labelledby": "h-de" },
       h("h3", { id: "h-de" }, "ΔE00 (mean)"),
       fitsDone.length ? h("div", { class: "scroll" }, h("table", { class: "data", id: "de-table" },
-        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "held out (each of the 12 predicted without it)", scan.specular_readings === false ? "specular (no SRA readings)" : "specular (2, vs the paper's grey spectrum)", `all (${geometryCount(scan)})`, "specular |ΔL*| (SRA model)", "in the model's reach?", ""].map((c) => h("th", { scope: "col" }, c)))),
+        h("thead", {}, h("tr", {}, ["cost function", "method", "diffuse (12)", "held out (each of the 12 predicted without it)", scan.specular_readings === false ? "specular (no SRA readings)" : "specular (2, vs the paper's grey spectrum)", `all (${geometryCount(scan)})`, scan.specular_readings === false ? "specular |ΔL*| (no SRA readings)" : "specular |ΔL*| (SRA model)", "in the model's reach?", ""].map((c) => h("th", { scope: "col" }, c)))),
         h("tbody", {}, fitsDone.map((f) => h("tr", { "data-cost": f.cost_function },
           h("td", {}, f.cost_function), h("td", {}, f.method), h("td", {}, fmt(f.delta_e00_diffuse)),
           heldOutCell(latestDone.get(f.cost_function)),
