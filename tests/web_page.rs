@@ -1142,6 +1142,37 @@ async fn an_sra_off_bench_and_an_imported_scan_read_truthfully_on_a_phone() {
     let body = body.as_str().unwrap();
     assert!(!body.contains("SRA: unknown"), "{body}");
     shot(&c, "sra-off-result").await;
+    // The same result page and the SRA-off bench on a phone: nothing scrolls sideways, and the
+    // bench still says the SRA is off.
+    c.set_window_size(390, 900).await.unwrap();
+    for (what, path) in [
+        ("the SRA-off scan's result", format!("/#/scans/{scan_id}")),
+        ("the SRA-off bench", "/#/".to_string()),
+    ] {
+        open(&c, addr, &path, &[]).await;
+        let layout = eval(
+            &c,
+            "return new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() =>
+               done({ inner: window.innerWidth, page: document.documentElement.scrollWidth,
+                      text: document.body.innerText }))))",
+        )
+        .await;
+        let (inner, page) = (
+            layout["inner"].as_f64().unwrap(),
+            layout["page"].as_f64().unwrap(),
+        );
+        assert!(
+            inner <= 390.0 && page <= inner,
+            "{what} scrolls sideways at 390 px: inner {inner}, page {page}"
+        );
+        let text = layout["text"].as_str().unwrap();
+        assert!(!text.contains("SRA: unknown"), "{what}: {text}");
+        if path == "/#/" {
+            assert!(text.contains("turned off"), "{what}: {text}");
+        }
+    }
+    shot(&c, "sra-off-bench-phone-390").await;
+    c.set_window_size(1280, 800).await.unwrap();
 
     // A real X-Rite export (its camera images, its SHA-256 in the provenance) on a phone.
     let real_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-mat12");
