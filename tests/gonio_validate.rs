@@ -437,11 +437,18 @@ fn validate_prints_the_json_contract_and_draws_its_figures() {
         ],
         None,
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(doc["material"], "own model");
     assert_eq!(doc["format"], "astm-e1392");
-    assert!(doc["rgb_upsampling"].is_null(), "a spectral file needs none");
+    assert!(
+        doc["rgb_upsampling"].is_null(),
+        "a spectral file needs none"
+    );
     assert_eq!(doc["readings"].as_object().unwrap().len(), 14);
     assert!(doc["readings"]["45as45"]["raw"].as_array().unwrap().len() > 1);
     let fits = doc["fits"].as_array().unwrap();
@@ -452,14 +459,20 @@ fn validate_prints_the_json_contract_and_draws_its_figures() {
             assert!(!f[key].is_null(), "fit lacks {key}: {f}");
         }
         for key in ["mean", "median", "p95", "near_specular_mean"] {
-            assert!(f["prediction"][key].is_number(), "prediction lacks {key}: {f}");
+            assert!(
+                f["prediction"][key].is_number(),
+                "prediction lacks {key}: {f}"
+            );
         }
     }
     assert_eq!(fits.iter().filter(|f| f["default"] == true).count(), 1);
     assert!(doc["oracle"]["mean"].is_number() && doc["lambert"]["mean"].is_number());
     assert!(doc["interpolation"]["leave_one_out"]["mean"].is_number());
     assert!(doc["reach"]["verdict"].is_string());
-    assert!(doc.get("directions_of_default").is_none(), "the figures' data stays out");
+    assert!(
+        doc.get("directions_of_default").is_none(),
+        "the figures' data stays out"
+    );
     let directions = doc["directions"].as_u64().unwrap() as usize;
     let hemisphere = std::fs::read_to_string(figures.join("own-model-hemisphere.svg")).unwrap();
     let svg = roxmltree::Document::parse(&hemisphere).unwrap();
@@ -475,14 +488,26 @@ fn validate_prints_the_json_contract_and_draws_its_figures() {
         .map(|(i, _)| hemisphere[i..].split(':').next().unwrap())
         .collect();
     assert_eq!(panels.len(), 6, "{panels:?}");
-    assert!(panels.contains(&"θi = 10°") && panels.contains(&"θi = 70°"), "{panels:?}");
-    assert!(dots >= 3 * 45 && dots < directions, "{dots} of {directions}");
+    assert!(
+        panels.contains(&"θi = 10°") && panels.contains(&"θi = 70°"),
+        "{panels:?}"
+    );
+    assert!(
+        dots >= 3 * 45 && dots < directions,
+        "{dots} of {directions}"
+    );
     let in_plane = std::fs::read_to_string(figures.join("own-model-in-plane.svg")).unwrap();
     let svg = roxmltree::Document::parse(&in_plane).unwrap();
-    assert!(svg.descendants().any(|n| n.has_tag_name("polyline")), "{in_plane}");
+    assert!(
+        svg.descendants().any(|n| n.has_tag_name("polyline")),
+        "{in_plane}"
+    );
     // One curve per incidence, up to four, the last measured among them.
     let curves = in_plane.matches("θi = ").count();
-    assert!((2..=4).contains(&curves) && in_plane.contains("θi = 70°"), "{in_plane}");
+    assert!(
+        (2..=4).contains(&curves) && in_plane.contains("θi = 70°"),
+        "{in_plane}"
+    );
 
     assert!(in_plane.contains("predicted by the cf2 fit"), "{in_plane}");
 }

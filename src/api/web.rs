@@ -515,8 +515,7 @@ async fn report_html(
         Err(e) => return load_refusal(e),
     };
     // Real and simulated scans are not pooled unless asked for, as in `brdfd report`.
-    let study = match crate::cli::report::pool_real_study(study, &selection, q.include_simulated)
-    {
+    let study = match crate::study::load::pool_real_study(study, &selection, q.include_simulated) {
         Ok(study) => study,
         Err(e) => return bad(format!("{e} (include_simulated=true in the query)")),
     };

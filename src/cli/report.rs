@@ -96,7 +96,8 @@ impl StoreSelection {
         if let Some(url) = self.central_url() {
             let selection = self.selection();
             let study = load_central_study(url, self.station.as_deref(), &selection)?;
-            return pool_real_study(study, &selection, self.include_simulated);
+            return crate::study::load::pool_real_study(study, &selection, self.include_simulated)
+                .map_err(anyhow::Error::msg);
         }
         if self.station.is_some() {
             bail!("--station only applies to a central database (--db postgres://…)");
@@ -218,52 +219,6 @@ fn pool_real(scans: &[crate::store::ScanSummary], include_simulated: bool) -> Op
         list_ids(&ids(&simulated))
     );
     Some(ids(&real).into_iter().map(ScanId).collect())
-}
-
-/// The central database's study held to the same rule as a store's (`--all` pools the real
-/// scans only when it holds both kinds; chosen scans that mix them are refused), with the
-/// samples named as the report names them (`T.Sky blue [bench-2]`).
-pub fn pool_real_study(
-    mut study: Study,
-    selection: &Selection,
-    include_simulated: bool,
-) -> anyhow::Result<Study> {
-    let simulated = |s: &crate::study::SampleStudy| {
-        s.origin
-            .as_ref()
-            .is_some_and(|o| o.provenance.simulated())
-    };
-    let (sim, real): (Vec<_>, Vec<_>) = study.samples.iter().partition(|s| simulated(s));
-    if include_simulated || sim.is_empty() || real.is_empty() {
-        return Ok(study);
-    }
-    let names = |v: &[&crate::study::SampleStudy]| {
-        let shown: Vec<&str> = v.iter().take(8).map(|s| s.name.as_str()).collect();
-        let more = v.len().saturating_sub(8);
-        if more > 0 {
-            format!("{} and {more} more", shown.join(", "))
-        } else {
-            shown.join(", ")
-        }
-    };
-    if matches!(selection, Selection::Scans(_)) {
-        bail!(
-            "the selection mixes scans from simulated instruments ({}) with scans from real ones \
-             ({}); select one kind, or pass --include-simulated to study them together",
-            names(&sim),
-            names(&real)
-        );
-    }
-    eprintln!(
-        "pooling the {} real scans ({}) only; left out {} scans from simulated instruments \
-         ({}): pass --include-simulated to pool them too",
-        real.len(),
-        names(&real),
-        sim.len(),
-        names(&sim)
-    );
-    study.samples.retain(|s| !simulated(s));
-    Ok(study)
 }
 
 fn list_ids(ids: &[i64]) -> String {
@@ -469,7 +424,7 @@ mod tests {
             scan(2, Some(false)),
             scan(3, Some(false)),
         ];
-        let e = check_provenance_mix(&mixed, false).unwrap_err().to_string();
+        let e = check_provenance_mix(&mixed, false).unwrap_err();
         assert!(e.contains("simulated instruments (scan 1)"), "{e}");
         assert!(e.contains("real ones (scan 2, scan 3)"), "{e}");
         assert!(e.contains("--include-simulated"), "{e}");
@@ -502,15 +457,17 @@ mod tests {
             ..real
         };
         assert!(study.samples[0].origin.as_ref().unwrap().provenance.real());
-        let pooled = pool_real_study(study.clone(), &Selection::All, false).unwrap();
+        let pooled =
+            crate::study::load::pool_real_study(study.clone(), &Selection::All, false).unwrap();
         assert_eq!(pooled.samples.len(), 1);
         assert_eq!(pooled.samples[0].name, study.samples[0].name);
-        let all = pool_real_study(study.clone(), &Selection::All, true).unwrap();
+        let all =
+            crate::study::load::pool_real_study(study.clone(), &Selection::All, true).unwrap();
         assert_eq!(all.samples.len(), 3);
         let chosen = Selection::Scans(vec![ScanId(1), ScanId(2)]);
-        let e = pool_real_study(study.clone(), &chosen, false).unwrap_err().to_string();
+        let e = crate::study::load::pool_real_study(study.clone(), &chosen, false).unwrap_err();
         assert!(e.contains("mixes scans from simulated instruments"), "{e}");
         assert!(e.contains("--include-simulated"), "{e}");
-        assert!(pool_real_study(study, &chosen, true).is_ok());
+        assert!(crate::study::load::pool_real_study(study, &chosen, true).is_ok());
     }
 }

@@ -28,7 +28,11 @@ const IN_PLANE_DEG: f64 = 7.5;
 /// [`SCALE_MAX`] and above.
 fn scale(de: f64) -> RGBColor {
     let t = (de / SCALE_MAX).clamp(0.0, 1.0);
-    let stops = [(49.0, 54.0, 149.0), (254.0, 224.0, 144.0), (165.0, 0.0, 38.0)];
+    let stops = [
+        (49.0, 54.0, 149.0),
+        (254.0, 224.0, 144.0),
+        (165.0, 0.0, 38.0),
+    ];
     let (a, b, u) = if t < 0.5 {
         (stops[0], stops[1], t / 0.5)
     } else {
@@ -46,9 +50,7 @@ fn incidences(points: &[DirectionError], n: usize) -> Vec<f64> {
     if all.len() <= n {
         return all;
     }
-    (0..n)
-        .map(|k| all[k * (all.len() - 1) / (n - 1)])
-        .collect()
+    (0..n).map(|k| all[k * (all.len() - 1) / (n - 1)]).collect()
 }
 
 fn at(points: &[DirectionError], theta_i: f64) -> impl Iterator<Item = &DirectionError> {
@@ -65,7 +67,13 @@ fn cost_name(report: &Report) -> &'static str {
 fn slug(material: &str) -> String {
     let s: String = material
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_lowercase() } else { '-' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '-'
+            }
+        })
         .collect();
     let s = s.trim_matches('-').to_string();
     if s.is_empty() { "material".into() } else { s }
@@ -121,10 +129,7 @@ fn draw_hemisphere(report: &Report, path: &Path) -> Result<(), DrawError> {
         let mine: Vec<&DirectionError> = at(points, ti).collect();
         let mean = mine.iter().map(|p| p.delta_e00).sum::<f64>() / mine.len().max(1) as f64;
         let mut chart = ChartBuilder::on(area)
-            .caption(
-                format!("θi = {ti:.0}°: mean ΔE00 {mean:.2}"),
-                font(13),
-            )
+            .caption(format!("θi = {ti:.0}°: mean ΔE00 {mean:.2}"), font(13))
             .margin(8)
             .build_cartesian_2d(-1.05f64..1.05f64, 0f64..1.05f64)?;
         // The horizon (θr = 90°) and θr = 30°, 60°.
@@ -140,7 +145,11 @@ fn draw_hemisphere(report: &Report, path: &Path) -> Result<(), DrawError> {
         chart.draw_series(mine.iter().map(|p| {
             let s = p.theta_r_deg.to_radians().sin();
             let phi = p.phi_deg.to_radians();
-            Circle::new((-s * phi.cos(), s * phi.sin()), 3, scale(p.delta_e00).filled())
+            Circle::new(
+                (-s * phi.cos(), s * phi.sin()),
+                3,
+                scale(p.delta_e00).filled(),
+            )
         }))?;
         chart.draw_series(std::iter::once(Cross::new(
             (ti.to_radians().sin(), 0.02),
@@ -176,7 +185,11 @@ fn draw_in_plane(report: &Report, path: &Path) -> Result<(), DrawError> {
     ];
     let points = &report.directions_of_default;
     let signed = |p: &DirectionError| {
-        if p.phi_deg > 90.0 { p.theta_r_deg } else { -p.theta_r_deg }
+        if p.phi_deg > 90.0 {
+            p.theta_r_deg
+        } else {
+            -p.theta_r_deg
+        }
     };
     let in_plane: Vec<&DirectionError> = points
         .iter()
@@ -187,8 +200,14 @@ fn draw_in_plane(report: &Report, path: &Path) -> Result<(), DrawError> {
     let (lo, hi) = in_plane
         .iter()
         .flat_map(|p| [p.measured_l, p.predicted_l])
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-    let (lo, hi) = if lo.is_finite() { (lo.min(0.0), hi.max(1.0) * 1.05) } else { (0.0, 100.0) };
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    let (lo, hi) = if lo.is_finite() {
+        (lo.min(0.0), hi.max(1.0) * 1.05)
+    } else {
+        (0.0, 100.0)
+    };
     let root = SVGBackend::new(path, (760, 480)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)

@@ -910,8 +910,7 @@ pub fn validate_with(
                 .iter()
                 .map(|t| {
                     let f = evaluate_at(&p, v.model, v.fresnel, t.wi, t.wo);
-                    let lab = colorimetry
-                        .reflectance_to_lab(&f.map(|x| std::f64::consts::PI * x));
+                    let lab = colorimetry.reflectance_to_lab(&f.map(|x| std::f64::consts::PI * x));
                     DirectionError::of(t, lab)
                 })
                 .collect();

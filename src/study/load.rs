@@ -349,3 +349,45 @@ fn disambiguate(samples: &mut [SampleStudy]) {
         }
     }
 }
+
+/// A study held to the rule of `brdfd report` over a store (`--all` pools the real
+/// scans only when it holds both kinds; chosen scans that mix them are refused), with the
+/// samples named as the report names them (`T.Sky blue [bench-2]`).
+pub fn pool_real_study(
+    mut study: Study,
+    selection: &Selection,
+    include_simulated: bool,
+) -> Result<Study, String> {
+    let simulated = |s: &SampleStudy| s.origin.as_ref().is_some_and(|o| o.provenance.simulated());
+    let (sim, real): (Vec<_>, Vec<_>) = study.samples.iter().partition(|s| simulated(s));
+    if include_simulated || sim.is_empty() || real.is_empty() {
+        return Ok(study);
+    }
+    let names = |v: &[&SampleStudy]| {
+        let shown: Vec<&str> = v.iter().take(8).map(|s| s.name.as_str()).collect();
+        let more = v.len().saturating_sub(8);
+        if more > 0 {
+            format!("{} and {more} more", shown.join(", "))
+        } else {
+            shown.join(", ")
+        }
+    };
+    if matches!(selection, Selection::Scans(_)) {
+        return Err(format!(
+            "the selection mixes scans from simulated instruments ({}) with scans from real ones \
+             ({}); select one kind, or pass --include-simulated to study them together",
+            names(&sim),
+            names(&real)
+        ));
+    }
+    eprintln!(
+        "pooling the {} real scans ({}) only; left out {} scans from simulated instruments \
+         ({}): pass --include-simulated to pool them too",
+        real.len(),
+        names(&real),
+        sim.len(),
+        names(&sim)
+    );
+    study.samples.retain(|s| !simulated(s));
+    Ok(study)
+}
