@@ -424,7 +424,7 @@ mod tests {
             scan(2, Some(false)),
             scan(3, Some(false)),
         ];
-        let e = check_provenance_mix(&mixed, false).unwrap_err();
+        let e = check_provenance_mix(&mixed, false).unwrap_err().to_string();
         assert!(e.contains("simulated instruments (scan 1)"), "{e}");
         assert!(e.contains("real ones (scan 2, scan 3)"), "{e}");
         assert!(e.contains("--include-simulated"), "{e}");
