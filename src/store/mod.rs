@@ -245,8 +245,8 @@ impl Store {
         (&self.writer, &self.reader)
     }
 
-    /// Closes every connection, waiting for queries under way. Call at shutdown: the last
-    /// connection to close checkpoints the write-ahead log into the database file.
+    /// Closes every connection, waiting for queries under way. Call at shutdown: the
+    /// write-ahead log is checkpointed into the database file first.
     pub async fn close(&self) {
         // A clean end of this incarnation (lineage.rs); a store already closed has nothing
         // to mark.
@@ -256,6 +256,17 @@ impl Store {
             tracing::debug!(error = %e, "marking the store's incarnation closed");
         }
         self.reader.close().await;
+        // The write-ahead log folded into the database file now, while this handle still
+        // holds the writer: the file alone is then the whole store (a copy of it made once
+        // the daemon stopped is complete), whatever order the connections end in. A
+        // read-only or in-memory store has nothing to fold.
+        if !self.writer.is_closed()
+            && let Err(e) = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+                .execute(&self.writer)
+                .await
+        {
+            tracing::debug!(error = %e, "checkpointing the store at close");
+        }
         self.writer.close().await;
         // Only now may another owner open it.
         self.lock.lock().unwrap_or_else(|p| p.into_inner()).take();

@@ -1124,6 +1124,60 @@ async fn a_file_store_reopens_without_reapplying_migrations() {
     store.close().await;
 }
 
+/// A copy of the database file alone, taken once the store closed, is the whole store, even
+/// when another connection (a report reading the file, an operator's `sqlite3`) was still
+/// open as it closed: the close folds the write-ahead log into the file itself instead of
+/// leaving it to the last connection, which may be a read-only one that cannot.
+#[tokio::test]
+async fn the_file_alone_holds_the_whole_store_once_it_is_closed() {
+    use sqlx::Connection;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("brdfd.db");
+    let store = Store::open(&path).await.unwrap();
+    let reference = complete_reference(&store).await;
+    let uid: String = sqlx::query_scalar("SELECT uid FROM sync_identity")
+        .fetch_one(&store.writer)
+        .await
+        .unwrap();
+    let mut onlooker = sqlx::SqliteConnection::connect_with(
+        &sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(&path)
+            .read_only(true),
+    )
+    .await
+    .unwrap();
+    let _: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM readings")
+        .fetch_one(&mut onlooker)
+        .await
+        .unwrap();
+    store.close().await;
+
+    let copy = dir.path().join("copy.db");
+    std::fs::copy(&path, &copy).unwrap();
+    onlooker.close().await.unwrap();
+    let copied = Store::open(&copy).await.unwrap();
+    let copied_uid: String = sqlx::query_scalar("SELECT uid FROM sync_identity")
+        .fetch_one(&copied.writer)
+        .await
+        .unwrap();
+    assert_eq!(copied_uid, uid, "the copy is of the same store");
+    assert_eq!(
+        copied.latest_reference().await.unwrap().map(|r| r.id),
+        Some(reference)
+    );
+    let closed: Option<i64> = sqlx::query_scalar(
+        "SELECT closed_at_ms FROM sync_lineage ORDER BY seq DESC LIMIT 1 OFFSET 1",
+    )
+    .fetch_one(&copied.writer)
+    .await
+    .unwrap();
+    assert!(
+        closed.is_some(),
+        "the copy knows its original was closed cleanly"
+    );
+    copied.close().await;
+}
+
 #[tokio::test]
 async fn a_store_that_applied_an_earlier_wording_of_a_reworded_migration_opens() {
     let dir = tempfile::tempdir().unwrap();
