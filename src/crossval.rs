@@ -187,8 +187,29 @@ pub fn crossval_of_fit(
     full: &FitReport,
     stop: &AtomicBool,
 ) -> Result<CrossValidation, FitScanError> {
-    let request = &full.request;
-    let measured = &full.measured;
+    crossval_held_out(
+        &full.sample,
+        &full.reference,
+        &full.measured,
+        &full.request,
+        full.evaluation.diffuse.mean,
+        stop,
+    )
+}
+
+/// The held-out half of a cross-validation: one fit of `request`'s configuration per MA-T12
+/// geometry `measured` has, that geometry held out and predicted, beside `fitted_mean`, the
+/// mean MA-T12 ΔE00 of the fit to every reading (as stored with it). What
+/// [`crossval_of_fit`] runs, and what the daemon runs for a stored fit that has no
+/// cross-validation yet. `stop`, read once per optimiser generation, cancels it.
+pub fn crossval_held_out(
+    sample: &str,
+    reference: &str,
+    measured: &MeasuredBrdf,
+    request: &FitRequest,
+    fitted_mean: f64,
+    stop: &AtomicBool,
+) -> Result<CrossValidation, FitScanError> {
     let mut observer = |_: &Progress| {
         if stop.load(Ordering::Relaxed) {
             ControlFlow::Break(())
@@ -203,8 +224,8 @@ pub fn crossval_of_fit(
         .filter(|g| g.device == Device::MaT12)
     {
         let r = fit_holding_out_with(
-            &full.sample,
-            &full.reference,
+            sample,
+            reference,
             measured,
             request,
             &[g.index],
@@ -227,7 +248,7 @@ pub fn crossval_of_fit(
         cost: request.settings.cost,
         model: request.settings.model,
         fresnel: request.settings.fresnel,
-        fitted_mean: full.evaluation.diffuse.mean,
+        fitted_mean,
         held_out_mean,
         held_out,
     })

@@ -1,7 +1,8 @@
 //! The daemon cross-validates every fit it stores (`[fit] crossval`): after a scan's fit, each
 //! MA-T12 geometry is held out in turn and predicted by a fit without it; the predictions and
 //! their mean are stored with the fit, read back by the store, the study the report draws, the
-//! API and `brdfd show` (text and `--json`), beside the fit's own ΔE00.
+//! API and `brdfd show` (text and `--json`), beside the fit's own ΔE00. A fit stored without
+//! one (cross-validation off, or the daemon stopped while it ran) gets it at the next start.
 
 mod common;
 
@@ -9,11 +10,111 @@ use std::time::{Duration, Instant};
 
 use brdfd::cost::CostFunction;
 use brdfd::geometry::GEOMETRIES;
-use brdfd::service::{ServiceOptions, ServiceSettings};
+use brdfd::service::{Service, ServiceOptions, ServiceSettings};
 use brdfd::study::load::{Selection, from_store};
 use serde_json::Value;
 
 use common::*;
+
+/// Waits until `service` has no fit and no cross-validation left to run.
+async fn wait_for_crossvals(service: &Service) {
+    let started = Instant::now();
+    loop {
+        let s = service.status().await.unwrap();
+        if s.crossvals_pending == 0 && s.fits_running == 0 && s.fits_queued == 0 {
+            return;
+        }
+        assert!(
+            started.elapsed() < STEP_TIMEOUT,
+            "the cross-validation did not end: {s:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fit_stored_without_its_cross_validation_gets_it_at_the_next_start() {
+    let _serial = serial();
+    bounded(async {
+        let off = ServiceSettings {
+            cost_functions: vec![CostFunction::Cf1],
+            bootstrap: 0,
+            crossval: false,
+            ..settings()
+        };
+        let d = start(
+            simulated(&strict_fast()),
+            off.clone(),
+            ServiceOptions::default(),
+        )
+        .await;
+        measure_reference(&d.service).await;
+        let scan = scan_and_settle(&d.service, "T.Later").await;
+        let fit = d.store.fits_for_scan(scan).await.unwrap()[0].id;
+        assert!(d.store.fit_detail(fit).await.unwrap().crossval.is_none());
+        assert_eq!(
+            d.store.done_fits_without_crossval().await.unwrap(),
+            vec![fit]
+        );
+        d.service.stop_keeping_store().await;
+
+        // The next start, cross-validation on: counted in `status` from the start, computed,
+        // stored with the fit.
+        let on = ServiceSettings {
+            crossval: true,
+            ..off
+        };
+        let service = Service::start(
+            d.store.clone(),
+            simulated(&strict_fast()),
+            on,
+            ServiceOptions::default(),
+        )
+        .await
+        .unwrap();
+        let pending = service.status().await.unwrap().crossvals_pending;
+        let already = d.store.fit_detail(fit).await.unwrap().crossval.is_some();
+        assert!(pending == 1 || already, "{pending} pending");
+        wait_for_crossvals(&service).await;
+        let detail = d.store.fit_detail(fit).await.unwrap();
+        let cv = detail
+            .crossval
+            .expect("the cross-validation computed at start-up");
+        assert_eq!(cv.held_out.len(), 12);
+        assert_eq!(cv.cost, CostFunction::Cf1);
+        let diffuse = detail.evaluation.unwrap().diffuse.mean;
+        assert!(
+            (cv.fitted_mean - diffuse).abs() < 1e-9,
+            "{cv:?} vs {diffuse}"
+        );
+        assert!(cv.held_out_mean > cv.fitted_mean, "{cv:?}");
+        assert!(
+            d.store
+                .done_fits_without_crossval()
+                .await
+                .unwrap()
+                .is_empty()
+        );
+        service.stop_keeping_store().await;
+
+        // A start with nothing left to do computes nothing.
+        let service = Service::start(
+            d.store.clone(),
+            simulated(&strict_fast()),
+            ServiceSettings {
+                crossval: true,
+                ..settings()
+            },
+            ServiceOptions::default(),
+        )
+        .await
+        .unwrap();
+        assert_eq!(service.status().await.unwrap().crossvals_pending, 0);
+        assert_eq!(d.store.fit_detail(fit).await.unwrap().crossval, Some(cv));
+        service.shutdown().await;
+    })
+    .await;
+}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_stored_fit_gets_its_held_out_delta_e_shown_beside_its_fitted_one() {
@@ -36,17 +137,7 @@ async fn every_stored_fit_gets_its_held_out_delta_e_shown_beside_its_fitted_one(
         measure_reference(&d.service).await;
         let scan = scan_and_settle(&d.service, "T.Held").await;
         let started = Instant::now();
-        loop {
-            let s = d.service.status().await.unwrap();
-            if s.crossvals_pending == 0 && s.fits_running == 0 && s.fits_queued == 0 {
-                break;
-            }
-            assert!(
-                started.elapsed() < STEP_TIMEOUT,
-                "the cross-validation did not end: {s:?}"
-            );
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
+        wait_for_crossvals(&d.service).await;
         eprintln!(
             "cross-validation of one cf1 fit: {:.1} s",
             started.elapsed().as_secs_f64()

@@ -30,7 +30,9 @@
 //! own (one at a time, no fit permit) and counted for `status`: its bootstrap intervals
 //! (`[fit] bootstrap`, SCIENCE.md §10) and its leave-one-geometry-out cross-validation
 //! (`[fit] crossval`, SCIENCE.md §12.5: the held-out ΔE00 shown beside the fit's). Shutdown stops
-//! both; a fit left without them shows none.
+//! both; a fit left without intervals shows none, and a done fit left without a
+//! cross-validation (stopped, or stored while `[fit] crossval` was off) gets it at the next
+//! start ([`FitWorker::crossval_backfill`]).
 
 use std::collections::HashMap;
 use std::ops::ControlFlow;
@@ -42,7 +44,7 @@ use std::time::Instant;
 use tokio::sync::{Semaphore, mpsc};
 
 use crate::cost::CostFunction;
-use crate::crossval::crossval_of_fit;
+use crate::crossval::crossval_held_out;
 use crate::fit::{FitReport, FitRequest, FitScanError, fit_measured};
 use crate::optimise::{FitError, Progress, Settings};
 use crate::processing::{MeasuredBrdf, ProcessingOptions};
@@ -197,6 +199,28 @@ enum Ended {
     Failed(String),
     Cancelled,
     Stopped,
+}
+
+/// What a cross-validation is computed from: the fit's measurement, request and the mean
+/// MA-T12 ΔE00 of the fit to every reading.
+struct CrossvalInput {
+    sample: String,
+    reference: String,
+    measured: MeasuredBrdf,
+    request: FitRequest,
+    fitted_mean: f64,
+}
+
+impl CrossvalInput {
+    /// A fit needs three MA-T12 readings left when one is held out.
+    fn can_hold_out(&self) -> bool {
+        self.measured
+            .geometries
+            .iter()
+            .filter(|g| g.device == crate::geometry::Device::MaT12)
+            .count()
+            >= 4
+    }
 }
 
 /// Takes one off a `status` counter when dropped: the end of what it counts, on every path.
@@ -374,27 +398,119 @@ impl FitWorker {
     /// configuration (`[fit] crossval`; SCIENCE.md §12.5), reusing the fit just made and
     /// fitting once more per MA-T12 geometry without it, on one blocking thread, one at a time
     /// and without a fit permit, beside the bootstrap; then stored with the fit. Shutdown stops
-    /// it within an optimiser generation; a fit left without one shows none. A scan with fewer
+    /// it within an optimiser generation; the next start computes what it left. A scan with fewer
     /// than four MA-T12 readings has none (a fit needs three left).
     async fn crossval_fit(&self, fit: FitRunId, report: Arc<FitReport>) {
-        let ma = report
-            .measured
-            .geometries
-            .iter()
-            .filter(|g| g.device == crate::geometry::Device::MaT12)
-            .count();
-        if !self.ctx.settings.crossval || ma < 4 || self.ctx.is_stopping() {
+        if !self.ctx.settings.crossval || self.ctx.is_stopping() {
+            return;
+        }
+        let input = CrossvalInput {
+            sample: report.sample.clone(),
+            reference: report.reference.clone(),
+            measured: report.measured,
+            request: report.request.clone(),
+            fitted_mean: report.evaluation.diffuse.mean,
+        };
+        if !input.can_hold_out() {
             return;
         }
         self.crossvals_pending.fetch_add(1, Ordering::Relaxed);
         let _pending = CountedUntilDrop(&self.crossvals_pending);
+        self.run_crossval(fit, input).await;
+    }
+
+    /// At start-up: the cross-validation of every done fit that has none (finished before the
+    /// store kept one, or the daemon stopped while it ran), newest first, one after the other
+    /// in the cross-validation slot, so a new fit's waits for at most one of them. Each is
+    /// counted in `status` from now until it is stored. Shutdown stops the pass; the next
+    /// start takes up what is left.
+    pub(super) async fn crossval_backfill(self: &Arc<Self>) -> Result<usize, ServiceError> {
+        if !self.ctx.settings.crossval {
+            return Ok(0);
+        }
+        let fits = self
+            .ctx
+            .timed_store(self.ctx.store.done_fits_without_crossval())
+            .await?;
+        if fits.is_empty() {
+            return Ok(0);
+        }
+        let Ok((guard, _stop)) = self.ctx.task_slot().await else {
+            return Ok(0);
+        };
+        let n = fits.len();
+        self.crossvals_pending.fetch_add(n, Ordering::Relaxed);
+        let worker = self.clone();
+        tokio::spawn(async move {
+            for (i, fit) in fits.iter().enumerate() {
+                // One counted each, from the start until it ends (or the pass stops).
+                let _pending = CountedUntilDrop(&worker.crossvals_pending);
+                if worker.ctx.is_stopping() {
+                    // The rest are not counted any more either.
+                    worker
+                        .crossvals_pending
+                        .fetch_sub(n - i - 1, Ordering::Relaxed);
+                    break;
+                }
+                match worker.stored_fit_input(*fit).await {
+                    Ok(Some(input)) if input.can_hold_out() => {
+                        worker.run_crossval(*fit, input).await
+                    }
+                    Ok(_) => {}
+                    Err(e) => {
+                        tracing::warn!(error = %e.error, %fit, "no cross-validation for the fit")
+                    }
+                }
+            }
+            drop(guard);
+        });
+        Ok(n)
+    }
+
+    /// What the cross-validation of the stored fit `fit` needs, when it is done and has none.
+    async fn stored_fit_input(&self, fit: FitRunId) -> Result<Option<CrossvalInput>, PrepareError> {
+        let detail = self
+            .ctx
+            .timed_store(self.ctx.store.fit_detail(fit))
+            .await
+            .map_err(|e| PrepareError {
+                scan: None,
+                error: e.into(),
+            })?;
+        if detail.run.status != FitStatus::Done || detail.crossval.is_some() {
+            return Ok(None);
+        }
+        let Some(fitted_mean) = detail.evaluation.as_ref().map(|e| e.diffuse.mean) else {
+            return Ok(None);
+        };
+        let job = self.job_of(detail.run).await?;
+        Ok(Some(CrossvalInput {
+            sample: job.sample,
+            reference: job.reference,
+            measured: job.measured,
+            request: job.request,
+            fitted_mean,
+        }))
+    }
+
+    /// Runs one cross-validation in the slot and stores it with the fit.
+    async fn run_crossval(&self, fit: FitRunId, input: CrossvalInput) {
         let Ok(permit) = self.crossval_slot.clone().acquire_owned().await else {
             return;
         };
         let stopping = self.ctx.stop_flag();
         let joined = tokio::task::spawn_blocking(move || {
             let _permit = permit;
-            catch_unwind(AssertUnwindSafe(|| crossval_of_fit(&report, &stopping)))
+            catch_unwind(AssertUnwindSafe(|| {
+                crossval_held_out(
+                    &input.sample,
+                    &input.reference,
+                    &input.measured,
+                    &input.request,
+                    input.fitted_mean,
+                    &stopping,
+                )
+            }))
         })
         .await;
         match joined {
@@ -523,6 +639,15 @@ impl FitWorker {
         if run.status != FitStatus::Queued {
             return Ok(None);
         }
+        let cost = run.cost_function;
+        Ok(Some((self.job_of(run).await?, cost)))
+    }
+
+    /// The job of the fit `run` as it was queued: its processed scan, its recorded settings
+    /// and colorimetry.
+    async fn job_of(&self, run: crate::store::FitRun) -> Result<FitJob, PrepareError> {
+        let store = &self.ctx.store;
+        let fit = run.id;
         let scan = run.scan;
         let fail = |error: ServiceError| PrepareError {
             scan: Some(scan),
@@ -556,19 +681,16 @@ impl FitWorker {
             // configured one, as it did then.
             colorimetry: run.colorimetry.unwrap_or(self.ctx.settings.colorimetry),
         };
-        Ok(Some((
-            FitJob {
-                fit,
-                scan,
-                reference: crate::service::pipeline::scan_from_detail(&scan_detail)
-                    .map(|s| s.reference_label().to_string())
-                    .unwrap_or_else(|_| scan_detail.reference.reference.name.clone()),
-                sample: scan_detail.scan.sample,
-                measured: processed.brdf,
-                request,
-            },
-            run.cost_function,
-        )))
+        Ok(FitJob {
+            fit,
+            scan,
+            reference: crate::service::pipeline::scan_from_detail(&scan_detail)
+                .map(|s| s.reference_label().to_string())
+                .unwrap_or_else(|_| scan_detail.reference.reference.name.clone()),
+            sample: scan_detail.scan.sample,
+            measured: processed.brdf,
+            request,
+        })
     }
 
     /// Stores how a fit ended; the report when it was stored as done.

@@ -386,7 +386,8 @@ impl std::fmt::Debug for Service {
 impl Service {
     /// Starts the service on an open store and started instruments: marks scans a crash left
     /// half-measured as failed, queues again the fits a crash left running, records the
-    /// instruments' identities, and starts the fit worker.
+    /// instruments' identities, starts the fit worker, and has it compute the
+    /// cross-validation of done fits that have none.
     pub async fn start(
         store: Store,
         devices: Devices,
@@ -414,6 +415,13 @@ impl Service {
         acquisition.watch_devices().await;
         for fit in ctx.store.queued_fits().await? {
             fits.submit(fit.id);
+        }
+        let backfill = fits.crossval_backfill().await?;
+        if backfill > 0 {
+            tracing::info!(
+                fits = backfill,
+                "computing the cross-validation of stored fits that have none"
+            );
         }
         let forwarding = match ctx.settings.sync.clone() {
             Some(options) => Some(Forwarding::start(&ctx, options).await?),

@@ -430,6 +430,19 @@ impl Store {
         Ok(ids.into_iter().map(FitRunId).collect())
     }
 
+    /// Done fits that have no cross-validation stored (finished before the store kept one,
+    /// or the daemon stopped while it ran), newest first: the daemon computes theirs at
+    /// start-up.
+    pub async fn done_fits_without_crossval(&self) -> Result<Vec<FitRunId>, StoreError> {
+        let ids: Vec<i64> = sqlx::query_scalar(
+            "SELECT id FROM fit_runs
+             WHERE status = 'done' AND crossval_json IS NULL ORDER BY id DESC",
+        )
+        .fetch_all(&self.reader)
+        .await?;
+        Ok(ids.into_iter().map(FitRunId).collect())
+    }
+
     /// Fits waiting for the worker, oldest first.
     pub async fn queued_fits(&self) -> Result<Vec<FitRun>, StoreError> {
         let rows: Vec<FitRow> = sqlx::query_as(&format!(
