@@ -100,9 +100,9 @@ impl ModelKind {
         }
     }
 
-    /// What a renderer export that draws only the paper's form (Mitsuba's `roughconductor` +
-    /// `diffuse`, glTF's metallic-roughness) leaves out of a fit made with this option, with its
-    /// fitted values; `None` for the paper's model.
+    /// What a renderer export that draws only the paper's form (glTF's metallic-roughness;
+    /// Mitsuba's `roughconductor` + `diffuse` for Oren–Nayar, which it has no BSDF for) leaves
+    /// out of a fit made with this option, with its fitted values; `None` for the paper's model.
     pub fn export_omission(self, extra: &[f64; EXTRA]) -> Option<String> {
         match self {
             ModelKind::Paper => None,

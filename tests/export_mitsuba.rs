@@ -8,7 +8,8 @@
 //! brdfd's model with the lobe scaled by the Fresnel ratio r_g = F_exact(l·h; μ) / F_fit
 //! (SCIENCE.md §11) to single precision: for the Schlick fits the difference from brdfd's model
 //! is |r_g − 1| · lobe, the bound SCIENCE.md states; for the exact-Fresnel fits r_g = 1 and
-//! Mitsuba's BSDF is brdfd's model. A Mitsuba render of each sample's cf1 scenes and brdfd's
+//! Mitsuba's BSDF is brdfd's model. So is it for a two-lobe material (the exact-Fresnel fits
+//! given a second, wider lobe: the nested blend of two `roughconductor`s). A Mitsuba render of each sample's cf1 scenes and brdfd's
 //! preview agree, on the same brightness scale (no factor applied to Mitsuba's film), in mean
 //! colour within the ΔE00 GUIDE.md and SCIENCE.md §11 state, and in mean luminance within 2 %.
 
@@ -21,10 +22,10 @@ use std::process::{Command, Stdio};
 use brdfd::colour::{Xyz, ciede2000, white_point, xyz_to_lab};
 use brdfd::formats::{ExportOptions, mitsuba};
 use brdfd::geometry::GEOMETRIES;
-use brdfd::model::{self, FresnelCosine, SpecularGeometry};
+use brdfd::model::{self, FresnelCosine, ModelKind, SpecularGeometry};
 use brdfd::optimise::Settings;
 use brdfd::render::{View, render_sphere};
-use brdfd::report::Study;
+use brdfd::report::{FitState, Study};
 use brdfd::scan::Scan;
 use brdfd::spectral::wavelengths_nm;
 use serde_json::{Value, json};
@@ -80,6 +81,22 @@ fn study(fresnel: FresnelCosine) -> Study {
     Study::from_fit_reports(&scans, &reports)
 }
 
+/// `study` with every fit given a second lobe beside its first (ks2 half of ks plus 0.05, α2
+/// four times α up to 1): a two-lobe material, whatever the fits found.
+fn with_second_lobe(mut study: Study) -> Study {
+    for s in &mut study.samples {
+        for f in &mut s.fits {
+            if let FitState::Done(d) = &mut f.state {
+                d.model = ModelKind::TwoLobe;
+                d.params.extra = [0.5 * d.params.ks + 0.05, (4.0 * d.params.alpha).min(1.0)];
+                d.estimated =
+                    model::evaluate_model(&d.params, d.model, d.fresnel, &SpecularGeometry::all());
+            }
+        }
+    }
+    study
+}
+
 fn srgb_linear_to_lab(rgb: [f64; 3]) -> brdfd::colour::Lab {
     // Inverse of the IEC 61966-2-1 matrix brdfd uses, computed from it.
     let m = [
@@ -121,7 +138,12 @@ fn decode(e: f64) -> f64 {
 #[test]
 fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
     let python = python();
-    let studies = [study(FresnelCosine::Incidence), study(FresnelCosine::Exact)];
+    let exact = study(FresnelCosine::Exact);
+    let studies = [
+        study(FresnelCosine::Incidence),
+        with_second_lobe(exact.clone()),
+        exact,
+    ];
     let dir = tempfile::tempdir().unwrap();
     let mut paths = Vec::new();
     for (i, study) in studies.iter().enumerate() {
@@ -162,12 +184,12 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
         .iter()
         .map(|g| json!([g.view(), g.light()]))
         .collect();
-    // Render the cf1 scene of each sample, with either Fresnel.
+    // Render the cf1 scene of each sample in each study.
     let request = json!({
         "scenes": paths,
         "pairs": pairs,
         "wavelengths": wavelengths_nm(),
-        "render": {"res": 64, "spp": 32, "only": [0, 3, 6, 9]},
+        "render": {"res": 64, "spp": 32, "only": [0, 3, 6, 9, 12, 15]},
     });
     let mut child = Command::new(&python)
         .arg(concat!(
@@ -196,10 +218,11 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
     let geos = SpecularGeometry::all();
     let mut k = 0;
     let mut worst_explained: f64 = 0.0;
-    let mut worst_diff_in_lobes = [0.0f64; 2];
+    let mut worst_diff_in_lobes = [0.0f64; 3];
     let mut worst_exact: f64 = 0.0;
-    let mut worst_de = [0.0f64; 2];
-    let mut worst_luminance = [0.0f64; 2];
+    let mut worst_two_lobe: f64 = 0.0;
+    let mut worst_de = [0.0f64; 3];
+    let mut worst_luminance = [0.0f64; 3];
     for (i, study) in studies.iter().enumerate() {
         for s in &study.samples {
             let first = k;
@@ -208,9 +231,15 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
                 let p = &d.params;
                 assert_eq!(
                     d.fresnel,
-                    [FresnelCosine::Incidence, FresnelCosine::Exact][i]
+                    [
+                        FresnelCosine::Incidence,
+                        FresnelCosine::Exact,
+                        FresnelCosine::Exact
+                    ][i]
                 );
-                let brdfd_model = model::evaluate(p, d.fresnel, &geos);
+                assert_eq!(d.model == ModelKind::TwoLobe, i == 1);
+                // Both lobes for the two-lobe material: its "lobe" below is their sum.
+                let brdfd_model = model::evaluate_model(p, d.model, d.fresnel, &geos);
                 for (gi, g) in geos.iter().enumerate() {
                     let lobe = brdfd_model[gi][0] - p.kd[0];
                     let ratio = fresnel_exact(g.l_dot_h, p.ior) / d.fresnel.factor(p.ior, g);
@@ -234,7 +263,9 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
                         let diff = (m - brdfd_model[gi][b]).abs();
                         assert!(diff <= (ratio - 1.0).abs() * lobe + 2e-5 * m);
                         worst_diff_in_lobes[i] = worst_diff_in_lobes[i].max(diff / lobe.max(1e-12));
-                        if d.fresnel == FresnelCosine::Exact {
+                        if d.model == ModelKind::TwoLobe {
+                            worst_two_lobe = worst_two_lobe.max(diff / brdfd_model[gi][b]);
+                        } else if d.fresnel == FresnelCosine::Exact {
                             worst_exact = worst_exact.max(diff / brdfd_model[gi][b]);
                         }
                     }
@@ -263,9 +294,10 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
             let y = |c: [f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
             let ratio = y(mi_rgb) / y(mean);
             eprintln!(
-                "{} ({:?}): brdfd preview mean linear sRGB {mean:?} ({} px), Mitsuba {mi_rgb:?} ({} px): ΔE00 {de:.3}, luminance Mitsuba/preview {ratio:.4}",
+                "{} ({:?}, {}): brdfd preview mean linear sRGB {mean:?} ({} px), Mitsuba {mi_rgb:?} ({} px): ΔE00 {de:.3}, luminance Mitsuba/preview {ratio:.4}",
                 s.name,
                 d.fresnel,
+                d.model,
                 on.len(),
                 mi["pixels"]
             );
@@ -274,12 +306,15 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
         }
     }
     eprintln!(
-        "worst |Mitsuba − (kd + r·lobe)| relative {worst_explained:.2e}; worst |Mitsuba − brdfd| of the lobe: Schlick fits {:.3}, exact-Fresnel fits {:.2e} ({worst_exact:.2e} of the value); worst mean-colour ΔE00: Schlick {:.3}, exact {:.3}; worst |luminance ratio − 1|: Schlick {:.4}, exact {:.4}",
+        "worst |Mitsuba − (kd + r·lobe)| relative {worst_explained:.2e}; worst |Mitsuba − brdfd| of the lobe: Schlick fits {:.3}, exact-Fresnel fits {:.2e} ({worst_exact:.2e} of the value), two lobes {:.2e} ({worst_two_lobe:.2e}); worst mean-colour ΔE00: Schlick {:.3}, exact {:.3}, two lobes {:.3}; worst |luminance ratio − 1|: Schlick {:.4}, exact {:.4}, two lobes {:.4}",
         worst_diff_in_lobes[0],
+        worst_diff_in_lobes[2],
         worst_diff_in_lobes[1],
         worst_de[0],
+        worst_de[2],
         worst_de[1],
         worst_luminance[0],
+        worst_luminance[2],
         worst_luminance[1]
     );
     // Exact-Fresnel fits: Mitsuba's BSDF is brdfd's model to single precision.
@@ -287,7 +322,11 @@ fn mitsuba_loads_every_scene_and_renders_what_the_preview_shows() {
         worst_exact < 2e-5,
         "exact-Fresnel fits: Mitsuba differs from brdfd's model by {worst_exact} relative"
     );
-    for i in 0..2 {
+    assert!(
+        worst_two_lobe < 2e-5,
+        "two-lobe material: Mitsuba differs from brdfd's model by {worst_two_lobe} relative"
+    );
+    for i in 0..3 {
         assert!(
             worst_de[i] < MEAN_COLOUR_DE00,
             "mean colour ΔE00 {} against the stated {MEAN_COLOUR_DE00}",

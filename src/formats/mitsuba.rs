@@ -18,6 +18,12 @@
 //!   `specular_reflectance` = `2·ks·4/π`: Mitsuba's lobe is `F·D·G/(4 cosθi cosθr)`, so the 4
 //!   vs π denominator and the blend's ½ are folded into this weight.
 //!
+//! A two-lobe fit (`--model two-lobe`) draws its second lobe too: the outer blend at weight ⅔
+//! of `diffuse` (reflectance `3π·kd(λ)`) and an inner `blendbsdf` at ½ of two
+//! `roughconductor`s (α and α2, each `specular_reflectance` `3·ks·4/π`), so each of the three
+//! terms is weighted ⅓ and the weights fold that in. Mitsuba 3 has no Oren–Nayar BSDF: an
+//! `oren-nayar` fit is drawn with its Lambertian kd, and the scene's comment says so.
+//!
 //! Mitsuba's Fresnel factor is the exact dielectric Fresnel on the microfacet normal (l·h):
 //! brdfd's `--fresnel exact` ([`FresnelCosine::Exact`]). A fit made with it exports without
 //! approximation. A fit made with the paper's Schlick on cosθi (or on l·h) is exported with its
@@ -35,7 +41,7 @@
 
 use std::fmt::Write as _;
 
-use crate::model::FresnelCosine;
+use crate::model::{FresnelCosine, ModelKind};
 use crate::render::{AMBIENT, DEFAULT_LIGHT, SPHERE_PX};
 use crate::spectral::wavelengths_nm;
 use crate::study::{DoneFit, SampleStudy};
@@ -93,18 +99,30 @@ pub fn scene(
             }
         ),
     };
-    let fresnel_note = match fit.model.export_omission(&fit.params.extra) {
+    // The second lobe of a two-lobe fit is drawn (a second roughconductor); Oren–Nayar's
+    // diffuse factor has no Mitsuba 3 BSDF.
+    let two_lobes = fit.model == ModelKind::TwoLobe && p.extra[0] > 0.0;
+    let omission = match fit.model {
+        ModelKind::TwoLobe => None,
+        m => m.export_omission(&p.extra),
+    };
+    let fresnel_note = match omission {
         Some(omitted) => format!("{fresnel_note}.\n     Not exact: {omitted}"),
         None => fresnel_note,
     };
     let _ = writeln!(
         t,
-        "<!-- {}: sample \"{}\", cost function {cost}, method {method}, Fresnel {}; written {}.\n     {}.\n     Render with a spectral variant: mitsuba -m scalar_spectral this-file.xml (a scene file cannot name its variant; a bare `mitsuba` picks an RGB one).\n     The film holds brdfd's preview values: linear sRGB radiance factor (light irradiance π, so a white diffuser facing it is 1).\n     brdfd's model f = kd + ks·F·D·G/(π cosθi cosθr) as blendbsdf(½ diffuse 2π·kd, ½ roughconductor GGX with specular_reflectance 2·ks·4/π).\n     {}.\n     Readings: {}. -->",
+        "<!-- {}: sample \"{}\", cost function {cost}, method {method}, Fresnel {}; written {}.\n     {}.\n     Render with a spectral variant: mitsuba -m scalar_spectral this-file.xml (a scene file cannot name its variant; a bare `mitsuba` picks an RGB one).\n     The film holds brdfd's preview values: linear sRGB radiance factor (light irradiance π, so a white diffuser facing it is 1).\n     {}.\n     {}.\n     Readings: {}. -->",
         esc(&opts.originator),
         esc(&sample.name),
         fit.fresnel.name(),
         esc(&opts.created),
         esc(&sample.scale().describe()),
+        if two_lobes {
+            "brdfd's model f = kd + ks·F·D(α)·G(α)/(π cosθi cosθr) + ks2·F·D(α2)·G(α2)/(π cosθi cosθr) (model two-lobe) as blendbsdf(⅓ diffuse 3π·kd, ⅔ blendbsdf(½ roughconductor GGX α with specular_reflectance 3·ks·4/π, ½ roughconductor GGX α2 with 3·ks2·4/π))"
+        } else {
+            "brdfd's model f = kd + ks·F·D·G/(π cosθi cosθr) as blendbsdf(½ diffuse 2π·kd, ½ roughconductor GGX with specular_reflectance 2·ks·4/π)"
+        },
         esc(&fresnel_note),
         esc(&sample
             .provenance_summary()
@@ -120,9 +138,11 @@ pub fn scene(
     // Mitsuba samples 360–830 nm and a spectrum is zero outside the wavelengths it is given,
     // which would darken the blue and red ends of a render: the end values are held flat to
     // 360 and 830 nm, as brdfd's colour sums (400–700 nm only) implicitly do.
+    // Each of the blend's n parts is weighted 1/n: n = 2 (diffuse, lobe) or 3 (two lobes).
+    let parts = if two_lobes { 3.0 } else { 2.0 };
     let reflectance: Vec<f64> =
         p.kd.iter()
-            .map(|kd| 2.0 * std::f64::consts::PI * kd)
+            .map(|kd| parts * std::f64::consts::PI * kd)
             .collect();
     let mut pairs = vec![format!("360:{}", reflectance[0])];
     pairs.extend(
@@ -132,28 +152,46 @@ pub fn scene(
             .map(|(nm, r)| format!("{nm}:{r}")),
     );
     pairs.push(format!("830:{}", reflectance[reflectance.len() - 1]));
+    let lobe = |indent: &str, ks: f64, alpha: f64| {
+        format!(
+            r#"{indent}<bsdf type="roughconductor">
+{indent}    <string name="distribution" value="ggx"/>
+{indent}    <float name="alpha" value="{alpha}"/>
+{indent}    <float name="eta" value="{}"/>
+{indent}    <float name="k" value="0"/>
+{indent}    <float name="specular_reflectance" value="{}"/>
+{indent}</bsdf>"#,
+            p.ior,
+            specular_weight(ks) * parts / 2.0
+        )
+    };
+    let specular = if two_lobes {
+        format!(
+            r#"        <bsdf type="blendbsdf">
+            <float name="weight" value="0.5"/>
+{}
+{}
+        </bsdf>"#,
+            lobe("            ", p.ks, p.alpha),
+            lobe("            ", p.extra[0], p.extra[1])
+        )
+    } else {
+        lobe("        ", p.ks, p.alpha)
+    };
     let _ = writeln!(
         t,
         r#"    <bsdf type="blendbsdf" id="material">
-        <float name="weight" value="0.5"/>
+        <float name="weight" value="{}"/>
         <bsdf type="diffuse">
             <spectrum name="reflectance" value="{}"/>
         </bsdf>
-        <bsdf type="roughconductor">
-            <string name="distribution" value="ggx"/>
-            <float name="alpha" value="{}"/>
-            <float name="eta" value="{}"/>
-            <float name="k" value="0"/>
-            <float name="specular_reflectance" value="{}"/>
-        </bsdf>
+{specular}
     </bsdf>
     <shape type="sphere">
         <ref id="material"/>
     </shape>"#,
+        (parts - 1.0) / parts,
         pairs.join(", "),
-        p.alpha,
-        p.ior,
-        specular_weight(p.ks)
     );
     let [lx, ly, lz] = DEFAULT_LIGHT;
     let radius_px = crate::render::View::default().radius_px;
@@ -309,6 +347,46 @@ mod tests {
             xml.contains("Not exact: model oren-nayar: its rough diffuse factor (σ = 0.2500 rad)"),
             "{xml}"
         );
+        // A two-lobe fit draws its second lobe: three terms at ⅓ each, nothing left out.
+        let two = DoneFit {
+            model: crate::model::ModelKind::TwoLobe,
+            params: crate::model::Params {
+                extra: [0.3, 0.5],
+                ..exact.params
+            },
+            ..exact.clone()
+        };
+        let xml = cf1_scene(&s, &two);
+        let doc = roxmltree::Document::parse(&xml).unwrap();
+        assert!(!xml.contains("Not exact"), "{xml}");
+        let lobes: Vec<(f64, f64)> = doc
+            .descendants()
+            .filter(|n| n.attribute("type") == Some("roughconductor"))
+            .map(|n| {
+                let value = |name: &str| {
+                    n.children()
+                        .find(|c| c.attribute("name") == Some(name))
+                        .and_then(|c| c.attribute("value")?.parse().ok())
+                        .unwrap()
+                };
+                (value("alpha"), value("specular_reflectance"))
+            })
+            .collect();
+        let third = |ks: f64| 3.0 * ks * 4.0 / std::f64::consts::PI;
+        let want = [(two.params.alpha, third(two.params.ks)), (0.5, third(0.3))];
+        assert_eq!(lobes.len(), 2, "{xml}");
+        for (got, want) in lobes.iter().zip(want) {
+            assert_eq!(got.0, want.0);
+            assert!(
+                (got.1 - want.1).abs() < 1e-12 * want.1,
+                "{got:?} vs {want:?}"
+            );
+        }
+        assert!(xml.contains(r#"<float name="weight" value="0.6666666666666666"/>"#));
+        assert!(xml.contains(&format!(
+            "400:{}",
+            3.0 * std::f64::consts::PI * two.params.kd[0]
+        )));
         let names: Vec<String> = scenes(
             &crate::study::Study {
                 samples: vec![s.clone()],
