@@ -30,6 +30,11 @@ What it does, per file:
      (the 45as45 reading everywhere). RGB files go through one spectral upsampling, measured
      and predicted alike.
 
+Each default fit (exact Fresnel, all 14 readings) is also cross-validated (each MA-T12 reading
+predicted by a fit without it), and the 95 % prediction interval this gives a direction's
+L*a*b* (the one `brdfd crossval` gives a held-out geometry) is held against every predicted
+direction: `intervals` says how often it holds the measured colour.
+
 The oracle of each form minimises the mean ΔE00 over every direction, starting from the best
 of the fits of that form, a least-squares fit and Lambert: no prediction of its form does
 better. `reach` is the verdict a scan of the material would be given from its readings alone
@@ -180,6 +185,27 @@ pub fn table(r: &Report) -> String {
         "",
         cells(&r.lambert.prediction)
     );
+    for f in &r.fits {
+        if let Some(c) = &f.interval_coverage {
+            let pct = |x: f64| format!("{:.0} %", 100.0 * x);
+            let _ = writeln!(
+                t,
+                "intervals        {} default: the 95 % prediction interval (± {:.2} L*, {:.2} a*, {:.2} b*, from the held-out ΔE00 {:.2}) holds L* at {} of the directions, a* {}, b* {}, all three {}{}",
+                f.cost.name(),
+                c.half_width[0],
+                c.half_width[1],
+                c.half_width[2],
+                c.held_out_mean,
+                pct(c.l),
+                pct(c.a),
+                pct(c.b),
+                pct(c.all),
+                c.near_specular_l
+                    .map(|n| format!("; near-specular L* {}", pct(n)))
+                    .unwrap_or_default()
+            );
+        }
+    }
     if let Some(reach) = &r.reach {
         let _ = writeln!(t, "reach            {}", super::fit::reach_line(reach));
     }

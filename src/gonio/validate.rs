@@ -245,6 +245,74 @@ pub struct FitResult {
     /// The reach verdict this fit gives the material from its readings alone
     /// ([`crate::reach`]): what a scan of it would be told, to hold against `prediction`.
     pub reach: Option<Reach>,
+    /// How often the 95 % prediction interval of a direction's L*a*b*, built from the
+    /// readings' own cross-validation, holds the measured colour (the default configuration's
+    /// fits to all 14 readings; `None` for the others).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interval_coverage: Option<IntervalCoverage>,
+}
+
+/// The prediction interval of a measured direction, held against the measurement: the fit's
+/// prediction there ± `t(0.975, m − 1)·√(1 + 1/m)·s` per L*, a*, b*, `s` the root mean square
+/// of the held-out errors at the m = 12 MA-T12 geometries (each predicted by a fit without it;
+/// [`crate::crossval::crossval_held_out`]), the interval `brdfd crossval` gives a held-out
+/// geometry (SCIENCE.md §10), applied to directions no reading was taken at.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct IntervalCoverage {
+    /// Fraction of the predicted directions whose measured L* lies in its interval.
+    pub l: f64,
+    pub a: f64,
+    pub b: f64,
+    /// ... whose measured L*, a* and b* all lie in theirs.
+    pub all: f64,
+    /// The same for L* over the near-specular directions alone; `None` when there are none.
+    pub near_specular_l: Option<f64>,
+    /// The intervals' half-widths `t·√(1 + 1/m)·s`, L*, a*, b*.
+    pub half_width: [f64; 3],
+    /// The cross-validation's mean held-out ΔE00 at the MA-T12 geometries.
+    pub held_out_mean: f64,
+}
+
+/// [`IntervalCoverage`] of the fit `p` over `targets`, from its cross-validation `cv`.
+fn interval_coverage(
+    targets: &[Target],
+    colorimetry: Colorimetry,
+    predicted: &dyn Fn(&Target) -> Spectrum,
+    cv: &crate::crossval::CrossValidation,
+) -> Option<IntervalCoverage> {
+    let errors: Vec<[f64; 3]> = cv
+        .held_out
+        .iter()
+        .map(|h| std::array::from_fn(|c| h.predicted_lab[c] - h.measured_lab[c]))
+        .collect();
+    // No position is left out of the errors: every held-out geometry is another direction.
+    let widths = crate::uncertainty::jackknife::prediction_interval(&errors, usize::MAX, [0.0; 3])?;
+    let half_width: [f64; 3] = std::array::from_fn(|c| widths[c][1]);
+    let mut inside = [0usize; 4];
+    let (mut near, mut near_inside) = (0usize, 0usize);
+    for t in targets {
+        let lab = colorimetry.reflectance_to_lab(&predicted(t).map(|x| std::f64::consts::PI * x));
+        let err = [lab.l - t.lab.l, lab.a - t.lab.a, lab.b - t.lab.b];
+        let ok: [bool; 3] = std::array::from_fn(|c| err[c].abs() <= half_width[c]);
+        for c in 0..3 {
+            inside[c] += usize::from(ok[c]);
+        }
+        inside[3] += usize::from(ok.iter().all(|&o| o));
+        if t.near {
+            near += 1;
+            near_inside += usize::from(ok[0]);
+        }
+    }
+    let n = targets.len().max(1) as f64;
+    Some(IntervalCoverage {
+        l: inside[0] as f64 / n,
+        a: inside[1] as f64 / n,
+        b: inside[2] as f64 / n,
+        all: inside[3] as f64 / n,
+        near_specular_l: (near > 0).then(|| near_inside as f64 / near as f64),
+        half_width,
+        held_out_mean: cv.held_out_mean,
+    })
 }
 
 /// The oracle of one model form: fitted to every prediction direction.
@@ -900,6 +968,24 @@ pub fn validate_with(
             &mut |_| ControlFlow::Continue(()),
         )?;
         let p = report.outcome.params;
+        let interval_coverage = if v.is_default() && v.geometries == GeometrySet::ALL {
+            let cv = crate::crossval::crossval_held_out(
+                m.material(),
+                "goniometric measurement",
+                &mb,
+                &request,
+                report.evaluation.diffuse.mean,
+                &std::sync::atomic::AtomicBool::new(false),
+            )?;
+            interval_coverage(
+                &targets,
+                colorimetry,
+                &|t| evaluate_at(&p, v.model, v.fresnel, t.wi, t.wo),
+                &cv,
+            )
+        } else {
+            None
+        };
         fitted.push((v, p));
         if v.is_default()
             && (figures_cost.is_none()
@@ -934,6 +1020,7 @@ pub fn validate_with(
             prediction,
             wall_ms: report.outcome.wall_ms,
             reach: crate::reach::of_report(&report),
+            interval_coverage,
         });
     }
     let mut oracles = Vec::new();
@@ -1121,6 +1208,52 @@ mod tests {
                 assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn a_direction_is_covered_when_its_error_is_within_the_held_out_interval() {
+        let c = Options::default().colorimetry;
+        let f: Spectrum = std::array::from_fn(|b| 0.1 + 0.002 * b as f64);
+        let lab = c.reflectance_to_lab(&f.map(|x| std::f64::consts::PI * x));
+        // Held-out errors ±1 in L*, none in a* and b*: s = 1, m = 12.
+        let cv = crate::crossval::CrossValidation {
+            cost: CostFunction::Cf2,
+            model: ModelKind::Paper,
+            fresnel: FresnelCosine::Exact,
+            fitted_mean: 0.5,
+            held_out_mean: 1.25,
+            held_out: (0..12)
+                .map(|i| crate::crossval::HeldOut {
+                    geometry: GEOMETRIES[i].name.into(),
+                    delta_e00: 1.0,
+                    measured_lab: [50.0, 0.0, 0.0],
+                    predicted_lab: [50.0 + if i % 2 == 0 { 1.0 } else { -1.0 }, 0.0, 0.0],
+                    predicted_l_interval: None,
+                })
+                .collect(),
+        };
+        let half = crate::stats::t_quantile(0.975, 11.0).unwrap() * (1.0 + 1.0 / 12.0f64).sqrt();
+        // Measured L* off the prediction by 0.5, 2.2 (inside: half ≈ 2.29), 2.4 and −3 (not).
+        let targets: Vec<Target> = [0.5, 2.2, 2.4, -3.0]
+            .iter()
+            .enumerate()
+            .map(|(k, d)| Target {
+                wi: direction(0.3, 0.0),
+                wo: direction(0.5, 1.0),
+                measured: f,
+                lab: Lab {
+                    l: lab.l + d,
+                    ..lab
+                },
+                near: k == 0,
+            })
+            .collect();
+        let got = interval_coverage(&targets, c, &|_| f, &cv).unwrap();
+        assert!((got.half_width[0] - half).abs() < 1e-12, "{got:?}");
+        assert_eq!(got.half_width[1..], [0.0, 0.0]);
+        assert_eq!((got.l, got.a, got.b, got.all), (0.5, 1.0, 1.0, 0.5));
+        assert_eq!(got.near_specular_l, Some(1.0));
+        assert_eq!(got.held_out_mean, 1.25);
     }
 
     #[test]
