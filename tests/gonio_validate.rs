@@ -466,6 +466,23 @@ fn validate_prints_the_json_contract_and_draws_its_figures() {
         }
     }
     assert_eq!(fits.iter().filter(|f| f["default"] == true).count(), 1);
+    // The default fit's prediction interval, held against every direction; only its.
+    for f in fits {
+        let c = &f["interval_coverage"];
+        if f["default"] != true {
+            assert!(c.is_null(), "{f}");
+            continue;
+        }
+        for key in ["l", "a", "b", "all", "near_specular_l"] {
+            let x = c[key].as_f64().unwrap_or_else(|| panic!("no {key} in {c}"));
+            assert!((0.0..=1.0).contains(&x), "{key} {x}");
+        }
+        assert!(c["all"].as_f64() <= c["l"].as_f64(), "{c}");
+        let widths = c["half_width"].as_array().unwrap();
+        assert_eq!(widths.len(), 3);
+        assert!(widths.iter().all(|w| w.as_f64().unwrap() > 0.0), "{c}");
+        assert!(c["held_out_mean"].as_f64().unwrap() > 0.0, "{c}");
+    }
     assert!(doc["oracle"]["mean"].is_number() && doc["lambert"]["mean"].is_number());
     assert!(doc["interpolation"]["leave_one_out"]["mean"].is_number());
     assert!(doc["reach"]["verdict"].is_string());
