@@ -304,7 +304,14 @@ const PAGE_STATES: &[(&str, &str)] = &[
     ),
     (
         "the result view",
-        "return document.querySelectorAll('#de-table tbody tr').length === 3 && !!document.querySelector('#de-table .best')
+        "const best = document.querySelector('#de-table .best');
+         const held = [...document.querySelectorAll('#de-table td.held-out')].map((td) => td.dataset.heldOut);
+         const byHeld = held.length === 3 && held.every((v) => v !== undefined);
+         const min = Math.min(...held.map(Number));
+         const bestHeld = best && best.closest('tr').querySelector('td.held-out').dataset.heldOut;
+         return document.querySelectorAll('#de-table tbody tr').length === 3 && !!best
+           && (byHeld ? best.dataset.by === 'held-out' && best.textContent === '★ predicts best' && Number(bestHeld) === min
+                      : best.dataset.by === 'fitted' && best.textContent === '★ best fit')
            && document.querySelectorAll('#de-table td.reach').length === 3
            && [...document.querySelectorAll('#de-table td.reach')].every((td) => ['in-reach', 'marginal', 'out-of-reach'].includes(td.dataset.reach) && /expect ΔE00 \\d/.test(td.textContent))",
     ),

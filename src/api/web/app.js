@@ -798,9 +798,18 @@ async function renderResult(id) {
     : p.origin === "absent" ? `${name}: absent (this scan has no readings of it)`
     : `${name}: ${p.model} · serial ${p.serial} · firmware ${p.firmware} · ${ORIGIN_TEXT[p.origin] || p.origin}`;
   const fitsDone = (sw && sw.fits) || [];
-  const best = fitsDone.length ? fitsDone.reduce((a, b) => (b.delta_e00_all < a.delta_e00_all ? b : a)) : null;
   const latestDone = new Map();
   for (const f of view.fits) if (f.run.status === "done") latestDone.set(f.run.cost_function, f);
+  // The star goes to the fit that predicts the readings it did not see best (held-out ΔE00)
+  // once every fit has its cross-validation; until then to the lowest ΔE00 at the readings.
+  const heldOut = (f) => { const d = latestDone.get(f.cost_function); return d && d.crossval ? d.crossval.held_out_mean : null; };
+  const byHeldOut = fitsDone.length > 0 && fitsDone.every((f) => heldOut(f) !== null);
+  const score = (f) => (byHeldOut ? heldOut(f) : f.delta_e00_all);
+  const best = fitsDone.length ? fitsDone.reduce((a, b) => (score(b) < score(a) ? b : a)) : null;
+  const bestLabel = byHeldOut ? "★ predicts best" : "★ best fit";
+  const bestTitle = byHeldOut
+    ? "lowest held-out ΔE00: the fit that best predicts readings it was not fitted to"
+    : "lowest ΔE00 at the readings it was fitted to (the held-out figures are not all computed)";
   const latest = new Map();
   for (const f of view.fits) latest.set(f.run.cost_function, f);
   const sim = simulatedNote(prov);
@@ -862,7 +871,7 @@ async function renderResult(id) {
           h("td", {}, f.delta_e00_specular === null ? "no specular readings" : fmt(f.delta_e00_specular)), h("td", {}, fmt(f.delta_e00_all)),
           h("td", {}, deltaL(latestDone.get(f.cost_function))),
           reachCell(latestDone.get(f.cost_function)),
-          h("td", { class: f === best ? "best" : "" }, f === best ? "★ best" : ""))))))
+          h("td", f === best ? { class: "best", title: bestTitle, "data-by": byHeldOut ? "held-out" : "fitted" } : {}, f === best ? bestLabel : ""))))))
         : h("p", { id: "not-fitted" }, notFitted),
       fitsDone.length ? h("p", { class: "muted" }, "Held out: each MA-T12 geometry predicted by a fit to the others (leave-one-geometry-out), mean ΔE00 — how far to trust the estimate at angles that were not measured. The diffuse figure beside it is the fit to every reading, which says less about other angles.") : null),
     latest.size ? h("section", { "aria-labelledby": "h-params" },
