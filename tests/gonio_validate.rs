@@ -431,6 +431,7 @@ fn validate_prints_the_json_contract_and_draws_its_figures() {
             "--cost",
             "cf2",
             "--json",
+            "--intervals",
             "--figures",
             figures.to_str().unwrap(),
             path.to_str().unwrap(),

@@ -30,10 +30,10 @@ What it does, per file:
      (the 45as45 reading everywhere). RGB files go through one spectral upsampling, measured
      and predicted alike.
 
-Each default fit (exact Fresnel, all 14 readings) is also cross-validated (each MA-T12 reading
-predicted by a fit without it), and the 95 % prediction interval this gives a direction's
-L*a*b* (the one `brdfd crossval` gives a held-out geometry) is held against every predicted
-direction: `intervals` says how often it holds the measured colour.
+With --intervals each default fit (exact Fresnel, all 14 readings) is also cross-validated
+(each MA-T12 reading predicted by a fit without it), and the 95 % prediction interval this gives
+a direction's L*a*b* (the one `brdfd crossval` gives a held-out geometry) is held against every
+predicted direction: `intervals` says how often it holds the measured colour.
 
 The oracle of each form minimises the mean ΔE00 over every direction, starting from the best
 of the fits of that form, a least-squares fit and Lambert: no prediction of its form does
@@ -46,7 +46,8 @@ oracle far above 1 means the material is out of the model's reach, however it is
 Examples:
   brdfd validate krylon_blue.astm
   brdfd validate --json *.astm *.bsdf > validation.jsonl
-  brdfd validate --cost cf2 --figures figures/ krylon_blue.astm")]
+  brdfd validate --cost cf2 --figures figures/ krylon_blue.astm
+  brdfd validate --intervals krylon_blue.astm")]
 pub struct ValidateArgs {
     /// Measured BRDF files: ASTM E1392 (.astm) or RGL tensor files (.bsdf).
     #[arg(value_name = "FILE", required = true)]
@@ -68,6 +69,13 @@ pub struct ValidateArgs {
     /// plane of incidence (`MATERIAL-in-plane.svg`) into DIR (created if missing).
     #[arg(long, value_name = "DIR")]
     pub figures: Option<PathBuf>,
+
+    /// Also cross-validate each default fit (each MA-T12 reading predicted by a fit without
+    /// it) and say how often the 95 % prediction interval this gives holds the measured
+    /// L*a*b* over every direction (`intervals` line; `interval_coverage` in `--json`). About
+    /// doubles the run: 12 more fits per cost function.
+    #[arg(long)]
+    pub intervals: bool,
 }
 
 pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
@@ -80,7 +88,11 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
         } else {
             args.cost.clone()
         };
-        let mut report = validate_with(&m, &Options::default(), &variants_of(&costs))
+        let opts = Options {
+            intervals: args.intervals,
+            ..Options::default()
+        };
+        let mut report = validate_with(&m, &opts, &variants_of(&costs))
             .with_context(|| format!("validating {}", path.display()))?;
         report.file = Some(path.display().to_string());
         if args.json {

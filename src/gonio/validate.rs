@@ -63,6 +63,10 @@ pub struct Options {
     pub seed: u64,
     /// The model forms an oracle is fitted for (the first is the report's `oracle`).
     pub oracle_forms: &'static [(ModelKind, FresnelCosine)],
+    /// Cross-validate each default fit and hold its prediction interval against every
+    /// direction ([`IntervalCoverage`]; 12 more fits per cost function, about doubling the
+    /// run). Default false.
+    pub intervals: bool,
 }
 
 /// Every model form the fits use: the paper's, exact Fresnel, Oren–Nayar.
@@ -82,6 +86,7 @@ impl Default for Options {
             sra: SraReading::LUMINANCE,
             seed: Settings::default().seed,
             oracle_forms: ORACLE_FORMS,
+            intervals: false,
         }
     }
 }
@@ -247,7 +252,7 @@ pub struct FitResult {
     pub reach: Option<Reach>,
     /// How often the 95 % prediction interval of a direction's L*a*b*, built from the
     /// readings' own cross-validation, holds the measured colour (the default configuration's
-    /// fits to all 14 readings; `None` for the others).
+    /// fits to all 14 readings, with [`Options::intervals`]; `None` for the others).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub interval_coverage: Option<IntervalCoverage>,
 }
@@ -968,7 +973,7 @@ pub fn validate_with(
             &mut |_| ControlFlow::Continue(()),
         )?;
         let p = report.outcome.params;
-        let interval_coverage = if v.is_default() && v.geometries == GeometrySet::ALL {
+        let interval_coverage = if opts.intervals && v.is_default() {
             let cv = crate::crossval::crossval_held_out(
                 m.material(),
                 "goniometric measurement",
