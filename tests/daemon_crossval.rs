@@ -16,6 +16,17 @@ use serde_json::Value;
 
 use common::*;
 
+/// One cost function under the flat SRA model, no bootstrap: the 12 held-out fits (with
+/// `crossval`) are the only extra work.
+fn one_cf1_fit(crossval: bool) -> ServiceSettings {
+    ServiceSettings {
+        cost_functions: vec![CostFunction::Cf1],
+        bootstrap: 0,
+        crossval,
+        ..settings()
+    }
+}
+
 /// Waits until `service` has no fit and no cross-validation left to run.
 async fn wait_for_crossvals(service: &Service) {
     let started = Instant::now();
@@ -36,12 +47,7 @@ async fn wait_for_crossvals(service: &Service) {
 async fn a_fit_stored_without_its_cross_validation_gets_it_at_the_next_start() {
     let _serial = serial();
     bounded(async {
-        let off = ServiceSettings {
-            cost_functions: vec![CostFunction::Cf1],
-            bootstrap: 0,
-            crossval: false,
-            ..settings()
-        };
+        let off = one_cf1_fit(false);
         let d = start(
             simulated(&strict_fast()),
             off.clone(),
@@ -120,14 +126,7 @@ async fn a_fit_stored_without_its_cross_validation_gets_it_at_the_next_start() {
 async fn every_stored_fit_gets_its_held_out_delta_e_shown_beside_its_fitted_one() {
     let _serial = serial();
     bounded(async {
-        // One cost function under the flat SRA model, no bootstrap: the 12 held-out fits are
-        // the only extra work.
-        let settings = ServiceSettings {
-            cost_functions: vec![CostFunction::Cf1],
-            bootstrap: 0,
-            crossval: true,
-            ..settings()
-        };
+        let settings = one_cf1_fit(true);
         let d = start(
             simulated(&strict_fast()),
             settings,
