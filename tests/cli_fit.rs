@@ -176,6 +176,62 @@ fn malformed_scan_fails_with_one_line_naming_the_field() {
 }
 
 #[test]
+fn fit_takes_an_xrite_export_as_import_format_reads_it() {
+    // The export itself and the scan file `import-format` makes of it: the same fit.
+    let xlsx = example("real-mat12/PAR_PW_GE_MC_1.xlsx");
+    let dir = std::env::temp_dir().join(format!("brdfd-cli-fit-xlsx-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = brdfd(&["import-format", &xlsx, "--out", dir.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let converted = std::fs::read_dir(&dir)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let fit = |input: &str| {
+        let out = brdfd(&["fit", "--input", input, "--cost", "cf1", "--json"]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (v["sample"].clone(), v["cost"].clone(), v["params"].clone())
+    };
+    let direct = fit(&xlsx);
+    let via_file = fit(converted.to_str().unwrap());
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(direct.0, "PAR_PW_GE_MC_1");
+    assert!(direct.1.as_f64().is_some_and(|c| c > 0.0), "{direct:?}");
+    assert_eq!(direct, via_file);
+}
+
+#[test]
+fn a_file_that_is_not_a_scan_names_the_command_that_converts_it() {
+    // An instrument's CGATS export given where a scan file belongs.
+    let dir = std::env::temp_dir().join(format!("brdfd-cli-fit-cgats-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("mat12.cgats");
+    std::fs::write(&path, "CGATS.17\nNUMBER_OF_FIELDS 2\n").unwrap();
+    for cmd in [&["fit", "--input"][..], &["crossval"][..]] {
+        let mut args = cmd.to_vec();
+        args.push(path.to_str().unwrap());
+        args.extend(["--cost", "cf1"]);
+        let out = brdfd(&args);
+        assert_eq!(out.status.code(), Some(1), "{cmd:?}");
+        let err = stderr_one_line(&out);
+        assert!(err.contains("is not a brdfd.scan/1 file"), "{err}");
+        assert!(err.contains("brdfd import-format FILE --out DIR"), "{err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn missing_file_fails_with_one_line() {
     let out = brdfd(&["fit", "--input", "no-such-scan.json", "--cost", "cf1"]);
     assert_eq!(out.status.code(), Some(1));

@@ -21,7 +21,7 @@ use super::fit::ScienceArgs;
 #[derive(Debug, Clone, clap::Args)]
 pub struct CrossvalArgs {
     /// Scan file: a `brdfd.scan/1` JSON document (`brdfd import-format` makes one of an
-    /// instrument's export).
+    /// instrument's export), or an X-Rite `.xlsx` export of one sample.
     #[arg(value_name = "SCAN.json")]
     pub input: PathBuf,
 
@@ -123,7 +123,7 @@ pub fn crossval_with(scan: &Scan, args: &CrossvalArgs) -> anyhow::Result<Crossva
 }
 
 pub fn run(args: &CrossvalArgs) -> anyhow::Result<()> {
-    let scan = Scan::read_file(&args.input)?;
+    let scan = super::scan_file::read_scan_input(&args.input)?;
     let doc = crossval_with(&scan, args)?;
     if args.json {
         println!("{}", serde_json::to_string(&doc)?);

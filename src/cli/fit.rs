@@ -22,7 +22,8 @@ use std::sync::atomic::AtomicBool;
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
     /// Scan file to fit: a `brdfd.scan/1` JSON document (sample and Munsell N9 reference
-    /// readings at all 14 geometries).
+    /// readings at all 14 geometries), or an X-Rite `.xlsx` export of one sample (fitted over
+    /// its 12 MA-T12 geometries, as `brdfd import-format` reads it).
     #[arg(long, value_name = "SCAN.json")]
     pub input: PathBuf,
 
@@ -204,7 +205,7 @@ pub fn fit_document_json(report: &FitReport) -> serde_json::Result<String> {
 }
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
-    let scan = Scan::read_file(&args.input)?;
+    let scan = super::scan_file::read_scan_input(&args.input)?;
     let report = fit_with(&scan, args)?;
     if args.json {
         println!("{}", fit_document_json(&report)?);

@@ -13,7 +13,6 @@ use crate::optimise::{Method, Settings};
 use crate::processing::ProcessingOptions;
 use crate::report::Study;
 use crate::report::load::Selection;
-use crate::scan::Scan;
 use crate::store::ScanId;
 
 use super::report::{StoreSelection, load_study};
@@ -36,7 +35,8 @@ pub struct RenderArgs {
     )]
     pub scan: Option<i64>,
 
-    /// A `brdfd.scan/1` file to fit and render instead of a stored scan.
+    /// A `brdfd.scan/1` file (or an X-Rite `.xlsx` export of one sample) to fit and render
+    /// instead of a stored scan.
     #[arg(long, value_name = "SCAN.json")]
     pub input: Option<PathBuf>,
 
@@ -75,7 +75,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let study = match (&args.input, args.scan) {
         (Some(path), _) => {
             let config = Config::load_or_default(args.config.as_deref())?;
-            let scan = Scan::read_file(path)?;
+            let scan = super::scan_file::read_scan_input(path)?;
             let mut reports = Vec::new();
             for &cost in &costs {
                 let request = FitRequest {

@@ -1,7 +1,8 @@
 //! `brdfd export` and `brdfd import`: a stored scan as a brdfd.scan/1 file, and such a file
-//! into the store (then following its fits).
+//! into the store (then following its fits); and [`read_scan_input`], how the commands that
+//! fit a file without the store (`fit`, `crossval`, `render`) read theirs.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use serde_json::json;
@@ -67,6 +68,51 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
 
 /// `brdfd import` of an X-Rite `.xlsx`: read and checked here (errors name the file), sent
 /// as it is, each scan's fits followed in turn.
+/// The scan of a file given to `fit --input`, `crossval` or `render --input`: a
+/// `brdfd.scan/1` file, or an X-Rite `.xlsx` export holding one sample (imported as
+/// `brdfd import-format` would, its warning printed). A file of another kind, or an export
+/// with several samples, is refused with the command that turns it into scan files.
+pub fn read_scan_input(path: &Path) -> anyhow::Result<crate::scan::Scan> {
+    use crate::scan::{Scan, ScanError};
+    let file = path.display();
+    const CONVERT: &str = "turn an instrument's export (CGATS, CxF3 with the SRA's CSV, X-Rite \
+        .xlsx) into scan files with `brdfd import-format FILE --out DIR` (see `brdfd \
+        import-format --help`)";
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("xlsx"))
+    {
+        let mut scans =
+            crate::formats::xrite::read_file(path, &crate::formats::budget::Budget::default())?;
+        if scans.len() != 1 {
+            let names: Vec<String> = scans
+                .iter()
+                .map(|x| terminal_safe(&x.scan.sample))
+                .collect();
+            anyhow::bail!(
+                "{file} holds {} samples ({}); this command fits one: write one scan file per \
+                 sample with `brdfd import-format {file} --out DIR` and give it one of them",
+                scans.len(),
+                names.join(", ")
+            );
+        }
+        let x = scans.remove(0);
+        if let Some(w) = x.warning() {
+            eprintln!("warning: {w}");
+        }
+        return Ok(x.scan);
+    }
+    Scan::read_file(path).map_err(|e| match e {
+        ScanError::Syntax(json) => {
+            anyhow::anyhow!("{file} is not a brdfd.scan/1 file: it is not JSON ({json}); {CONVERT}")
+        }
+        e @ (ScanError::MissingFormat | ScanError::UnknownFormat { .. }) => {
+            anyhow::anyhow!("{file}: {e}; {CONVERT}")
+        }
+        e => anyhow::Error::new(e),
+    })
+}
+
 fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
     let scans =
         crate::formats::xrite::read_file(&args.file, &crate::formats::budget::Budget::default())?;
