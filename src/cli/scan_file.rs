@@ -66,22 +66,16 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `brdfd import` of an X-Rite `.xlsx`: read and checked here (errors name the file), sent
-/// as it is, each scan's fits followed in turn.
 /// The scan of a file given to `fit --input`, `crossval` or `render --input`: a
 /// `brdfd.scan/1` file, or an X-Rite `.xlsx` export holding one sample (imported as
 /// `brdfd import-format` would, its warning printed). A file of another kind, or an export
 /// with several samples, is refused with the command that turns it into scan files.
 pub fn read_scan_input(path: &Path) -> anyhow::Result<crate::scan::Scan> {
-    use crate::scan::{Scan, ScanError};
     let file = path.display();
     const CONVERT: &str = "turn an instrument's export (CGATS, CxF3 with the SRA's CSV, X-Rite \
         .xlsx) into scan files with `brdfd import-format FILE --out DIR` (see `brdfd \
         import-format --help`)";
-    if path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("xlsx"))
-    {
+    if is_xlsx(path) {
         let mut scans =
             crate::formats::xrite::read_file(path, &crate::formats::budget::Budget::default())?;
         if scans.len() != 1 {
@@ -102,17 +96,33 @@ pub fn read_scan_input(path: &Path) -> anyhow::Result<crate::scan::Scan> {
         }
         return Ok(x.scan);
     }
-    Scan::read_file(path).map_err(|e| match e {
-        ScanError::Syntax(json) => {
-            anyhow::anyhow!("{file} is not a brdfd.scan/1 file: it is not JSON ({json}); {CONVERT}")
-        }
-        e @ (ScanError::MissingFormat | ScanError::UnknownFormat { .. }) => {
-            anyhow::anyhow!("{file}: {e}; {CONVERT}")
-        }
-        e => anyhow::Error::new(e),
-    })
+    crate::scan::Scan::read_file(path).map_err(|e| not_a_scan_file(path, e, CONVERT))
 }
 
+/// Whether `path` names an X-Rite QC export (by its extension, as `import-format` decides).
+fn is_xlsx(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("xlsx"))
+}
+
+/// A scan file's error, named with its path; where the file is not a brdfd.scan/1 document at
+/// all (not JSON, no or an unknown `format`), with `hint` on what to do with it instead.
+fn not_a_scan_file(path: &Path, e: crate::scan::ScanError, hint: &str) -> anyhow::Error {
+    use crate::scan::ScanError;
+    let file = path.display();
+    match e {
+        ScanError::Syntax(json) => {
+            anyhow::anyhow!("{file} is not a brdfd.scan/1 file: it is not JSON ({json}); {hint}")
+        }
+        e @ (ScanError::MissingFormat | ScanError::UnknownFormat { .. }) => {
+            anyhow::anyhow!("{file}: {e}; {hint}")
+        }
+        e => anyhow::Error::new(e),
+    }
+}
+
+/// `brdfd import` of an X-Rite `.xlsx`: read and checked here (errors name the file), sent
+/// as it is, each scan's fits followed in turn.
 fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
     let scans =
         crate::formats::xrite::read_file(&args.file, &crate::formats::budget::Budget::default())?;
@@ -155,11 +165,7 @@ fn import_xlsx(args: &ImportArgs) -> anyhow::Result<()> {
 }
 
 pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
-    let is_xlsx = args
-        .file
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("xlsx"));
-    if is_xlsx {
+    if is_xlsx(&args.file) {
         return import_xlsx(args);
     }
     // Within the import budget's file size, as every door reads (a larger file is refused
@@ -168,18 +174,15 @@ pub fn import(args: &ImportArgs) -> anyhow::Result<()> {
         crate::formats::read_text_within(&args.file, &crate::formats::budget::Budget::default())?;
     // Checked here too, so a bad file is named with its path before anything is sent.
     if let Err(e) = crate::scan::Scan::from_json(text.as_bytes()) {
-        use crate::scan::ScanError;
         const OTHER_FORMATS: &str = "an instrument's export (CGATS, CxF3, the SRA's CSV) is \
             imported with `brdfd import-format` (see `brdfd import-format --help`)";
-        let file = args.file.display();
         return Err(match e {
-            ScanError::Syntax(json) => anyhow::anyhow!(
-                "{file} is not a brdfd.scan/1 file: it is not JSON ({json}); {OTHER_FORMATS}"
-            ),
-            e @ (ScanError::MissingFormat | ScanError::UnknownFormat { .. }) => {
-                anyhow::anyhow!("{file}: {e}; {OTHER_FORMATS}")
+            e @ (crate::scan::ScanError::Syntax(_)
+            | crate::scan::ScanError::MissingFormat
+            | crate::scan::ScanError::UnknownFormat { .. }) => {
+                not_a_scan_file(&args.file, e, OTHER_FORMATS)
             }
-            e => anyhow::Error::new(e).context(format!("{file}")),
+            e => anyhow::Error::new(e).context(format!("{}", args.file.display())),
         });
     }
     let client = args.daemon.client()?;
