@@ -160,6 +160,72 @@ pub(super) fn run_local(problem: &Problem, s: &SeparableSettings, start: &Params
     answer(&map, &best_t, kd, tracker)
 }
 
+/// Moves along the lobe's peak/width trade-off from `t`: α scaled by 1.25 and by 0.8, the
+/// peak ks·F0/α² kept by scaling F0 = ((μ − 1)/(μ + 1))² (first two) or ks (last two) by the
+/// square of the same factor, within the bounds.
+fn lobe_width_moves(map: &Map, t: &[f64; 3]) -> [[f64; 3]; 4] {
+    let b = &map.bounds;
+    let (ks, alpha, ior) = map.params(t);
+    let r = (ior - 1.0) / (ior + 1.0);
+    let mv = |c: f64, by_ior: bool| {
+        let a = (alpha * c).clamp(b.alpha.0, b.alpha.1);
+        let c = a / alpha;
+        if by_ior {
+            let r2 = r * c;
+            let mu = ((1.0 + r2) / (1.0 - r2)).clamp(b.ior.0, b.ior.1);
+            let r3 = (mu - 1.0) / (mu + 1.0);
+            // what F0 could not take, ks does
+            let rest = if r3 > 0.0 { (r2 / r3).powi(2) } else { 1.0 };
+            map.unit((ks * rest).clamp(b.ks.0, b.ks.1), a, mu)
+        } else {
+            map.unit((ks * c * c).clamp(b.ks.0, b.ks.1), a, ior)
+        }
+    };
+    [
+        mv(1.25, true),
+        mv(0.8, true),
+        mv(1.25, false),
+        mv(0.8, false),
+    ]
+}
+
+/// Surrogate stages pass on their best optimum and up to `TRACKS − 1` more distinct search
+/// ends within `TRACK_MARGIN` of it (other basins the later stages search too).
+const TRACKS: usize = 2;
+const TRACK_MARGIN: f64 = 0.05;
+/// Lobe-width moves (`lobe_width_moves`) after the polish: a move is searched when its cost is
+/// within `JUMP_MARGIN` of the best, at most `JUMP_ROUNDS` times; its polish restarts while
+/// they gain more than `JUMP_POLISH_GAIN` of the cost.
+const JUMP_MARGIN: f64 = 0.01;
+const JUMP_ROUNDS: u32 = 2;
+const JUMP_POLISH_GAIN: f64 = 1e-6;
+
+/// cf1's survey: the design and its projections onto the three upper-bound faces (real
+/// paint's cf1 optima often lie on a face: α = 1, ks = 10, μ = 3).
+fn with_faces(points: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let mut v = points.to_vec();
+    {
+        for d in 0..3 {
+            v.extend(points.iter().map(|p| {
+                let mut q = *p;
+                q[d] = 1.0;
+                q
+            }));
+        }
+    }
+    v
+}
+
+/// cf1 profiles are cheap: its stages search from three times the design starts.
+fn cf1_settings(c: Criterion, s: &SeparableSettings) -> SeparableSettings {
+    let n: u32 = 3 * s.starts;
+    if c == Criterion::Cf1 {
+        SeparableSettings { starts: n, ..*s }
+    } else {
+        *s
+    }
+}
+
 fn distance_inf(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     (0..3).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max)
 }
@@ -270,29 +336,81 @@ pub(super) fn run(
     //    stages before. `warm` holds their optima (unit cube) with the fit's own cost there.
     let mut warm: Vec<([f64; 3], f64)> = Vec::with_capacity(chain.len());
     let mut best_f = f64::INFINITY;
+    let faced = with_faces(&points);
     for &criterion in chain {
         let mut cost_at = |t: &[f64; 3]| profile(criterion, t, &mut kd);
+        let points: &[[f64; 3]] = if criterion == Criterion::Cf1 {
+            &faced
+        } else {
+            &points
+        };
         let costs: Vec<f64> = points.iter().map(&mut cost_at).collect();
         let starts: Vec<([f64; 3], f64)> = warm.iter().map(|(t, _)| (*t, cost_at(t))).collect();
-        let (t, _) = descend(&mut cost_at, &points, &costs, &starts, s, &mut |_| Ok(()))?;
+        let mut ends = Vec::new();
+        let s1 = cf1_settings(criterion, s);
+        let (t, fs) = descend_ends(
+            &mut cost_at,
+            points,
+            &costs,
+            &starts,
+            &s1,
+            &mut |_| Ok(()),
+            &mut ends,
+            None,
+        )?;
         // Progress is reported in the fit's own cost.
         let f = profile(objective, &t, &mut kd);
         warm.push((t, f));
         best_f = best_f.min(f);
+        let tracks: usize = TRACKS;
+        let margin: f64 = TRACK_MARGIN;
+        ends.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let mut kept = vec![t];
+        for (u, fu) in ends {
+            if kept.len() >= tracks {
+                break;
+            }
+            if fu <= fs * (1.0 + margin)
+                && kept
+                    .iter()
+                    .all(|k| distance_inf(k, &u) >= s.start_separation)
+            {
+                kept.push(u);
+                let f = profile(objective, &u, &mut kd);
+                warm.push((u, f));
+                best_f = best_f.min(f);
+            }
+        }
         tracker.evaluations = count.get();
         tracker.generation_done(best_f, observer)?;
     }
 
     // 1–3. The fit's own cost: survey, searches from the warm starts and the design, polish.
     let mut cost_at = |t: &[f64; 3]| profile(objective, t, &mut kd);
+    let points: &[[f64; 3]] = if objective == Criterion::Cf1 {
+        &faced
+    } else {
+        &points
+    };
     let costs: Vec<f64> = points.iter().map(&mut cost_at).collect();
     best_f = costs.iter().copied().fold(best_f, f64::min);
     tracker.evaluations = count.get();
     tracker.generation_done(best_f, observer)?;
-    let (best_t, _) = descend(&mut cost_at, &points, &costs, &warm, s, &mut |f| {
-        tracker.evaluations = count.get();
-        tracker.generation_done(f, observer)
-    })?;
+    let jumps = |t: &[f64; 3]| lobe_width_moves(&map, t);
+    let s1 = cf1_settings(objective, s);
+    let (best_t, _) = descend_ends(
+        &mut cost_at,
+        points,
+        &costs,
+        &warm,
+        &s1,
+        &mut |f| {
+            tracker.evaluations = count.get();
+            tracker.generation_done(f, observer)
+        },
+        &mut Vec::new(),
+        Some(&jumps),
+    )?;
 
     // The kd of the best point: one more profile, which writes it.
     cost_at(&best_t);
@@ -311,6 +429,28 @@ fn descend(
     warm: &[([f64; 3], f64)],
     s: &SeparableSettings,
     generation_done: &mut dyn FnMut(f64) -> Result<(), FitError>,
+) -> Result<([f64; 3], f64), FitError> {
+    descend_ends(
+        cost_at,
+        points,
+        costs,
+        warm,
+        s,
+        generation_done,
+        &mut Vec::new(),
+        None,
+    )
+}
+
+fn descend_ends(
+    cost_at: &mut impl FnMut(&[f64; 3]) -> f64,
+    points: &[[f64; 3]],
+    costs: &[f64],
+    warm: &[([f64; 3], f64)],
+    s: &SeparableSettings,
+    generation_done: &mut dyn FnMut(f64) -> Result<(), FitError>,
+    ends: &mut Vec<([f64; 3], f64)>,
+    jumps: Option<&dyn Fn(&[f64; 3]) -> [[f64; 3]; 4]>,
 ) -> Result<([f64; 3], f64), FitError> {
     // Warm starts that coincide (cf1 and L1 both find an exact fit) are searched once.
     let mut starts: Vec<([f64; 3], f64)> = Vec::with_capacity(warm.len() + s.starts as usize);
@@ -341,6 +481,7 @@ fn descend(
     };
     for (t, f) in starts {
         let out = nelder_mead::minimise(cost_at, t, f, &search);
+        ends.push((out.x, out.f));
         if out.f < best_f {
             (best_t, best_f) = (out.x, out.f);
         }
@@ -369,6 +510,47 @@ fn descend(
             break;
         }
         polish.initial_step *= 0.25;
+    }
+    if let Some(jumps) = jumps {
+        let margin: f64 = JUMP_MARGIN;
+        let rounds: u32 = JUMP_ROUNDS;
+        for _ in 0..rounds {
+            let (jt, jf) = jumps(&best_t)
+                .into_iter()
+                .map(|t| {
+                    let f = cost_at(&t);
+                    (t, f)
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap();
+            if jf > best_f * (1.0 + margin) {
+                break;
+            }
+            let out = nelder_mead::minimise(cost_at, jt, jf, &search);
+            if out.f >= best_f {
+                break;
+            }
+            let (mut t, mut f) = (out.x, out.f);
+            let mut polish = Options {
+                initial_step: 0.05,
+                ..polish
+            };
+            let jr: u32 = 2 * s.polish_restarts;
+            let jg: f64 = JUMP_POLISH_GAIN;
+            for _ in 0..jr {
+                let out = nelder_mead::minimise(cost_at, t, f, &polish);
+                let improved = f - out.f > jg * f;
+                if out.f < f {
+                    (t, f) = (out.x, out.f);
+                }
+                if !improved {
+                    break;
+                }
+                polish.initial_step *= 0.25;
+            }
+            (best_t, best_f) = (t, f);
+            generation_done(best_f)?;
+        }
     }
     Ok((best_t, best_f))
 }
