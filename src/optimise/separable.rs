@@ -312,7 +312,10 @@ pub(super) fn run(
     let stages = chain.len() as u32;
     // A generation per surrogate stage, then the survey, one per search (the warm starts
     // and the design's), one per polishing restart.
-    let mut tracker = Tracker::new(stages + 1 + stages + s.starts + s.polish_restarts);
+    let own_starts = cf1_settings(Criterion::from(problem.cf), s).starts;
+    let mut tracker = Tracker::new(
+        stages + 1 + stages * TRACKS as u32 + own_starts + s.polish_restarts + JUMP_ROUNDS,
+    );
     let count = Cell::new(0u64);
     let mut kd = [0.0; BANDS];
     let profile = |criterion: Criterion, t: &[f64; 3], kd: &mut Spectrum| {
