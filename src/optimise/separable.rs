@@ -16,6 +16,16 @@
 //!    collapsed early, the known failure of Nelder–Mead, and only a stalled simplex leaves
 //!    that much to gain (smaller gains are the polish converging: on the example scans, restarts on gains above
 //!    `f_tolerance` gained at most ~1e-7 of the cost).
+//! 4. Lobe-width moves (the fit's own cost only): α × 1.25 and × 0.8 with the lobe's peak
+//!    ks·F0/α² kept, by F0 or by ks; the best move is searched when it comes within
+//!    `JUMP_MARGIN` of the best, and polished if the search beats it. On real paint the best
+//!    fit often lies in a narrow valley along that peak on a bound face, whose floor holds
+//!    several minima that no local search crosses (SCIENCE.md §12.5).
+//!
+//! cf1's stages survey the design together with its projections onto the three upper-bound
+//! faces and search from three times the starts (cf1 profiles are cheap, and real paint's cf1
+//! optima often lie on a face); each surrogate stage passes on `TRACKS` warm starts, its
+//! optimum and another distinct search end near it, so that a second basin is followed too.
 //!
 //! # Why the continuation
 //!
@@ -153,6 +163,8 @@ pub(super) fn run_local(problem: &Problem, s: &SeparableSettings, start: &Params
             tracker.history.push(f);
             Ok(())
         },
+        &mut Vec::new(),
+        None,
     )
     .unwrap_or((t0, f0));
     cost_at(&best_t);
@@ -199,6 +211,23 @@ const TRACK_MARGIN: f64 = 0.05;
 const JUMP_MARGIN: f64 = 0.01;
 const JUMP_ROUNDS: u32 = 2;
 const JUMP_POLISH_GAIN: f64 = 1e-6;
+
+/// A stage's tracks: its optimum `best` (cost `best_f`), then, best first, the search `ends`
+/// within `TRACK_MARGIN` of it that lie at least `sep` from the tracks already taken, up to
+/// `TRACKS` in all.
+fn tracks(best: [f64; 3], best_f: f64, mut ends: Vec<([f64; 3], f64)>, sep: f64) -> Vec<[f64; 3]> {
+    ends.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let mut kept = vec![best];
+    for (u, fu) in ends {
+        if kept.len() == TRACKS {
+            break;
+        }
+        if fu <= best_f * (1.0 + TRACK_MARGIN) && kept.iter().all(|k| distance_inf(k, &u) >= sep) {
+            kept.push(u);
+        }
+    }
+    kept
+}
 
 /// cf1's survey: the design and its projections onto the three upper-bound faces (real
 /// paint's cf1 optima often lie on a face: α = 1, ks = 10, μ = 3).
@@ -351,7 +380,7 @@ pub(super) fn run(
         let starts: Vec<([f64; 3], f64)> = warm.iter().map(|(t, _)| (*t, cost_at(t))).collect();
         let mut ends = Vec::new();
         let s1 = cf1_settings(criterion, s);
-        let (t, fs) = descend_ends(
+        let (t, fs) = descend(
             &mut cost_at,
             points,
             &costs,
@@ -361,28 +390,12 @@ pub(super) fn run(
             &mut ends,
             None,
         )?;
-        // Progress is reported in the fit's own cost.
-        let f = profile(objective, &t, &mut kd);
-        warm.push((t, f));
-        best_f = best_f.min(f);
-        let tracks: usize = TRACKS;
-        let margin: f64 = TRACK_MARGIN;
-        ends.sort_by(|a, b| a.1.total_cmp(&b.1));
-        let mut kept = vec![t];
-        for (u, fu) in ends {
-            if kept.len() >= tracks {
-                break;
-            }
-            if fu <= fs * (1.0 + margin)
-                && kept
-                    .iter()
-                    .all(|k| distance_inf(k, &u) >= s.start_separation)
-            {
-                kept.push(u);
-                let f = profile(objective, &u, &mut kd);
-                warm.push((u, f));
-                best_f = best_f.min(f);
-            }
+        // The stage's tracks go on as warm starts, costed in the fit's own cost (which is
+        // also what progress reports).
+        for u in tracks(t, fs, ends, s.start_separation) {
+            let f = profile(objective, &u, &mut kd);
+            warm.push((u, f));
+            best_f = best_f.min(f);
         }
         tracker.evaluations = count.get();
         tracker.generation_done(best_f, observer)?;
@@ -401,7 +414,7 @@ pub(super) fn run(
     tracker.generation_done(best_f, observer)?;
     let jumps = |t: &[f64; 3]| lobe_width_moves(&map, t);
     let s1 = cf1_settings(objective, s);
-    let (best_t, _) = descend_ends(
+    let (best_t, _) = descend(
         &mut cost_at,
         points,
         &costs,
@@ -423,29 +436,12 @@ pub(super) fn run(
 
 /// Steps 2 and 3 for one criterion whose design costs are `costs`: Nelder–Mead searches from
 /// the warm starts (point, cost) and from the best separated design points, then polishing of
-/// the best point found. Calls `generation_done` with the best cost so far after each search
-/// and each polishing restart; returns the best point and its cost.
+/// the best point found, then (with `jumps`) the lobe-width moves from it. Calls
+/// `generation_done` with the best cost so far after each search, each polishing restart and
+/// each move taken; returns the best point and its cost, and pushes every search's end onto
+/// `ends`.
+#[allow(clippy::too_many_arguments)]
 fn descend(
-    cost_at: &mut impl FnMut(&[f64; 3]) -> f64,
-    points: &[[f64; 3]],
-    costs: &[f64],
-    warm: &[([f64; 3], f64)],
-    s: &SeparableSettings,
-    generation_done: &mut dyn FnMut(f64) -> Result<(), FitError>,
-) -> Result<([f64; 3], f64), FitError> {
-    descend_ends(
-        cost_at,
-        points,
-        costs,
-        warm,
-        s,
-        generation_done,
-        &mut Vec::new(),
-        None,
-    )
-}
-
-fn descend_ends(
     cost_at: &mut impl FnMut(&[f64; 3]) -> f64,
     points: &[[f64; 3]],
     costs: &[f64],
@@ -496,64 +492,74 @@ fn descend_ends(
     //    last simplex had stalled short of the minimum; a smaller one is the polish itself
     //    closing in, which a further restart only refines (on the example scans and the
     //    reliability harness by at most ~1e-7 of the cost, for 150–300 more evaluations).
-    let mut polish = Options {
+    let polish_options = Options {
         initial_step: 0.05,
         max_evaluations: s.max_evaluations_per_polish,
         x_tolerance: s.x_tolerance,
         f_tolerance: s.f_tolerance,
     };
-    for _ in 0..s.polish_restarts {
-        let out = nelder_mead::minimise(cost_at, best_t, best_f, &polish);
-        let improved = best_f - out.f > s.search_tolerance * best_f;
-        if out.f < best_f {
-            (best_t, best_f) = (out.x, out.f);
-        }
-        generation_done(best_f)?;
-        if !improved {
-            break;
-        }
-        polish.initial_step *= 0.25;
-    }
+    (best_t, best_f) = polish(
+        cost_at,
+        (best_t, best_f),
+        polish_options,
+        s.polish_restarts,
+        s.search_tolerance,
+        generation_done,
+    )?;
+
+    // 4. Lobe-width moves: a move close enough to the best is searched, and polished (to a
+    //    finer gain: the valleys the moves reach are narrow) if the search beats the best.
     if let Some(jumps) = jumps {
-        let margin: f64 = JUMP_MARGIN;
-        let rounds: u32 = JUMP_ROUNDS;
-        for _ in 0..rounds {
+        for _ in 0..JUMP_ROUNDS {
             let (jt, jf) = jumps(&best_t)
                 .into_iter()
-                .map(|t| {
-                    let f = cost_at(&t);
-                    (t, f)
-                })
+                .map(|t| (t, cost_at(&t)))
                 .min_by(|a, b| a.1.total_cmp(&b.1))
-                .unwrap();
-            if jf > best_f * (1.0 + margin) {
+                .expect("four moves");
+            if jf > best_f * (1.0 + JUMP_MARGIN) {
                 break;
             }
             let out = nelder_mead::minimise(cost_at, jt, jf, &search);
             if out.f >= best_f {
                 break;
             }
-            let (mut t, mut f) = (out.x, out.f);
-            let mut polish = Options {
-                initial_step: 0.05,
-                ..polish
-            };
-            let jr: u32 = 2 * s.polish_restarts;
-            let jg: f64 = JUMP_POLISH_GAIN;
-            for _ in 0..jr {
-                let out = nelder_mead::minimise(cost_at, t, f, &polish);
-                let improved = f - out.f > jg * f;
-                if out.f < f {
-                    (t, f) = (out.x, out.f);
-                }
-                if !improved {
-                    break;
-                }
-                polish.initial_step *= 0.25;
-            }
-            (best_t, best_f) = (t, f);
+            (best_t, best_f) = polish(
+                cost_at,
+                (out.x, out.f),
+                polish_options,
+                2 * s.polish_restarts,
+                JUMP_POLISH_GAIN,
+                &mut |_| Ok(()),
+            )?;
             generation_done(best_f)?;
         }
+    }
+    Ok((best_t, best_f))
+}
+
+/// Nelder–Mead restarted at `best` with simplices a quarter the size of the last (the first
+/// `options.initial_step`), at most `restarts` times, while a restart gains more than `gain`
+/// of the cost; calls `on_restart` with the best cost after each. Returns the best point.
+fn polish(
+    cost_at: &mut impl FnMut(&[f64; 3]) -> f64,
+    best: ([f64; 3], f64),
+    mut options: Options,
+    restarts: u32,
+    gain: f64,
+    on_restart: &mut dyn FnMut(f64) -> Result<(), FitError>,
+) -> Result<([f64; 3], f64), FitError> {
+    let (mut best_t, mut best_f) = best;
+    for _ in 0..restarts {
+        let out = nelder_mead::minimise(cost_at, best_t, best_f, &options);
+        let improved = best_f - out.f > gain * best_f;
+        if out.f < best_f {
+            (best_t, best_f) = (out.x, out.f);
+        }
+        on_restart(best_f)?;
+        if !improved {
+            break;
+        }
+        options.initial_step *= 0.25;
     }
     Ok((best_t, best_f))
 }
